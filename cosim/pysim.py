@@ -1,0 +1,207 @@
+"""Cycle-accurate simulation of a stream component with Amaranth's Python simulator.
+
+Convention for every block and top that the simulation backends run: a component with an
+input stream port ``i`` and an output stream port ``o`` (``amaranth.lib.stream``). Payloads
+travel as packed integers (the bits of ``Value.cast(payload)``, LSB first, as
+``amaranth.lib.data`` lays out a struct), so the same numpy arrays drive this backend, the
+Verilator backend and the bit-exact models. Other input ports can be held at constant values
+(``inputs``) or changed at given cycles (``writes``: register writes from the DSP side).
+
+This backend steps Python once per clock. It is the reference for the compiled backend and
+for short runs only (about 1e4..1e5 cycles/s).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from amaranth.hdl import Value
+from amaranth.sim import Simulator
+
+
+@dataclass
+class StreamResult:
+    """What came out of the ``o`` stream.
+
+    Attributes
+    ----------
+    words : ndarray of int64 (or object for payloads wider than 63 bits)
+        Packed payload of each output transfer, in order.
+    cycles : ndarray of int64
+        Clock cycle (0-based) at which each output transfer happened.
+    n_cycles : int
+        Cycles simulated.
+    in_accepted : int
+        Input words the component accepted.
+    probes : dict of str to ndarray
+        Per-cycle values of signals asked for with ``probe``.
+    """
+
+    words: np.ndarray
+    cycles: np.ndarray
+    n_cycles: int
+    in_accepted: int
+    probes: dict = field(default_factory=dict)
+
+
+def _signed_from_bits(v: int, width: int) -> int:
+    return v - (1 << width) if v >> (width - 1) else v
+
+
+def unpack_fields(words: np.ndarray, layout: list[tuple[str, int, bool]]) -> dict[str, np.ndarray]:
+    """Split packed payload words into named integer fields.
+
+    ``layout`` lists ``(name, width, signed)`` from the LSB up, as ``data.StructLayout``
+    places its fields in declaration order.
+    """
+    words = np.asarray(words)
+    out = {}
+    offset = 0
+    for name, width, signed in layout:
+        if words.dtype == object:
+            vals = np.array([(int(w) >> offset) & ((1 << width) - 1) for w in words], dtype=np.int64)
+        else:
+            vals = (words.astype(np.int64) >> np.int64(offset)) & np.int64((1 << width) - 1)
+        if signed:
+            vals = np.where(vals >= (1 << (width - 1)), vals - (1 << width), vals)
+        out[name] = vals.astype(np.int64)
+        offset += width
+    return out
+
+
+def pack_fields(fields: dict[str, np.ndarray], layout: list[tuple[str, int, bool]]) -> np.ndarray:
+    """Inverse of :func:`unpack_fields` (total width <= 63 bits)."""
+    total = sum(w for _, w, _ in layout)
+    if total > 63:
+        raise ValueError(f"packed payload must be <= 63 bits wide for int64 words, not {total}")
+    out = None
+    offset = 0
+    for name, width, _signed in layout:
+        v = np.asarray(fields[name], dtype=np.int64) & np.int64((1 << width) - 1)
+        out = (v << np.int64(offset)) if out is None else out | (v << np.int64(offset))
+        offset += width
+    return out
+
+
+def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=None,
+               flush_cycles: int = 64, inputs: dict | None = None,
+               writes: list | None = None, probe: dict | None = None,
+               clk_hz: float = 20e6, vcd: str | Path | None = None,
+               vcd_window: tuple[int, int] | None = None) -> StreamResult:
+    """Run ``dut`` cycle by cycle in ``amaranth.sim`` and collect its output stream.
+
+    Parameters
+    ----------
+    dut : wiring.Component
+        Has ``o`` (output stream) and, unless ``in_words`` is None, ``i`` (input stream).
+    in_words : array of int, optional
+        Packed input payloads, offered in order.
+    in_valid : array of bool, optional
+        Per-cycle: offer the next input word this cycle (default: every cycle). When the
+        pattern runs out, input is offered every cycle.
+    out_ready : array of bool, optional
+        Per-cycle ``o.ready`` (default: always ready). Ignored if ``o`` is always-ready.
+    n_cycles : int, optional
+        Cycles to run; default: until every input is accepted, plus ``flush_cycles``.
+    inputs : dict of port -> int
+        Constant values for other input ports (``Value`` objects of ``dut``).
+    writes : list of (cycle, port, value)
+        Register writes: ``port`` takes ``value`` from ``cycle`` on.
+    probe : dict of name -> Value
+        Signals to record every cycle (sampled at the clock edge).
+    vcd : path, optional
+        Write a waveform (opt-in; place it under ``build/``). ``vcd_window`` is not
+        supported by amaranth's VCD writer and is recorded whole.
+    """
+    in_words = None if in_words is None else np.asarray(in_words)
+    n_in = 0 if in_words is None else len(in_words)
+    in_valid = None if in_valid is None else np.asarray(in_valid, dtype=bool)
+    out_ready = None if out_ready is None else np.asarray(out_ready, dtype=bool)
+    writes = sorted(writes or [], key=lambda w: w[0])
+    probe = dict(probe or {})
+    has_in = in_words is not None
+
+    i_payload = Value.cast(dut.i.payload) if has_in else None
+    o_payload = Value.cast(dut.o.payload)
+    o_ready_const = not hasattr(dut.o, "ready") or isinstance(dut.o.ready, int) or \
+        getattr(dut.o.signature, "always_ready", False)
+    i_has_ready = has_in and not getattr(dut.i.signature, "always_ready", False)
+
+    out_words: list[int] = []
+    out_cycles: list[int] = []
+    probe_vals = {k: [] for k in probe}
+    state = {"accepted": 0, "cycles": 0}
+
+    async def testbench(ctx):
+        for port, value in (inputs or {}).items():
+            ctx.set(port, value)
+        w_idx = 0
+        cyc = 0
+        flush_left = flush_cycles
+        while True:
+            if n_cycles is not None and cyc >= n_cycles:
+                break
+            if n_cycles is None and state["accepted"] >= n_in:
+                if flush_left <= 0:
+                    break
+                flush_left -= 1
+            while w_idx < len(writes) and writes[w_idx][0] <= cyc:
+                ctx.set(writes[w_idx][1], writes[w_idx][2])
+                w_idx += 1
+            offer = False
+            if has_in:
+                k = state["accepted"]
+                offer = k < n_in and (in_valid is None or cyc >= len(in_valid) or bool(in_valid[cyc]))
+                ctx.set(dut.i.valid, 1 if offer else 0)
+                if offer:
+                    ctx.set(i_payload, int(in_words[k]))
+            if not o_ready_const:
+                rdy = True if out_ready is None or cyc >= len(out_ready) else bool(out_ready[cyc])
+                ctx.set(dut.o.ready, 1 if rdy else 0)
+            sampled = [dut.o.valid, o_payload]
+            if not o_ready_const:
+                sampled.append(dut.o.ready)
+            if i_has_ready:
+                sampled.append(dut.i.ready)
+            sampled.extend(probe.values())
+            res = await ctx.tick().sample(*sampled)
+            vals = list(res[-len(sampled):])  # (clk, rst, *sampled)
+            o_valid, o_pay = vals[0], vals[1]
+            idx = 2
+            o_rdy = 1
+            if not o_ready_const:
+                o_rdy = vals[idx]
+                idx += 1
+            i_rdy = 1
+            if i_has_ready:
+                i_rdy = vals[idx]
+                idx += 1
+            for name, v in zip(probe, vals[idx:]):
+                probe_vals[name].append(int(v))
+            if o_valid and o_rdy:
+                out_words.append(int(o_pay))
+                out_cycles.append(cyc)
+            if offer and i_rdy:
+                state["accepted"] += 1
+            cyc += 1
+        state["cycles"] = cyc
+
+    sim = Simulator(dut)
+    sim.add_clock(1.0 / clk_hz)
+    sim.add_testbench(testbench)
+    if vcd is not None:
+        Path(vcd).parent.mkdir(parents=True, exist_ok=True)
+        with sim.write_vcd(str(vcd)):
+            sim.run()
+    else:
+        sim.run()
+
+    width = len(o_payload)
+    if width <= 63:
+        words = np.array(out_words, dtype=np.int64)
+    else:
+        words = np.array(out_words, dtype=object)
+    return StreamResult(words=words, cycles=np.array(out_cycles, dtype=np.int64),
+                        n_cycles=state["cycles"], in_accepted=state["accepted"],
+                        probes={k: np.array(v, dtype=np.int64) for k, v in probe_vals.items()})
