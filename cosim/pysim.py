@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from amaranth.hdl import Value
+from amaranth.hdl import Value, ValueCastable
 from amaranth.sim import Simulator
 
 
@@ -84,8 +84,28 @@ def pack_fields(fields: dict[str, np.ndarray], layout: list[tuple[str, int, bool
     return out
 
 
+def resolve_port(dut, port):
+    """``port`` as a ``Value``: a ``Value``/``ValueCastable`` of ``dut`` as is, or a port name
+    as the Verilog export spells it (signature path joined with ``__``, e.g. ``"freq"``,
+    ``"ctrl__step"``)."""
+    if isinstance(port, str):
+        for path, _member, value in dut.signature.flatten(dut):
+            if "__".join(map(str, path)) == port:
+                return value.as_value() if isinstance(value, ValueCastable) else value
+        raise KeyError(f"{dut!r} has no port named {port!r}")
+    return port
+
+
+def _items(inputs):
+    # Amaranth values are unhashable, so `inputs` keyed by Value objects can only be given as
+    # (port, value) pairs; a dict is fine with port names as keys.
+    if inputs is None:
+        return []
+    return list(inputs.items()) if isinstance(inputs, dict) else list(inputs)
+
+
 def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=None,
-               flush_cycles: int = 64, inputs: dict | None = None,
+               flush_cycles: int = 64, inputs: dict | list | None = None,
                writes: list | None = None, probe: dict | None = None,
                clk_hz: float = 20e6, vcd: str | Path | None = None,
                vcd_window: tuple[int, int] | None = None) -> StreamResult:
@@ -104,10 +124,11 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
         Per-cycle ``o.ready`` (default: always ready). Ignored if ``o`` is always-ready.
     n_cycles : int, optional
         Cycles to run; default: until every input is accepted, plus ``flush_cycles``.
-    inputs : dict of port -> int
-        Constant values for other input ports (``Value`` objects of ``dut``).
+    inputs : dict of port name -> int, or list of (port, int)
+        Constant values for other input ports (port names as in the Verilog export, or
+        ``Value`` objects of ``dut`` given as pairs: Amaranth values are unhashable).
     writes : list of (cycle, port, value)
-        Register writes: ``port`` takes ``value`` from ``cycle`` on.
+        Register writes: ``port`` (name or ``Value``) takes ``value`` from ``cycle`` on.
     probe : dict of name -> Value
         Signals to record every cycle (sampled at the clock edge).
     vcd : path, optional
@@ -118,7 +139,9 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
     n_in = 0 if in_words is None else len(in_words)
     in_valid = None if in_valid is None else np.asarray(in_valid, dtype=bool)
     out_ready = None if out_ready is None else np.asarray(out_ready, dtype=bool)
-    writes = sorted(writes or [], key=lambda w: w[0])
+    writes = sorted(((c, resolve_port(dut, p), v) for c, p, v in (writes or [])),
+                    key=lambda w: w[0])
+    inputs = [(resolve_port(dut, p), v) for p, v in _items(inputs)]
     probe = dict(probe or {})
     has_in = in_words is not None
 
@@ -134,7 +157,7 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
     state = {"accepted": 0, "cycles": 0}
 
     async def testbench(ctx):
-        for port, value in (inputs or {}).items():
+        for port, value in inputs:
             ctx.set(port, value)
         w_idx = 0
         cyc = 0

@@ -1,0 +1,48 @@
+# FPGA+DSP co-design toolkit for Kalman-filter navigation receivers.
+# `make run` and `make test` set up everything they need (.venv, pip packages, Verilator).
+
+VENV   ?= .venv
+PYTHON ?= python3
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-stamp
+
+.DEFAULT_GOAL := help
+.PHONY: help setup tools run test test-all bench clean
+
+help:  ## show this help
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
+
+setup: $(STAMP) tools  ## create .venv, install the package and the tools the tests need
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[test,synth]"
+	touch $(STAMP)
+
+tools:  ## install Verilator when missing (apt-get, as root)
+	@if ! command -v verilator >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing verilator with apt-get"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq verilator >/dev/null; \
+	  else \
+	    echo "warning: verilator not found and cannot install it here (not root or no apt-get):" \
+	         "install it yourself; the Verilator tests will be skipped"; \
+	  fi; \
+	fi
+
+run: setup  ## run the default TACAN scenario end to end and print the bearing
+	$(PY) -m cosim tacan
+
+test: setup  ## run the whole test suite (slow tests excluded: see test-all)
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: setup  ## run every test, slow ones included
+	$(PY) -m pytest -q
+
+bench: setup  ## run the benchmarks; results go to results/ (shown in README.md)
+	$(PY) -m cosim bench tacan-accuracy
+
+clean:  ## remove generated files (build/, caches); keeps .venv and results/
+	rm -rf build .pytest_cache
+	find . -name __pycache__ -type d -prune -not -path './$(VENV)/*' -exec rm -rf {} +

@@ -1,0 +1,193 @@
+"""Golden (float64) model of the TACAN FPGA front end.
+
+The same structure as the HDL chain, without quantisation, so that golden and hardware
+differ only where the hardware rounds:
+
+    ADC codes -> x 2 exp(-j w n) (NCO + mixer) -> CIC (N, R, M) -> FIR (CIC-compensated
+    pulse-matched filter, decimation D) -> |z| -> pulse-peak search (noise-floor threshold)
+
+The CIC runs here as its equivalent FIR (a boxcar of R*M convolved N times, DC gain 1), the
+FIR with the float taps of :func:`dsp.design.design_pulse_fir`, the envelope is the exact
+magnitude and the peak search is :func:`hdl.model.peak.peak_search_float` (the integer
+model's twin). Amplitudes come out in units of ADC full scale (carrier peak amplitude);
+timestamps in ADC sample ticks, delayed by :attr:`FrontendConfig.group_delay_samples`.
+
+Runs in chunks with carried state: memory stays bounded for long records and the result
+does not depend on the chunking.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal as sps
+
+from dsp.design import cic_taps, design_pulse_fir
+from hdl.model.peak import PeakParams, PeakState, peak_search_float
+
+PULSE_SIGMA_S = 3.5e-6 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+
+
+@dataclass(frozen=True)
+class FrontendConfig:
+    """Structure and rates of the TACAN front end (shared by the golden model and the HDL).
+
+    Parameters
+    ----------
+    fs_hz : float
+        ADC sample rate (Hz).
+    if_hz : float
+        Digital IF after bandpass sampling (Hz), ``0 < if_hz < fs/2``.
+    cic_stages, cic_rate, cic_delay : int
+        CIC decimator N, R, M.
+    fir_numtaps, fir_decim : int
+        Pulse-matched FIR length (odd) and its decimation.
+    pulse_sigma_s : float
+        Gaussian pulse standard deviation the FIR is matched to.
+    peak : PeakParams
+        Pulse-peak search (noise-floor block, threshold factor, hold, max length).
+    thr_min_fs : float
+        Lowest detection threshold in the golden model (fraction of ADC full scale).
+    """
+
+    fs_hz: float = 20e6
+    if_hz: float = 3e6
+    cic_stages: int = 3
+    cic_rate: int = 4
+    cic_delay: int = 1
+    fir_numtaps: int = 33
+    fir_decim: int = 1
+    pulse_sigma_s: float = PULSE_SIGMA_S
+    peak: PeakParams = field(default_factory=PeakParams)
+    thr_min_fs: float = 0.05
+
+    def __post_init__(self):
+        for name in ("fs_hz", "if_hz", "pulse_sigma_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, not {v!r}")
+        if not self.if_hz < self.fs_hz / 2:
+            raise ValueError(f"digital IF must be below fs/2 = {self.fs_hz / 2:g} Hz, not {self.if_hz:g}")
+        for name, lo in (("cic_stages", 1), ("cic_rate", 2), ("cic_delay", 1), ("fir_decim", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                what = "CIC decimation" if name == "cic_rate" else name
+                raise ValueError(f"{what} must be an integer >= {lo}, not {v!r}")
+        if isinstance(self.fir_numtaps, bool) or not isinstance(self.fir_numtaps, int) \
+                or self.fir_numtaps < 3 or self.fir_numtaps % 2 == 0:
+            raise ValueError(f"FIR numtaps must be an odd integer >= 3, not {self.fir_numtaps!r}")
+        if self.peak.ts_step != self.decimation:
+            raise ValueError(f"peak ts_step ({self.peak.ts_step}) must equal the total "
+                             f"decimation cic_rate*fir_decim = {self.decimation}")
+        if not self.thr_min_fs >= 0:
+            raise ValueError(f"thr_min_fs must be >= 0, not {self.thr_min_fs}")
+
+    @property
+    def decimation(self) -> int:
+        return self.cic_rate * self.fir_decim
+
+    @property
+    def env_rate_hz(self) -> float:
+        return self.fs_hz / self.decimation
+
+    @property
+    def fir_taps(self) -> np.ndarray:
+        return design_pulse_fir(fs_in_hz=self.fs_hz, cic_stages=self.cic_stages,
+                                cic_rate=self.cic_rate, cic_delay=self.cic_delay,
+                                numtaps=self.fir_numtaps, pulse_sigma_s=self.pulse_sigma_s)
+
+    @property
+    def group_delay_samples(self) -> float:
+        """Delay of a pulse peak through CIC + FIR, in ADC samples."""
+        cic = self.cic_stages * (self.cic_rate * self.cic_delay - 1) / 2
+        return cic + (self.fir_numtaps - 1) / 2 * self.cic_rate
+
+    @classmethod
+    def for_signal(cls, sig_cfg, **changes) -> "FrontendConfig":
+        """The front end for a :class:`cosim.tacan_signal.TacanSignalConfig`'s rates."""
+        kw = dict(fs_hz=sig_cfg.fs_hz, if_hz=sig_cfg.digital_if_hz, pulse_sigma_s=sig_cfg.pulse_sigma_s)
+        kw.update(changes)
+        return cls(**kw)
+
+
+class _DecimatingFir:
+    """Streaming FIR + decimation by ``down`` (output at input indices that are multiples
+    of ``down``), with the history carried between chunks."""
+
+    def __init__(self, taps: np.ndarray, down: int):
+        self.h = np.asarray(taps, dtype=np.float64)
+        self.down = down
+        hist = len(self.h) - 1
+        self.hist_len = -(-hist // down) * down  # multiple of down
+        self.hist = np.zeros(self.hist_len, dtype=np.complex128)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        if len(x) % self.down:
+            raise ValueError("chunk length must be a multiple of the decimation")
+        buf = np.concatenate([self.hist, x])
+        # upfirdn output m: sum_k h[k] buf[m*down - k]; keep outputs at buf index >= hist_len.
+        y = sps.upfirdn(self.h, buf, up=1, down=self.down)
+        m0 = self.hist_len // self.down
+        y = y[m0:m0 + len(x) // self.down]
+        self.hist = buf[len(buf) - self.hist_len:] if self.hist_len else self.hist
+        return y
+
+
+@dataclass
+class Peaks:
+    """Pulse peaks as the FPGA reports them."""
+
+    timestamps: np.ndarray   # ADC sample ticks (int64, not wrapped)
+    amplitudes: np.ndarray   # fraction of ADC full scale
+    fs_hz: float
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return self.timestamps / self.fs_hz
+
+
+class GoldenFrontend:
+    """Float64 front end; call :meth:`process` on consecutive chunks of ADC codes."""
+
+    CHUNK = 1 << 20
+
+    def __init__(self, cfg: FrontendConfig, adc_bits: int):
+        self.cfg = cfg
+        self.adc_bits = int(adc_bits)
+        self.n = 0
+        self.cic = _DecimatingFir(cic_taps(cfg.cic_stages, cfg.cic_rate, cfg.cic_delay), cfg.cic_rate)
+        self.fir = _DecimatingFir(cfg.fir_taps, cfg.fir_decim)
+        self.peak_state: PeakState | None = None
+        self.w = 2 * np.pi * cfg.if_hz / cfg.fs_hz
+
+    def envelope(self, codes: np.ndarray) -> np.ndarray:
+        """Envelope samples (fraction of full scale) of the next chunk of ADC codes."""
+        x = np.asarray(codes, dtype=np.float64) * (2.0 ** -(self.adc_bits - 1))
+        n = np.arange(self.n, self.n + len(x), dtype=np.float64)
+        self.n += len(x)
+        z = 2.0 * x * np.exp(-1j * self.w * n)
+        return np.abs(self.fir(self.cic(z)))
+
+    def process(self, codes: np.ndarray) -> Peaks:
+        env = self.envelope(codes)
+        res, self.peak_state = peak_search_float(env, self.cfg.peak, self.peak_state,
+                                                 thr_min=self.cfg.thr_min_fs)
+        return Peaks(timestamps=np.asarray(res.index, np.int64) * self.cfg.decimation,
+                     amplitudes=np.asarray(res.amplitude, np.float64), fs_hz=self.cfg.fs_hz)
+
+
+def run_golden_frontend(samples: np.ndarray, cfg: FrontendConfig, adc_bits: int) -> Peaks:
+    """All peaks of a record of ADC codes (chunked internally)."""
+    samples = np.asarray(samples)
+    step = GoldenFrontend.CHUNK
+    step -= step % cfg.decimation
+    fe = GoldenFrontend(cfg, adc_bits)
+    usable = len(samples) - len(samples) % cfg.decimation
+    ts, amps = [], []
+    for c0 in range(0, usable, step):
+        p = fe.process(samples[c0:min(usable, c0 + step)])
+        ts.append(p.timestamps)
+        amps.append(p.amplitudes)
+    return Peaks(np.concatenate(ts) if ts else np.zeros(0, np.int64),
+                 np.concatenate(amps) if amps else np.zeros(0), cfg.fs_hz)

@@ -1,0 +1,186 @@
+"""TACAN pulse-peak search: adaptive threshold from a block noise floor, peak of each pulse.
+
+The algorithm, its parameters and the bit-exact model are in :mod:`hdl.model.peak`.
+
+Hardware structure (why it looks the way it does)
+-------------------------------------------------
+The noise floor has a one-sample recursion at every block boundary: the clip level of the
+first sample of block ``b+1`` depends on the last sample of block ``b``, which may arrive on
+the previous cycle. To keep that loop to one compare, one mux and one adder:
+
+* ``nu_{b+1} = nu_b + ((floor(S/L) - nu_b) >> s)`` is computed as
+  ``(S + nu_b*(2**s - 1)*L) >> (log2 L + s)`` (identical for integers; ``base =
+  nu_b*(2**s-1)*L`` is a register computed during the block), so block end -> new ``nu``
+  is one adder, one cycle after the block's sum ``S`` is registered;
+* the clipped contribution of the *first* sample of every block is taken one cycle late
+  (``def_*`` registers), after the new ``nu`` is in place;
+* block 0 accumulates ``e << s`` so that the same shift gives ``nu_1 = S_0 >> log2 L``.
+
+The detector runs ``det_delay`` (4) cycles behind the noise path on a delay line, so the
+threshold multiplier ``nu * thr_mult`` and the ``max(thr_min, .)`` are registered and
+``T_{b+1}`` is ready when the detector reaches block ``b+1``; its pre-stage registers the
+comparison ``e >= T`` so the pulse logic starts from a flop. Needs ``block_log2 >= 1``.
+"""
+from __future__ import annotations
+
+from amaranth.hdl import Const, Module, Mux, Signal, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from hdl.model.peak import PeakParams
+
+__all__ = ["PeakSearch", "PeakParams"]
+
+
+class PeakSearch(wiring.Component):
+    """Pulse-peak search over an envelope stream.
+
+    Parameters
+    ----------
+    params : PeakParams
+
+    Ports
+    -----
+    i : In(stream.Signature(unsigned(amp_width), always_ready=True))
+        Envelope samples; ``n`` (and the timestamp) advance on each valid transfer only.
+    o : Out(stream.Signature(StructLayout({"amplitude": unsigned(amp_width),
+            "timestamp": unsigned(ts_bits)}), always_ready=True))
+        One transfer per pulse, ``params.latency`` (6) cycles after the transfer of the
+        sample that closes the pulse. ``timestamp = (n_peak * ts_step) mod 2**ts_bits``.
+    """
+
+    def __init__(self, params: PeakParams | None = None):
+        self.params = params if params is not None else PeakParams()
+        p = self.params
+        self.out_layout = data.StructLayout({"amplitude": unsigned(p.amp_width),
+                                             "timestamp": unsigned(p.ts_bits)})
+        super().__init__({
+            "i": In(stream.Signature(unsigned(p.amp_width), always_ready=True)),
+            "o": Out(stream.Signature(self.out_layout, always_ready=True)),
+        })
+
+    def elaborate(self, platform):
+        p = self.params
+        m = Module()
+        aw = p.amp_width
+        L = p.block_len
+        K = p.block_log2 + p.smooth_log2
+
+        # Input register (the noise path's compare starts from a flop).
+        e_r = Signal(unsigned(aw))
+        v_r = Signal()
+        m.d.sync += [e_r.eq(self.i.payload), v_r.eq(self.i.valid)]
+
+        # -- noise floor ------------------------------------------------------------------
+        pos = Signal(unsigned(p.block_log2))
+        blk0 = Signal(init=1)
+        nu = Signal(unsigned(aw))
+        base = Signal(unsigned(p.acc_width))
+        acc = Signal(unsigned(p.acc_width))
+        s_reg = Signal(unsigned(p.acc_width))
+        s_v = Signal()
+        def_v = Signal()
+        def_e = Signal(unsigned(aw))
+        def_blk0 = Signal()
+
+        clip = Signal(unsigned(aw + p.clip_log2))
+        m.d.comb += clip.eq(nu << p.clip_log2)
+
+        def contribution(e, in_blk0):
+            clipped = Mux(e > clip, clip, e)
+            return Mux(in_blk0, e << p.smooth_log2, clipped)
+
+        first = pos == 0
+        last = pos == L - 1
+        take_in = v_r & ~first
+        lhs = Mux(def_v, contribution(def_e, def_blk0), acc)
+        rhs = Mux(take_in, contribution(e_r, blk0), 0)
+        total = Signal(unsigned(p.acc_width))
+        m.d.comb += total.eq(lhs + rhs)
+        with m.If(def_v | take_in):
+            m.d.sync += acc.eq(total)
+        m.d.sync += [
+            s_v.eq(v_r & last),
+            s_reg.eq(total),
+            def_v.eq(v_r & first),
+        ]
+        with m.If(v_r & first):
+            m.d.sync += [def_e.eq(e_r), def_blk0.eq(blk0)]
+        with m.If(v_r):
+            m.d.sync += pos.eq(pos + 1)
+            with m.If(last):
+                m.d.sync += blk0.eq(0)
+        with m.If(s_v):
+            m.d.sync += nu.eq((s_reg + base) >> K)
+        base_mult = ((1 << p.smooth_log2) - 1) * L
+        m.d.sync += base.eq(nu * base_mult)
+
+        # Threshold pipeline: registered product, then the floor.
+        prod = Signal(unsigned(aw + p.thr_mult.bit_length()))
+        t_next = Signal(unsigned(p.thr_width))
+        m.d.sync += prod.eq(nu * Const(p.thr_mult, unsigned(p.thr_mult.bit_length())))
+        scaled = prod >> p.thr_frac
+        m.d.sync += t_next.eq(Mux(scaled < p.thr_min, p.thr_min, scaled))
+
+        # -- detector, det_delay cycles behind ----------------------------------------------
+        # A pre-stage (det_delay - 1 cycles behind) picks the threshold and registers the
+        # comparison, so the pulse logic starts from a flop.
+        pe, pv = e_r, v_r
+        for k in range(p.det_delay - 1):
+            ne, nv = Signal(unsigned(aw), name=f"d{k}_e"), Signal(name=f"d{k}_v")
+            m.d.sync += [ne.eq(pe), nv.eq(pv)]
+            pe, pv = ne, nv
+
+        pre_pos = Signal(unsigned(p.block_log2))
+        pre_first = Signal(init=1)  # the next pre-stage sample starts a block
+        pre_blk0 = Signal(init=1)
+        thr = Signal(unsigned(p.thr_width))
+        t_use = Mux(pre_first, t_next, thr)
+        de = Signal(unsigned(aw))
+        dv = Signal()
+        above = Signal()
+        m.d.sync += [de.eq(pe), dv.eq(pv), above.eq(pv & ~pre_blk0 & (pe >= t_use))]
+        with m.If(pv):
+            m.d.sync += [pre_pos.eq(pre_pos + 1), pre_first.eq(pre_pos == L - 1)]
+            with m.If(pre_pos == L - 1):
+                m.d.sync += pre_blk0.eq(0)
+            with m.If(pre_first):
+                m.d.sync += thr.eq(t_next)
+
+        ts = Signal(unsigned(p.ts_bits))
+        is_open = Signal()
+        pmax = Signal(unsigned(aw))
+        pts = Signal(unsigned(p.ts_bits))
+        below = Signal(range(p.hold + 1))
+        plen = Signal(range(p.max_len + 1))
+
+        upd = de > pmax
+        new_max = Mux(upd, de, pmax)
+        new_ts = Mux(upd, ts, pts)
+        below_n = Mux(above, 0, below + 1)
+        len_n = plen + 1
+        close = (below_n == p.hold) | (len_n == p.max_len)
+
+        o_valid = Signal()
+        o_amp = Signal(unsigned(aw))
+        o_ts = Signal(unsigned(p.ts_bits))
+        m.d.sync += o_valid.eq(0)
+        with m.If(dv):
+            m.d.sync += ts.eq(ts + p.ts_step)
+            with m.If(~is_open):
+                with m.If(above):
+                    m.d.sync += [is_open.eq(1), pmax.eq(de), pts.eq(ts), below.eq(0),
+                                 plen.eq(1)]
+            with m.Else():
+                with m.If(close):
+                    m.d.sync += [is_open.eq(0), o_valid.eq(1), o_amp.eq(new_max),
+                                 o_ts.eq(new_ts)]
+                with m.Else():
+                    m.d.sync += [pmax.eq(new_max), pts.eq(new_ts), below.eq(below_n),
+                                 plen.eq(len_n)]
+        m.d.comb += [
+            self.o.valid.eq(o_valid),
+            self.o.payload.amplitude.eq(o_amp),
+            self.o.payload.timestamp.eq(o_ts),
+        ]
+        return m

@@ -1,0 +1,52 @@
+"""End to end through the CLI contract: `python -m cosim tacan ... --json`."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from cosim.cli import main
+
+KEYS = {"bearing_true_deg", "bearing_est_deg", "rmse_deg", "mean_error_deg", "crb_deg",
+        "n_updates", "backend"}
+
+
+def test_cli_json_contract(capsys):
+    rc = main(["tacan", "--bearing-deg", "123", "--snr-db", "15", "--duration-s", "1.5",
+               "--seed", "2", "--mode", "X", "--backend", "golden", "--json"])
+    assert rc == 0
+    r = json.loads(capsys.readouterr().out)
+    assert KEYS <= set(r)
+    assert r["backend"] == "golden" and r["bearing_true_deg"] == 123.0
+    assert abs(r["bearing_est_deg"] - 123.0) < 0.5
+    assert r["n_updates"] > 5000 and r["crb_deg"] > 0
+
+
+def test_cli_readable_summary(capsys):
+    assert main(["tacan", "--duration-s", "1.5", "--snr-db", "20", "--bearing-deg", "10"]) == 0
+    out = capsys.readouterr().out
+    assert "bearing: true 10.000 deg" in out and "RMSE" in out and "Cramer-Rao" in out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--fs-hz", "2e6"], "sample rate 2 MS/s is too low for the IF"),
+    (["--adc-bits", "0"], "adc_bits must be an integer in [1, 24], not 0"),
+    (["--mod-15", "1.5"], "modulation depths must satisfy"),
+    (["--duration-s", "0"], "duration_s must be > 0, not 0.0"),
+    (["--duration-s", "0.5"], "leaves no time after the filter settles"),
+    (["--backend", "nope"], "backend must be one of"),
+])
+def test_cli_errors_go_to_stderr_with_nonzero_exit(capsys, args, message):
+    rc = main(["tacan", "--json"] + args)
+    cap = capsys.readouterr()
+    assert rc != 0
+    assert message in cap.err
+    assert cap.out == ""
+
+
+def test_cli_nan_bearing_is_refused():
+    p = subprocess.run([sys.executable, "-m", "cosim", "tacan", "--bearing-deg", "nan", "--json"],
+                       capture_output=True, text=True)
+    assert p.returncode != 0
+    assert "must be a finite number, not nan" in p.stderr
+    assert p.stdout == ""

@@ -1,0 +1,107 @@
+"""The seed's 5-state envelope Kalman filter, checked against an independent formulation."""
+import numpy as np
+import pytest
+
+from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig
+
+
+def _stream(seed, n=600, sigma=0.05):
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.exponential(1 / 7200, n))  # non-uniform peak times
+    x_true = np.array([0.2, -0.1, 0.05, 0.19, 1.0])
+    A = EnvelopeKalman.transition(t - t[-1])  # state at t_j from the state at t_N
+    H = np.array([1.0, 0, 1, 0, 1])
+    y = np.einsum("nij,j->ni", A, x_true) @ H + rng.standard_normal(n) * sigma
+    return t, y, x_true
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_kalman_equals_batch_least_squares(seed):
+    """With no process noise the filter is recursive least squares: its final state must
+    equal the batch fit of all measurements expressed at the last time, with the prior
+    x0 = 0, P0 = p0 I as a ridge term (written independently, solved with numpy.linalg)."""
+    t, y, _ = _stream(seed)
+    cfg = KalmanConfig(memory_s=1e9, p0=1e4, gate=1e9)
+    kf = EnvelopeKalman(cfg)
+    kf.run(np.diff(t, prepend=t[0]), y[None, :])
+    A = EnvelopeKalman.transition(t - t[-1])
+    M = A[:, [0, 2, 4], :].sum(axis=1)  # H A(t_j - t_N)
+    info = M.T @ M + np.eye(5) / cfg.p0
+    x_ls = np.linalg.solve(info, M.T @ y)
+    np.testing.assert_allclose(kf.x[0], x_ls, rtol=0, atol=1e-10)
+    # Its covariance is the LS covariance (in units of r).
+    np.testing.assert_allclose(kf.P[0], np.linalg.inv(info), rtol=1e-8, atol=1e-14)
+
+
+def test_step_and_run_agree():
+    t, y, _ = _stream(4, n=300)
+    dts = np.diff(t, prepend=t[0])
+    a, b = EnvelopeKalman(), EnvelopeKalman()
+    a.run(dts, y[None, :])
+    for k in range(t.size):
+        b.step(dts[k], y[k])
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.P, b.P, rtol=0, atol=1e-12)
+
+
+def test_transition_is_a_rotation_group():
+    A = EnvelopeKalman.transition
+    np.testing.assert_allclose(A(1.3e-4)[0] @ A(2.1e-4)[0], A(3.4e-4)[0], atol=1e-14)
+    np.testing.assert_allclose(A(-5e-4)[0] @ A(5e-4)[0], np.eye(5), atol=1e-14)
+
+
+def test_batched_trials_are_independent():
+    t, y, _ = _stream(5, n=200)
+    dts = np.diff(t, prepend=t[0])
+    ys = np.stack([y, 2 * y, -y])
+    kb = EnvelopeKalman(batch=3)
+    kb.run(dts, ys)
+    for i in range(3):
+        k1 = EnvelopeKalman()
+        k1.run(dts, ys[i:i + 1])
+        np.testing.assert_allclose(kb.x[i], k1.x[0], atol=1e-12)
+
+
+def test_covariance_stays_symmetric_psd_over_a_long_run():
+    rng = np.random.default_rng(0)
+    n = 20000
+    dts = rng.exponential(1 / 7200, n)
+    kf = EnvelopeKalman()
+    kf.run(dts, rng.standard_normal((1, n)) * 0.1 + 1.0)
+    P = kf.P[0]
+    np.testing.assert_allclose(P, P.T, atol=0)
+    assert np.linalg.eigvalsh(P).min() > 0
+
+
+def test_outliers_are_gated_and_divergence_reinitialises():
+    rng = np.random.default_rng(1)
+    cfg = KalmanConfig(warmup=100, max_rejects=20)
+    kf = EnvelopeKalman(cfg)
+    dts = rng.exponential(1 / 7200, 3000)
+    y = 1.0 + 0.05 * rng.standard_normal(3000)
+    y[1000] = 50.0                      # one wild pulse: gated
+    y[2000:2100] = 40.0                 # the level jumps: divergence -> re-initialise
+    kf.run(dts, y[None, :])
+    assert kf.events.gated[0] >= 21
+    assert kf.events.reinit[0] == 1
+    assert np.all(np.isfinite(kf.x))
+
+
+def test_nan_measurement_is_refused():
+    kf = EnvelopeKalman()
+    with pytest.raises(ValueError, match="measurement is NaN or infinite"):
+        kf.step(1e-4, float("nan"))
+    with pytest.raises(ValueError, match="measurement is NaN or infinite"):
+        kf.run(np.ones(3) * 1e-4, np.array([[1.0, np.inf, 1.0]]))
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(memory_s=0.0), r"memory_s must be a finite number > 0, not 0.0"),
+    (dict(memory_s=float("nan")), r"memory_s must be a finite number > 0, not nan"),
+    (dict(gate=-1.0), r"gate must be a finite number > 0, not -1.0"),
+    (dict(warmup=0), r"warmup must be an integer >= 1, not 0"),
+    (dict(memory_s=1e-4), r"memory_s=0.0001 is shorter than a few pulses"),
+])
+def test_bad_config(kw, message):
+    with pytest.raises(ValueError, match=message):
+        KalmanConfig(**kw)

@@ -1,0 +1,263 @@
+"""FIFO towards the DSP: sync sim == cycle model; async conservation at two clock rates."""
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import ClockDomain, Const, Elaboratable, Module, Value
+from amaranth.sim import Simulator
+
+from cosim.pysim import run_stream
+from hdl.fifo import DspFifo
+from hdl.model.fifo import (TAG_DATA, TAG_MARKER, FifoParams, decode_stream, fifo_model,
+                            pack_word, unpack_word)
+
+BUILD = Path(__file__).resolve().parents[2] / "build" / "lint"
+
+
+def _bursts(rng, n, burst, p_on, p_fine):
+    """Per-cycle pattern: bursts of ``burst`` cycles on with probability ``p_on``, thinned."""
+    on = np.repeat(rng.random(n // burst + 1) < p_on, burst)[:n]
+    return on & (rng.random(n) < p_fine)
+
+
+def _check_sim(p, rng, n_cycles, *, w=(20, 0.5, 0.8), r=(15, 0.6, 0.8)):
+    in_valid = _bursts(rng, n_cycles, *w)
+    out_ready = _bursts(rng, n_cycles, *r)
+    words = rng.integers(0, 1 << p.width, int(in_valid.sum()))
+    dut = DspFifo(p)
+    res = run_stream(dut, words, in_valid=in_valid, out_ready=out_ready, n_cycles=n_cycles,
+                     probe={"ovf": dut.overflow_count})
+    ref = fifo_model(words, in_valid, out_ready, p)
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(res.cycles, ref.cycles)
+    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
+    return words, ref
+
+
+def _check_accounting(words, ref, p):
+    """Data words come out in order; markers count exactly the words skipped before them."""
+    payload, tag = unpack_word(ref.words, p)
+    assert set(np.unique(tag)) <= {TAG_DATA, TAG_MARKER}
+    kept = words[~ref.dropped]
+    data, _ = decode_stream(ref.words, p)
+    np.testing.assert_array_equal(data, kept[:data.size])
+    # Walk the output: a marker stands for exactly its count of dropped inputs (a long gap
+    # may be reported by several markers); a data word is the next input not dropped.
+    k = 0
+    for pl, tg in zip(payload.tolist(), tag.tolist()):
+        if tg == TAG_MARKER:
+            assert pl > 0 and ref.dropped[k:k + pl].all() and k + pl <= words.size
+            k += pl
+        else:
+            assert not ref.dropped[k] and words[k] == pl
+            k += 1
+
+
+# -- synchronous: simulation == model ------------------------------------------------------
+def test_sim_matches_model_quick():
+    p = FifoParams(width=12, depth=8)
+    rng = np.random.default_rng(301)
+    words, ref = _check_sim(p, rng, 20_000)
+    assert ref.dropped.sum() > 100 and ref.words.size > 1000
+    _check_accounting(words, ref, p)
+
+
+@pytest.mark.slow
+def test_sim_matches_model_1e5():
+    p = FifoParams(width=51, depth=16)
+    rng = np.random.default_rng(302)
+    words, ref = _check_sim(p, rng, 100_000)
+    assert ref.dropped.sum() > 1000
+    _check_accounting(words, ref, p)
+
+
+@pytest.mark.parametrize("depth", [1, 2, 3])
+def test_small_depths(depth):
+    p = FifoParams(width=8, depth=depth)
+    rng = np.random.default_rng(303 + depth)
+    words, ref = _check_sim(p, rng, 6000, w=(10, 0.5, 0.6), r=(7, 0.7, 0.7))
+    assert ref.dropped.sum() > 50
+    _check_accounting(words, ref, p)
+
+
+def test_back_to_back_writes_and_no_overflow():
+    """Continuous input, always-ready reader: nothing dropped, 2-cycle latency, no markers."""
+    p = FifoParams(width=10, depth=4)
+    rng = np.random.default_rng(306)
+    n = 2000
+    words = rng.integers(0, 1 << p.width, n)
+    in_valid = np.ones(n + 10, bool)
+    ready = np.ones(n + 10, bool)
+    dut = DspFifo(p)
+    res = run_stream(dut, words, in_valid=in_valid, out_ready=ready, n_cycles=n + 10)
+    ref = fifo_model(words, in_valid, ready, p)
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(ref.words, words)
+    np.testing.assert_array_equal(res.cycles, np.arange(n) + 2)
+
+
+def test_marker_words_directed():
+    p = FifoParams(width=8, depth=4)
+    n = 60
+    in_valid = np.zeros(n, bool)
+    in_valid[0:10] = True      # 4 fit (3 in the memory + the output register), 6 dropped
+    in_valid[30:33] = True     # after the reader drained: marker first, then these
+    ready = np.zeros(n, bool)
+    ready[20:] = True
+    words = np.arange(100, 113)
+    dut = DspFifo(p)
+    res = run_stream(dut, words, in_valid=in_valid, out_ready=ready, n_cycles=n,
+                     probe={"ovf": dut.overflow_count})
+    expected = pack_word([100, 101, 102, 103, 6, 110, 111, 112],
+                         [0, 0, 0, 0, TAG_MARKER, 0, 0, 0], p)
+    np.testing.assert_array_equal(res.words, expected)
+    ref = fifo_model(words, in_valid, ready, p)
+    np.testing.assert_array_equal(ref.words, expected)
+    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
+    assert res.probes["ovf"][-1] == 6
+    # The marker cycle had an input word too: it went through the hold register.
+    assert ref.dropped.tolist() == [False] * 4 + [True] * 6 + [False] * 3
+
+
+def test_counter_and_marker_saturate():
+    p = FifoParams(width=2, depth=2, count_width=3)
+    rng = np.random.default_rng(307)
+    words, ref = _check_sim(p, rng, 5000, w=(50, 0.7, 0.9), r=(50, 0.3, 0.3))
+    assert ref.overflow_count.max() == p.count_max == 7
+    payload, tag = unpack_word(ref.words, p)
+    assert (payload[tag == TAG_MARKER] == p.marker_max).any()
+
+
+def test_model_validates_inputs():
+    p = FifoParams(width=8, depth=4)
+    with pytest.raises(ValueError, match=r"out_ready must have one entry per cycle \(5\)"):
+        fifo_model([1], np.ones(5, bool), np.ones(4, bool), p)
+    with pytest.raises(ValueError, match="synchronous FIFO only"):
+        fifo_model([1], [1], [1], FifoParams(depth=4, asynchronous=True))
+
+
+# -- asynchronous: two clocks --------------------------------------------------------------
+class _TwoClocks(Elaboratable):
+    def __init__(self, dut):
+        self.dut = dut
+
+    def elaborate(self, platform):
+        m = Module()
+        m.domains.dsp = ClockDomain("dsp")
+        m.submodules.dut = self.dut
+        return m
+
+
+def _run_async(p, words, in_valid, out_ready, w_hz, r_hz, r_cycles):
+    """Two-clock testbench (``cosim.pysim.run_stream`` drives one clock only)."""
+    dut = DspFifo(p)
+    out, ovf_trace = [], []
+    sim = Simulator(_TwoClocks(dut))
+    sim.add_clock(1 / w_hz, domain="sync")
+    sim.add_clock(1 / r_hz, domain="dsp")
+
+    async def writer(ctx):
+        k = 0
+        for v in in_valid:
+            offer = bool(v) and k < len(words)
+            ctx.set(dut.i.valid, offer)
+            if offer:
+                ctx.set(dut.i.payload, int(words[k]))
+                k += 1
+            await ctx.tick("sync")
+        ctx.set(dut.i.valid, 0)
+
+    async def reader(ctx):
+        for c in range(r_cycles):
+            rdy = True if c >= len(out_ready) else bool(out_ready[c])
+            ctx.set(dut.o.ready, rdy)
+            _, _, valid, payload, cnt = await ctx.tick("dsp").sample(
+                dut.o.valid, Value.cast(dut.o.payload), dut.overflow_count)
+            if valid and rdy:
+                out.append(int(payload))
+            ovf_trace.append(int(cnt))
+
+    sim.add_testbench(writer)
+    sim.add_testbench(reader)
+    sim.run()
+    return np.array(out, dtype=np.int64), np.array(ovf_trace, dtype=np.int64)
+
+
+@pytest.mark.parametrize("w_hz, r_hz", [(100e6, 37e6), (20e6, 73e6)])
+def test_async_two_clock_rates(w_hz, r_hz):
+    p = FifoParams(width=20, depth=5, asynchronous=True)
+    assert p.actual_depth == 5
+    rng = np.random.default_rng(308)
+    n_w = 4000
+    in_valid = _bursts(rng, n_w, 30, 0.5, 0.7)
+    words = np.arange(int(in_valid.sum()))
+    r_cycles = int(n_w * r_hz / w_hz) + 200  # the reader drains everything at the end
+    out_ready = _bursts(rng, r_cycles - 150, 20, 0.5, 0.6)
+    out, ovf = _run_async(p, words, in_valid, out_ready, w_hz, r_hz, r_cycles)
+    payload, tag = unpack_word(out, p)
+    data = payload[tag == TAG_DATA]
+    lost = payload[tag == TAG_MARKER]
+    assert lost.size > 0 and data.size > 100
+    # In order, nothing lost silently: every gap in the data is announced by markers.
+    assert np.all(np.diff(data) > 0)
+    expect_prev = 0
+    k = 0
+    for pl, tg in zip(payload.tolist(), tag.tolist()):
+        if tg == TAG_MARKER:
+            k += pl
+        else:
+            assert pl == expect_prev + k, "gap not announced by a marker"
+            expect_prev, k = pl + 1, 0
+    assert data.size + lost.sum() == words.size
+    # The count crosses into the read domain monotonically and ends at the total.
+    assert np.all(np.diff(ovf) >= 0)
+    assert ovf[-1] == lost.sum()
+
+
+# -- parameters and Verilog ----------------------------------------------------------------
+@pytest.mark.parametrize("kw, msg", [
+    (dict(depth=0), r"FIFO depth must be >= 1, not 0"),
+    (dict(depth=2, asynchronous=True), r"asynchronous FIFO depth must be >= 3, not 2"),
+    (dict(width=0), r"FIFO width must be an integer in \[1, 61\], not 0"),
+    (dict(count_width=0), r"FIFO count_width must be an integer in \[1, 32\], not 0"),
+    (dict(asynchronous=True, r_domain="sync"),
+     r"asynchronous FIFO needs two different domains, not 'sync' twice"),
+])
+def test_bad_params(kw, msg):
+    with pytest.raises(ValueError, match=msg):
+        FifoParams(**kw)
+
+
+def test_actual_depth():
+    assert FifoParams(depth=7).actual_depth == 7
+    assert FifoParams(depth=3, asynchronous=True).actual_depth == 3
+    assert FifoParams(depth=6, asynchronous=True).actual_depth == 9
+    assert FifoParams(depth=512, asynchronous=True).actual_depth == 513
+
+
+@pytest.mark.verilator
+@pytest.mark.parametrize("asynchronous", [False, True])
+def test_verilog_lints_clean(asynchronous):
+    """Waived as for every Amaranth export: UNUSEDSIGNAL, DECLFILENAME, WIDTH."""
+    if shutil.which("verilator") is None:
+        pytest.skip("verilator not on PATH (install verilator >= 5)")
+    p = FifoParams(depth=16, asynchronous=asynchronous)
+    dut = DspFifo(p)
+    # amaranth-lang/amaranth#1574: the constant ``ready`` of an always-ready stream
+    # cannot be a port.
+    ports = [Value.cast(v) for _, _, v in dut.signature.flatten(dut)]
+    ports = [v for v in ports if not isinstance(v, Const)]
+    name = "dsp_fifo_async" if asynchronous else "dsp_fifo"
+    top = _TwoClocks(dut) if asynchronous else dut
+    BUILD.mkdir(parents=True, exist_ok=True)
+    path = BUILD / f"{name}.v"
+    path.write_text(verilog.convert(top, name=name, ports=ports))
+    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
+                        "-Wno-DECLFILENAME", "-Wno-WIDTH", str(path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr

@@ -1,0 +1,228 @@
+"""Complex mixer: Amaranth simulation == bit-exact model, corners, scaling, errors, lint."""
+from __future__ import annotations
+
+import itertools
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import Const
+from amaranth.hdl._ir import PortDirection
+from amaranth.lib import wiring
+
+from cosim.pysim import pack_fields, run_stream, unpack_fields
+from hdl.mixer import Mixer
+from hdl.model.mixer import MixerModel, MixerParams
+
+BUILD = Path(__file__).resolve().parents[2] / "build" / "verilog"
+ROUNDINGS = ("floor", "half_up", "half_even", "zero")
+
+
+def _in_layout(p: MixerParams):
+    a, b = p.in_width, p.lo_width
+    x = [("xi", a, True), ("xq", a, True)] if p.complex_input else [("x", a, True)]
+    return x + [("cos", b, True), ("sin", b, True)]
+
+
+def _random_inputs(p: MixerParams, n: int, rng) -> dict:
+    """Uniform words with 10 % of each operand forced to full scale (either sign)."""
+    def draw(w):
+        v = rng.integers(-(1 << (w - 1)), 1 << (w - 1), n)
+        fs = rng.random(n) < 0.1
+        v[fs] = rng.choice([-(1 << (w - 1)), (1 << (w - 1)) - 1], np.count_nonzero(fs))
+        return v
+    f = {"cos": draw(p.lo_width), "sin": draw(p.lo_width)}
+    if p.complex_input:
+        f["xi"], f["xq"] = draw(p.in_width), draw(p.in_width)
+    else:
+        f["x"] = draw(p.in_width)
+    return f
+
+
+def _model(p: MixerParams, f: dict):
+    x = (f["xi"], f["xq"]) if p.complex_input else f["x"]
+    return MixerModel(p).run(x, f["cos"], f["sin"])
+
+
+def _sim(p: MixerParams, f: dict, in_valid=None):
+    dut = Mixer(p)
+    res = run_stream(dut, pack_fields(f, _in_layout(p)), in_valid=in_valid,
+                     flush_cycles=p.latency + 4)
+    o = unpack_fields(res.words, [("i", p.out_width, True), ("q", p.out_width, True)])
+    return o["i"], o["q"], res
+
+
+def _accepted_cycles(n: int, in_valid) -> np.ndarray:
+    """Cycle of each accepted input under run_stream's offer rule (always-ready input;
+    offered every cycle once the pattern runs out)."""
+    if in_valid is None:
+        return np.arange(n)
+    cyc = np.flatnonzero(in_valid)[:n]
+    return np.r_[cyc, len(in_valid) + np.arange(n - len(cyc))]
+
+
+def _check(p: MixerParams, n: int, seed: int, gaps: bool = True):
+    rng = np.random.default_rng(seed)
+    f = _random_inputs(p, n, rng)
+    in_valid = rng.random(n + n // 4) < 0.8 if gaps else None
+    i, q, res = _sim(p, f, in_valid)
+    mi, mq = _model(p, f)
+    assert len(i) == n, f"seed {seed}"
+    np.testing.assert_array_equal(i, mi, err_msg=f"seed {seed} {p}")
+    np.testing.assert_array_equal(q, mq, err_msg=f"seed {seed} {p}")
+    np.testing.assert_array_equal(res.cycles, _accepted_cycles(n, in_valid) + p.latency)
+
+
+@pytest.mark.parametrize("rounding,overflow", list(itertools.product(ROUNDINGS, ("wrap", "saturate"))))
+def test_real_random(rounding, overflow):
+    p = MixerParams(rounding=rounding, overflow=overflow)
+    _check(p, 2500, seed=100 + ROUNDINGS.index(rounding) * 2 + (overflow == "wrap"))
+
+
+@pytest.mark.parametrize("rounding", ROUNDINGS)
+def test_complex_random(rounding):
+    p = MixerParams(complex_input=True, in_width=14, lo_width=16, out_width=20,
+                    rounding=rounding, overflow="saturate")
+    _check(p, 2500, seed=200 + ROUNDINGS.index(rounding))
+
+
+@pytest.mark.parametrize("p", [
+    MixerParams(in_width=4, lo_width=4, out_width=10),               # drop_bits < 0: exact
+    MixerParams(in_width=8, lo_width=6, out_width=13),               # drop_bits = 0
+    MixerParams(in_width=8, lo_width=6, out_width=12, rounding="half_even"),  # drop_bits = 1
+    MixerParams(headroom_bits=1, rounding="zero", overflow="wrap"),
+    MixerParams(complex_input=True, in_width=5, lo_width=7, out_width=6, rounding="half_even",
+                overflow="wrap"),
+])
+def test_widths_and_headroom(p):
+    _check(p, 1500, seed=300)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("p", [MixerParams(), MixerParams(complex_input=True, rounding="half_even")])
+def test_random_1e5(p):
+    """1e5 random samples through the Amaranth simulation (about a minute each)."""
+    _check(p, 100_000, seed=400 + p.complex_input)
+
+
+@pytest.mark.parametrize("p", [
+    MixerParams(rounding="floor", overflow="wrap"),
+    MixerParams(rounding="half_up", overflow="saturate"),
+    MixerParams(complex_input=True, rounding="half_even", overflow="saturate"),
+    MixerParams(complex_input=True, rounding="zero", overflow="wrap"),
+])
+def test_full_scale_corners(p):
+    """Every combination of {min, min+1, -1, 0, 1, max} for each operand."""
+    def vals(w):
+        return [-(1 << (w - 1)), -(1 << (w - 1)) + 1, -1, 0, 1, (1 << (w - 1)) - 1]
+    xs, ls = vals(p.in_width), vals(p.lo_width)
+    if p.complex_input:
+        rows = list(itertools.product(xs, xs, ls, ls))
+        names = ["xi", "xq", "cos", "sin"]
+    else:
+        rows = list(itertools.product(xs, ls, ls))
+        names = ["x", "cos", "sin"]
+    f = {k: np.array(col, dtype=np.int64) for k, col in zip(names, zip(*rows))}
+    i, q, _ = _sim(p, f)
+    mi, mq = _model(p, f)
+    np.testing.assert_array_equal(i, mi)
+    np.testing.assert_array_equal(q, mq)
+    # The most negative x times the most negative LO is +1.0: one LSB over full scale.
+    mn_x, mn_l = -(1 << (p.in_width - 1)), -(1 << (p.lo_width - 1))
+    top = (1 << (p.out_width - 1)) - 1
+    k = [j for j, r in enumerate(rows) if all(v == (mn_x if n[0] == "x" else mn_l) for v, n in zip(r, names))]
+    assert len(k) == 1
+    if p.complex_input:   # i = 2.0 (overflow), q = 0
+        assert i[k[0]] == (top if p.overflow == "saturate" else 0) and q[k[0]] == 0
+    else:                 # i = +1.0, q = -(x*sin) = -1.0 (fits)
+        assert i[k[0]] == (top if p.overflow == "saturate" else -(top + 1))
+        assert q[k[0]] == -(top + 1)
+
+
+def test_model_rounding_against_float():
+    """The model's rounding equals an independent float formulation (products < 2**53)."""
+    rng = np.random.default_rng(7)
+    x = rng.integers(-2048, 2048, 20000)
+    c = rng.integers(-32768, 32768, 20000)
+    s = rng.integers(-32768, 32768, 20000)
+    prod = x * c / 2.0 ** 9
+    ref = {"floor": np.floor(prod), "half_up": np.floor(prod + 0.5),
+           "half_even": np.rint(prod), "zero": np.trunc(prod)}
+    for r in ROUNDINGS:
+        p = MixerParams(rounding=r, overflow="saturate")
+        assert p.drop_bits == 9
+        i, _ = MixerModel(p).run(x, c, s)
+        np.testing.assert_array_equal(i, np.clip(ref[r], -(1 << 17), (1 << 17) - 1), err_msg=r)
+
+
+def test_scaling_properties():
+    p = MixerParams()
+    assert (p.product_width, p.sum_width, p.frac_bits, p.drop_bits, p.latency) == (28, 28, 26, 9, 4)
+    pc = MixerParams(complex_input=True, headroom_bits=1)
+    assert (pc.sum_width, pc.drop_bits, pc.latency) == (29, 10, 5)
+    # Unity gain in full-scale units: 0.5 * 0.5 -> 0.25.
+    i, q = MixerModel(p).run(np.array([1024]), np.array([16384]), np.array([-16384]))
+    assert i[0] == q[0] == 1 << 15
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(in_width=1), r"mixer in_width must be an integer in \[2, 32\], not 1"),
+    (dict(lo_width=33), r"mixer lo_width must be an integer in \[2, 32\], not 33"),
+    (dict(out_width=0), r"mixer out_width must be an integer in \[2, 48\], not 0"),
+    (dict(headroom_bits=9), r"mixer headroom_bits must be an integer in \[0, 8\], not 9"),
+    (dict(rounding="nearest"), r"mixer rounding must be one of .*'half_even'.*, not 'nearest'"),
+    (dict(overflow="clip"), r"mixer overflow must be one of \('wrap', 'saturate'\), not 'clip'"),
+    (dict(complex_input="yes"), r"mixer complex_input must be a bool, not 'yes'"),
+])
+def test_bad_params(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        MixerParams(**kwargs)
+
+
+def test_model_refuses_out_of_range():
+    m = MixerModel(MixerParams())
+    with pytest.raises(ValueError, match=r"mixer LO sin must be signed 16-bit integers in \[-32768, 32767\], found 32768"):
+        m.run(np.array([1]), np.array([1]), np.array([32768]))
+    with pytest.raises(ValueError, match=r"mixer input x must be signed 12-bit"):
+        m.run(np.array([-2049]), np.array([1]), np.array([1]))
+
+
+def test_bad_component_argument():
+    with pytest.raises(ValueError, match=r"Mixer needs a MixerParams, not 12"):
+        Mixer(12)
+
+
+def _verilog_ports(c):
+    """Ports for ``verilog.convert`` without the constant ``ready`` of always-ready streams."""
+    ports = {}
+    for path, member, value in c.signature.flatten(c):
+        v = value.as_value() if hasattr(value, "as_value") else value
+        if isinstance(v, Const) or len(v) == 0:
+            continue
+        d = PortDirection.Input if member.flow == wiring.In else PortDirection.Output
+        ports["__".join(map(str, path))] = (v, d)
+    return ports
+
+
+@pytest.mark.verilator
+@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.parametrize("name,p", [
+    ("mixer_real", MixerParams()),
+    ("mixer_real_floor_wrap", MixerParams(rounding="floor", overflow="wrap")),
+    ("mixer_cplx_even", MixerParams(complex_input=True, rounding="half_even")),
+    ("mixer_cplx_zero", MixerParams(complex_input=True, rounding="zero", overflow="wrap")),
+])
+def test_verilog_lint(name, p):
+    # Waived: UNUSEDSIGNAL (Amaranth keeps unused intermediate wires and carry bits) and
+    # DECLFILENAME (module names are not file names).
+    dut = Mixer(p)
+    text = verilog.convert(dut, name=name, ports=_verilog_ports(dut))
+    BUILD.mkdir(parents=True, exist_ok=True)
+    path = BUILD / f"{name}.v"
+    path.write_text(text)
+    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
+                        "-Wno-DECLFILENAME", str(path)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr

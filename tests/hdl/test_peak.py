@@ -1,0 +1,338 @@
+"""Pulse-peak search: Amaranth sim == bit-exact model, model == per-sample reference, corners."""
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import Const, Module, ResetInserter, Value
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In
+
+from cosim.pysim import run_stream, unpack_fields
+from hdl.model.peak import PeakParams, PeakState, peak_search, peak_search_float
+from hdl.peak import PeakSearch
+
+BUILD = Path(__file__).resolve().parents[2] / "build" / "lint"
+
+
+# -- helpers -------------------------------------------------------------------------------
+def realistic_envelope(rng, n, *, noise=200.0, width=10.0, min_gap=21, max_gap=150,
+                       amp_range=(2.0, 20.0), amp_width=19):
+    """Rayleigh noise (mean ``noise``) plus Gaussian pulses (FWHM ``width`` samples) at
+    random spacing > 20 samples with amplitudes 2..20 times the noise mean."""
+    mean_to_sigma = 1.0 / np.sqrt(np.pi / 2)
+    e = rng.rayleigh(noise * mean_to_sigma, n)
+    centres = np.cumsum(rng.integers(min_gap, max_gap, n // min_gap + 1))
+    centres = centres[centres < n]
+    amps = rng.uniform(*amp_range, centres.size) * noise
+    sigma = width / (2 * np.sqrt(2 * np.log(2)))
+    k = np.arange(-4 * int(sigma + 1), 4 * int(sigma + 1) + 1)
+    shape = np.exp(-0.5 * (k / sigma) ** 2)
+    for c, a in zip(centres, amps):
+        idx = c + k
+        ok = (idx >= 0) & (idx < n)
+        e[idx[ok]] += a * shape[ok]
+    return np.minimum(np.round(e), (1 << amp_width) - 1).astype(np.int64)
+
+
+def reference_loop(e, p, *, is_float=False, thr_min=None):
+    """Straight per-sample transcription of the algorithm (independent of the model)."""
+    L = p.block_len
+    out = []
+    nu, bsum = 0, 0
+    is_open, pmax, nmax, below, length = False, 0, 0, 0, 0
+    tm = p.thr_min if thr_min is None else thr_min
+    for n, x in enumerate(e):
+        x = float(x) if is_float else int(x)
+        b = n // L
+        if b == 0:
+            T = float("inf")
+            bsum += x
+        elif is_float:
+            T = max(tm, nu * p.thr_mult / 2 ** p.thr_frac)
+            bsum += min(x, nu * 2 ** p.clip_log2)
+        else:
+            T = max(p.thr_min, (nu * p.thr_mult) >> p.thr_frac)
+            bsum += min(x, nu << p.clip_log2)
+        if (n + 1) % L == 0:
+            if is_float:
+                m = bsum / L
+                nu = m if b == 0 else nu + (m - nu) / 2 ** p.smooth_log2
+            else:
+                m = bsum >> p.block_log2
+                nu = m if b == 0 else nu + ((m - nu) >> p.smooth_log2)
+            bsum = 0
+        if not is_open:
+            if x >= T:
+                is_open, pmax, nmax, below, length = True, x, n, 0, 1
+        else:
+            if x > pmax:
+                pmax, nmax = x, n
+            below = 0 if x >= T else below + 1
+            length += 1
+            if below == p.hold or length == p.max_len:
+                out.append((pmax, nmax, n))
+                is_open = False
+    return out
+
+
+def _as_tuples(r):
+    return list(zip(r.amplitude.tolist(), r.index.tolist(), r.end_index.tolist()))
+
+
+def _run_sim(p, e, in_valid=None, dut=None, **kw):
+    res = run_stream(dut if dut is not None else PeakSearch(p), e, in_valid=in_valid,
+                     flush_cycles=p.latency + 2, **kw)
+    f = unpack_fields(res.words, p.out_layout)
+    return res, f["amplitude"], f["timestamp"]
+
+
+def _check_sim(p, e, in_valid=None):
+    res, amp, ts = _run_sim(p, e, in_valid)
+    ref, _ = peak_search(e, p)
+    np.testing.assert_array_equal(amp, ref.amplitude)
+    np.testing.assert_array_equal(ts, ref.timestamp)
+    # Emitted params.latency cycles after the closing sample's input transfer.
+    in_cycles = np.arange(e.size) if in_valid is None else np.flatnonzero(in_valid)[:e.size]
+    np.testing.assert_array_equal(res.cycles, in_cycles[ref.end_index] + p.latency)
+    return ref
+
+
+class _WithClear(wiring.Component):
+    """The DUT with a synchronous ``clear`` input (reset in the middle of a run)."""
+
+    def __init__(self, dut):
+        self.dut = dut
+        super().__init__({**dict(dut.signature.members), "clear": In(1)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dut = ResetInserter(self.clear)(self.dut)
+        wiring.connect(m, wiring.flipped(self.i), self.dut.i)
+        wiring.connect(m, self.dut.o, wiring.flipped(self.o))
+        return m
+
+
+SMALL = PeakParams(block_log2=5, hold=3, max_len=24)
+
+
+# -- simulation == model -------------------------------------------------------------------
+@pytest.mark.slow
+def test_sim_matches_model_realistic_1e5():
+    p = PeakParams()
+    rng = np.random.default_rng(201)
+    e = realistic_envelope(rng, 100_000)
+    e[60_000:60_700] = 2500  # a continuous carrier (max_len cuts)
+    ref = _check_sim(p, e)
+    assert ref.amplitude.size > 1000
+
+
+def test_sim_matches_model_realistic_quick():
+    p = PeakParams(block_log2=8)
+    rng = np.random.default_rng(200)
+    e = realistic_envelope(rng, 15_000)
+    e[9_000:9_300] = 2500
+    ref = _check_sim(p, e)
+    assert ref.amplitude.size > 100
+
+
+@pytest.mark.parametrize("kw", [
+    dict(block_log2=1, hold=1, max_len=2),
+    dict(block_log2=3, hold=2, max_len=7, ts_bits=8, ts_step=5),   # timestamp wraps
+    dict(block_log2=6, smooth_log2=0, clip_log2=0, thr_mult=5, thr_frac=0),
+    dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12),
+])
+def test_sim_matches_model_variants(kw):
+    p = PeakParams(**kw)
+    rng = np.random.default_rng(202)
+    e = realistic_envelope(rng, 8000, amp_width=p.amp_width)
+    e[3000:3300] = min(3000, (1 << p.amp_width) - 1)
+    _check_sim(p, e)
+
+
+def test_gaps_in_valid():
+    rng = np.random.default_rng(203)
+    e = realistic_envelope(rng, 3000)
+    valid = rng.random(9000) < 0.35
+    _check_sim(SMALL, e, valid)
+    # Bursty valid too: long gaps, then back to back.
+    valid = np.repeat(rng.random(900) < 0.5, 10)
+    _check_sim(SMALL, e, valid)
+
+
+def test_pulse_spanning_block_boundary():
+    p = SMALL
+    L = p.block_len
+    e = np.full(4 * L, 100, dtype=np.int64)
+    # Block 2 gets a higher floor (threshold) than block 1; the pulse straddles the
+    # boundary, peaks after it and its tail is below block 2's threshold but above block 1's.
+    e[L:2 * L] = 100
+    e[2 * L - 4:2 * L] = [400, 500, 600, 700]
+    e[2 * L:2 * L + 6] = [800, 900, 650, 320, 310, 305]
+    ref = _check_sim(p, e)
+    assert _as_tuples(ref) == reference_loop(e, p)
+    assert ref.index[0] == 2 * L + 1 and ref.end_index[0] >= 2 * L
+
+
+def test_tie_first_occurrence_wins():
+    p = SMALL
+    L = p.block_len
+    e = np.full(3 * L, 50, dtype=np.int64)
+    e[L + 5:L + 12] = [300, 700, 700, 700, 650, 700, 200]
+    ref = _check_sim(p, e)
+    assert ref.amplitude.tolist() == [700]
+    assert ref.index.tolist() == [L + 6]
+    assert ref.timestamp.tolist() == [(L + 6) * p.ts_step]
+
+
+def test_max_len_cut_on_carrier():
+    p = SMALL
+    L = p.block_len
+    e = np.full(8 * L, 60, dtype=np.int64)
+    start = 2 * L + 3
+    e[start:start + 3 * p.max_len + 5] = 1000
+    ref = _check_sim(p, e)
+    # Cut every max_len samples; the cutting sample is consumed, the next one reopens.
+    starts = start + np.arange(3) * p.max_len
+    np.testing.assert_array_equal(ref.index[:3], starts)
+    np.testing.assert_array_equal(ref.end_index[:3], starts + p.max_len - 1)
+    assert ref.amplitude.size == 4
+
+
+def test_reset_mid_run():
+    p = SMALL
+    rng = np.random.default_rng(204)
+    e1 = realistic_envelope(rng, 700)
+    e1[-40:] = 10  # quiet end: no pulse open when the clear comes
+    e2 = realistic_envelope(rng, 900)
+    ref1, st1 = peak_search(e1, p)
+    assert not st1.open
+    ref2, _ = peak_search(e2, p)
+    valid = np.concatenate((np.ones(e1.size, bool), np.zeros(30, bool)))
+    c = e1.size + 15
+    dut = _WithClear(PeakSearch(p))
+    _, amp, ts = _run_sim(p, np.concatenate((e1, e2)), valid, dut=dut,
+                          writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)])
+    np.testing.assert_array_equal(amp, np.concatenate((ref1.amplitude, ref2.amplitude)))
+    np.testing.assert_array_equal(ts, np.concatenate((ref1.timestamp, ref2.timestamp)))
+
+
+# -- model ---------------------------------------------------------------------------------
+PARAM_SETS = [PeakParams(), SMALL, PeakParams(block_log2=3, hold=2, max_len=7),
+              PeakParams(block_log2=2, hold=1, max_len=2, smooth_log2=0),
+              PeakParams(block_log2=4, max_len=20, clip_log2=0)]
+
+
+@pytest.mark.parametrize("k", range(len(PARAM_SETS)))
+def test_model_matches_reference_loop(k):
+    p = PARAM_SETS[k]
+    rng = np.random.default_rng(205 + k)
+    e = realistic_envelope(rng, 20_000)
+    e[9000:9500] = 4000
+    ref, _ = peak_search(e, p)
+    assert _as_tuples(ref) == reference_loop(e, p)
+
+
+@pytest.mark.parametrize("k", range(len(PARAM_SETS)))
+def test_model_chunked_equals_one_run(k):
+    p = PARAM_SETS[k]
+    rng = np.random.default_rng(215 + k)
+    e = realistic_envelope(rng, 20_000)
+    e[9000:9500] = 4000
+    whole, st_whole = peak_search(e, p)
+    # Cut inside pulses (open at the end of a chunk), at random points, and 1-sample chunks.
+    cuts = np.concatenate((whole.index[::7] + 1, rng.integers(0, e.size, 40),
+                           np.arange(9200, 9210)))
+    cuts = np.unique(np.clip(cuts, 0, e.size))
+    st = None
+    parts = []
+    prev = 0
+    for c in list(cuts) + [e.size]:
+        r, st = peak_search(e[prev:c], p, st)
+        parts.append(r)
+        prev = c
+    for name in ("amplitude", "timestamp", "index", "end_index"):
+        np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]),
+                                      getattr(whole, name))
+    assert st == st_whole
+
+
+def test_state_is_not_modified():
+    st = PeakState()
+    peak_search(np.full(100, 5), SMALL, st)
+    assert st == PeakState()
+
+
+@pytest.mark.parametrize("k", range(len(PARAM_SETS)))
+def test_float_variant_matches_reference_loop(k):
+    p = PARAM_SETS[k]
+    rng = np.random.default_rng(225 + k)
+    e = realistic_envelope(rng, 10_000) * 1e-3 + rng.random(10_000) * 1e-4
+    r, _ = peak_search_float(e, p, thr_min=0.03)
+    got = np.array(_as_tuples(r))
+    exp = np.array(reference_loop(e, p, is_float=True, thr_min=0.03))
+    assert got.shape == exp.shape
+    np.testing.assert_allclose(got, exp, rtol=0, atol=1e-12)
+    # Chunked float run gives the same result.
+    r1, st = peak_search_float(e[:4321], p, thr_min=0.03)
+    r2, _ = peak_search_float(e[4321:], p, st, thr_min=0.03)
+    np.testing.assert_array_equal(np.concatenate((r1.index, r2.index)), r.index)
+
+
+def test_float_variant_close_to_integer():
+    """On a strong-pulse envelope both variants find the same pulses at the same peaks."""
+    p = PeakParams()
+    rng = np.random.default_rng(235)
+    e = realistic_envelope(rng, 50_000, amp_range=(6.0, 20.0))
+    ri, _ = peak_search(e, p)
+    rf, _ = peak_search_float(e.astype(np.float64), p)
+    np.testing.assert_array_equal(rf.index, ri.index)
+    np.testing.assert_array_equal(rf.amplitude, ri.amplitude)
+
+
+def test_model_rejects_bad_input():
+    with pytest.raises(ValueError, match="unsigned 19-bit"):
+        peak_search(np.array([-1]), PeakParams())
+    with pytest.raises(ValueError, match="NaN"):
+        peak_search_float(np.array([np.nan]), PeakParams())
+
+
+# -- parameters ----------------------------------------------------------------------------
+@pytest.mark.parametrize("kw, msg", [
+    (dict(amp_width=0), r"peak amp_width must be an integer in \[1, 40\], not 0"),
+    (dict(ts_bits=0), r"peak ts_bits must be an integer in \[1, 62\], not 0"),
+    (dict(ts_step=0), r"peak ts_step must be an integer in \[1, \d+\], not 0"),
+    (dict(block_log2=0), r"peak block_log2 must be an integer in \[1, 20\], not 0"),
+    (dict(hold=0), r"peak hold must be an integer in \[1, 65536\], not 0"),
+    (dict(hold=5, max_len=5), r"peak max_len must be an integer > hold \(5\) and <= 2\*\*20, "
+                              r"not 5"),
+    (dict(thr_mult=0), r"peak thr_mult must be an integer in \[1, 1048575\], not 0"),
+    (dict(thr_min=-1), r"peak thr_min must be an integer in \[0, 524287\], not -1"),
+    (dict(smooth_log2=2.0), r"peak smooth_log2 must be an integer in \[0, 16\], not 2.0"),
+])
+def test_bad_params(kw, msg):
+    with pytest.raises(ValueError, match=msg):
+        PeakParams(**kw)
+
+
+@pytest.mark.verilator
+def test_verilog_lints_clean():
+    """Waived as for every Amaranth export: UNUSEDSIGNAL, DECLFILENAME, WIDTH."""
+    if shutil.which("verilator") is None:
+        pytest.skip("verilator not on PATH (install verilator >= 5)")
+    dut = PeakSearch(PeakParams())
+    # amaranth-lang/amaranth#1574: the constant ``ready`` of an always-ready stream
+    # cannot be a port.
+    ports = [Value.cast(v) for _, _, v in dut.signature.flatten(dut)]
+    ports = [v for v in ports if not isinstance(v, Const)]
+    BUILD.mkdir(parents=True, exist_ok=True)
+    path = BUILD / "peak_search.v"
+    path.write_text(verilog.convert(dut, name="peak_search", ports=ports))
+    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
+                        "-Wno-DECLFILENAME", "-Wno-WIDTH", str(path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
