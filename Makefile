@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
 .DEFAULT_GOAL := help
-.PHONY: help setup tools run test test-all bench clean
+.PHONY: help setup tools run test test-all bench verilog synth clean
 
 help:  ## show this help
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -42,6 +42,12 @@ test-all: setup  ## run every test, slow ones included
 
 bench: setup  ## run the benchmarks; results go to results/ (shown in README.md)
 	$(PY) -m cosim bench tacan-accuracy
+
+verilog: setup  ## export every HDL block and the TACAN top to build/verilog and lint them
+	$(PY) -m cosim verilog --out build/verilog
+
+synth: setup  ## synthesise the TACAN front end for LFE5U-85F (yosys + nextpnr) and print resources/Fmax
+	$(PY) -m cosim synth --top tacan --json
 
 clean:  ## remove generated files (build/, caches); keeps .venv and results/
 	rm -rf build .pytest_cache

@@ -49,7 +49,12 @@ def _one_run(kw: dict) -> dict:
     from .tacan import TacanRunConfig, run_tacan
     from .tacan_signal import TacanSignalConfig
     sig = TacanSignalConfig(**kw)
-    r = run_tacan(TacanRunConfig(signal=sig, backend="golden"))
+    try:
+        r = run_tacan(TacanRunConfig(signal=sig, backend="golden"))
+        r["locked"] = True
+    except RuntimeError:  # no reference decoded: the receiver has no bearing (counted)
+        r = {"locked": False, "snr_db": kw["snr_db"], "rmse_deg": None, "mean_error_deg": None,
+             "max_abs_error_deg": None, "gated": 0, "reinit": 0}
     r.pop("elapsed_s", None)
     r["bearing_deg"] = kw["bearing_deg"]
     return r
@@ -71,7 +76,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
 
     t_start = time.perf_counter()
     snrs = [0, 10, 20] if quick else list(range(0, 21, 2))
-    trials = 1 if quick else 3
+    trials = 1 if quick else 2
     duration = 2.0 if quick else 3.0
     items = [dict(bearing_deg=b, snr_db=float(s), duration_s=duration, seed=100 + k)
              for s in snrs for b in (90.0, 270.0) for k in range(trials)]
@@ -79,24 +84,30 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     kc = KalmanConfig()
     snr_rows = []
     for s in snrs:
+        crb = crb_deg(TacanSignalConfig(snr_db=float(s)).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
         for b in (90.0, 270.0):
             rs = [r for r in runs if r["snr_db"] == s and r["bearing_deg"] == b]
-            rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in rs])))
-            snr_rows.append({"snr_db": s, "bearing_deg": b, "trials": len(rs), "rmse_deg": rmse,
-                             "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in rs])),
-                             "max_abs_error_deg": float(max(r["max_abs_error_deg"] for r in rs)),
-                             "crb_deg": rs[0]["crb_deg"], "rmse_over_crb": rmse / rs[0]["crb_deg"],
-                             "gated": int(sum(r["gated"] for r in rs)),
-                             "reinit": int(sum(r["reinit"] for r in rs))})
+            ok = [r for r in rs if r["locked"]]
+            row = {"snr_db": s, "bearing_deg": b, "trials": len(rs), "locked": len(ok),
+                   "rmse_deg": None, "mean_error_deg": None, "max_abs_error_deg": None,
+                   "crb_deg": crb, "rmse_over_crb": None,
+                   "gated": int(sum(r["gated"] for r in rs)), "reinit": int(sum(r["reinit"] for r in rs))}
+            if ok:
+                rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in ok])))
+                row.update(rmse_deg=rmse, rmse_over_crb=rmse / crb,
+                           mean_error_deg=float(np.mean([r["mean_error_deg"] for r in ok])),
+                           max_abs_error_deg=float(max(r["max_abs_error_deg"] for r in ok)))
+            snr_rows.append(row)
 
-    step = 15 if quick else 1
+    step = 15 if quick else 2
     bearings = np.arange(0, 360, step, dtype=float)
-    sweep_items = [dict(bearing_deg=float(b), snr_db=10.0, duration_s=2.0, seed=1000 + int(b))
+    sweep_items = [dict(bearing_deg=float(b), snr_db=10.0, duration_s=1.6, seed=1000 + int(b))
                    for b in bearings]
     sweep = _map(jobs, _one_run, sweep_items, "bearing sweep (IF, 10 dB)")
-    brg_rows = [{"bearing_deg": r["bearing_deg"], "rmse_deg": r["rmse_deg"],
+    brg_rows = [{"bearing_deg": r["bearing_deg"], "locked": r["locked"], "rmse_deg": r["rmse_deg"],
                  "mean_error_deg": r["mean_error_deg"], "max_abs_error_deg": r["max_abs_error_deg"]}
                 for r in sweep]
+    locked = [r for r in brg_rows if r["locked"]]
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.
     pl_rows = []
@@ -115,7 +126,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                         "crb_deg": crb_deg(cfg.matched_filter_rel_sigma(), cfg.mod_15, cfg.mod_135,
                                            kc.n_eff)})
 
-    worst_if = max(r["max_abs_error_deg"] for r in brg_rows)
+    worst_if = max(r["max_abs_error_deg"] for r in locked) if locked else None
     summary = {
         "benchmark": "tacan-accuracy", "machine": machine_info(), "quick": quick,
         "elapsed_s": time.perf_counter() - t_start,
@@ -123,10 +134,10 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                      "adc_bits": 12, "backend": "golden", "kalman_memory_s": kc.memory_s,
                      "settle_s": 2 * kc.memory_s},
         "snr_sweep": snr_rows,
-        "bearing_sweep_if_10db": {"bearings": int(bearings.size), "duration_s": 2.0,
-                                  "rmse_deg": float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in brg_rows]))),
+        "bearing_sweep_if_10db": {"bearings": int(bearings.size), "locked": len(locked), "duration_s": 1.6,
+                                  "rmse_deg": float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in locked]))) if locked else None,
                                   "max_abs_error_deg": worst_if,
-                                  "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in brg_rows))},
+                                  "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in locked))},
         "bearing_sweep_pulse_level": pl_rows,
     }
     out.mkdir(parents=True, exist_ok=True)
@@ -150,7 +161,7 @@ def _plot_accuracy(path: Path, snr_rows, brg_rows):
     import matplotlib.pyplot as plt
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
     for b, mk in ((90.0, "o-"), (270.0, "s-")):
-        rs = [r for r in snr_rows if r["bearing_deg"] == b]
+        rs = [r for r in snr_rows if r["bearing_deg"] == b and r["rmse_deg"] is not None]
         a1.semilogy([r["snr_db"] for r in rs], [r["rmse_deg"] for r in rs], mk, label=f"RMSE, {b:g} deg")
         a1.semilogy([r["snr_db"] for r in rs], [abs(r["mean_error_deg"]) for r in rs], mk,
                     alpha=0.4, label=f"|mean error|, {b:g} deg")
@@ -162,6 +173,7 @@ def _plot_accuracy(path: Path, snr_rows, brg_rows):
     a1.set_title("TACAN X mode, A = B = 0.21, golden chain")
     a1.grid(True, which="both", alpha=0.3)
     a1.legend(fontsize=7)
+    brg_rows = [r for r in brg_rows if r["locked"]]
     a2.plot([r["bearing_deg"] for r in brg_rows], [r["rmse_deg"] for r in brg_rows], ".", label="RMSE")
     a2.plot([r["bearing_deg"] for r in brg_rows], [r["max_abs_error_deg"] for r in brg_rows], ".",
             alpha=0.5, label="max |error|")
@@ -179,15 +191,17 @@ def _accuracy_markdown(s: dict) -> str:
     m = s["machine"]
     lines = [f"TACAN bearing accuracy, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
              f"commit {m['commit']}, {s['elapsed_s']:.0f} s)", "",
-             "| SNR dB | bearing | RMSE deg | mean err deg | max err deg | CRB deg | RMSE/CRB |",
-             "|---:|---:|---:|---:|---:|---:|---:|"]
+             "| SNR dB | bearing | locked | RMSE deg | mean err deg | max err deg | CRB deg | RMSE/CRB |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    f = lambda v, fmt: "-" if v is None else format(v, fmt)
     for r in s["snr_sweep"]:
-        lines.append(f"| {r['snr_db']:g} | {r['bearing_deg']:g} | {r['rmse_deg']:.3f} | "
-                     f"{r['mean_error_deg']:+.3f} | {r['max_abs_error_deg']:.3f} | {r['crb_deg']:.3f} | "
-                     f"{r['rmse_over_crb']:.2f} |")
+        lines.append(f"| {r['snr_db']:g} | {r['bearing_deg']:g} | {r['locked']}/{r['trials']} | "
+                     f"{f(r['rmse_deg'], '.3f')} | {f(r['mean_error_deg'], '+.3f')} | "
+                     f"{f(r['max_abs_error_deg'], '.3f')} | {r['crb_deg']:.3f} | {f(r['rmse_over_crb'], '.2f')} |")
     b = s["bearing_sweep_if_10db"]
-    lines += ["", f"Every bearing 0-359 deg in 1 deg steps at 10 dB (IF chain, {b['duration_s']:g} s each): "
-              f"RMSE {b['rmse_deg']:.3f} deg, worst error {b['max_abs_error_deg']:.3f} deg, "
+    lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB (IF chain, "
+              f"{b['duration_s']:g} s each, {b['locked']}/{b['bearings']} locked): "
+              f"RMSE {f(b['rmse_deg'], '.3f')} deg, worst error {f(b['max_abs_error_deg'], '.3f')} deg, "
               f"sector slips {b['sector_slips']}.", "",
               "| pulse-level, SNR dB | bearings x seeds | RMSE deg | worst error deg | CRB deg |",
               "|---:|---:|---:|---:|---:|"]

@@ -85,12 +85,125 @@ def _cmd_bench(a) -> int:
     return 0
 
 
+def _add_hdl(sub):
+    p = sub.add_parser("check-equivalence",
+                       help="run the bit-exact model, Amaranth sim and Verilator on one record "
+                            "and count mismatching FIFO words (exit 1 on any)")
+    p.add_argument("--top", default="tacan", choices=["tacan"])
+    p.add_argument("--samples", type=int, default=20_000, help="ADC samples (20 MS/s)")
+    p.add_argument("--backends", default="model,pysim,verilator",
+                   help="comma-separated subset of model,pysim,verilator")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--stall", action="store_true",
+                   help="DSP ready pattern with long stalls and a 4-word FIFO (drops, markers)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd_check_equivalence)
+
+    p = sub.add_parser("verilog", help="export every HDL block and the TACAN top to Verilog "
+                                       "and lint them with Verilator")
+    p.add_argument("--out", default="build/verilog")
+    p.add_argument("--no-lint", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_verilog)
+
+    p = sub.add_parser("synth", help="synthesise and place-and-route a top for ECP5 (YoWASP)")
+    p.add_argument("--top", default="tacan", choices=["tacan"])
+    p.add_argument("--device", default="LFE5U-85F")
+    p.add_argument("--target-mhz", type=_finite, default=100.0)
+    p.add_argument("--out", default="build/synth")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_synth)
+
+
+def _cmd_check_equivalence(a) -> int:
+    from .equivalence import check_equivalence
+    backends = tuple(b.strip() for b in a.backends.split(",") if b.strip())
+    r = check_equivalence(top=a.top, samples=a.samples, backends=backends, seed=a.seed,
+                          stall=a.stall)
+    if a.json:
+        print(json.dumps(r))
+    else:
+        print(f"{r['top']}: {r['samples']} samples, {r['words']} FIFO words "
+              f"({r['peaks']} peaks, {r['markers']} markers, {r['dropped']} dropped), "
+              f"backends {', '.join(r['backends'])}: {r['mismatches']} mismatches")
+        for name, why in r["skipped"].items():
+            print(f"  skipped {name}: {why}")
+    return 0 if r["mismatches"] == 0 else 1
+
+
+def hdl_blocks() -> dict:
+    """Every HDL block (default-ish parameters) and the TACAN top, by Verilog module name."""
+    from hdl.cic import Cic
+    from hdl.ddc import Ddc
+    from hdl.envelope import Envelope
+    from hdl.fifo import DspFifo
+    from hdl.fir import Fir
+    from hdl.mixer import Mixer
+    from hdl.model.tacan_frontend import TacanFrontendParams
+    from hdl.nco import Nco
+    from hdl.peak import PeakSearch
+    from hdl.tacan_frontend import TacanFrontEnd
+    p = TacanFrontendParams()
+    return {
+        "nco": lambda: Nco(p.ddc.nco),
+        "mixer": lambda: Mixer(p.ddc.mixer),
+        "ddc": lambda: Ddc(p.ddc),
+        "cic": lambda: Cic(p.cic),
+        "fir": lambda: Fir(p.fir),
+        "envelope": lambda: Envelope(p.envelope),
+        "peak": lambda: PeakSearch(p.peak),
+        "fifo": lambda: DspFifo(p.fifo),
+        "tacan_frontend": lambda: TacanFrontEnd(p),
+    }
+
+
+def _cmd_verilog(a) -> int:
+    import shutil
+    from .verilog import export_verilog, lint
+    out, bad = [], 0
+    do_lint = not a.no_lint and shutil.which("verilator") is not None
+    for name, make in hdl_blocks().items():
+        path = export_verilog(make(), name=name, out_dir=a.out)
+        findings = lint(path) if do_lint else None
+        bad += len(findings or [])
+        out.append({"name": name, "path": str(path), "lint": findings})
+    if a.json:
+        print(json.dumps({"files": out, "linted": do_lint, "findings": bad}))
+    else:
+        for f in out:
+            state = "not linted" if f["lint"] is None else \
+                ("lint clean" if not f["lint"] else f"{len(f['lint'])} lint findings")
+            print(f"{f['path']}  ({state})")
+            for line in f["lint"] or []:
+                print(f"    {line}")
+        if not do_lint and not a.no_lint:
+            print("verilator not on PATH: files written, not linted")
+    return 0 if bad == 0 else 1
+
+
+def _cmd_synth(a) -> int:
+    from hdl.tacan_frontend import TacanFrontEnd
+    from .synth import synth
+    r = synth(TacanFrontEnd(), name="tacan_frontend", device=a.device,
+              target_mhz=a.target_mhz, out_dir=a.out, seed=a.seed)
+    short = {"top": a.top, **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
+    if a.json:
+        print(json.dumps(short))
+    else:
+        print(f"{a.top} on {r['device']}: {r['lut4']} LUT4, {r['ff']} FF, {r['mult18']} MULT18, "
+              f"{r['bram']} DP16KD, Fmax {r['fmax_mhz']:.1f} MHz "
+              f"(target {r['target_mhz']:g}: {'met' if r['timing_met'] else 'MISSED'})")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m cosim",
                                 description="FPGA+DSP co-simulation of Kalman-filter navigation receivers")
     sub = p.add_subparsers(dest="command", required=True)
     _add_tacan(sub)
     _add_bench(sub)
+    _add_hdl(sub)
     return p
 
 

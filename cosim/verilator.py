@@ -201,7 +201,9 @@ API int32_t sim_run(void* h, RunArgs* a) {
         if (has_in) {
             offer = !drained && (cyc >= n_valid || in_valid[cyc]);
             top->@I_VALID@ = offer;
+#if @HAS_I_PAYLOAD@
             if (offer) top->@I_PAYLOAD@ = in_words[accepted] & @I_MASK@ULL;
+#endif
         }
 #endif
 #if @HAS_O_READY@
@@ -455,7 +457,9 @@ class VerilatorStreamSim:
             if p.direction == "in":
                 mask = (1 << p.width) - 1
                 set_cases.append(f"    case {i}: top->{c(p.name)} = v & {mask}ULL; break;")
-        has_in = "i__valid" in cxx and "i__payload" in cxx
+        # A zero-width input payload (a bare strobe stream) is not a port: only valid is driven.
+        has_in = "i__valid" in cxx
+        has_i_payload = has_in and "i__payload" in cxx
         subs = {
             "@VERSION@": HARNESS_VERSION,
             "@TRACED@": "1" if trace_kind else "0",
@@ -465,11 +469,12 @@ class VerilatorStreamSim:
             "@GET_CASES@": "\n".join(get_cases),
             "@SET_CASES@": "\n".join(set_cases),
             "@HAS_IN@": "1" if has_in else "0",
+            "@HAS_I_PAYLOAD@": "1" if has_i_payload else "0",
             "@HAS_I_READY@": "1" if "i__ready" in cxx else "0",
             "@HAS_O_READY@": "1" if "o__ready" in cxx else "0",
             "@I_VALID@": c("i__valid") if has_in else "",
-            "@I_PAYLOAD@": c("i__payload") if has_in else "",
-            "@I_MASK@": str((1 << cxx["i__payload"][2]) - 1) if has_in else "0",
+            "@I_PAYLOAD@": c("i__payload") if has_i_payload else "",
+            "@I_MASK@": str((1 << cxx["i__payload"][2]) - 1) if has_i_payload else "0",
             "@I_READY@": c("i__ready") if "i__ready" in cxx else "",
             "@O_VALID@": c("o__valid"),
             "@O_PAYLOAD@": c("o__payload"),
@@ -567,9 +572,12 @@ class VerilatorStreamSim:
         lib = self._libs[trace_kind or ""]
 
         has_in = in_words is not None
-        if has_in and "i__payload" not in self._by_name:
+        if has_in and "i__valid" not in self._by_name:
             raise ValueError("in_words given but the component has no input stream `i`")
-        if has_in:
+        if has_in and "i__payload" not in self._by_name:
+            # Zero-width payload (a strobe stream): only the number of words matters.
+            words_u64 = np.zeros(len(np.asarray(in_words)), dtype=np.uint64)
+        elif has_in:
             pin = self.ports[self._by_name["i__payload"]]
             words_u64 = self._to_u64(in_words, pin.width)
         else:

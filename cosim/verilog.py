@@ -81,8 +81,8 @@ def component_ports(component: wiring.Component) -> list[PortInfo]:
     for path, member, value in component.signature.flatten(component):
         if isinstance(value, ValueCastable):
             value = value.as_value()
-        if not isinstance(value, Value) or isinstance(value, Const):
-            continue
+        if not isinstance(value, Value) or isinstance(value, Const) or len(value) == 0:
+            continue  # constants and zero-width members (e.g. a bare strobe stream) are not ports
         shape = value.shape()
         ports.append(PortInfo(name="__".join(map(str, path)), value=value,
                               direction="in" if member.flow == wiring.In else "out",

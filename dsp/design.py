@@ -4,6 +4,8 @@ Pure numpy/scipy; the golden front end uses the float taps, the HDL FIR quantise
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import signal
 
@@ -62,6 +64,12 @@ def design_pulse_fir(*, fs_in_hz: float, cic_stages: int, cic_rate: int, cic_del
         raise ValueError(f"FIR numtaps must be an odd integer >= 3, not {numtaps}")
     if pulse_sigma_s <= 0:
         raise ValueError(f"pulse_sigma_s must be > 0, not {pulse_sigma_s}")
+    return _design_pulse_fir(float(fs_in_hz), int(cic_stages), int(cic_rate), int(cic_delay),
+                             int(numtaps), float(pulse_sigma_s), str(window)).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def _design_pulse_fir(fs_in_hz, cic_stages, cic_rate, cic_delay, numtaps, pulse_sigma_s, window):
     fs = fs_in_hz / cic_rate
     freq = np.linspace(0.0, fs / 2, 513)
     hcic = cic_response(freq, fs_in_hz, cic_stages, cic_rate, cic_delay)

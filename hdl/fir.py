@@ -42,11 +42,15 @@ class Fir(wiring.Component):
         Always 0 in the fully parallel architecture.
 
     Fully parallel pipeline (one register level each): delay line, pre-adders
-    ``x[k] + x[L-1-k]`` (multiplier input registers), constant multipliers (output
-    registers), ``tree_levels`` of two-input adders, rounding, overflow. Time-shared: the
-    same, but each multiplier takes ``mux_factor`` pre-added pairs in turn (operand and
-    coefficient chosen by a phase counter, both registered) into an accumulator. The delay
-    line shifts only on valid input; the rest runs every cycle with a valid bit alongside.
+    ``x[k] + x[L-1-k]``, multiplier input (operand limbs), multiplier output, a routing
+    register away from the DSP block, ``tree_levels`` of two-input adders, rounding,
+    overflow. Multipliers are built from 18x18 signed pieces (ECP5 MULT18X18D): an operand
+    wider than 18 bits is split into 17-bit unsigned low limbs and a signed top limb
+    (``FirParams.data_limbs``/``coef_limbs``), and the shifted pieces are leaves of the
+    adder tree, so no cycle holds more than one DSP or one adder. Time-shared
+    (``mux_factor`` T >= 2): each multiplier takes T pre-added pairs in turn (operand and
+    coefficient chosen by a phase counter) into one accumulator per piece. The delay line
+    shifts only on valid input; the rest runs every cycle with a valid bit alongside.
     Tree nodes and accumulators are kept at ``acc_width`` bits: the true sum fits, so
     two's-complement wraparound of partial sums cannot change it.
     """

@@ -160,13 +160,17 @@ class GoldenFrontend:
         self.fir = _DecimatingFir(cfg.fir_taps, cfg.fir_decim)
         self.peak_state: PeakState | None = None
         self.w = 2 * np.pi * cfg.if_hz / cfg.fs_hz
+        self._lo = None
 
     def envelope(self, codes: np.ndarray) -> np.ndarray:
         """Envelope samples (fraction of full scale) of the next chunk of ADC codes."""
         x = np.asarray(codes, dtype=np.float64) * (2.0 ** -(self.adc_bits - 1))
-        n = np.arange(self.n, self.n + len(x), dtype=np.float64)
+        # LO = exp(-j w n0) * exp(-j w k): the per-chunk table is computed once.
+        if self._lo is None or self._lo.size < len(x):
+            self._lo = np.exp(-1j * self.w * np.arange(len(x), dtype=np.float64))
+        lo = self._lo[:len(x)] * np.exp(-1j * ((self.w * self.n) % (2 * np.pi)))
         self.n += len(x)
-        z = 2.0 * x * np.exp(-1j * self.w * n)
+        z = (2.0 * x) * lo
         return np.abs(self.fir(self.cic(z)))
 
     def process(self, codes: np.ndarray) -> Peaks:

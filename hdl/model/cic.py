@@ -324,7 +324,7 @@ def cic_model(params: CicParams, x, state: CicState | None = None, *,
     method : {"auto", "direct", "stages"}
         ``"stages"`` runs the integrators (``cumsum``) and combs as the hardware does.
         ``"direct"`` computes the decimated outputs as the equivalent FIR
-        (:attr:`CicParams.impulse_response`) on a polyphase stride, about 3x faster; it is
+        (:attr:`CicParams.impulse_response`) on a polyphase split, about 2x faster; it is
         exact only without pruning (the hardware result is the exact sum mod 2**B_max and
         fits B_max bits). ``"auto"``: direct unless pruning discards bits. The tests run
         both against each other and against the HDL.

@@ -4,9 +4,10 @@ The filter is type I (odd length L, ``h[k] == h[L-1-k]``) with real float taps q
 ``coef_bits`` signed integers ``taps_int = round(h * 2**coef_frac)``; ``coef_frac`` is the
 largest power-of-two scale that keeps every tap in range, so the biggest tap uses as much
 of the coefficient word as a power-of-two scale allows. The hardware pre-adds the symmetric
-input pairs (one multiplier per distinct non-zero tap), sums the products exactly in an
-``acc_width`` accumulator, drops ``out_shift`` LSBs with ``rounding`` and applies
-``overflow`` to ``out_width`` bits.
+input pairs (one multiplier per distinct non-zero tap, or ``ceil(U / input_spacing)`` of them
+time-shared when the input cadence allows), sums the products exactly in an ``acc_width``
+accumulator, drops ``out_shift`` LSBs with ``rounding`` and applies ``overflow`` to
+``out_width`` bits. The architecture changes the latency only, never the values.
 
 Output meaning: ``y_int ~= float_gain * sum_k taps_quantised[k] * x_int[n-k]`` with
 ``float_gain = 2**(coef_frac - out_shift)`` (1 by default: output LSB = input LSB);

@@ -121,6 +121,23 @@ class Wide64Demo(wiring.Component):
         return m
 
 
+class StrobeDemo(wiring.Component):
+    """Zero-width input payload (a bare strobe stream, as the NCO's): each strobe emits the
+    strobe count plus ``offset``; the payload is not a Verilog port at all."""
+
+    i: In(stream.Signature(unsigned(0), always_ready=True))
+    o: Out(stream.Signature(unsigned(16), always_ready=True))
+    offset: In(unsigned(8))
+
+    def elaborate(self, platform):
+        m = Module()
+        count = Signal(16)
+        with m.If(self.i.valid):
+            m.d.sync += [count.eq(count + 1), self.o.payload.eq(count + self.offset)]
+        m.d.sync += self.o.valid.eq(self.i.valid)
+        return m
+
+
 def assert_same(got, want):
     assert got.n_cycles == want.n_cycles
     assert got.in_accepted == want.in_accepted
@@ -237,6 +254,19 @@ def test_wide_64bit_signed_payload():
     got = sim.run(words, **kw)
     assert_same(got, want)
     assert got.words.dtype == object and min(got.words) < 0
+
+
+@needs_verilator
+def test_zero_width_input_payload():
+    dut = StrobeDemo()
+    sim = VerilatorStreamSim(dut, "strobe_demo")
+    assert "i__payload" not in [p.name for p in sim.ports]
+    rng = np.random.default_rng(8)
+    kw = dict(in_valid=random_pattern(rng, 900, 0.4), writes=[(300, "offset", 77)])
+    want = run_stream(dut, np.zeros(500, dtype=np.int64), **kw)
+    got = sim.run(np.zeros(500, dtype=np.int64), **kw)
+    assert_same(got, want)
+    assert got.in_accepted == 500 and len(got.words) == 500
 
 
 @needs_verilator

@@ -1,18 +1,10 @@
 """DDC (NCO + mixer): Amaranth simulation == bit-exact model, run-time tuning, gaps, reset,
-full scale, baseband sanity, errors, lint."""
+full scale, baseband sanity, errors, lint; the exported Verilog (Verilator) == Amaranth
+simulation == model."""
 from __future__ import annotations
-
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
-from amaranth.back import verilog
-from amaranth.hdl import Const, Module, ResetInserter
-from amaranth.hdl._ir import PortDirection
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In
 
 from cosim.pysim import run_stream, unpack_fields
 from hdl.ddc import Ddc
@@ -20,15 +12,10 @@ from hdl.model.ddc import DdcModel, DdcParams
 from hdl.model.mixer import MixerParams
 from hdl.model.nco import NcoParams, nco_freq_word
 
-BUILD = Path(__file__).resolve().parents[2] / "build" / "verilog"
+from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_stream,
+                   needs_verilator, verilator_sim)
+
 F_CLK = 20e6
-
-
-def _accepted_cycles(n: int, in_valid) -> np.ndarray:
-    if in_valid is None:
-        return np.arange(n)
-    cyc = np.flatnonzero(in_valid)[:n]
-    return np.r_[cyc, len(in_valid) + np.arange(n - len(cyc))]
 
 
 def _freq_at(cycles, writes, port) -> np.ndarray:
@@ -39,27 +26,36 @@ def _freq_at(cycles, writes, port) -> np.ndarray:
     return out
 
 
-def _sim(dut, p: DdcParams, x, writes, in_valid=None):
+def _sim(dut, p: DdcParams, x, writes, in_valid=None, run=None):
+    """Run ``dut`` (with ``run_stream``, or ``run``: a Verilator simulator's ``run``)."""
     w = np.asarray(x, dtype=np.int64) & ((1 << p.adc_width) - 1)
-    res = run_stream(dut, w, in_valid=in_valid, writes=writes, flush_cycles=p.latency + 4)
+    kw = dict(in_valid=in_valid, writes=writes, flush_cycles=p.latency + 4)
+    res = run_stream(dut, w, **kw) if run is None else run(w, **kw)
     o = unpack_fields(res.words, [("i", p.out_width, True), ("q", p.out_width, True)])
     return o["i"], o["q"], res
+
+
+def _random_stimulus(p: DdcParams, dut, rng, n: int, n_writes: int = 10):
+    """Random ADC words (10 % at full scale), random gaps, frequency rewritten ``n_writes``
+    times."""
+    a = p.adc_width
+    x = rng.integers(-(1 << (a - 1)), 1 << (a - 1), n)
+    fs = rng.random(n) < 0.1
+    x[fs] = rng.choice([-(1 << (a - 1)), (1 << (a - 1)) - 1], np.count_nonzero(fs))
+    writes = [(0, dut.freq, nco_freq_word(3e6, f_clk_hz=F_CLK, phase_bits=p.freq_width).word)]
+    for c in np.sort(rng.choice(n, n_writes, replace=False)):
+        writes.append((int(c), dut.freq, int(rng.integers(0, 1 << p.freq_width))))
+    in_valid = rng.random(n + n // 4) < 0.8
+    return x, writes, in_valid
 
 
 def _check_random(p: DdcParams, n: int, seed: int):
     """Random ADC words (10 % at full scale), random gaps, frequency rewritten 10 times."""
     rng = np.random.default_rng(seed)
-    a = p.adc_width
-    x = rng.integers(-(1 << (a - 1)), 1 << (a - 1), n)
-    fs = rng.random(n) < 0.1
-    x[fs] = rng.choice([-(1 << (a - 1)), (1 << (a - 1)) - 1], np.count_nonzero(fs))
     dut = Ddc(p)
-    writes = [(0, dut.freq, nco_freq_word(3e6, f_clk_hz=F_CLK, phase_bits=p.freq_width).word)]
-    for c in np.sort(rng.choice(n, 10, replace=False)):
-        writes.append((int(c), dut.freq, int(rng.integers(0, 1 << p.freq_width))))
-    in_valid = rng.random(n + n // 4) < 0.8
+    x, writes, in_valid = _random_stimulus(p, dut, rng, n)
     i, q, res = _sim(dut, p, x, writes, in_valid)
-    cyc = _accepted_cycles(n, in_valid)
+    cyc = accepted_cycles(n, in_valid)
     mi, mq, _ = DdcModel(p).run(x, _freq_at(cyc, writes, dut.freq))
     assert len(i) == n, f"seed {seed}"
     np.testing.assert_array_equal(i, mi, err_msg=f"seed {seed}")
@@ -103,21 +99,7 @@ def test_full_scale_and_latency():
 
 def test_reset_mid_run():
     p = DdcParams(nco=NcoParams(dither_bits=4))
-
-    class Wrapped(wiring.Component):
-        def __init__(self):
-            self.inner = Ddc(p)
-            super().__init__({**dict(self.inner.signature.members), "clear": In(1)})
-
-        def elaborate(self, platform):
-            m = Module()
-            m.submodules.ddc = ResetInserter(self.clear)(self.inner)
-            wiring.connect(m, wiring.flipped(self.i), self.inner.i)
-            wiring.connect(m, self.inner.o, wiring.flipped(self.o))
-            m.d.comb += self.inner.freq.eq(self.freq)
-            return m
-
-    dut = Wrapped()
+    dut = WithClear(Ddc(p))
     rng = np.random.default_rng(3)
     n1, n2, gap = 400, 400, 14
     x = rng.integers(-2048, 2048, n1 + n2)
@@ -193,28 +175,49 @@ def test_model_speed_smoke():
     assert time.perf_counter() - t0 < 1.0
 
 
-def _verilog_ports(c):
-    """Ports for ``verilog.convert`` without the constant ``ready`` of always-ready streams."""
-    ports = {}
-    for path, member, value in c.signature.flatten(c):
-        v = value.as_value() if hasattr(value, "as_value") else value
-        if isinstance(v, Const) or len(v) == 0:
-            continue
-        d = PortDirection.Input if member.flow == wiring.In else PortDirection.Output
-        ports["__".join(map(str, path))] = (v, d)
-    return ports
-
-
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
 def test_verilog_lint():
-    # Waived: UNUSEDSIGNAL (Amaranth keeps unused intermediate wires and carry bits) and
-    # DECLFILENAME (submodules are named ddc.nco / ddc.mixer, not after the file).
-    dut = Ddc(DdcParams(nco=NcoParams(dither_bits=8)))
-    text = verilog.convert(dut, name="ddc", ports=_verilog_ports(dut))
-    BUILD.mkdir(parents=True, exist_ok=True)
-    path = BUILD / "ddc.v"
-    path.write_text(text)
-    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
-                        "-Wno-DECLFILENAME", str(path)], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    # Waived: only cosim.verilog.LINT_WAIVERS less WIDTH (the DDC is clean of it).
+    assert_lints_clean(Ddc(DdcParams(nco=NcoParams(dither_bits=8))), "ddc", check_width=True)
+
+
+#: Compiled with Verilator: the TACAN DDC with NCO dither (as the slow 1e5 sim test).
+VL_PARAMS = DdcParams(nco=NcoParams(dither_bits=8))
+
+
+@pytest.fixture(scope="module")
+def vl_ddc():
+    dut = Ddc(VL_PARAMS)
+    return dut, verilator_sim(dut, "ddc_vl")
+
+
+@needs_verilator
+def test_verilator_matches_pysim(vl_ddc):
+    """Same stimulus as the random sim tests: full-scale words, gaps, frequency writes."""
+    dut, sim = vl_ddc
+    p = VL_PARAMS
+    rng = np.random.default_rng(31)
+    n = 6000
+    x, writes, in_valid = _random_stimulus(p, dut, rng, n)
+    w = np.asarray(x, dtype=np.int64) & ((1 << p.adc_width) - 1)
+    kw = dict(in_valid=in_valid, writes=writes, flush_cycles=p.latency + 4)
+    want = run_stream(dut, w, **kw)
+    got = sim.run(w, **kw)
+    assert_same_stream(got, want, "verilator vs pysim")
+    assert len(got.words) == n
+
+
+@needs_verilator
+def test_verilator_matches_model_long(vl_ddc):
+    """1e6 ADC samples with 40 run-time frequency writes and random gaps."""
+    dut, sim = vl_ddc
+    p = VL_PARAMS
+    rng = np.random.default_rng(32)
+    n = 1_000_000
+    x, writes, in_valid = _random_stimulus(p, dut, rng, n, n_writes=40)
+    i, q, res = _sim(dut, p, x, writes, in_valid, run=sim.run)
+    cyc = accepted_cycles(n, in_valid)
+    mi, mq, _ = DdcModel(p).run(x, _freq_at(cyc, writes, dut.freq))
+    np.testing.assert_array_equal(i, mi)
+    np.testing.assert_array_equal(q, mq)
+    np.testing.assert_array_equal(res.cycles, cyc + p.latency)

@@ -1,23 +1,18 @@
-"""Envelope (CORDIC vectoring magnitude): Amaranth sim == bit-exact model, accuracy, corners."""
+"""Envelope (CORDIC vectoring magnitude): Amaranth sim == bit-exact model, accuracy, corners;
+the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
-from amaranth.back import verilog
-from amaranth.hdl import Const, Module, ResetInserter, Value
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In
 
 from cosim.pysim import pack_fields, run_stream
 from hdl.envelope import Envelope
 from hdl.model.envelope import EnvelopeParams, envelope_model
 
-BUILD = Path(__file__).resolve().parents[2] / "build" / "lint"
+from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_stream,
+                   needs_verilator, verilator_sim)
 
 
 def _layout(p):
@@ -41,44 +36,6 @@ def _check_sim(p, i, q, in_valid=None):
     res = run_stream(Envelope(p), words, in_valid=in_valid, flush_cycles=p.latency + 2)
     np.testing.assert_array_equal(res.words, envelope_model(i, q, p))
     return res
-
-
-class _WithClear(wiring.Component):
-    """The DUT with a synchronous ``clear`` input (reset in the middle of a run)."""
-
-    def __init__(self, dut):
-        self.dut = dut
-        super().__init__({**dict(dut.signature.members), "clear": In(1)})
-
-    def elaborate(self, platform):
-        m = Module()
-        m.submodules.dut = ResetInserter(self.clear)(self.dut)
-        wiring.connect(m, wiring.flipped(self.i), self.dut.i)
-        wiring.connect(m, self.dut.o, wiring.flipped(self.o))
-        return m
-
-
-def _lint(component, name):
-    """Export to Verilog and lint with Verilator -Wall.
-
-    Waived, because Amaranth's output always has them: UNUSEDSIGNAL (unused slices of
-    internal nets), DECLFILENAME (module name vs file name), WIDTH (Amaranth compares and
-    extends with unsized 1-bit constants such as ``$signed(1'h0)``).
-    """
-    if shutil.which("verilator") is None:
-        pytest.skip("verilator not on PATH (install verilator >= 5)")
-    # Amaranth 0.5 cannot take the constant ``ready`` of an always-ready stream as a port
-    # (amaranth-lang/amaranth#1574), so list the ports without it.
-    ports = [Value.cast(v) for _, _, v in component.signature.flatten(component)]
-    ports = [v for v in ports if not isinstance(v, Const)]
-    text = verilog.convert(component, name=name, ports=ports)
-    BUILD.mkdir(parents=True, exist_ok=True)
-    path = BUILD / f"{name}.v"
-    path.write_text(text)
-    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
-                        "-Wno-DECLFILENAME", "-Wno-WIDTH", str(path)],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
 
 
 # -- simulation == model -------------------------------------------------------------------
@@ -138,7 +95,7 @@ def test_reset_drops_samples_in_flight():
     rng = np.random.default_rng(105)
     n, c = 400, 200
     i, q = _random_iq(rng, p, n)
-    dut = _WithClear(Envelope(p))
+    dut = WithClear(Envelope(p))
     words = pack_fields({"i": i, "q": q}, _layout(p))
     res = run_stream(dut, words, writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)],
                      flush_cycles=p.latency + 2)
@@ -203,4 +160,48 @@ def test_bad_params(kw, msg):
 @pytest.mark.verilator
 @pytest.mark.parametrize("kw", [dict(), dict(compensate=True, rounding="half_up")])
 def test_verilog_lints_clean(kw):
-    _lint(Envelope(EnvelopeParams(**kw)), "envelope" + ("_comp" if kw else ""))
+    """Waived: cosim.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH: Amaranth
+    compares and extends with unsized 1-bit constants such as ``$signed(1'h0)``)."""
+    assert_lints_clean(Envelope(EnvelopeParams(**kw)), "envelope" + ("_comp" if kw else ""))
+
+
+#: Compiled with Verilator: the default envelope and the gain-compensated one.
+VL_PARAMS = {"plain": EnvelopeParams(), "comp": EnvelopeParams(compensate=True, rounding="half_up")}
+
+
+@pytest.fixture(scope="module", params=sorted(VL_PARAMS))
+def vl_envelope(request):
+    p = VL_PARAMS[request.param]
+    dut = Envelope(p)
+    return p, dut, verilator_sim(dut, f"envelope_{request.param}_vl")
+
+
+def _vl_stimulus(p, rng, n, p_valid):
+    """Full-scale corners, then random I/Q; random gaps in valid."""
+    fi, fq = _full_scale_iq(p)
+    i, q = _random_iq(rng, p, n - fi.size)
+    i, q = np.concatenate((fi, i)), np.concatenate((fq, q))
+    return i, q, rng.random(int(n / p_valid) + 100) < p_valid
+
+
+@needs_verilator
+def test_verilator_matches_pysim(vl_envelope):
+    """Like the gaps test: sparse valid (40 %), plus full-scale corners."""
+    p, dut, sim = vl_envelope
+    i, q, valid = _vl_stimulus(p, np.random.default_rng(110), 2000, 0.4)
+    words = pack_fields({"i": i, "q": q}, _layout(p))
+    kw = dict(in_valid=valid, flush_cycles=p.latency + 2)
+    want = run_stream(dut, words, **kw)
+    got = sim.run(words, **kw)
+    assert_same_stream(got, want, "verilator vs pysim")
+    assert len(got.words) == i.size
+
+
+@needs_verilator
+def test_verilator_matches_model_long(vl_envelope):
+    p, _, sim = vl_envelope
+    i, q, valid = _vl_stimulus(p, np.random.default_rng(111), 1_000_000, 0.7)
+    res = sim.run(pack_fields({"i": i, "q": q}, _layout(p)), in_valid=valid,
+                  flush_cycles=p.latency + 2)
+    np.testing.assert_array_equal(res.words, envelope_model(i, q, p))
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(i.size, valid) + p.latency)

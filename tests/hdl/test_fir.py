@@ -359,3 +359,21 @@ def test_verilog_lint(name, p):
     from cosim.verilog import REPO_ROOT, export_verilog, lint
     path = export_verilog(Fir(p), name=name, out_dir=REPO_ROOT / "build" / "verilog" / "test")
     assert lint(path) == []
+
+
+def test_cic_fir_chain_pulse_level():
+    """TACAN chain levels: a Gaussian pulse of amplitude A through the CIC (gain 64) and the
+    default FIR comes out with peak A * 64 * 1 (design_pulse_fir's normalisation)."""
+    from hdl.model.cic import CicParams, cic_model
+    cic = CicParams()
+    fs, sigma = 20e6, 3.5e-6 / (2 * np.sqrt(2 * np.log(2)))
+    t = (np.arange(4000) - 2000.3) / fs
+    amp = 100_000
+    pulse = np.round(amp * np.exp(-t ** 2 / (2 * sigma ** 2))).astype(np.int64)
+    x = np.stack([pulse, -pulse], axis=1)
+    y_cic, _ = cic_model(cic, x)
+    y, st = fir_model(TACAN, y_cic)
+    want = amp * cic.float_gain * TACAN.float_gain
+    assert st.overflows == 0
+    assert y[:, 0].max() == pytest.approx(want, rel=0.01)
+    assert y[:, 1].min() == pytest.approx(-want, rel=0.01)

@@ -1,40 +1,23 @@
-"""NCO: Amaranth simulation == bit-exact model, table symmetry, frequency words, SFDR, lint."""
+"""NCO: Amaranth simulation == bit-exact model, table symmetry, frequency words, SFDR, lint;
+the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
-from amaranth.back import verilog
-from amaranth.hdl import Const, ResetInserter
-from amaranth.hdl._ir import PortDirection
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In
 
 from cosim.pysim import run_stream, unpack_fields
 from hdl.model.nco import (LFSR_BITS, NcoModel, NcoParams, NcoState, lfsr_bits,
                            nco_freq_word, nco_full_tables, nco_quarter_table)
 from hdl.nco import Nco
 
-BUILD = Path(__file__).resolve().parents[2] / "build" / "verilog"
+from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_stream,
+                   needs_verilator, verilator_sim)
 
 
 def _layout(p: NcoParams):
     return [("cos", p.amp_bits, True), ("sin", p.amp_bits, True)]
-
-
-def _accepted_cycles(n: int, in_valid) -> np.ndarray:
-    """Cycle of each accepted step under run_stream's offer rule (always-ready input)."""
-    if in_valid is None:
-        return np.arange(n)
-    in_valid = np.asarray(in_valid, dtype=bool)
-    cyc = np.flatnonzero(in_valid)[:n]
-    if len(cyc) < n:
-        cyc = np.r_[cyc, len(in_valid) + np.arange(n - len(cyc))]
-    return cyc
 
 
 def _port_at(cycles, writes, port, default=0) -> np.ndarray:
@@ -55,10 +38,21 @@ def _run_nco(p: NcoParams, n: int, writes, in_valid=None, dut=None):
 
 
 def _model_for(p: NcoParams, n: int, writes, in_valid, dut):
-    cyc = _accepted_cycles(n, in_valid)
+    cyc = accepted_cycles(n, in_valid)
     fw = _port_at(cyc, writes, dut.freq)
     po = _port_at(cyc, writes, dut.phase) if p.phase_port else 0
     return NcoModel(p).run(n, fw, phase_offset=po)
+
+
+def _random_stimulus(p: NcoParams, dut, rng, n: int, n_writes: int = 12):
+    """Run-time frequency (and phase) writes at random cycles, random gaps in valid."""
+    writes = [(0, dut.freq, int(rng.integers(0, 1 << p.phase_bits)))]
+    for c in np.sort(rng.choice(n, n_writes, replace=False)):
+        writes.append((int(c), dut.freq, int(rng.integers(0, 1 << p.phase_bits))))
+        if p.phase_port:
+            writes.append((int(c) + 3, dut.phase, int(rng.integers(0, 1 << p.phase_bits))))
+    in_valid = rng.random(n + n // 3) < 0.75
+    return writes, in_valid
 
 
 @pytest.mark.parametrize("seed,p", [
@@ -73,19 +67,14 @@ def test_sim_matches_model_random(seed, p):
     rng = np.random.default_rng(seed)
     n = 6000
     dut = Nco(p)
-    writes = [(0, dut.freq, int(rng.integers(0, 1 << p.phase_bits)))]
-    for c in np.sort(rng.choice(n, 12, replace=False)):
-        writes.append((int(c), dut.freq, int(rng.integers(0, 1 << p.phase_bits))))
-        if p.phase_port:
-            writes.append((int(c) + 3, dut.phase, int(rng.integers(0, 1 << p.phase_bits))))
-    in_valid = rng.random(n + n // 3) < 0.75
+    writes, in_valid = _random_stimulus(p, dut, rng, n)
     cos, sin, res = _run_nco(p, n, writes, in_valid, dut)
     mc, ms, _ = _model_for(p, n, writes, in_valid, dut)
     assert len(cos) == n, f"seed {seed}"
     np.testing.assert_array_equal(cos, mc, err_msg=f"seed {seed}")
     np.testing.assert_array_equal(sin, ms, err_msg=f"seed {seed}")
     # Fixed latency, whatever the gaps.
-    np.testing.assert_array_equal(res.cycles, _accepted_cycles(n, in_valid) + p.latency)
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(n, in_valid) + p.latency)
 
 
 def test_frequency_change_mid_run_negative_and_wrap():
@@ -155,22 +144,7 @@ def test_dither_on_off():
 def test_reset_restarts_phase_and_dither():
     """A synchronous reset mid-run restarts accumulator, LFSR and pipeline."""
     p = NcoParams(dither_bits=6)
-
-    class Wrapped(wiring.Component):
-        def __init__(self):
-            self.inner = Nco(p)
-            super().__init__({**dict(self.inner.signature.members), "clear": In(1)})
-
-        def elaborate(self, platform):
-            from amaranth.hdl import Module
-            m = Module()
-            m.submodules.nco = nco = ResetInserter(self.clear)(self.inner)
-            wiring.connect(m, wiring.flipped(self.i), self.inner.i)
-            wiring.connect(m, self.inner.o, wiring.flipped(self.o))
-            m.d.comb += self.inner.freq.eq(self.freq)
-            return m
-
-    dut = Wrapped()
+    dut = WithClear(Nco(p))
     n1, n2, gap, clear_at = 500, 500, 12, 505
     in_valid = np.r_[np.ones(n1, bool), np.zeros(gap, bool), np.ones(n2, bool)]
     f = 0x1357_9BDF
@@ -339,31 +313,51 @@ def test_bad_model_inputs():
 
 # -- Verilog -------------------------------------------------------------------------------
 
-def _verilog_ports(c):
-    """Ports of a component for ``verilog.convert``: constant ``ready`` of always-ready
-    streams and zero-width payloads are not wires, so they are left out."""
-    ports = {}
-    for path, member, value in c.signature.flatten(c):
-        v = value.as_value() if hasattr(value, "as_value") else value
-        if isinstance(v, Const) or len(v) == 0:
-            continue
-        d = PortDirection.Input if member.flow == wiring.In else PortDirection.Output
-        ports["__".join(map(str, path))] = (v, d)
-    return ports
-
-
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
 @pytest.mark.parametrize("name,p", [("nco", NcoParams()),
                                     ("nco_dither_phase", NcoParams(dither_bits=8, phase_port=True))])
 def test_verilog_lint(name, p):
-    # Waived: UNUSEDSIGNAL (Amaranth keeps unused intermediate wires and carry bits) and
-    # DECLFILENAME (module names are not file names).
-    dut = Nco(p)
-    text = verilog.convert(dut, name=name, ports=_verilog_ports(dut))
-    BUILD.mkdir(parents=True, exist_ok=True)
-    path = BUILD / f"{name}.v"
-    path.write_text(text)
-    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
-                        "-Wno-DECLFILENAME", str(path)], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    # Waived: only cosim.verilog.LINT_WAIVERS less WIDTH (the NCO is clean of it).
+    assert_lints_clean(Nco(p), name, check_width=True)
+
+
+#: The configuration compiled with Verilator: dither and the phase port exercise every path.
+VL_PARAMS = NcoParams(dither_bits=8, phase_port=True)
+
+
+@pytest.fixture(scope="module")
+def vl_nco():
+    dut = Nco(VL_PARAMS)
+    return dut, verilator_sim(dut, "nco_vl")
+
+
+@needs_verilator
+def test_verilator_matches_pysim(vl_nco):
+    """Same stimulus as the random sim test: frequency/phase writes, gaps in valid."""
+    dut, sim = vl_nco
+    p = VL_PARAMS
+    rng = np.random.default_rng(21)
+    n = 6000
+    writes, in_valid = _random_stimulus(p, dut, rng, n)
+    kw = dict(in_valid=in_valid, writes=writes, flush_cycles=p.latency + 4)
+    want = run_stream(dut, np.zeros(n, dtype=np.int64), **kw)
+    got = sim.run(np.zeros(n, dtype=np.int64), **kw)
+    assert_same_stream(got, want, "verilator vs pysim")
+    assert len(got.words) == n
+
+
+@needs_verilator
+def test_verilator_matches_model_long(vl_nco):
+    """1e6 steps with 40 run-time frequency and phase writes and random gaps."""
+    dut, sim = vl_nco
+    p = VL_PARAMS
+    rng = np.random.default_rng(22)
+    n = 1_000_000
+    writes, in_valid = _random_stimulus(p, dut, rng, n, n_writes=40)
+    res = sim.run(np.zeros(n, dtype=np.int64), in_valid=in_valid, writes=writes,
+                  flush_cycles=p.latency + 4)
+    f = unpack_fields(res.words, _layout(p))
+    mc, ms, _ = _model_for(p, n, writes, in_valid, dut)
+    np.testing.assert_array_equal(f["cos"], mc)
+    np.testing.assert_array_equal(f["sin"], ms)
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(n, in_valid) + p.latency)

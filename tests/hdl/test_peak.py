@@ -1,22 +1,16 @@
-"""Pulse-peak search: Amaranth sim == bit-exact model, model == per-sample reference, corners."""
+"""Pulse-peak search: Amaranth sim == bit-exact model, model == per-sample reference, corners;
+the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
-
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
-from amaranth.back import verilog
-from amaranth.hdl import Const, Module, ResetInserter, Value
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In
 
 from cosim.pysim import run_stream, unpack_fields
 from hdl.model.peak import PeakParams, PeakState, peak_search, peak_search_float
 from hdl.peak import PeakSearch
 
-BUILD = Path(__file__).resolve().parents[2] / "build" / "lint"
+from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_stream,
+                   needs_verilator, verilator_sim)
 
 
 # -- helpers -------------------------------------------------------------------------------
@@ -100,21 +94,6 @@ def _check_sim(p, e, in_valid=None):
     in_cycles = np.arange(e.size) if in_valid is None else np.flatnonzero(in_valid)[:e.size]
     np.testing.assert_array_equal(res.cycles, in_cycles[ref.end_index] + p.latency)
     return ref
-
-
-class _WithClear(wiring.Component):
-    """The DUT with a synchronous ``clear`` input (reset in the middle of a run)."""
-
-    def __init__(self, dut):
-        self.dut = dut
-        super().__init__({**dict(dut.signature.members), "clear": In(1)})
-
-    def elaborate(self, platform):
-        m = Module()
-        m.submodules.dut = ResetInserter(self.clear)(self.dut)
-        wiring.connect(m, wiring.flipped(self.i), self.dut.i)
-        wiring.connect(m, self.dut.o, wiring.flipped(self.o))
-        return m
 
 
 SMALL = PeakParams(block_log2=5, hold=3, max_len=24)
@@ -214,7 +193,7 @@ def test_reset_mid_run():
     ref2, _ = peak_search(e2, p)
     valid = np.concatenate((np.ones(e1.size, bool), np.zeros(30, bool)))
     c = e1.size + 15
-    dut = _WithClear(PeakSearch(p))
+    dut = WithClear(PeakSearch(p))
     _, amp, ts = _run_sim(p, np.concatenate((e1, e2)), valid, dut=dut,
                           writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)])
     np.testing.assert_array_equal(amp, np.concatenate((ref1.amplitude, ref2.amplitude)))
@@ -321,18 +300,49 @@ def test_bad_params(kw, msg):
 
 @pytest.mark.verilator
 def test_verilog_lints_clean():
-    """Waived as for every Amaranth export: UNUSEDSIGNAL, DECLFILENAME, WIDTH."""
-    if shutil.which("verilator") is None:
-        pytest.skip("verilator not on PATH (install verilator >= 5)")
-    dut = PeakSearch(PeakParams())
-    # amaranth-lang/amaranth#1574: the constant ``ready`` of an always-ready stream
-    # cannot be a port.
-    ports = [Value.cast(v) for _, _, v in dut.signature.flatten(dut)]
-    ports = [v for v in ports if not isinstance(v, Const)]
-    BUILD.mkdir(parents=True, exist_ok=True)
-    path = BUILD / "peak_search.v"
-    path.write_text(verilog.convert(dut, name="peak_search", ports=ports))
-    r = subprocess.run(["verilator", "--lint-only", "-Wall", "-Wno-UNUSEDSIGNAL",
-                        "-Wno-DECLFILENAME", "-Wno-WIDTH", str(path)],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    """Waived: cosim.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH)."""
+    assert_lints_clean(PeakSearch(PeakParams()), "peak_search")
+
+
+#: Compiled with Verilator: the default (TACAN) configuration.
+VL_PARAMS = PeakParams()
+
+
+@pytest.fixture(scope="module")
+def vl_peak():
+    dut = PeakSearch(VL_PARAMS)
+    return dut, verilator_sim(dut, "peak_search_vl")
+
+
+def _vl_stimulus(rng, n, p_valid):
+    """Realistic envelope with a continuous carrier (max_len cuts); random gaps in valid."""
+    e = realistic_envelope(rng, n)
+    e[n // 2:n // 2 + 700] = 2500
+    return e, rng.random(int(n / p_valid) + 100) < p_valid
+
+
+@needs_verilator
+def test_verilator_matches_pysim(vl_peak):
+    dut, sim = vl_peak
+    p = VL_PARAMS
+    e, valid = _vl_stimulus(np.random.default_rng(240), 8000, 0.6)
+    kw = dict(in_valid=valid, flush_cycles=p.latency + 2)
+    want = run_stream(dut, e, **kw)
+    got = sim.run(e, **kw)
+    assert_same_stream(got, want, "verilator vs pysim")
+    assert len(got.words) > 50
+
+
+@needs_verilator
+def test_verilator_matches_model_long(vl_peak):
+    _, sim = vl_peak
+    p = VL_PARAMS
+    e, valid = _vl_stimulus(np.random.default_rng(241), 1_000_000, 0.7)
+    res = sim.run(e, in_valid=valid, flush_cycles=p.latency + 2)
+    f = unpack_fields(res.words, p.out_layout)
+    ref, _ = peak_search(e, p)
+    assert ref.amplitude.size > 10_000
+    np.testing.assert_array_equal(f["amplitude"], ref.amplitude)
+    np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
+    np.testing.assert_array_equal(res.cycles,
+                                  accepted_cycles(e.size, valid)[ref.end_index] + p.latency)

@@ -1,0 +1,640 @@
+"""TACAN FPGA front end (top level): parameters, word lengths and the bit-exact model.
+
+Chain (one ``sync`` clock, the ADC rate)::
+
+    ADC (12 b) -> DDC (NCO + real mixer) -> CIC (N=3, R=4, M=1) -> FIR (33 taps, matched,
+    CIC-compensating) -> envelope (CORDIC |z|) -> pulse-peak search -> FIFO -> DSP
+
+:class:`TacanFrontendParams` holds the rates/structure (a :class:`dsp.tacan.frontend.FrontendConfig`,
+shared with the golden float model) plus every word length, and builds each block's
+parameters in one place so that each block's output width is the next one's input width.
+
+Word lengths (defaults) and why
+-------------------------------
+Units: "FS" is ADC full scale (code ``2**(adc_bits-1)``); the golden model's amplitudes are
+the carrier amplitude in FS (its mixer multiplies by ``2 exp(-jwn)``).
+
+* **ADC 12 b** (the scenario's converter).
+* **NCO**: 32-bit phase (frequency error ~2 mHz at 3 MHz), 10-bit table address (phase error
+  <= pi/1024 rad, zero-mean with the bin-centre table), 16-bit amplitude (table rounding
+  1.5e-5 relative): the 12 x 16 product fits one 18x18 multiplier. The LO phase error
+  changes a narrowband pulse's *magnitude* only to second order (a rotation to first order).
+* **Mixer 16 b, headroom 0, half_even**: output LSB ``2**-15`` FS (16x finer than the ADC
+  LSB, so its rounding adds < 0.4% to the ADC quantisation noise power). The product is
+  shifted by 11 bits and ``|x * lo| <= 2**11 * (2**15 - 1)``, so the output is at most
+  ``2**15 - 1`` LSB: it never saturates, not even at (-full scale) x (-peak). Convergent
+  rounding has no DC bias (a floor would put a ~1e-5 FS offset on I and Q).
+* **CIC 17 b out** (full width 22, 5 LSBs dropped, half_even, no pruning): LSB ``2**-16`` FS;
+  the impulse response is positive with gain 64/32, so ``|out| <= 2 * (2**15 - 1) < 2**16``;
+  17 bits make the FIR's pre-adder 18 bits, i.e. one 18x18 multiplier per tap.
+* **FIR**: 18-bit coefficients (the 18x18 multiplier; quantisation error of the pulse
+  response ~1e-5 relative), output LSB = input LSB (``2**-16`` FS), 18 b out: every tap is
+  positive with sum 1.212, so ``|out| <= 1.212 * 2**16 < 2**17`` (no overflow for any
+  input). The multipliers
+  are time-shared over ``input_spacing = cic_rate`` cycles (the CIC cannot deliver faster).
+* **Envelope 18 b in, 19 b out** (CORDIC, 12 iterations, half_up, no gain compensation):
+  ``1.647 * sqrt(2) * 2**17 < 2**19``; error <= :attr:`~hdl.model.envelope.EnvelopeParams.error_bound_lsb`
+  (1.4 LSB = 2.5e-5 FS). 12 iterations leave an angle residual of atan(2**-11), i.e. a
+  relative error <= 2**-23 (0.02 LSB at full scale); more iterations would only add
+  truncation error (each one < 1 guard LSB) and pipeline stages.
+* **Peak search** 19-bit amplitude, 32-bit timestamp (wraps after 214 s at 20 MHz; the model
+  also returns it unwrapped), threshold floor ``thr_min`` = the golden's ``thr_min_fs`` in
+  envelope LSBs.
+* **FIFO** 51-bit payload (amplitude | timestamp << 19) + 2-bit tag, 512 deep (one DP16KD
+  block pair), 16-bit overflow counter.
+
+Model
+-----
+:class:`TacanFrontendModel` chains the block models (vectorised, chunkable with a
+:class:`TacanFrontendState`); :meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle
+model for a given DSP ``ready`` pattern.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal as sps
+
+from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
+from dsp.tacan.frontend import FrontendConfig, Peaks
+
+from .cic import CicParams, CicState, cic_model
+from .ddc import DdcModel, DdcParams
+from .envelope import EnvelopeParams, envelope_model
+from .fifo import FifoParams, fifo_model
+from .fir import FirParams, FirState, fir_model
+from .mixer import MixerParams
+from .nco import NcoParams, NcoState, nco_freq_word
+from .peak import PeakParams, PeakState, peak_search
+
+__all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",
+           "FifoRun"]
+
+
+@dataclass(frozen=True)
+class TacanFrontendParams:
+    """Rates, structure and word lengths of the TACAN front end.
+
+    Parameters
+    ----------
+    config : FrontendConfig
+        Rates and structure shared with the golden model (fs, digital IF, CIC N/R/M, FIR
+        length/decimation, pulse width, peak-search parameters, ``thr_min_fs``).
+        ``config.peak`` gives the noise-floor/threshold/hold settings; its ``amp_width`` and
+        ``thr_min`` are replaced by the envelope width and ``thr_min_fs`` in LSBs.
+    adc_bits : int
+        ADC word (signed, 2..18).
+    nco_phase_bits, nco_table_bits, nco_amp_bits, nco_dither_bits : int
+        NCO accumulator, full-circle table address, signed amplitude, phase dither widths.
+    mixer_out_bits, mixer_headroom_bits : int
+        Mixer output width and extra right shift (output LSB ``2**-(out - 1 - headroom)`` FS).
+    mixer_rounding : str
+        Rounding of the mixer products (see :mod:`dsp.fixed`).
+    cic_out_bits : int
+        CIC output width (LSBs dropped from the full Hogenauer width).
+    cic_rounding : str
+    cic_prune : bool
+        Hogenauer register pruning.
+    fir_coef_bits : int
+        FIR coefficient width.
+    fir_out_shift_rel : int
+        FIR output LSB relative to its input LSB, as a power of two: the FIR drops
+        ``coef_frac - fir_out_shift_rel`` LSBs (1: one fraction bit more than the input).
+    fir_out_bits : int
+        FIR output width.
+    fir_rounding : str
+    fir_input_spacing : int, optional
+        Multiplier sharing of the FIR (default ``config.cic_rate``: the CIC's guaranteed
+        minimum spacing between its outputs; 1 = fully parallel).
+    env_iterations : int
+        CORDIC iterations.
+    env_out_bits : int, optional
+        Envelope output width (default: natural, ``fir_out_bits + 1``).
+    env_rounding : str
+    ts_bits : int
+        Peak timestamp width (wraps).
+    fifo_depth, fifo_count_bits : int
+        FIFO depth (words) and overflow-counter width.
+    check_headroom : bool
+        Refuse word lengths where a legal input could overflow a stage (default True).
+    """
+
+    config: FrontendConfig = field(default_factory=FrontendConfig)
+    adc_bits: int = 12
+    nco_phase_bits: int = 32
+    nco_table_bits: int = 10
+    nco_amp_bits: int = 16
+    nco_dither_bits: int = 0
+    mixer_out_bits: int = 16
+    mixer_headroom_bits: int = 0
+    mixer_rounding: str = "half_even"
+    cic_out_bits: int = 17
+    cic_rounding: str = "half_even"
+    cic_prune: bool = False
+    fir_coef_bits: int = 18
+    fir_out_shift_rel: int = 0
+    fir_out_bits: int = 18
+    fir_rounding: str = "half_up"
+    fir_input_spacing: int | None = None
+    env_iterations: int = 12
+    env_out_bits: int | None = None
+    env_rounding: str = "half_up"
+    ts_bits: int = 32
+    fifo_depth: int = 512
+    fifo_count_bits: int = 16
+    check_headroom: bool = True
+    _blocks: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        if not isinstance(self.config, FrontendConfig):
+            raise ValueError(f"config must be a FrontendConfig, not {self.config!r}")
+        check_width("ADC adc_bits", self.adc_bits, minimum=2, maximum=18)
+        for name in ("mixer_rounding", "cic_rounding", "fir_rounding"):
+            if getattr(self, name) not in ROUNDINGS:
+                raise ValueError(f"{name} must be one of {ROUNDINGS}, not {getattr(self, name)!r}")
+        if not isinstance(self.cic_prune, bool):
+            raise ValueError(f"cic_prune must be a bool, not {self.cic_prune!r}")
+        if isinstance(self.fir_out_shift_rel, bool) or not isinstance(self.fir_out_shift_rel, int) \
+                or not 0 <= self.fir_out_shift_rel <= 8:
+            raise ValueError(f"fir_out_shift_rel must be an integer in [0, 8], not "
+                             f"{self.fir_out_shift_rel!r}")
+        cfg = self.config
+        if self.fir_input_spacing is None:
+            object.__setattr__(self, "fir_input_spacing", cfg.cic_rate)
+        if isinstance(self.fir_input_spacing, bool) or not isinstance(self.fir_input_spacing, int) \
+                or not 1 <= self.fir_input_spacing <= cfg.cic_rate:
+            raise ValueError(f"fir_input_spacing must be an integer in [1, cic_rate = "
+                             f"{cfg.cic_rate}] (the CIC's output spacing), not "
+                             f"{self.fir_input_spacing!r}")
+
+        # Build every block once, in chain order; each takes the previous one's out width.
+        b = self._blocks
+        nco = NcoParams(phase_bits=self.nco_phase_bits, table_bits=self.nco_table_bits,
+                        amp_bits=self.nco_amp_bits, dither_bits=self.nco_dither_bits)
+        mixer = MixerParams(in_width=self.adc_bits, lo_width=nco.amp_bits,
+                            out_width=self.mixer_out_bits, rounding=self.mixer_rounding,
+                            overflow="saturate", headroom_bits=self.mixer_headroom_bits)
+        b["ddc"] = DdcParams(nco=nco, mixer=mixer)
+        b["cic"] = CicParams(stages=cfg.cic_stages, rate=cfg.cic_rate, diff_delay=cfg.cic_delay,
+                             in_width=b["ddc"].out_width, channels=2, out_width=self.cic_out_bits,
+                             rounding=self.cic_rounding, overflow="saturate", prune=self.cic_prune)
+        probe = FirParams(taps=tuple(cfg.fir_taps), coef_bits=self.fir_coef_bits,
+                          decimation=cfg.fir_decim, in_width=b["cic"].out_width, channels=2)
+        out_shift = probe.coef_frac - self.fir_out_shift_rel
+        if out_shift < 0:
+            raise ValueError(f"fir_out_shift_rel must be <= the coefficient fraction bits "
+                             f"{probe.coef_frac}, not {self.fir_out_shift_rel}")
+        b["fir"] = FirParams(taps=probe.taps, coef_bits=self.fir_coef_bits,
+                             decimation=cfg.fir_decim, in_width=b["cic"].out_width, channels=2,
+                             out_shift=out_shift, out_width=self.fir_out_bits,
+                             rounding=self.fir_rounding, overflow="saturate",
+                             input_spacing=self.fir_input_spacing)
+        b["envelope"] = EnvelopeParams(in_width=b["fir"].out_width, out_width=self.env_out_bits,
+                                       iterations=self.env_iterations,
+                                       rounding=self.env_rounding)
+        env = b["envelope"]
+        object.__setattr__(self, "env_out_bits", env.out_width)
+        # thr_min_fs in envelope LSBs (scale of the chain up to the envelope).
+        thr_min = int(round(cfg.thr_min_fs / self._scale_from(b)))
+        pk = cfg.peak
+        b["peak"] = PeakParams(amp_width=env.out_width, ts_bits=self.ts_bits,
+                               ts_step=cfg.decimation, block_log2=pk.block_log2,
+                               clip_log2=pk.clip_log2, smooth_log2=pk.smooth_log2,
+                               thr_mult=pk.thr_mult, thr_frac=pk.thr_frac,
+                               thr_min=min(thr_min, (1 << env.out_width) - 1),
+                               hold=pk.hold, max_len=pk.max_len)
+        b["fifo"] = FifoParams(width=env.out_width + self.ts_bits, depth=self.fifo_depth,
+                               count_width=self.fifo_count_bits)
+        if self.check_headroom:
+            self._check_headroom()
+
+    # -- headroom ----------------------------------------------------------------------------
+    def headroom(self) -> dict[str, tuple[int, int]]:
+        """Per stage: (largest magnitude any legal ADC input can produce, largest the output
+        word holds), both in that stage's output LSBs (exact integers; the envelope's from
+        its CORDIC bound)."""
+        d, c, f, e = self.ddc, self.cic, self.fir, self.envelope
+        mx = d.mixer
+        full = 1 << (self.adc_bits - 1)
+        prod = full * d.nco.peak
+        drop = mx.drop_bits
+        mix_max = (prod + (1 << (drop - 1))) >> drop if drop > 0 else prod << -drop
+        # CIC: positive impulse response, gain/2**out_shift, plus a rounding carry.
+        cic_max = -(-mix_max * c.gain // (1 << c.out_shift))
+        taps = np.array(f.taps_int, dtype=object)
+        fir_max = -(-cic_max * int(np.abs(taps).sum()) // (1 << f.out_shift))
+        env_max = int(math.ceil(e.eff_gain * math.sqrt(2) * fir_max / 2.0 ** e.shift
+                                + e.error_bound_lsb))
+        return {
+            "mixer": (mix_max, (1 << (mx.out_width - 1)) - 1),
+            "cic": (cic_max, (1 << (c.out_width - 1)) - 1),
+            "fir": (fir_max, (1 << (f.out_width - 1)) - 1),
+            "envelope": (env_max, (1 << e.out_width) - 1),
+        }
+
+    def _check_headroom(self):
+        for stage, (need, have) in self.headroom().items():
+            if need > have:
+                raise ValueError(
+                    f"{stage} output can overflow: a full-scale ADC input reaches {need} LSB "
+                    f"but {stage} words hold {have}; widen it, or pass check_headroom=False "
+                    f"to study saturation")
+
+    # -- blocks --------------------------------------------------------------------------------
+    @property
+    def ddc(self) -> DdcParams:
+        return self._blocks["ddc"]
+
+    @property
+    def cic(self) -> CicParams:
+        return self._blocks["cic"]
+
+    @property
+    def fir(self) -> FirParams:
+        return self._blocks["fir"]
+
+    @property
+    def envelope(self) -> EnvelopeParams:
+        return self._blocks["envelope"]
+
+    @property
+    def peak(self) -> PeakParams:
+        return self._blocks["peak"]
+
+    @property
+    def fifo(self) -> FifoParams:
+        return self._blocks["fifo"]
+
+    # -- derived ---------------------------------------------------------------------------------
+    @property
+    def nco_freq_word(self) -> int:
+        """NCO word of the digital IF (rounded to nearest; the error is ``nco_freq_error_hz``)."""
+        return nco_freq_word(self.config.if_hz, f_clk_hz=self.config.fs_hz,
+                             phase_bits=self.nco_phase_bits).word
+
+    @property
+    def nco_freq_error_hz(self) -> float:
+        return nco_freq_word(self.config.if_hz, f_clk_hz=self.config.fs_hz,
+                             phase_bits=self.nco_phase_bits).error_hz
+
+    @property
+    def decimation(self) -> int:
+        return self.config.decimation
+
+    @property
+    def peak_latency(self) -> int:
+        """Cycles from the ADC transfer that completes a pulse's closing envelope sample to
+        the peak search's output transfer (= the FIFO write)."""
+        return (self.ddc.latency + self.cic.latency + self.fir.latency + self.envelope.latency
+                + self.peak.latency)
+
+    #: SyncFIFOBuffered: a word written into an empty queue is offered 2 cycles later.
+    FIFO_LATENCY = 2
+
+    @property
+    def latency(self) -> int:
+        """Cycles from the ADC transfer that completes a pulse's closing envelope sample to
+        ``o.valid`` of its FIFO word (empty FIFO, DSP ready)."""
+        return self.peak_latency + self.FIFO_LATENCY
+
+    @staticmethod
+    def _scale_from(b) -> float:
+        d, c, f, e = b["ddc"], b["cic"], b["fir"], b["envelope"]
+        mx = d.mixer
+        lo_rel = d.nco.peak / 2.0 ** (d.nco.amp_bits - 1)
+        # mixer integer per golden baseband unit: golden z = 2 x exp(-jwn) (x in FS).
+        mix = lo_rel * 2.0 ** (mx.out_width - 1 - mx.headroom_bits) / 2.0
+        return 1.0 / (mix * c.float_gain * f.float_gain * e.eff_gain / 2.0 ** e.shift)
+
+    @property
+    def scale_to_fs(self) -> float:
+        """ADC full-scale units per envelope (amplitude) LSB: golden amplitude ~=
+        ``scale_to_fs * amplitude`` (mixer scaling and NCO peak, CIC and FIR gains, CORDIC
+        gain; the FIR's quantised taps stand for the golden float taps)."""
+        return self._scale_from(self._blocks)
+
+    @property
+    def group_delay_samples(self) -> float:
+        """Delay (ADC ticks) of a pulse peak to its hardware timestamp: subtract it from a
+        timestamp to get the pulse time. The golden's delay less ``decimation - 1``: a
+        hardware envelope sample ``n`` has timestamp ``n D`` but completes on ADC tick
+        ``n D + D - 1`` (the D-th, 2D-th, ... input is kept)."""
+        return self.config.group_delay_samples - (self.decimation - 1)
+
+    @property
+    def amp_bound_fs(self) -> float:
+        """Bound on ``|model amplitude - golden amplitude|`` (FS) for the same envelope
+        sampling phase, from the rounding steps of the chain (worst case over inputs) and the
+        CORDIC bound; see :func:`amp_error_terms`."""
+        return sum(amp_error_terms(self).values())
+
+
+def amp_error_terms(p: TacanFrontendParams) -> dict[str, float]:
+    """Worst-case amplitude error (FS) contributed by each rounding step; the magnitude of a
+    complex error ``(ei, eq)`` with ``|ei|, |eq| <= b`` is at most ``sqrt(2) b``.
+
+    * mixer rounding: 1/2 LSB per sample (half_even), through CIC (DC gain 1, positive) and
+      FIR (sum|h|);
+    * CIC output rounding: 1/2 CIC LSB through the FIR;
+    * FIR output rounding (+ coefficient quantisation is not a rounding of the signal: the
+      golden comparison uses the design taps, so the difference of the tap sets times the
+      largest input is counted too);
+    * envelope: :attr:`EnvelopeParams.error_bound_lsb`.
+
+    * NCO: the table rounds the LO amplitude by <= 1/2 LSB of its peak (relative
+      ``1/(2 peak)``, first order, times the largest amplitude 1 FS); the table's phase
+      error ``|d| <= pi/2**table_bits`` only rotates a narrowband pulse to first order
+      (zero-mean pattern, filtered by the positive CIC/FIR), changing its magnitude by
+      ``<= d**2/2`` relative.
+    """
+    fs = p.scale_to_fs   # FS per envelope LSB
+    e = p.envelope
+    env_per_fir = e.eff_gain / 2.0 ** e.shift    # envelope LSB per FIR LSB
+    fir_lsb = fs * env_per_fir                   # FS per FIR LSB
+    cic_lsb = fir_lsb * p.fir.float_gain
+    mix_lsb = cic_lsb * p.cic.float_gain
+    h = np.asarray(p.fir.taps_quantised)
+    dh = float(np.abs(h - np.asarray(p.fir.taps)).sum())
+    s2 = math.sqrt(2.0)
+    half = {"floor": 1.0, "zero": 1.0, "half_up": 0.5, "half_even": 0.5}
+    return {
+        "mixer": s2 * half[p.ddc.mixer.rounding] * mix_lsb * np.abs(h).sum(),
+        "cic": s2 * half[p.cic.rounding] * (cic_lsb if p.cic.out_shift else 0.0) * np.abs(h).sum(),
+        "fir_coef": dh * 1.0,   # |x| <= 1 FS (golden units: carrier amplitude <= 1)
+        "fir": s2 * half[p.fir.rounding] * fir_lsb,
+        "envelope": e.error_bound_lsb * fs,
+        "nco": 1.0 / (2 * p.ddc.nco.peak) + (math.pi / 2 ** p.ddc.nco.table_bits) ** 2 / 2,
+    }
+
+
+# -- model ------------------------------------------------------------------------------------
+
+def _round_inplace(v: np.ndarray, rounding: str) -> None:
+    """Round float64 values that are exact binary fractions (|v| < 2**51) to integers, in
+    place, with :func:`dsp.fixed.shift_right`'s modes."""
+    if rounding == "half_even":
+        np.rint(v, out=v)
+    elif rounding == "half_up":
+        v += 0.5
+        np.floor(v, out=v)
+    elif rounding == "floor":
+        np.floor(v, out=v)
+    elif rounding == "zero":
+        np.trunc(v, out=v)
+    else:
+        raise ValueError(f"rounding must be one of {ROUNDINGS}, not {rounding!r}")
+
+
+def _fast_decimate(h: np.ndarray, z: np.ndarray, hist, down: int):
+    """Outputs ``sum_t h[t] z[k - t]`` at the chunk indices ``k = down-1, 2 down-1, ...``
+    (real float64 holding integers; exact below 2**53), and the new history (last ``L-1``
+    inputs)."""
+    L = len(h)
+    if hist is None:
+        hist = np.zeros(L - 1, dtype=np.float64)
+    buf = np.concatenate([hist, z])
+    new_hist = buf[len(buf) - (L - 1):].copy()
+    count = len(z) // down
+    if count == 0:
+        return np.zeros(0, dtype=np.float64), new_hist
+    if down == 1:
+        return np.convolve(buf, h, mode="valid"), new_hist
+    # Kept outputs sit at buf indices o + i*down, o = L - 1 + down - 1; drop d = o % down
+    # leading samples so that they are the multiples of down upfirdn computes.
+    o = L + down - 2
+    d = o % down
+    y = sps.upfirdn(h, buf[d:], up=1, down=down)
+    j0 = (o - d) // down
+    return y[j0:j0 + count], new_hist
+
+@dataclass
+class TacanFrontendState:
+    """Model state between chunks (``None`` = just after reset)."""
+
+    nco: NcoState | None = None
+    cic: object = None         #: CicState (block path) or history array (fast path)
+    fir: object = None         #: FirState (block path) or history array (fast path)
+    peak: PeakState | None = None
+    n_adc: int = 0            #: ADC samples consumed
+    pending: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: ADC samples left over (fewer than one decimation group: the CIC/FIR consume whole
+    #: groups per chunk so that the integer models' chunks line up).
+
+
+@dataclass
+class FrontendPeaks:
+    """Peaks as the hardware reports them (before the FIFO).
+
+    amplitudes : int64 envelope LSBs; timestamps : int64 ADC ticks, unwrapped
+    (``timestamps mod 2**ts_bits`` is the hardware field); index / end_index : envelope
+    sample of the peak / of the sample that closed the pulse.
+    """
+
+    amplitudes: np.ndarray
+    timestamps: np.ndarray
+    index: np.ndarray
+    end_index: np.ndarray
+
+    def __len__(self):
+        return len(self.amplitudes)
+
+
+@dataclass
+class FifoRun:
+    """FIFO output predicted for a ready pattern: packed words and their cycles, the
+    ``overflow_count`` port per cycle, and which peaks were dropped."""
+
+    words: np.ndarray
+    cycles: np.ndarray
+    overflow_count: np.ndarray
+    dropped: np.ndarray
+
+
+class TacanFrontendModel:
+    """Bit-exact model of :class:`hdl.tacan_frontend.TacanFrontEnd`.
+
+    Parameters
+    ----------
+    params : TacanFrontendParams
+    freq_word : int, optional
+        NCO word held on the ``freq`` port (default: the IF word).
+    fast : bool, optional
+        Use the fused float64 path when the parameters allow it (default), or force the
+        chained block models (``False``); both give the same bits.
+    """
+
+    CHUNK = 1 << 18   # ADC samples per internal step (cache-sized temporaries)
+
+    def __init__(self, params: TacanFrontendParams | None = None, *, freq_word: int | None = None,
+                 fast: bool | None = None):
+        self.params = params if params is not None else TacanFrontendParams()
+        self.freq_word = self.params.nco_freq_word if freq_word is None else int(freq_word)
+        self.ddc = DdcModel(self.params.ddc)
+        self._fast = self._fast_ok() if fast is None else bool(fast and self._fast_ok())
+        p = self.params
+        drop = p.ddc.mixer.drop_bits
+        self._lo = (self.ddc.nco.cos_table * 2.0 ** -drop, -self.ddc.nco.sin_table * 2.0 ** -drop)
+        self._h_cic = np.array(p.cic.impulse_response, dtype=np.float64)
+        self._h_fir = np.array(p.fir.taps_int, dtype=np.float64)
+
+    @property
+    def fast(self) -> bool:
+        """Whether :meth:`envelope` takes the float64 fast path (see there)."""
+        return self._fast
+
+    def _fast_ok(self) -> bool:
+        p = self.params
+        # Exact in float64 when every intermediate is an integer below 2**53 and nothing
+        # saturates (check_headroom) or wraps (no pruning: the CIC sum is exact).
+        return (p.check_headroom and not p.cic_prune and p.nco_dither_bits == 0
+                and p.fir.acc_width <= 50 and p.cic.full_width <= 50
+                and p.ddc.mixer.product_width <= 50)
+
+    def envelope(self, adc_codes, state: TacanFrontendState | None = None
+                 ) -> tuple[np.ndarray, TacanFrontendState]:
+        """Envelope samples (envelope LSBs) of the next ADC codes, and the new state
+        (the peak search state is carried unchanged).
+
+        Two implementations with the same bits: the block models chained
+        (``fast=False``), and a fused float64 path used when the parameters allow it
+        (:attr:`fast`): every value up to the FIR accumulator is an integer below ``2**50``,
+        so float64 products and sums are exact in any order, and the roundings are exact
+        float operations on ``v * 2**-s`` (``rint`` is round-half-even, ``floor(. + 1/2)``
+        half-up, ...). The CIC and FIR then run as compiled convolutions (``upfirdn``,
+        ``np.convolve``) instead of one numpy pass per tap. The tests check the two paths
+        against each other and the HDL against both.
+        """
+        p = self.params
+        st = TacanFrontendState() if state is None else state
+        x = np.asarray(adc_codes)
+        if x.dtype.kind not in "iu":
+            raise ValueError(f"ADC codes must be integers, not dtype {x.dtype}")
+        if len(st.pending):
+            x = np.concatenate([st.pending.astype(x.dtype), x])
+        r = p.cic.rate * p.fir.decimation
+        usable = len(x) - len(x) % r
+        rest = x[usable:].astype(np.int64)
+        x = x[:usable]
+        if self._fast:
+            e, nco, cic, fir = self._fast_chain(x, st)
+        else:
+            i, q, nco = self.ddc.run(x.astype(np.int64), self.freq_word, st.nco)
+            c, cic = cic_model(p.cic, np.stack([i, q], axis=-1), st.cic)
+            f, fir = fir_model(p.fir, c, st.fir)
+            e = envelope_model(f[:, 0], f[:, 1], p.envelope)
+        return e, TacanFrontendState(nco=nco, cic=cic, fir=fir, peak=st.peak,
+                                     n_adc=st.n_adc + usable, pending=rest)
+
+    def _fast_chain(self, x, st: TacanFrontendState):
+        p = self.params
+        lo = p.adc_bits - 1
+        if x.size and (x.min() < -(1 << lo) or x.max() >= (1 << lo)):
+            raise ValueError(f"ADC codes must be signed {p.adc_bits}-bit integers")
+        a, nco = self.ddc.nco.addresses(len(x), self.freq_word, st.nco)
+        xf = x.astype(np.float64)
+        cic_hist = [None, None] if st.cic is None else st.cic
+        fir_hist = [None, None] if st.fir is None else st.fir
+        out = []
+        # I and Q as separate contiguous real arrays (compiled loops on real data are ~2x
+        # faster than on complex); LO tables pre-scaled by 2**-drop (exact).
+        for ch, table in enumerate(self._lo):
+            v = table[a]
+            v *= xf
+            _round_inplace(v, p.ddc.mixer.rounding)
+            # CIC as its integer FIR, decimated; chunks hold whole groups, so the
+            # decimation phase is 0 at every chunk start.
+            v, cic_hist[ch] = _fast_decimate(self._h_cic, v, cic_hist[ch], p.cic.rate)
+            v *= 2.0 ** -p.cic.out_shift
+            _round_inplace(v, p.cic.rounding)
+            v, fir_hist[ch] = _fast_decimate(self._h_fir, v, fir_hist[ch], p.fir.decimation)
+            v *= 2.0 ** -p.fir.out_shift
+            _round_inplace(v, p.fir.rounding)
+            out.append(v.astype(np.int64))
+        e = envelope_model(out[0], out[1], p.envelope)
+        return e, nco, cic_hist, fir_hist
+
+    def run(self, adc_codes, state: TacanFrontendState | None = None
+            ) -> tuple[FrontendPeaks, TacanFrontendState]:
+        """Peaks of the next ADC codes (valid samples only; gaps in valid do not change the
+        values), vectorised, in internal chunks of :attr:`CHUNK`.
+
+        Returns
+        -------
+        peaks : FrontendPeaks
+            ``amplitudes`` (envelope LSBs) and ``timestamps`` (unwrapped int64 ADC ticks).
+        state : TacanFrontendState
+            Pass it to the next call: the result of several calls equals one long call.
+        """
+        p = self.params
+        x = np.asarray(adc_codes)
+        st = TacanFrontendState() if state is None else state
+        amps, ts, idx, end = [], [], [], []
+        for c0 in range(0, max(len(x), 1), self.CHUNK):
+            e, st = self.envelope(x[c0:c0 + self.CHUNK], st)
+            res, pk = peak_search(e, p.peak, st.peak)
+            st.peak = pk
+            amps.append(res.amplitude)
+            idx.append(res.index)
+            end.append(res.end_index)
+        index = np.concatenate(idx).astype(np.int64)
+        peaks = FrontendPeaks(amplitudes=np.concatenate(amps).astype(np.int64),
+                              timestamps=index * np.int64(p.peak.ts_step),
+                              index=index, end_index=np.concatenate(end).astype(np.int64))
+        return peaks, st
+
+    # -- conversions --------------------------------------------------------------------------
+    def peaks_to_fs(self, peaks: FrontendPeaks) -> Peaks:
+        """The golden model's units: amplitudes in ADC full scale, timestamps in the golden's
+        convention (the ADC tick that completes the envelope sample: ``ts + D - 1``)."""
+        p = self.params
+        return Peaks(timestamps=peaks.timestamps + (p.decimation - 1),
+                     amplitudes=peaks.amplitudes * p.scale_to_fs, fs_hz=p.config.fs_hz)
+
+    def words(self, peaks: FrontendPeaks) -> np.ndarray:
+        """Packed FIFO input payloads ``amplitude | (timestamp mod 2**ts_bits) << amp_width``."""
+        p = self.params.peak
+        ts = peaks.timestamps & np.int64((1 << p.ts_bits) - 1)
+        return peaks.amplitudes | (ts << np.int64(p.amp_width))
+
+    def unpack(self, fifo_words) -> dict[str, np.ndarray]:
+        """Split FIFO output words into ``amplitude``, ``timestamp`` (wrapped) and ``tag``."""
+        p = self.params
+        w = np.asarray(fifo_words, dtype=np.int64)
+        aw, tb = p.peak.amp_width, p.peak.ts_bits
+        return {"amplitude": w & np.int64((1 << aw) - 1),
+                "timestamp": (w >> np.int64(aw)) & np.int64((1 << tb) - 1),
+                "tag": (w >> np.int64(aw + tb)) & np.int64(3)}
+
+    def peak_cycles(self, peaks: FrontendPeaks, in_valid=None) -> np.ndarray:
+        """Clock cycle (from reset, as :func:`cosim.pysim.run_stream` counts) at which each
+        peak leaves the peak search (and is written to the FIFO), for ADC samples offered
+        with ``in_valid`` (per cycle; every cycle after the pattern ends, as ``run_stream``)."""
+        p = self.params
+        adc_idx = (peaks.end_index + 1) * np.int64(p.decimation) - 1
+        if in_valid is None:
+            acc = adc_idx
+        else:
+            v = np.flatnonzero(np.asarray(in_valid, dtype=bool))
+            n_pat = len(np.asarray(in_valid))
+            acc = np.where(adc_idx < len(v), v[np.minimum(adc_idx, max(len(v) - 1, 0))]
+                           if len(v) else 0, n_pat + adc_idx - len(v))
+        return acc + np.int64(p.peak_latency)
+
+    def fifo_output(self, peaks: FrontendPeaks, n_cycles: int, *, in_valid=None,
+                    out_ready=None) -> FifoRun:
+        """What the FIFO hands the DSP in ``n_cycles`` cycles from reset, given the DSP's
+        ``ready`` per cycle (default always; after the pattern ends: ready)."""
+        p = self.params
+        cyc = self.peak_cycles(peaks, in_valid)
+        keep = cyc < n_cycles
+        w_valid = np.zeros(n_cycles, dtype=bool)
+        w_valid[cyc[keep]] = True
+        rdy = np.ones(n_cycles, dtype=bool)
+        if out_ready is not None:
+            r = np.asarray(out_ready, dtype=bool)[:n_cycles]
+            rdy[:len(r)] = r
+        res = fifo_model(self.words(peaks)[keep], w_valid, rdy, p.fifo)
+        return FifoRun(words=res.words, cycles=res.cycles,
+                       overflow_count=res.overflow_count, dropped=res.dropped)

@@ -1,0 +1,91 @@
+"""TACAN FPGA front end: DDC -> CIC -> FIR -> envelope -> peak search -> FIFO, one clock.
+
+Parameters, word lengths and the bit-exact model are in :mod:`hdl.model.tacan_frontend`.
+"""
+from __future__ import annotations
+
+from amaranth.hdl import Module, signed, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from .cic import Cic
+from .ddc import Ddc
+from .envelope import Envelope
+from .fifo import DspFifo
+from .fir import Fir
+from .model.tacan_frontend import TacanFrontendParams
+from .peak import PeakSearch
+
+__all__ = ["TacanFrontEnd", "TacanFrontendParams"]
+
+
+class TacanFrontEnd(wiring.Component):
+    """The TACAN front end from ADC samples to tagged peak words for the DSP.
+
+    Parameters
+    ----------
+    params : TacanFrontendParams
+        Rates, structure and every word length (each block's params come from it).
+
+    Ports
+    -----
+    i : In(stream.Signature(signed(adc_bits), always_ready=True))
+        ADC samples at the clock rate; gaps in ``valid`` are allowed (each valid sample
+        steps the NCO once; the CIC keeps the R-th, 2R-th, ... valid sample).
+    freq : In(unsigned(nco_phase_bits), init=params.nco_freq_word)
+        NCO frequency word, sampled with each valid ADC sample. Its ``init`` (the digital IF
+        word) is what ``amaranth.sim`` uses when a testbench does not drive it; in the
+        exported Verilog it is a plain input that the surrounding design (or the DSP's
+        control register) must drive, as the Verilator runs do with ``inputs={"freq": ...}``.
+    o : Out(stream.Signature(StructLayout({"payload": unsigned(amp + ts), "tag": unsigned(2)})))
+        FIFO words towards the DSP, with a real ``ready``. Data word (tag 0): payload =
+        ``amplitude | timestamp << amp_width`` (amplitude in envelope LSBs,
+        ``TacanFrontendParams.scale_to_fs`` FS each; timestamp = ADC tick of the peak's
+        envelope sample mod ``2**ts_bits``). Marker (tag 2): payload = peaks dropped just
+        before it. ``params.latency`` cycles from the ADC sample that completes the envelope
+        sample closing a pulse to ``o.valid`` (empty FIFO).
+    overflow_count : Out(unsigned(fifo_count_bits))
+        Peaks dropped because the FIFO was full (saturating), the cycle after the drop.
+    """
+
+    def __init__(self, params: TacanFrontendParams | None = None):
+        params = params if params is not None else TacanFrontendParams()
+        if not isinstance(params, TacanFrontendParams):
+            self._MustUse__silence = True
+            raise TypeError(f"TacanFrontEnd takes a TacanFrontendParams, not "
+                            f"{type(params).__name__}")
+        self.params = params
+        self._fifo = DspFifo(params.fifo)   # its output layout is the top's
+        super().__init__({
+            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "freq": In(unsigned(params.nco_phase_bits), init=params.nco_freq_word),
+            "o": Out(stream.Signature(self._fifo.out_layout)),
+            "overflow_count": Out(unsigned(params.fifo_count_bits)),
+        })
+
+    @property
+    def latency(self) -> int:
+        return self.params.latency
+
+    def elaborate(self, platform):
+        p = self.params
+        m = Module()
+        m.submodules.ddc = ddc = Ddc(p.ddc)
+        m.submodules.cic = cic = Cic(p.cic)
+        m.submodules.fir = fir = Fir(p.fir)
+        m.submodules.envelope = env = Envelope(p.envelope)
+        m.submodules.peak = peak = PeakSearch(p.peak)
+        m.submodules.fifo = fifo = self._fifo
+
+        wiring.connect(m, wiring.flipped(self.i), ddc.i)
+        m.d.comb += ddc.freq.eq(self.freq)
+        wiring.connect(m, ddc.o, cic.i)
+        wiring.connect(m, cic.o, fir.i)
+        wiring.connect(m, fir.o, env.i)
+        wiring.connect(m, env.o, peak.i)
+        # Adapter: the FIFO stores raw bits; the peak's struct is packed as it lays it out
+        # (amplitude at the LSB), which is the documented word format.
+        m.d.comb += [fifo.i.valid.eq(peak.o.valid), fifo.i.payload.eq(peak.o.payload.as_value())]
+        wiring.connect(m, fifo.o, wiring.flipped(self.o))
+        m.d.comb += self.overflow_count.eq(fifo.overflow_count)
+        return m

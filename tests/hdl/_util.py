@@ -1,0 +1,101 @@
+"""Helpers shared by the HDL block tests (imported as ``_util``; see ``conftest.py``).
+
+- :class:`WithClear`: a block with a synchronous ``clear`` input (reset mid-run).
+- :func:`assert_lints_clean`: export with :mod:`cosim.verilog` and lint with Verilator.
+- :data:`needs_verilator`, :func:`verilator_sim`, :func:`assert_same_stream`: the
+  "exported Verilog simulates identically" checks against :func:`cosim.pysim.run_stream`.
+- :func:`accepted_cycles`: when ``run_stream`` transfers each input word.
+"""
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+from amaranth.hdl import Module, ResetInserter
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In
+
+from cosim.pysim import StreamResult
+from cosim.verilator import VerilatorStreamSim, verilator_available
+from cosim.verilog import export_verilog, lint, verilator_missing_message
+
+__all__ = ["WithClear", "accepted_cycles", "assert_lints_clean", "needs_verilator",
+           "verilator_sim", "assert_same_stream"]
+
+
+class WithClear(wiring.Component):
+    """``dut`` with an extra synchronous ``clear`` input that resets all of it.
+
+    Every member of ``dut``'s signature is passed through under the same name (streams are
+    connected, plain ports assigned), so stimulus written for the bare block works as is.
+    """
+
+    def __init__(self, dut: wiring.Component):
+        self.dut = dut
+        super().__init__({**dict(dut.signature.members), "clear": In(1)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dut = ResetInserter(self.clear)(self.dut)
+        for name, member in self.dut.signature.members.items():
+            outer, inner = getattr(self, name), getattr(self.dut, name)
+            if member.is_signature:
+                if member.flow == In:
+                    wiring.connect(m, wiring.flipped(outer), inner)
+                else:
+                    wiring.connect(m, inner, wiring.flipped(outer))
+            elif member.flow == In:
+                m.d.comb += inner.eq(outer)
+            else:
+                m.d.comb += outer.eq(inner)
+        return m
+
+
+def accepted_cycles(n: int, in_valid) -> np.ndarray:
+    """Cycle of each of ``n`` input transfers under ``run_stream``'s offer rule for an
+    always-ready input (offered every cycle once the ``in_valid`` pattern runs out)."""
+    if in_valid is None:
+        return np.arange(n)
+    cyc = np.flatnonzero(np.asarray(in_valid, dtype=bool))[:n]
+    return np.r_[cyc, len(in_valid) + np.arange(n - len(cyc))]
+
+
+def assert_lints_clean(component: wiring.Component, name: str, *, check_width: bool = False):
+    """Export ``component`` to ``build/verilog/<name>.v`` and assert Verilator ``-Wall``
+    finds nothing beyond :data:`cosim.verilog.LINT_WAIVERS`.
+
+    ``check_width=True`` turns the ``WIDTH`` warning back on, for blocks whose Verilog is
+    clean of it (their tests never waived it).
+    """
+    if shutil.which("verilator") is None:
+        pytest.skip(verilator_missing_message())
+    path = export_verilog(component, name=name)
+    findings = lint(path, extra_args=("-Wwarn-WIDTH",) if check_width else ())
+    assert findings == [], "\n".join(findings)
+
+
+def needs_verilator(f):
+    """Decorator for tests that compile a block with Verilator: marked ``verilator`` and
+    skipped, with the reason, when the tool chain is missing."""
+    f = pytest.mark.skipif(not verilator_available(),
+                           reason="Verilator (and make, a C++ compiler) not found on PATH; "
+                                  + verilator_missing_message())(f)
+    return pytest.mark.verilator(f)
+
+
+def verilator_sim(component: wiring.Component, name: str) -> VerilatorStreamSim:
+    """``component`` compiled with Verilator (cached under ``build/verilator``)."""
+    return VerilatorStreamSim(component, name)
+
+
+def assert_same_stream(got: StreamResult, want: StreamResult, what: str = ""):
+    """Zero mismatches between two stream runs: every output word and its cycle, the run
+    length and the number of inputs taken."""
+    assert len(got.words) == len(want.words), f"{what}: {len(got.words)} vs {len(want.words)} words"
+    np.testing.assert_array_equal(got.words, want.words, err_msg=f"{what}: words")
+    np.testing.assert_array_equal(got.cycles, want.cycles, err_msg=f"{what}: output cycles")
+    assert (got.n_cycles, got.in_accepted) == (want.n_cycles, want.in_accepted), what
+    assert set(got.probes) == set(want.probes), what
+    for k in want.probes:
+        np.testing.assert_array_equal(got.probes[k], want.probes[k], err_msg=f"{what}: {k}")

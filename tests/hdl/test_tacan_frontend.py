@@ -1,0 +1,243 @@
+"""TACAN front-end top: params, model (fast == block chain, chunking), Amaranth sim ==
+model, Verilator == model (incl. DSP stalls), lint, quantisation bound vs the golden chain."""
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from cosim.equivalence import check_equivalence, stall_pattern, tacan_record
+from cosim.pysim import run_stream
+from cosim.tacan_signal import TacanSignalConfig, generate
+from dsp.tacan.frontend import FrontendConfig, run_golden_frontend
+from hdl.model.tacan_frontend import (TacanFrontendModel, TacanFrontendParams,
+                                      amp_error_terms)
+from hdl.tacan_frontend import TacanFrontEnd
+
+P = TacanFrontendParams()
+HAVE_VERILATOR = shutil.which("verilator") is not None
+
+
+# -- parameters ------------------------------------------------------------------------------
+def test_widths_chain_and_derived_values():
+    p = P
+    assert p.ddc.adc_width == 12
+    assert p.cic.in_width == p.ddc.out_width
+    assert p.fir.in_width == p.cic.out_width
+    assert p.envelope.in_width == p.fir.out_width
+    assert p.peak.amp_width == p.envelope.out_width
+    assert p.fifo.width == p.peak.amp_width + p.peak.ts_bits
+    assert p.peak.ts_step == p.config.decimation == 4
+    assert p.fir.numtaps == 33 and np.allclose(p.fir.taps, p.config.fir_taps)
+    assert p.fir.data_limbs == ((0, 18, True),) and p.fir.coef_limbs == ((0, 18, True),)
+    assert p.nco_freq_word == round(3e6 / 20e6 * 2 ** 32)
+    assert p.latency == p.peak_latency + 2
+    assert p.group_delay_samples == p.config.group_delay_samples - 3
+    # thr_min is the golden's thr_min_fs in envelope LSBs.
+    assert abs(p.peak.thr_min * p.scale_to_fs - p.config.thr_min_fs) < p.scale_to_fs
+
+
+def test_scale_to_fs_from_a_carrier():
+    """A constant carrier of amplitude A FS at the IF comes out as the golden's level: A
+    times the FIR's DC gain (1.21; the golden keeps it too)."""
+    a = 0.5
+    n = np.arange(40_000)
+    x = np.round(a * 2047 * np.cos(2 * np.pi * 0.15 * n + 0.3)).astype(np.int64)
+    e, _ = TacanFrontendModel(P).envelope(x)
+    level = np.median(e[2000:]) * P.scale_to_fs
+    assert abs(level - a * 2047 / 2048 * sum(P.config.fir_taps)) < 2e-4
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(adc_bits=0), r"ADC adc_bits must be an integer in \[2, 18\], not 0"),
+    (dict(nco_table_bits=12, nco_phase_bits=10), "NCO LUT larger than the phase width"),
+    (dict(mixer_out_bits=0), r"mixer out_width must be an integer in \[2, 48\], not 0"),
+    (dict(cic_out_bits=30), r"CIC out_width must be an integer in \[2, 22\]"),
+    (dict(mixer_rounding="up"), "mixer_rounding must be one of"),
+    (dict(fifo_depth=0), "FIFO depth must be >= 1, not 0"),
+    (dict(fir_input_spacing=5), r"fir_input_spacing must be an integer in \[1, cic_rate = 4\]"),
+    (dict(fir_out_bits=17), "fir output can overflow: a full-scale ADC input reaches 79452 LSB "
+                            "but fir words hold 65535"),
+    (dict(config=None), "config must be a FrontendConfig, not None"),
+])
+def test_bad_parameters(kw, msg):
+    with pytest.raises(ValueError, match=msg):
+        TacanFrontendParams(**kw)
+
+
+def test_headroom_check_can_be_waived_for_studies():
+    p = TacanFrontendParams(fir_out_bits=17, check_headroom=False)
+    assert p.headroom()["fir"][0] > p.headroom()["fir"][1]
+    assert not TacanFrontendModel(p).fast
+
+
+def test_full_scale_pulse_does_not_overflow():
+    """A full-scale (clipping) pulse burst: no stage saturates in the block models."""
+    n = np.arange(60_000)
+    env = np.exp(-0.5 * ((n % 6000 - 3000) / 30.0) ** 2)
+    x = np.clip(np.round(2100 * env * np.cos(2 * np.pi * 0.15 * n)), -2048, 2047).astype(np.int64)
+    x[::7] = np.where(x[::7] > 0, 2047, -2048)   # the rails, both signs
+    m = TacanFrontendModel(P, fast=False)
+    e, st = m.envelope(x)
+    assert st.cic.overflows == 0 and st.fir.overflows == 0
+    assert e.max() < (1 << P.envelope.out_width) - 1   # envelope never saturates
+    assert e.max() <= P.headroom()["envelope"][0]
+    # the mixer's worst case is exactly in range (checked by headroom()): |x*lo| >> 11
+    assert P.headroom()["mixer"] == (32767, 32767)
+
+
+# -- model -----------------------------------------------------------------------------------
+def test_fast_path_equals_block_chain_and_chunking():
+    rng = np.random.default_rng(11)
+    x = tacan_record(120_003, seed=4)
+    x[1000:1200] = rng.integers(-2048, 2048, 200)      # rails and wideband junk
+    fast, slow = TacanFrontendModel(P), TacanFrontendModel(P, fast=False)
+    assert fast.fast and not slow.fast
+    e1, _ = fast.envelope(x)
+    e2, _ = slow.envelope(x)
+    np.testing.assert_array_equal(e1, e2)
+    whole, _ = fast.run(x)
+    for m in (fast, slow):
+        st, parts = None, []
+        for chunk in np.array_split(x, [1, 4097, 50_001, 50_002, 99_999]):
+            pk, st = m.run(chunk, st)
+            parts.append(pk)
+        for f in ("amplitudes", "timestamps", "index", "end_index"):
+            np.testing.assert_array_equal(np.concatenate([getattr(q, f) for q in parts]),
+                                          getattr(whole, f))
+    assert len(whole) > 20
+
+
+# -- Amaranth simulation == model ------------------------------------------------------------
+def test_pysim_equals_model():
+    """~1 ms of SNR 10 dB TACAN IF (about 20 s of pysim): every FIFO word and its cycle."""
+    x = tacan_record(20_000, seed=2)
+    m = TacanFrontendModel(P)
+    pk, _ = m.run(x)
+    dut = TacanFrontEnd(P)
+    res = run_stream(dut, x, n_cycles=len(x) + 300, inputs={"freq": P.nco_freq_word},
+                     probe={"ovf": dut.overflow_count})
+    ref = m.fifo_output(pk, res.n_cycles)
+    assert len(pk) >= 3
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(res.cycles, ref.cycles)
+    assert not res.probes["ovf"].any()
+    # latency: the first word leaves params.latency cycles after its closing ADC sample
+    adc = (pk.end_index[0] + 1) * P.decimation - 1
+    assert res.cycles[0] == adc + P.latency
+
+
+def test_pysim_gaps_in_valid_and_dsp_stalls():
+    """ADC valid with gaps and a DSP that stalls on a 2-deep FIFO: drops and markers."""
+    p = TacanFrontendParams(fifo_depth=2)
+    x = tacan_record(14_000, seed=6)
+    rng = np.random.default_rng(6)
+    in_valid = rng.random(17_000) < 0.85
+    n_cycles = int(np.flatnonzero(in_valid)[len(x) - 1]) + 300
+    ready = np.zeros(n_cycles, bool)
+    ready[-150:] = True                                   # DSP wakes up at the end
+    m = TacanFrontendModel(p)
+    pk, _ = m.run(x)
+    dut = TacanFrontEnd(p)
+    res = run_stream(dut, x, in_valid=in_valid, out_ready=ready, n_cycles=n_cycles,
+                     inputs={"freq": p.nco_freq_word}, probe={"ovf": dut.overflow_count})
+    ref = m.fifo_output(pk, n_cycles, in_valid=in_valid, out_ready=ready)
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(res.cycles, ref.cycles)
+    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
+    assert ref.dropped.sum() >= 1 and (m.unpack(ref.words)["tag"] == 2).sum() >= 1
+
+
+@pytest.mark.slow
+def test_pysim_equals_model_long():
+    r = check_equivalence(samples=100_000, backends=("model", "pysim"), seed=3)
+    assert r["mismatches"] == 0 and "pysim" in r["backends"]
+
+
+# -- Verilator -------------------------------------------------------------------------------
+verilator = pytest.mark.skipif(not HAVE_VERILATOR, reason="verilator not on PATH")
+
+
+@pytest.mark.verilator
+@verilator
+@pytest.mark.parametrize("samples, stall", [(20_000, False), (200_000, False), (400_000, True)])
+def test_verilator_equals_model(samples, stall):
+    r = check_equivalence(samples=samples, backends=("model", "verilator"), seed=1,
+                          stall=stall)
+    assert r["backends"] == ["model", "verilator"]
+    assert r["mismatches"] == 0, r
+    assert r["peaks"] > 0
+    if stall:
+        assert r["dropped"] > 0 and r["markers"] > 0
+
+
+@pytest.mark.verilator
+@verilator
+def test_exported_top_lints_clean(tmp_path):
+    from cosim.verilog import export_verilog, lint
+    path = export_verilog(TacanFrontEnd(P), name="tacan_frontend", out_dir=tmp_path)
+    assert lint(path) == []
+
+
+# -- quantisation vs the golden chain ---------------------------------------------------------
+def _match(h_ts, g_ts, tol):
+    j = np.clip(np.searchsorted(g_ts, h_ts), 1, max(len(g_ts) - 1, 1))
+    jj = np.where(np.abs(g_ts[j - 1] - h_ts) <= np.abs(g_ts[j] - h_ts), j - 1, j)
+    ok = np.abs(h_ts - g_ts[jj]) <= tol
+    return jj, ok
+
+
+def _sampling_phase_bound(p: TacanFrontendParams) -> float:
+    """Relative amplitude loss bound when the envelope peak is sampled up to D/2 ticks off
+    its top: the pulse after the matched chain is ~Gaussian with variance sigma_p**2 plus the
+    filter's, so the loss is <= (D/2)**2 / (2 sigma_e**2)."""
+    cfg = p.config
+    h = np.convolve(np.repeat(np.asarray(p.fir.taps), cfg.cic_rate)[:: 1],
+                    np.asarray(p.cic.impulse_response, float))
+    t = np.arange(len(h))
+    var_h = np.sum(h * (t - np.sum(h * t) / h.sum()) ** 2) / h.sum()
+    sigma_e2 = (cfg.pulse_sigma_s * cfg.fs_hz) ** 2 + var_h
+    return (p.decimation / 2) ** 2 / (2 * sigma_e2)
+
+
+@pytest.mark.parametrize("snr_db", [None, 10.0])
+def test_quantisation_bound_vs_golden(snr_db):
+    """30 ms of TACAN IF. (1) Golden fed the record from ADC tick D-1 (the hardware's
+    envelope sampling phase): same pulses, same timestamps (one pulse in a hundred may move
+    by one envelope sample where two samples of a pulse top tie within the bound),
+    amplitudes within ``amp_bound_fs``. (2) The same record: timestamps within one envelope
+    sample; noiseless, amplitudes within the bound plus the sampling-phase loss (with noise
+    the two sampling grids see different noise at the top, so only (1) bounds amplitudes).
+    Pulses that only one side finds must be near the threshold."""
+    p = P
+    m = TacanFrontendModel(p)
+    x = generate(TacanSignalConfig(duration_s=0.03, snr_db=snr_db, seed=5)).samples
+    hw = m.peaks_to_fs(m.run(x)[0])
+    bound = p.amp_bound_fs
+    assert bound < 2e-4
+    d = p.decimation
+    # (1) phase-aligned
+    g = run_golden_frontend(x[d - 1:], p.config, p.adc_bits)
+    g_ts = g.timestamps + (d - 1)
+    jj, ok = _match(hw.timestamps, g_ts, d)
+    da = np.abs(hw.amplitudes - g.amplitudes[jj])
+    dt = hw.timestamps - g_ts[jj]
+    assert len(hw.timestamps) == len(g_ts) and ok.all()
+    assert np.count_nonzero(dt) <= max(1, len(dt) // 100)
+    assert np.all(np.abs(dt) <= d)
+    assert da.max() <= bound, (da.max(), amp_error_terms(p))
+    # (2) same record, golden's own sampling phase
+    g = run_golden_frontend(x, p.config, p.adc_bits)
+    jj, ok = _match(hw.timestamps, g.timestamps, d)
+    thr_zone = 1.25 * max(p.config.thr_min_fs, 0)        # near-threshold pulses may differ
+    assert np.all(hw.amplitudes[~ok] < 3 * thr_zone)
+    assert abs(len(hw.timestamps) - len(g.timestamps)) <= np.count_nonzero(~ok) + 0
+    dt = hw.timestamps[ok] - g.timestamps[jj[ok]]
+    assert np.all(np.abs(dt) <= d)
+    amp = g.amplitudes[jj[ok]]
+    da = np.abs(hw.amplitudes[ok] - amp)
+    if snr_db is None:
+        assert np.all(da <= bound + amp * _sampling_phase_bound(p)), \
+            (da.max(), bound, _sampling_phase_bound(p))
