@@ -13,10 +13,25 @@ Rounding modes (what happens to the LSBs dropped by a right shift):
 ``"zero"``       towards zero (fxpmath ``trunc``).
 
 Overflow modes: ``"wrap"`` (two's complement, what a plain adder does) and ``"saturate"``.
+
+Arithmetic kernels (:func:`add`, :func:`sub`, :func:`mul`, :func:`dot`, :func:`matmul`,
+:func:`div`, :func:`quantize`, :func:`requantize`) take integer arrays together with their
+formats, form the exact result in ``int64``, then round and overflow it once into the output
+format, like a DSP's full-precision multiplier/accumulator followed by one store. They
+broadcast over any leading batch dimensions. Pass ``log=Counters()`` (and a ``name=``) to
+count overflow and division-by-zero events and log the range of each named signal, the way
+Fixed-Point Designer's range logging does.
+
+Every exact intermediate must fit in 63 signed bits (checked from the formats before any
+work, ``ValueError`` otherwise): for :func:`mul` two signed operands need
+``width_a + width_b <= 63`` (e.g. 32 x 31 or 24 x 24 bits). There is no split multiply:
+a wider product would need 128-bit intermediates, which no DSP word length here needs.
+Integer inputs are assumed to lie in their formats (every kernel output does).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -130,10 +145,12 @@ class FixedFormat:
         w = (v - lo) & (span - 1)
         return w + lo, n
 
-    def quantize(self, x) -> tuple[np.ndarray, int]:
+    def quantize(self, x, *, log: "Counters | None" = None,
+                 name: str = "quantize") -> tuple[np.ndarray, int]:
         """Float values to integers of this format: rounding, then the overflow mode.
 
-        NaN input is refused with a ``ValueError`` (it has no integer meaning).
+        NaN input is refused with a ``ValueError`` (it has no integer meaning). With
+        ``log``, the overflow count and the range of the rounded values go to ``log[name]``.
         """
         x = np.asarray(x, dtype=np.float64)
         if np.isnan(x).any():
@@ -143,20 +160,30 @@ class FixedFormat:
         # Clamp before the int cast so +-inf and huge values count as overflow, not UB.
         big = float(1 << 62)
         r = np.clip(r, -big, big)
-        return self.fit(r.astype(np.int64))
+        v, n = self.fit(r.astype(np.int64))
+        if log is not None:
+            log.record(name, self, r, n)
+        return v, n
 
     def to_float(self, v) -> np.ndarray:
         return np.ldexp(np.asarray(v, dtype=np.float64), -self.frac)
 
-    def requantize(self, v, src_frac: int) -> tuple[np.ndarray, int]:
-        """Integers scaled by ``2**-src_frac`` into this format (shift, round, overflow)."""
+    def requantize(self, v, src_frac: int, *, log: "Counters | None" = None,
+                   name: str = "requantize") -> tuple[np.ndarray, int]:
+        """Integers scaled by ``2**-src_frac`` into this format (shift, round, overflow).
+
+        With ``log``, the overflow count and the range before overflow go to ``log[name]``.
+        """
         v = np.asarray(v, dtype=np.int64)
         shift = int(src_frac) - self.frac
         if shift > 0:
             v = shift_right(v, shift, self.rounding)
         elif shift < 0:
             v = v << np.int64(-shift)
-        return self.fit(v)
+        r, n = self.fit(v)
+        if log is not None:
+            log.record(name, self, v, n)
+        return r, n
 
 
 def _round_float(x: np.ndarray, mode: str) -> np.ndarray:

