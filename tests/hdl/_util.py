@@ -79,8 +79,8 @@ def needs_verilator(f):
     """Decorator for tests that compile a block with Verilator: marked ``verilator`` and
     skipped, with the reason, when the tool chain is missing."""
     f = pytest.mark.skipif(not verilator_available(),
-                           reason="Verilator (and make, a C++ compiler) not found on PATH; "
-                                  + verilator_missing_message())(f)
+                           reason="Verilator, make or a C++ compiler not found on PATH "
+                                  "(install with `make setup`: apt-get install verilator)")(f)
     return pytest.mark.verilator(f)
 
 

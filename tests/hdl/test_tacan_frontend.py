@@ -130,10 +130,10 @@ def test_pysim_equals_model():
 
 
 def test_pysim_gaps_in_valid_and_dsp_stalls():
-    """ADC valid with gaps and a DSP that stalls on a 2-deep FIFO: drops and markers."""
-    p = TacanFrontendParams(fifo_depth=2)
-    x = tacan_record(14_000, seed=6)
-    rng = np.random.default_rng(6)
+    """ADC valid with gaps and a DSP that stalls on a 1-deep FIFO: drops and markers."""
+    p = TacanFrontendParams(fifo_depth=1)
+    x = tacan_record(14_000, seed=11)     # 7 peaks in 0.7 ms
+    rng = np.random.default_rng(11)
     in_valid = rng.random(17_000) < 0.85
     n_cycles = int(np.flatnonzero(in_valid)[len(x) - 1]) + 300
     ready = np.zeros(n_cycles, bool)
