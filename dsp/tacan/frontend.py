@@ -18,6 +18,7 @@ does not depend on the chunking.
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -160,15 +161,23 @@ class GoldenFrontend:
         self.fir = _DecimatingFir(cfg.fir_taps, cfg.fir_decim)
         self.peak_state: PeakState | None = None
         self.w = 2 * np.pi * cfg.if_hz / cfg.fs_hz
-        self._lo = None
+        # When f_IF / fs is a ratio of small integers (3/20 by default) the LO repeats every
+        # `period` samples: one table serves every chunk, exactly (same bits for any chunking).
+        ratio = Fraction(cfg.if_hz / cfg.fs_hz).limit_denominator(1 << 16)
+        exact = abs(float(ratio) - cfg.if_hz / cfg.fs_hz) < 1e-15 and ratio.denominator <= 1 << 16
+        self._period = ratio.denominator if exact else None
+        if self._period:
+            self._table = np.exp(-1j * self.w * np.arange(self._period))
+
+    def _lo_at(self, n0: int, count: int) -> np.ndarray:
+        if self._period:
+            return self._table[(n0 + np.arange(count)) % self._period]
+        return np.exp(-1j * self.w * np.arange(n0, n0 + count, dtype=np.float64))
 
     def envelope(self, codes: np.ndarray) -> np.ndarray:
         """Envelope samples (fraction of full scale) of the next chunk of ADC codes."""
         x = np.asarray(codes, dtype=np.float64) * (2.0 ** -(self.adc_bits - 1))
-        # LO = exp(-j w n0) * exp(-j w k): the per-chunk table is computed once.
-        if self._lo is None or self._lo.size < len(x):
-            self._lo = np.exp(-1j * self.w * np.arange(len(x), dtype=np.float64))
-        lo = self._lo[:len(x)] * np.exp(-1j * ((self.w * self.n) % (2 * np.pi)))
+        lo = self._lo_at(self.n, len(x))
         self.n += len(x)
         z = (2.0 * x) * lo
         return np.abs(self.fir(self.cic(z)))
