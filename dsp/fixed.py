@@ -30,6 +30,7 @@ Integer inputs are assumed to lie in their formats (every kernel output does).
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Literal
@@ -351,6 +352,26 @@ def _check_span(lo: int, hi: int, what: str) -> None:
             f"use narrower operands")
 
 
+@functools.lru_cache(maxsize=1024)
+def _check_left(lo: int, hi: int, shift: int, out: FixedFormat) -> None:
+    _check_span(lo << shift, hi << shift, f"result scaled to {out}")
+
+
+# The static range checks depend on the formats only: cached, so that batch-1 calls pay
+# for them once.
+@functools.lru_cache(maxsize=1024)
+def _sum_range(fa: FixedFormat, fb: FixedFormat, sign: int) -> tuple[int, int, int, int, int]:
+    frac = max(fa.frac, fb.frac)
+    sa, sb = frac - fa.frac, frac - fb.frac
+    if sign > 0:
+        lo, hi = (fa.min_int << sa) + (fb.min_int << sb), (fa.max_int << sa) + (fb.max_int << sb)
+        _check_span(lo, hi, f"sum of {fa} and {fb}")
+    else:
+        lo, hi = (fa.min_int << sa) - (fb.max_int << sb), (fa.max_int << sa) - (fb.min_int << sb)
+        _check_span(lo, hi, f"difference of {fa} and {fb}")
+    return frac, sa, sb, lo, hi
+
+
 def _fmt(f, what: str) -> FixedFormat:
     if not isinstance(f, FixedFormat):
         raise ValueError(f"{what} must be a FixedFormat, not {f!r}")
@@ -372,17 +393,12 @@ def _to_out(v: np.ndarray, frac: int, lo: int, hi: int, out: FixedFormat,
     if shift > 0:
         v = shift_right(v, shift, out.rounding)
     elif shift < 0:
-        _check_span(lo << -shift, hi << -shift, f"result scaled to {out}")
+        _check_left(lo, hi, -shift, out)
         v = v << np.int64(-shift)
     r, n = out.fit(v)
     if log is not None:
         log.record(name, out, v, n)
     return r
-
-
-def _align(fa: FixedFormat, fb: FixedFormat):
-    frac = max(fa.frac, fb.frac)
-    return frac, frac - fa.frac, frac - fb.frac
 
 
 def quantize(x, out: FixedFormat, *, log: Counters | None = None,
@@ -417,9 +433,7 @@ def add(a, fa: FixedFormat, b, fb: FixedFormat, out: FixedFormat, *,
     numpy.ndarray of int64, the broadcast shape of ``a`` and ``b``.
     """
     fa, fb, out = _fmt(fa, "fa"), _fmt(fb, "fb"), _fmt(out, "out")
-    frac, sa, sb = _align(fa, fb)
-    lo, hi = (fa.min_int << sa) + (fb.min_int << sb), (fa.max_int << sa) + (fb.max_int << sb)
-    _check_span(lo, hi, f"sum of {fa} and {fb}")
+    frac, sa, sb, lo, hi = _sum_range(fa, fb, 1)
     a, b = _ints(a, "a"), _ints(b, "b")
     v = (a << np.int64(sa) if sa else a) + (b << np.int64(sb) if sb else b)
     return _to_out(v, frac, lo, hi, out, log, name)
@@ -429,14 +443,13 @@ def sub(a, fa: FixedFormat, b, fb: FixedFormat, out: FixedFormat, *,
         log: Counters | None = None, name: str = "sub") -> np.ndarray:
     """``a - b``, exact then rounded/overflowed into ``out`` (as :func:`add`)."""
     fa, fb, out = _fmt(fa, "fa"), _fmt(fb, "fb"), _fmt(out, "out")
-    frac, sa, sb = _align(fa, fb)
-    lo, hi = (fa.min_int << sa) - (fb.max_int << sb), (fa.max_int << sa) - (fb.min_int << sb)
-    _check_span(lo, hi, f"difference of {fa} and {fb}")
+    frac, sa, sb, lo, hi = _sum_range(fa, fb, -1)
     a, b = _ints(a, "a"), _ints(b, "b")
     v = (a << np.int64(sa) if sa else a) - (b << np.int64(sb) if sb else b)
     return _to_out(v, frac, lo, hi, out, log, name)
 
 
+@functools.lru_cache(maxsize=1024)
 def _product_range(fa: FixedFormat, fb: FixedFormat) -> tuple[int, int]:
     c = [x * y for x in (fa.min_int, fa.max_int) for y in (fb.min_int, fb.max_int)]
     lo, hi = min(c), max(c)
@@ -519,6 +532,15 @@ def matmul(a, fa: FixedFormat, b, fb: FixedFormat, out: FixedFormat, *,
                acc_width=acc_width, acc_overflow=acc_overflow, log=log, name=name)
 
 
+@functools.lru_cache(maxsize=1024)
+def _div_shifts(fa: FixedFormat, fb: FixedFormat, out: FixedFormat) -> tuple[int, int]:
+    s = out.frac + fb.frac - fa.frac  # quotient integer = (a * 2**s) / b
+    sn, sd = max(s, 0), max(-s, 0)
+    _check_span(fa.min_int << sn, fa.max_int << sn, f"dividend {fa} scaled to {out}")
+    _check_span(fb.min_int << sd, fb.max_int << sd, f"divisor {fb} scaled to {out}")
+    return sn, sd
+
+
 def div(a, fa: FixedFormat, b, fb: FixedFormat, out: FixedFormat, *,
         log: Counters | None = None, name: str = "div") -> np.ndarray:
     """``a / b`` into ``out``, the exact quotient rounded once per ``out.rounding``.
@@ -528,10 +550,7 @@ def div(a, fa: FixedFormat, b, fb: FixedFormat, out: FixedFormat, *,
     ``log[name].div_by_zero`` (not as an overflow).
     """
     fa, fb, out = _fmt(fa, "fa"), _fmt(fb, "fb"), _fmt(out, "out")
-    s = out.frac + fb.frac - fa.frac  # quotient integer = (a * 2**s) / b
-    sn, sd = max(s, 0), max(-s, 0)
-    _check_span(fa.min_int << sn, fa.max_int << sn, f"dividend {fa} scaled to {out}")
-    _check_span(fb.min_int << sd, fb.max_int << sd, f"divisor {fb} scaled to {out}")
+    sn, sd = _div_shifts(fa, fb, out)
     a, b = np.broadcast_arrays(_ints(a, "a"), _ints(b, "b"))
     num = a << np.int64(sn) if sn else a
     den = b << np.int64(sd) if sd else b

@@ -226,6 +226,11 @@ def test_div_matches_exact(rounding, overflow, fa, fb, out):
     a, b = rand_ints(rng, fa, 10_000), rand_ints(rng, fb, 10_000)
     b[b == 0] = 1
     b[:100] = rng.integers(1, 4, 100) * np.sign(a[:100] | 1)  # tiny divisors: overflows
+    # Exact ties: a * 2**s / b = q + 1/2 with b = B * 2**(s+1), a = (2q+1) * B.
+    s = out.frac + fb.frac - fa.frac
+    big_b = rng.integers(1, 4, 2000) * rng.choice([-1, 1], 2000)
+    b[100:2100] = big_b << (s + 1)
+    a[100:2100] = (2 * rng.integers(-40, 40, 2000) + 1) * big_b
     log = Counters()
     got = div(a, fa, b, fb, out, log=log)
     exact = [Fraction(int(x), 1 << fa.frac) / Fraction(int(y), 1 << fb.frac)
