@@ -1,4 +1,5 @@
-"""CIC decimator: Amaranth simulation == bit-exact model, Hogenauer widths and pruning, lint."""
+"""CIC decimator: Amaranth simulation == bit-exact model, Hogenauer widths and pruning, lint;
+the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
 import math
@@ -6,14 +7,13 @@ import shutil
 
 import numpy as np
 import pytest
-from amaranth.hdl import Module, ResetInserter
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In
 
 from cosim.pysim import pack_fields, run_stream, unpack_fields
 from dsp.design import cic_taps
 from hdl.cic import Cic
 from hdl.model.cic import CicParams, cic_init_state, cic_model, hogenauer_f2
+
+from _util import WithClear, accepted_cycles, assert_same_stream, needs_verilator, verilator_sim
 
 TACAN = CicParams()  # N=3, R=4, M=1, 18-bit complex in, 24-bit out
 
@@ -177,23 +177,10 @@ def test_gaps_in_valid_and_latency():
 def test_reset_mid_run():
     """A synchronous reset clears integrators, combs, decimation phase and the pipeline."""
     p = TACAN
-
-    class Wrapped(wiring.Component):
-        def __init__(self):
-            self.inner = Cic(p)
-            super().__init__({**dict(self.inner.signature.members), "clear": In(1)})
-
-        def elaborate(self, platform):
-            m = Module()
-            m.submodules.cic = ResetInserter(self.clear)(self.inner)
-            wiring.connect(m, wiring.flipped(self.i), self.inner.i)
-            wiring.connect(m, self.inner.o, wiring.flipped(self.o))
-            return m
-
     rng = np.random.default_rng(11)
     n1, n2, gap = 1002, 1000, 20      # n1 not a multiple of R: the phase must reset too
     x = _random_input(rng, p, n1 + n2)
-    dut = Wrapped()
+    dut = WithClear(Cic(p))
     in_valid = np.r_[np.ones(n1, bool), np.zeros(gap, bool)]
     clear_at = n1 + 15                  # after the last group of part 1 has come out
     got, _ = _sim(p, x, in_valid, dut=dut,
@@ -383,3 +370,41 @@ def test_verilog_lint(name, p):
     from cosim.verilog import REPO_ROOT, export_verilog, lint
     path = export_verilog(Cic(p), name=name, out_dir=REPO_ROOT / "build" / "verilog" / "test")
     assert lint(path) == []
+
+
+@pytest.fixture(scope="module")
+def vl_cic():
+    dut = Cic(TACAN)
+    return dut, verilator_sim(dut, "cic_tacan_vl")
+
+
+@needs_verilator
+def test_verilator_matches_pysim(vl_cic):
+    """The TACAN sim test's stimulus (random complex samples, gaps in valid), shorter."""
+    dut, sim = vl_cic
+    rng = np.random.default_rng(20260103)
+    n = 4000
+    words = _pack(TACAN, _random_input(rng, TACAN, n))
+    kw = dict(in_valid=rng.random(n + n // 10) < 0.93, flush_cycles=TACAN.latency + 4)
+    want = run_stream(dut, words, **kw)
+    got = sim.run(words, **kw)
+    assert_same_stream(got, want, "verilator vs pysim")
+    assert len(got.words) == n // TACAN.rate
+
+
+@needs_verilator
+def test_verilator_matches_model_long(vl_cic):
+    """10^6 random complex samples with gaps; each output `latency` cycles after the input
+    that completes its decimation group."""
+    p = TACAN
+    _, sim = vl_cic
+    rng = np.random.default_rng(20260104)
+    n = 1_000_000
+    x = _random_input(rng, p, n)
+    in_valid = rng.random(n + n // 10) < 0.8
+    res = sim.run(_pack(p, x), in_valid=in_valid, flush_cycles=p.latency + 4)
+    want, st = cic_model(p, x)
+    np.testing.assert_array_equal(_unpack(p, res.words), want)
+    np.testing.assert_array_equal(res.cycles,
+                                  accepted_cycles(n, in_valid)[p.rate - 1::p.rate] + p.latency)
+    assert st.overflows == 0

@@ -197,7 +197,7 @@ def test_verilator_matches_pysim(vl_ddc):
     dut, sim = vl_ddc
     p = VL_PARAMS
     rng = np.random.default_rng(31)
-    n = 6000
+    n = 3000
     x, writes, in_valid = _random_stimulus(p, dut, rng, n)
     w = np.asarray(x, dtype=np.int64) & ((1 << p.adc_width) - 1)
     kw = dict(in_valid=in_valid, writes=writes, flush_cycles=p.latency + 4)

@@ -267,12 +267,12 @@ def vl_fifo():
 def test_verilator_matches_pysim(vl_fifo):
     """The quick sim test's stimulus (bursty writes, back-pressure), overflow count probed."""
     dut, sim = vl_fifo
-    words, in_valid, out_ready = _stimulus(VL_PARAMS, np.random.default_rng(309), 10_000)
+    words, in_valid, out_ready = _stimulus(VL_PARAMS, np.random.default_rng(309), 6000)
     kw = dict(in_valid=in_valid, out_ready=out_ready, n_cycles=in_valid.size)
     want = run_stream(dut, words, probe={"ovf": dut.overflow_count}, **kw)
     got = sim.run(words, probe={"ovf": "overflow_count"}, **kw)
     assert_same_stream(got, want, "verilator vs pysim")
-    assert got.probes["ovf"][-1] > 50 and len(got.words) > 1000
+    assert got.probes["ovf"][-1] > 20 and len(got.words) > 500
 
 
 @needs_verilator

@@ -1,13 +1,11 @@
-"""Symmetric FIR decimator: Amaranth simulation == bit-exact model, quantisation, corners, lint."""
+"""Symmetric FIR decimator: Amaranth simulation == bit-exact model, quantisation, corners, lint;
+the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
 import shutil
 
 import numpy as np
 import pytest
-from amaranth.hdl import Module, ResetInserter
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In
 from scipy import signal
 
 from cosim.pysim import pack_fields, run_stream, unpack_fields
@@ -15,6 +13,8 @@ from dsp.design import design_pulse_fir
 from hdl.fir import Fir
 from hdl.model.fir import (FirParams, default_fir_taps, fir_float_reference, fir_init_state,
                            fir_model)
+
+from _util import WithClear, accepted_cycles, assert_same_stream, needs_verilator, verilator_sim
 
 TACAN = FirParams()   # 33 taps, 18-bit coefficients, 24-bit complex in, D = 1
 LOWPASS = tuple(signal.firwin(15, 0.3))             # has negative taps
@@ -221,23 +221,10 @@ def test_gaps_in_valid_and_latency():
 def test_reset_mid_run():
     """A synchronous reset clears the delay line, the decimation phase and the pipeline."""
     p = FirParams(taps=LOWPASS, decimation=2, in_width=12)
-
-    class Wrapped(wiring.Component):
-        def __init__(self):
-            self.inner = Fir(p)
-            super().__init__({**dict(self.inner.signature.members), "clear": In(1)})
-
-        def elaborate(self, platform):
-            m = Module()
-            m.submodules.fir = ResetInserter(self.clear)(self.inner)
-            wiring.connect(m, wiring.flipped(self.i), self.inner.i)
-            wiring.connect(m, self.inner.o, wiring.flipped(self.o))
-            return m
-
     rng = np.random.default_rng(12)
     n1, n2, gap = 501, 500, 20
     x = _random_input(rng, p, n1 + n2)
-    dut = Wrapped()
+    dut = WithClear(Fir(p))
     in_valid = np.r_[np.ones(n1, bool), np.zeros(gap, bool)]
     clear_at = n1 + p.latency + 2
     got, _ = _sim(p, x, in_valid, dut=dut,
@@ -377,3 +364,51 @@ def test_cic_fir_chain_pulse_level():
     assert st.overflows == 0
     assert y[:, 0].max() == pytest.approx(want, rel=0.01)
     assert y[:, 1].min() == pytest.approx(-want, rel=0.01)
+
+
+#: Compiled with Verilator: the TACAN FIR (parallel) and its time-shared variant.
+VL_PARAMS = {"parallel": TACAN, "shared4": SHARED[0]}
+
+
+@pytest.fixture(scope="module", params=sorted(VL_PARAMS))
+def vl_fir(request):
+    p = VL_PARAMS[request.param]
+    dut = Fir(p)
+    return p, dut, verilator_sim(dut, f"fir_{request.param}_vl")
+
+
+def _vl_valid(rng, p: FirParams, n: int) -> np.ndarray:
+    """Gaps in valid; at least ``input_spacing`` cycles apart for the time-shared design."""
+    if p.input_spacing > 1:
+        return _spaced_valid(rng, n, p.input_spacing)
+    return rng.random(n + n // 10) < 0.93
+
+
+@needs_verilator
+def test_verilator_matches_pysim(vl_fir):
+    """Random complex samples with gaps (at the guaranteed cadence), overrun probed."""
+    p, dut, sim = vl_fir
+    rng = np.random.default_rng(20260203)
+    n = 2000 if p.input_spacing == 1 else 600   # pysim steps every cycle of the spacing
+    words = _pack(p, _random_input(rng, p, n))
+    kw = dict(in_valid=_vl_valid(rng, p, n), flush_cycles=p.latency + 4)
+    want = run_stream(dut, words, probe={"overrun": dut.overrun}, **kw)
+    got = sim.run(words, probe={"overrun": "overrun"}, **kw)
+    assert_same_stream(got, want, "verilator vs pysim")
+    assert len(got.words) == n // p.decimation and got.probes["overrun"].max() == 0
+
+
+@needs_verilator
+def test_verilator_matches_model_long(vl_fir):
+    p, _, sim = vl_fir
+    rng = np.random.default_rng(20260204)
+    n = 1_000_000
+    x = _random_input(rng, p, n)
+    in_valid = _vl_valid(rng, p, n)
+    res = sim.run(_pack(p, x), in_valid=in_valid, flush_cycles=p.latency + 4,
+                  probe={"overrun": "overrun"})
+    want, st = fir_model(p, x)
+    np.testing.assert_array_equal(_unpack(p, res.words), want)
+    d = p.decimation
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(n, in_valid)[d - 1::d] + p.latency)
+    assert res.probes["overrun"].max() == 0 and st.overflows == 0

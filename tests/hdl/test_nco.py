@@ -337,7 +337,7 @@ def test_verilator_matches_pysim(vl_nco):
     dut, sim = vl_nco
     p = VL_PARAMS
     rng = np.random.default_rng(21)
-    n = 6000
+    n = 3000
     writes, in_valid = _random_stimulus(p, dut, rng, n)
     kw = dict(in_valid=in_valid, writes=writes, flush_cycles=p.latency + 4)
     want = run_stream(dut, np.zeros(n, dtype=np.int64), **kw)

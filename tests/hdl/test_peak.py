@@ -325,12 +325,12 @@ def _vl_stimulus(rng, n, p_valid):
 def test_verilator_matches_pysim(vl_peak):
     dut, sim = vl_peak
     p = VL_PARAMS
-    e, valid = _vl_stimulus(np.random.default_rng(240), 8000, 0.6)
+    e, valid = _vl_stimulus(np.random.default_rng(240), 5000, 0.6)
     kw = dict(in_valid=valid, flush_cycles=p.latency + 2)
     want = run_stream(dut, e, **kw)
     got = sim.run(e, **kw)
     assert_same_stream(got, want, "verilator vs pysim")
-    assert len(got.words) > 50
+    assert len(got.words) > 20
 
 
 @needs_verilator
