@@ -47,7 +47,7 @@ verilog: setup  ## export every HDL block and the TACAN top to build/verilog and
 	$(PY) -m cosim verilog --out build/verilog
 
 synth: setup  ## synthesise the TACAN front end for LFE5U-85F (yosys + nextpnr) and print resources/Fmax
-	$(PY) -m cosim synth --top tacan --json
+	$(PY) -m cosim synth --top tacan --results results --json
 
 clean:  ## remove generated files (build/, caches); keeps .venv and results/
 	rm -rf build .pytest_cache

@@ -112,6 +112,8 @@ def _add_hdl(sub):
     p.add_argument("--target-mhz", type=_finite, default=100.0)
     p.add_argument("--out", default="build/synth")
     p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--results", default=None,
+                   help="also write the figures with machine/date/command to DIR/synth_<top>.json")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_synth)
 
@@ -188,6 +190,13 @@ def _cmd_synth(a) -> int:
     r = synth(TacanFrontEnd(), name="tacan_frontend", device=a.device,
               target_mhz=a.target_mhz, out_dir=a.out, seed=a.seed)
     short = {"top": a.top, **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
+    if a.results:
+        from pathlib import Path
+        from .bench import machine_info
+        Path(a.results).mkdir(parents=True, exist_ok=True)
+        rec = {**short, "device": r["device"], "target_mhz": r["target_mhz"],
+               "timing_met": r["timing_met"], "seed": a.seed, "machine": machine_info()}
+        (Path(a.results) / f"synth_{a.top}.json").write_text(json.dumps(rec, indent=1) + "\n")
     if a.json:
         print(json.dumps(short))
     else:
