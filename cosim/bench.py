@@ -23,6 +23,14 @@ import numpy as np
 from tqdm import tqdm
 
 
+def _command_line() -> str:
+    if not sys.argv:
+        return ""
+    prog = Path(sys.argv[0])
+    head = ["python -m cosim"] if prog.name == "__main__.py" and prog.parent.name == "cosim" else [prog.name]
+    return " ".join(head + sys.argv[1:])
+
+
 def machine_info() -> dict:
     cpu = platform.processor() or ""
     try:
@@ -41,7 +49,7 @@ def machine_info() -> dict:
     return {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "host": platform.node(), "cpu": cpu, "cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__,
-            "command": " ".join([Path(sys.argv[0]).name] + sys.argv[1:]) if sys.argv else "",
+            "command": _command_line(),
             "commit": commit}
 
 
