@@ -45,10 +45,6 @@ class StreamResult:
     probes: dict = field(default_factory=dict)
 
 
-def _signed_from_bits(v: int, width: int) -> int:
-    return v - (1 << width) if v >> (width - 1) else v
-
-
 def unpack_fields(words: np.ndarray, layout: list[tuple[str, int, bool]]) -> dict[str, np.ndarray]:
     """Split packed payload words into named integer fields.
 

@@ -99,3 +99,30 @@ def assert_same_stream(got: StreamResult, want: StreamResult, what: str = ""):
     assert set(got.probes) == set(want.probes), what
     for k in want.probes:
         np.testing.assert_array_equal(got.probes[k], want.probes[k], err_msg=f"{what}: {k}")
+
+
+# -- real/complex sample streams (CIC, FIR) ---------------------------------------------------
+def channel_layout(width: int, channels: int):
+    """``unpack_fields`` layout of a real (1) or complex {"i","q"} (2) sample of ``width``."""
+    return [("i", width, True), ("q", width, True)][:channels]
+
+
+def pack_channels(x: np.ndarray, width: int, channels: int) -> np.ndarray:
+    """Samples (n,) or (n, 2) -> packed payload words."""
+    from cosim.pysim import pack_fields
+    if channels == 1:
+        return pack_fields({"i": x}, channel_layout(width, 1))
+    return pack_fields({"i": x[:, 0], "q": x[:, 1]}, channel_layout(width, 2))
+
+
+def unpack_channels(words: np.ndarray, width: int, channels: int) -> np.ndarray:
+    """Packed payload words -> samples (n,) or (n, 2)."""
+    from cosim.pysim import unpack_fields
+    f = unpack_fields(words, channel_layout(width, channels))
+    return f["i"] if channels == 1 else np.stack([f["i"], f["q"]], axis=1)
+
+
+def random_samples(rng, width: int, n: int, sample_shape) -> np.ndarray:
+    """Uniform random signed ``width``-bit samples of shape (n, *sample_shape)."""
+    lo, hi = -(1 << (width - 1)), 1 << (width - 1)
+    return rng.integers(lo, hi, size=(n, *sample_shape), dtype=np.int64)

@@ -13,30 +13,27 @@ from dsp.design import cic_taps
 from hdl.cic import Cic
 from hdl.model.cic import CicParams, cic_init_state, cic_model, hogenauer_f2
 
-from _util import WithClear, accepted_cycles, assert_same_stream, needs_verilator, verilator_sim
+from _util import (WithClear, accepted_cycles, assert_same_stream, channel_layout, needs_verilator,
+                   pack_channels, random_samples, unpack_channels, verilator_sim)
 
 TACAN = CicParams()  # N=3, R=4, M=1, 18-bit complex in, 24-bit out
 
 
 # -- helpers --------------------------------------------------------------------------------
 def _layout(width: int, channels: int):
-    return [("i", width, True), ("q", width, True)][:channels]
+    return channel_layout(width, channels)
 
 
 def _pack(p: CicParams, x: np.ndarray) -> np.ndarray:
-    if p.channels == 1:
-        return pack_fields({"i": x}, _layout(p.in_width, 1))
-    return pack_fields({"i": x[:, 0], "q": x[:, 1]}, _layout(p.in_width, 2))
+    return pack_channels(x, p.in_width, p.channels)
 
 
 def _unpack(p: CicParams, words: np.ndarray) -> np.ndarray:
-    f = unpack_fields(words, _layout(p.out_width, p.channels))
-    return f["i"] if p.channels == 1 else np.stack([f["i"], f["q"]], axis=1)
+    return unpack_channels(words, p.out_width, p.channels)
 
 
 def _random_input(rng, p: CicParams, n: int) -> np.ndarray:
-    lo, hi = -(1 << (p.in_width - 1)), 1 << (p.in_width - 1)
-    return rng.integers(lo, hi, size=(n, *p.sample_shape), dtype=np.int64)
+    return random_samples(rng, p.in_width, n, p.sample_shape)
 
 
 def _sim(p: CicParams, x: np.ndarray, in_valid=None, dut=None, **kw):

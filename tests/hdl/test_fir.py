@@ -14,7 +14,8 @@ from hdl.fir import Fir
 from hdl.model.fir import (FirParams, default_fir_taps, fir_float_reference, fir_init_state,
                            fir_model)
 
-from _util import WithClear, accepted_cycles, assert_same_stream, needs_verilator, verilator_sim
+from _util import (WithClear, accepted_cycles, assert_same_stream, channel_layout, needs_verilator,
+                   pack_channels, random_samples, unpack_channels, verilator_sim)
 
 TACAN = FirParams()   # 33 taps, 18-bit coefficients, 24-bit complex in, D = 1
 LOWPASS = tuple(signal.firwin(15, 0.3))             # has negative taps
@@ -23,23 +24,19 @@ HALFBAND = tuple(signal.firwin(11, 0.5))            # has exact zeros (every oth
 
 # -- helpers --------------------------------------------------------------------------------
 def _layout(width: int, channels: int):
-    return [("i", width, True), ("q", width, True)][:channels]
+    return channel_layout(width, channels)
 
 
 def _pack(p: FirParams, x: np.ndarray) -> np.ndarray:
-    if p.channels == 1:
-        return pack_fields({"i": x}, _layout(p.in_width, 1))
-    return pack_fields({"i": x[:, 0], "q": x[:, 1]}, _layout(p.in_width, 2))
+    return pack_channels(x, p.in_width, p.channels)
 
 
 def _unpack(p: FirParams, words: np.ndarray) -> np.ndarray:
-    f = unpack_fields(words, _layout(p.out_width, p.channels))
-    return f["i"] if p.channels == 1 else np.stack([f["i"], f["q"]], axis=1)
+    return unpack_channels(words, p.out_width, p.channels)
 
 
 def _random_input(rng, p: FirParams, n: int) -> np.ndarray:
-    lo, hi = -(1 << (p.in_width - 1)), 1 << (p.in_width - 1)
-    return rng.integers(lo, hi, size=(n, *p.sample_shape), dtype=np.int64)
+    return random_samples(rng, p.in_width, n, p.sample_shape)
 
 
 def _sim(p: FirParams, x: np.ndarray, in_valid=None, dut=None, **kw):
