@@ -1,12 +1,23 @@
-"""The seed's 5-state Kalman filter for the TACAN envelope (seed eqs. 6-14), float golden form.
+"""The seed's 5-state Kalman filter for the TACAN envelope (seed eqs. 6-14), one source for
+float (golden) and fixed point.
 
 State ``x = [m1 sin a, m1 cos a, m2 sin b, m2 cos b, u]`` (15 Hz and 135 Hz components and
 the DC level), transition from the *non-uniform* time ``dt`` between pulse peaks (eq. 12)::
 
     A = blkdiag(R(2 pi 15 dt), R(2 pi 135 dt), 1),  R(d) = [[cos d, sin d], [-sin d, cos d]]
 
-measurement ``y = x1 + x3 + x5 + v`` (eq. 14). Batched: ``x`` is ``(B, 5)`` and ``P``
-``(B, 5, 5)`` so Monte Carlo trials sharing one pulse timeline run in one pass.
+measurement ``y = x1 + x3 + x5 + v`` (eq. 14). Batched: trials sharing one pulse timeline
+run in one call (``x`` is ``(B, 5)``, ``P`` ``(B, 5, 5)``).
+
+One source, two arithmetics (data-type override)
+-----------------------------------------------
+The filter is written once (:func:`_trial`) in terms of the operators of :mod:`dsp.qops`.
+numba compiles it for ``float64`` state -- the golden filter: every operator is the real
+operation -- and for ``int64`` state -- the fixed-point DSP core: every operator quantises
+to the formats of :class:`KalmanFixedConfig`. :class:`EnvelopeKalman` picks the arithmetic
+from its configuration: a :class:`KalmanConfig` runs in float, a :class:`KalmanFixedConfig`
+(which contains the :class:`KalmanConfig`) in fixed point. The two therefore differ only
+where quantisation happens.
 
 Design choices (the seed leaves them open)
 ------------------------------------------
@@ -18,20 +29,84 @@ Design choices (the seed leaves them open)
   ``N = rate * memory_s`` pulses (``K = 2 / (N + 1)``; scalar random walk
   ``q = K^2 r_eff / (1 - K)`` per pulse, with ``r_eff = 2 r`` for a rotating sin/cos pair,
   which only sees half of each measurement on average).
+* Scalar update ``P <- Pp - K PH^T`` (for a scalar measurement the Joseph form reduces to
+  ``Pp - S K K^T``, which this is); only the upper triangle is computed and mirrored, so
+  ``P`` is symmetric by construction in both arithmetics.
 * Innovation gate (``gate`` sigmas) after a warm-up; gated measurements are counted; a run
   of ``max_rejects`` consecutive gated measurements means divergence: the trial is
-  re-initialised and the event counted. Nothing here can produce a NaN from finite input.
+  re-initialised and the event counted. ``S <= 0`` or a negative diagonal of ``P`` (lost
+  positive definiteness) also re-initialise (``p_neg``). Nothing here can produce a NaN from
+  finite input; NaN input is refused.
+
+Number formats (:class:`KalmanFixedConfig`, defaults)
+-----------------------------------------------------
+======  ==================  ===========================================================
+signal  format              why
+======  ==================  ===========================================================
+y       s18.16  (+-2)       peak amplitudes 0.2-1.4 FS plus noise
+x       s36.28  (+-128)     state; LSB 3.7e-9; early transients reach ~10
+P       s46.30  (+-32768)   covariance in units of r, see below
+K       s38.30  (+-128)     gain (early on |K_i| <= sqrt(P_ii / S) reaches ~100)
+cs      s24.22  (+-2)       sin/cos of the transition (LSB 2.4e-7)
+innov   s24.20  (+-8)       innovation
+r       s40.30  (+-512)     innovation power e2 = innov^2/S and the r estimate (signal^2)
+======  ==================  ===========================================================
+
+Dynamic range of P (the design choice): P runs from ``p0 = 1e4`` (uninformative prior, in
+units of r) down to ~5e-4 on the diagonal in steady state, and its per-pulse process noise
+is ~6e-7: 3e10 : 1, i.e. 35 bits before any precision. A plain wide word is used rather
+than a block-floating form: 46 bits with 30 fraction bits hold ``p0`` up to 16384 with a
+steady-state diagonal of 5e5 LSB and a per-pulse ``Q`` of ~670 LSB (0.1 % quantisation;
+``half_up`` rounding so that the recursion carries no per-step bias). The products of this
+46-bit word with 24-bit sin/cos and 38-bit gains do not fit an int64 product, so they go
+through an *exact split multiply* (:func:`_mac2`): the wide operand is split at ``k`` bits,
+both partial products fit 63 bits, and the rounding of the full product is reassembled
+exactly (``floor((hi*2^k + lo) / 2^s) = Q + floor((R*2^k + lo) / 2^s)``) -- in hardware,
+one 27x18 DSP slice cascade. The result equals the exactly rounded product bit for bit
+(the tests check it against Python's unbounded integers).
+
+Fixed-point stability
+---------------------
+* ``P`` is symmetric by construction: only the upper triangle is computed and mirrored.
+* ``P <- Pp - K PH^T`` (the scalar-update form of the float filter); a diagonal that comes
+  out below 1 LSB is clamped to 1 LSB (``p_clamps``); a negative diagonal or ``S <= 0``
+  (lost positive definiteness) re-initialises the trial (``p_neg`` and ``reinit``).
+* The transition comes from the integer timestamp difference: phase = ``dt_ticks * fw mod
+  2^40`` (``fw`` the 40-bit frequency word of 15/135 Hz: frequency error < 1e-5 Hz),
+  sin/cos from a 1024-entry full-circle sine ROM (30 fraction bits) plus a 3rd-order
+  Taylor correction of the residual angle (< 1e-12), then one rounding to ``cs``
+  (<= 0.5 LSB = 1.2e-7).
+* Every store saturates to its format and counts the event per signal (``sat_*``).
+* Gated measurements are counted; ``max_rejects`` consecutive gated ones re-initialise the
+  trial (``reinit``), as in the float filter. Integers cannot be NaN.
+
+Timestamps: ``run`` takes ``dts`` as integer ticks (``tick_hz``, default 20 MHz, the ADC
+clock) or float seconds. The fixed core converts seconds by rounding the *cumulative* time to
+ticks (the residual carried between calls) so no rounding drift builds up; the float filter
+converts ticks to seconds.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
+from ..fixed import FixedFormat
+from ..qops import (PHASE_BITS, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm, div_square, ewma,
+                    floor_one, mac2, mulw, rate_dt, rs, sat, scale_sat, sincos_dt, snorm)
+
 F15, F135 = 15.0, 135.0
-H = np.array([1.0, 0.0, 1.0, 0.0, 1.0])
-_DIAG = np.arange(5)
+#: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
+GATE_FRAC = 8
+Q_EXTRA = 16
+#: Largest dt in ticks (2^38 ticks: 3.8 h at 20 MHz).
+MAX_TICKS = 1 << 38
+
+EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
+               "p_clamps", "p_neg", "reinit", "gated")
+_EV = {n: i for i, n in enumerate(EVENT_NAMES)}
 
 
 @dataclass(frozen=True)
@@ -94,156 +169,473 @@ class KalmanConfig:
         return q_rot * self.pulse_rate_hz, q_dc * self.pulse_rate_hz
 
 
-@dataclass
-class KalmanEvents:
-    gated: np.ndarray
-    reinit: np.ndarray
+
+def _default(width, frac):
+    return FixedFormat(width, frac, True, "half_up", "saturate")
 
 
+@dataclass(frozen=True)
+class KalmanFixedConfig:
+    """The float :class:`KalmanConfig` plus the fixed-point word lengths (see module doc).
+
+    Every format must be signed, round ``"half_up"`` or ``"floor"`` and ``"saturate"``; the
+    combinations are checked so that no int64 intermediate can overflow.
+    """
+
+    kalman: KalmanConfig = field(default_factory=KalmanConfig)
+    y: FixedFormat = field(default_factory=lambda: _default(18, 16))
+    x: FixedFormat = field(default_factory=lambda: _default(36, 28))
+    P: FixedFormat = field(default_factory=lambda: _default(46, 30))
+    K: FixedFormat = field(default_factory=lambda: _default(38, 30))
+    cs: FixedFormat = field(default_factory=lambda: _default(24, 22))
+    innov: FixedFormat = field(default_factory=lambda: _default(24, 20))
+    r: FixedFormat = field(default_factory=lambda: _default(40, 30))
+    tick_hz: float = 20e6
+
+    def __post_init__(self):
+        if not isinstance(self.kalman, KalmanConfig):
+            raise ValueError(f"kalman must be a KalmanConfig, not {self.kalman!r}")
+        for name in ("y", "x", "P", "K", "cs", "innov", "r"):
+            f = getattr(self, name)
+            if not isinstance(f, FixedFormat):
+                raise ValueError(f"{name} must be a FixedFormat, not {f!r}")
+            if not f.signed:
+                raise ValueError(f"{name} format must be signed, not {f}")
+            if f.rounding not in ("half_up", "floor"):
+                raise ValueError(f"{name} rounding must be 'half_up' or 'floor', "
+                                 f"not {f.rounding!r}")
+            if f.overflow != "saturate":
+                raise ValueError(f"{name} overflow must be 'saturate', not {f.overflow!r}")
+            if f.frac < 0:
+                raise ValueError(f"{name} frac must be >= 0, not {f.frac}")
+        t = self.tick_hz
+        if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 1000 * F135):
+            raise ValueError(f"tick_hz must be a finite number >= {1000 * F135:g}, not {t!r}")
+        y, x, P, K, cs, iv, r = self.y, self.x, self.P, self.K, self.cs, self.innov, self.r
+        if not (cs.int_bits >= 1 and cs.frac <= TRIG_FRAC):
+            raise ValueError(f"cs must hold +-1 with at most {TRIG_FRAC} fraction bits, not {cs}")
+        if not (x.frac >= y.frac and x.frac >= iv.frac):
+            raise ValueError(f"x needs at least as many fraction bits as y and innov "
+                             f"(x {x}, y {y}, innov {iv})")
+        if x.width + cs.width > 61 or K.width + iv.width > 62:
+            raise ValueError(f"x*cs and K*innov products must fit 62 bits "
+                             f"(x {x}, cs {cs}, K {K}, innov {iv})")
+        if K.frac + iv.frac < x.frac:
+            raise ValueError(f"K.frac + innov.frac must be >= x.frac (K {K}, innov {iv}, x {x})")
+        if P.width - cs.frac + cs.width + 1 > 62 or cs.frac + cs.width + 1 > 62:
+            raise ValueError(f"the split P*cs product does not fit int64 (P {P}, cs {cs})")
+        if P.width + 2 + 2 * K.width > 124 or K.frac < 1 or K.frac > 40:
+            raise ValueError(f"the split P*K product does not fit int64 (P {P}, K {K})")
+        if P.frac < 12:
+            raise ValueError(f"P needs at least 12 fraction bits, not {P}")
+        if 2 * iv.width > 48:
+            raise ValueError(f"innov must be at most 24 bits wide (its square feeds e2), not {iv}")
+        if not (0 <= r.frac - 2 * iv.frac + P.frac + (S_BITS - P.frac + 12) <= 33) or r.width > 48:
+            raise ValueError(f"r format {r} does not fit e2 = innov^2/S with innov {iv}, P {P}")
+        if 2 * self.kalman.p0 > P.max_value:
+            raise ValueError(f"p0={self.kalman.p0:g} does not fit the P format {P} "
+                             f"(needs p0 <= {P.max_value / 2:g})")
+        if r.max_value < 1.0:
+            raise ValueError(f"r format {r} must hold the initial r = 1")
+
+    def int_consts(self) -> np.ndarray:
+        """Integer parameters of the kernel: counters and, per format, frac/min/max/half-up."""
+        k = self.kalman
+        c = [k.warmup, k.max_rejects, k.r_smooth, GATE_FRAC, Q_EXTRA]
+        for f in (self.y, self.x, self.P, self.K, self.cs, self.innov, self.r):   # 5..32
+            c += [f.frac, f.min_int, f.max_int, 1 if f.rounding == "half_up" else 0]
+        return np.array(c, dtype=np.int64)
+
+    def value_consts(self) -> np.ndarray:
+        """The quantised constants (built once from floats: the boundary)."""
+        k = self.kalman
+        q_rot, q_dc = k.q_rates()
+        qf = self.P.frac + Q_EXTRA
+        scale = 2.0 ** PHASE_BITS / self.tick_hz
+        return np.array([
+            int(round(F15 * scale)), int(round(F135 * scale)),       # frequency words
+            int(round(q_rot / self.tick_hz * 2.0 ** qf)),            # q_rot per tick
+            int(round(q_dc / self.tick_hz * 2.0 ** qf)),             # q_dc per tick
+            int(round(k.p0 * 2.0 ** self.P.frac)),                   # p0
+            min(int(round(k.gate ** 2 * (1 << GATE_FRAC))), 1 << 40),  # gate^2
+            1 << self.r.frac,                                        # r init = 1
+        ], dtype=np.int64)
+
+
+def _float_consts(k: KalmanConfig) -> np.ndarray:
+    q_rot, q_dc = k.q_rates()
+    return np.array([2 * math.pi * F15, 2 * math.pi * F135, q_rot, q_dc, k.p0, k.gate ** 2, 1.0])
+
+
+# ---------------------------------------------------------------------------------------
+# The filter (one source; numba compiles it for float64 and for int64 state)
+# ---------------------------------------------------------------------------------------
+_jit = numba.njit(cache=True, nogil=True)
+# Index of each format's (frac, min, max, half) in the integer constants.
+_Y, _X, _P, _K, _CS, _IV, _R = 5, 9, 13, 17, 21, 25, 29
+
+
+@_jit
+def _step_consts(lut, dts, rms, ci, cv, out):
+    """Per-step values shared by all trials: out[k] = (sa, ca, sb, cb, q_rot, q_dc, r_mult)."""
+    csf, csh, ph = ci[_CS], ci[_CS + 3], ci[_P + 3]
+    for k in range(dts.size):
+        dt = dts[k]
+        out[k, 0], out[k, 1] = sincos_dt(lut, dt, cv[0], csf, csh)
+        out[k, 2], out[k, 3] = sincos_dt(lut, dt, cv[1], csf, csh)
+        out[k, 4] = rate_dt(cv[2], dt, ci[4], ph)
+        out[k, 5] = rate_dt(cv[3], dt, ci[4], ph)
+        out[k, 6] = rms[k]
+
+
+@_jit
+def _reset(x, P, p0):
+    for i in range(5):
+        x[i] = p0 - p0
+        for j in range(5):
+            P[i, j] = p0 if i == j else p0 - p0
+
+
+@_jit
+def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
+    """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, rejects]."""
+    yf = ci[_Y]
+    xf, xlo, xhi, xh = ci[_X], ci[_X + 1], ci[_X + 2], ci[_X + 3]
+    pf, plo, phi, ph = ci[_P], ci[_P + 1], ci[_P + 2], ci[_P + 3]
+    kf, klo, khi, kh = ci[_K], ci[_K + 1], ci[_K + 2], ci[_K + 3]
+    csf = ci[_CS]
+    ivf, ivlo, ivhi, ivh = ci[_IV], ci[_IV + 1], ci[_IV + 2], ci[_IV + 3]
+    rf, rlo, rhi, rh = ci[_R], ci[_R + 1], ci[_R + 2], ci[_R + 3]
+    kw_bits = 1
+    kv = khi
+    while kv > 0:
+        kv >>= 1
+        kw_bits += 1
+    ksplit = min(62 - kw_bits, kf)
+    warmup, max_rej, r_smooth, gfrac = ci[0], ci[1], ci[2], ci[3]
+    p0, g2 = cv[4], cv[5]
+    zero = p0 - p0
+    M = np.empty_like(P)
+    Pp = np.empty_like(P)
+    xp = np.empty_like(x)
+    PH = np.empty_like(x)
+    K = np.empty_like(x)
+    A = np.zeros_like(P)
+    A[4, 4] = align(zero + 1, csf)
+    for k in range(ys.size):
+        sa, ca, sb, cb = sc[k, 0], sc[k, 1], sc[k, 2], sc[k, 3]
+        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = ca, sa, -sa, ca
+        A[2, 2], A[2, 3], A[3, 2], A[3, 3] = cb, sb, -sb, cb
+        # -- predict x
+        for i in range(0, 4, 2):
+            a0, a1 = A[i, i], A[i, i + 1]
+            xp[i] = sat(rs(a0 * x[i] + a1 * x[i + 1], csf, xh), xlo, xhi, ev, 1)
+            xp[i + 1] = sat(rs(-a1 * x[i] + a0 * x[i + 1], csf, xh), xlo, xhi, ev, 1)
+        xp[4] = x[4]
+        # -- predict P: M = A P (rounded to P), Pp = M A^T + Q (upper triangle, mirrored)
+        for i in range(5):
+            bi = i - (i & 1) if i < 4 else 4
+            for j in range(5):
+                if i == 4:
+                    M[i, j] = P[i, j]
+                else:
+                    M[i, j] = sat(mac2(P[bi, j], A[i, bi], P[bi + 1, j], A[i, bi + 1],
+                                       csf, csf, ph), plo, phi, ev, 2)
+        for i in range(5):
+            for j in range(i, 5):
+                if j == 4:
+                    v = M[i, 4]
+                else:
+                    bj = j - (j & 1)
+                    v = mac2(M[i, bj], A[j, bj], M[i, bj + 1], A[j, bj + 1], csf, csf, ph)
+                if i == j:
+                    v += sc[k, 4] if i < 4 else sc[k, 5]
+                v = sat(v, plo, phi, ev, 2)
+                Pp[i, j] = v
+                Pp[j, i] = v
+        # -- innovation, S, e2 = innov^2 / S
+        for i in range(5):
+            PH[i] = Pp[i, 0] + Pp[i, 2] + Pp[i, 4]
+        S = PH[0] + PH[2] + PH[4] + sc[k, 6]
+        iv = sat(rs(align(ys[k], xf - yf) - (xp[0] + xp[2] + xp[4]), xf - ivf, ivh),
+                 ivlo, ivhi, ev, 4)
+        r = r_st[0]
+        n = cnt[0]
+        if not S > 0:
+            ev[8] += 1
+            ev[9] += 1
+            _reset(x, P, p0)
+            cnt[0] = 0
+            cnt[1] = 0
+            continue
+        Sn, nb = snorm(S)
+        e2 = div_square(iv, Sn, nb, rf - 2 * ivf + pf, rh, rhi, ev, 5)
+        thr = scale_sat(g2, r, gfrac, rhi)     # gate^2 r
+        warm = n >= warmup
+        gated = warm and e2 > thr
+        if gated:
+            for i in range(5):
+                x[i] = xp[i]
+                for j in range(5):
+                    P[i, j] = Pp[i, j]
+        else:
+            for i in range(5):
+                K[i] = div_norm(PH[i], Sn, nb, kf, kh, klo, khi, ev, 3)
+            sh_x = kf + ivf - xf
+            for i in range(5):
+                x[i] = sat(xp[i] + rs(K[i] * iv, sh_x, xh), xlo, xhi, ev, 1)
+            bad = False
+            for i in range(5):
+                for j in range(i, 5):
+                    v = sat(Pp[i, j] - mulw(PH[j], K[i], kf, ksplit, ph), plo, phi, ev, 2)
+                    if i == j:
+                        if v < 0:
+                            bad = True
+                        else:
+                            v = floor_one(v, ev, 7)
+                    P[i, j] = v
+                    P[j, i] = v
+            if bad:
+                ev[8] += 1
+                ev[9] += 1
+                _reset(x, P, p0)
+                cnt[0] = 0
+                cnt[1] = 0
+                continue
+        # r estimate: running mean over the second half of the warm-up, then an EWMA of the
+        # innovation power clipped at the gate
+        if (not gated) and n >= warmup // 2:
+            if warm:
+                acc = e2 if e2 < thr else thr
+                m = r_smooth
+            else:
+                acc = e2
+                m = max(1, n - warmup // 2 + 1)
+            r_st[0] = ewma(r, acc, m, rh, rlo, rhi, ev, 5)
+        cnt[0] = n + 1
+        if gated:
+            ev[10] += 1
+            cnt[1] += 1
+            if cnt[1] >= max_rej:
+                ev[9] += 1
+                _reset(x, P, p0)
+                cnt[0] = 0
+                cnt[1] = 0
+        else:
+            cnt[1] = 0
+
+
+#: Steps per block: all trials run one block of the shared per-step values (7 words a
+#: step) while it is in cache.
+BLOCK = 2048
+
+
+@_jit
+def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv):
+    for k0 in range(0, ys.shape[1], BLOCK):
+        k1 = min(k0 + BLOCK, ys.shape[1])
+        for b in range(ys.shape[0]):
+            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv):
+    for k0 in range(0, ys.shape[1], BLOCK):
+        k1 = min(k0 + BLOCK, ys.shape[1])
+        for b in numba.prange(ys.shape[0]):
+            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv)
+
+
+# ---------------------------------------------------------------------------------------
 class EnvelopeKalman:
-    """Batched float64 envelope Kalman filter (the golden form).
+    """Batched envelope Kalman filter, float (golden) or fixed point by configuration.
 
     Parameters
     ----------
-    cfg : KalmanConfig
+    cfg : KalmanConfig or KalmanFixedConfig
+        A :class:`KalmanConfig` runs the filter in float64; a :class:`KalmanFixedConfig`
+        (the same :class:`KalmanConfig` plus word lengths) runs the same source in fixed
+        point.
     batch : int
-        Number of independent trials run side by side.
+        Independent trials sharing one pulse timeline.
+    parallel : bool, optional
+        Spread the trials over the cores (numba threads). Default: when ``batch >= 16``.
+    tick_hz : float, optional
+        Tick rate for integer ``dts`` in float mode (fixed mode: ``cfg.tick_hz``).
+
+    Attributes
+    ----------
+    x, P : arrays (B, 5), (B, 5, 5)
+        Raw state (float64, or int64 codes in the formats of ``cfg``).
+    arithmetic : str
+        ``"float"`` or ``"fixed"``.
     """
 
-    def __init__(self, cfg: KalmanConfig | None = None, batch: int = 1):
-        self.cfg = cfg or KalmanConfig()
+    def __init__(self, cfg: KalmanConfig | KalmanFixedConfig | None = None, batch: int = 1, *,
+                 parallel: bool | None = None, tick_hz: float = 20e6):
+        cfg = KalmanConfig() if cfg is None else cfg
+        if isinstance(cfg, KalmanFixedConfig):
+            self.fixed: KalmanFixedConfig | None = cfg
+            self.kalman = cfg.kalman
+            self.tick_hz = float(cfg.tick_hz)
+            self._ci = cfg.int_consts()
+            self._cv = cfg.value_consts()
+            dtype = np.int64
+        elif isinstance(cfg, KalmanConfig):
+            self.fixed = None
+            self.kalman = cfg
+            if not (isinstance(tick_hz, (int, float)) and math.isfinite(tick_hz) and tick_hz > 0):
+                raise ValueError(f"tick_hz must be a finite number > 0, not {tick_hz!r}")
+            self.tick_hz = float(tick_hz)
+            self._ci = KalmanFixedConfig(kalman=cfg).int_consts()   # unused by float ops
+            self._cv = _float_consts(cfg)
+            dtype = np.float64
+        else:
+            raise ValueError(f"cfg must be a KalmanConfig or KalmanFixedConfig, not {cfg!r}")
+        self.cfg = cfg
+        if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
+            raise ValueError(f"batch must be an integer >= 1, not {batch!r}")
         self.batch = int(batch)
-        self.q_rot, self.q_dc = self.cfg.q_rates()
-        self.x = np.zeros((self.batch, 5))
-        self.P = np.zeros((self.batch, 5, 5))
-        self.r = np.ones(self.batch)          # estimated measurement variance (signal units)
-        self.n = np.zeros(self.batch, np.int64)
-        self.rejects = np.zeros(self.batch, np.int64)
-        self.events = KalmanEvents(np.zeros(self.batch, np.int64), np.zeros(self.batch, np.int64))
+        self.parallel = self.batch >= 16 if parallel is None else bool(parallel)
+        self.x = np.zeros((self.batch, 5), dtype)
+        self.P = np.zeros((self.batch, 5, 5), dtype)
+        self._r = np.full(self.batch, self._cv[6], dtype)
+        self._cnt = np.zeros((self.batch, 2), np.int64)      # n, consecutive rejects
+        self._ev = np.zeros((self.batch, len(EVENT_NAMES)), np.int64)
+        self._t_resid = 0.0
         self.n_updates = 0
         self.reset()
 
-    def reset(self, which: np.ndarray | None = None) -> None:
-        w = np.ones(self.batch, bool) if which is None else which
-        self.x[w] = 0.0
-        self.P[w] = np.eye(5) * self.cfg.p0
-        self.n[w] = 0
-        self.rejects[w] = 0
+    @property
+    def arithmetic(self) -> str:
+        return "float" if self.fixed is None else "fixed"
 
-    # -- the filter -------------------------------------------------------------------------
-    @staticmethod
-    def transition(dt) -> np.ndarray:
-        """Eq. 12 for each ``dt`` (s): array ``(B, 5, 5)``."""
-        dt = np.atleast_1d(np.asarray(dt, dtype=np.float64))
-        a = 2 * np.pi * F15 * dt
-        b = 2 * np.pi * F135 * dt
-        A = np.zeros(dt.shape + (5, 5))
-        ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
-        A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1] = ca, sa, -sa, ca
-        A[..., 2, 2], A[..., 2, 3], A[..., 3, 2], A[..., 3, 3] = cb, sb, -sb, cb
-        A[..., 4, 4] = 1.0
-        return A
+    def reset(self) -> None:
+        """Back to the prior (keeps r, events and the time residual)."""
+        self.x[:] = 0
+        self.P[:] = 0
+        self.P[:, np.arange(5), np.arange(5)] = self._cv[4]
+        self._cnt[:] = 0
 
-    def step(self, dt, y, valid=None) -> None:
-        """Predict over ``dt`` (s) and update with measurement ``y`` (per trial).
-
-        ``dt`` is a scalar (trials share the pulse timeline) or one value per trial.
-        ``valid`` (bool per trial) masks trials without a measurement at this step.
-        """
-        y = np.broadcast_to(np.asarray(y, dtype=np.float64), (self.batch,))
-        if not np.isfinite(y).all():
-            raise ValueError("measurement is NaN or infinite: the front end must not send it")
-        if np.ndim(dt) == 0:
-            dt = float(dt)
-            A = self.transition(dt)[0]
-            xp = self.x @ A.T
-            Pp = A @ self.P @ A.T
-            qd = np.array([self.q_rot * dt] * 4 + [self.q_dc * dt])
+    # -- boundary conversions ----------------------------------------------------------------
+    def _ticks(self, dts) -> np.ndarray:
+        d = np.asarray(dts)
+        if d.dtype.kind in "iu":
+            t = d.astype(np.int64).ravel()
         else:
-            dt = np.broadcast_to(np.asarray(dt, dtype=np.float64), (self.batch,))
-            A = self.transition(dt)
-            xp = np.einsum("bij,bj->bi", A, self.x)
-            Pp = A @ self.P @ np.swapaxes(A, 1, 2)
-            qd = np.stack([self.q_rot * dt] * 4 + [self.q_dc * dt], axis=1)
-        self._update(xp, Pp, qd, y, None if valid is None else np.asarray(valid, bool))
+            d = d.astype(np.float64).ravel()
+            if not np.isfinite(d).all() or (d < 0).any():
+                raise ValueError("dts must be finite and >= 0")
+            cum = np.cumsum(d) + self._t_resid
+            tk = np.round(cum * self.tick_hz)
+            if tk.size and tk[-1] >= 2.0 ** 62:
+                raise ValueError("dts too long for the tick counter")
+            tk = tk.astype(np.int64)
+            t = np.diff(tk, prepend=np.int64(0))
+            if tk.size:
+                self._t_resid = float(cum[-1] - tk[-1] / self.tick_hz)
+        if (t < 0).any() or (t >= MAX_TICKS).any():
+            raise ValueError(f"dt ticks must lie in [0, 2^38), got {t.min()}..{t.max()}")
+        return t
+
+    def _seconds(self, dts) -> np.ndarray:
+        d = np.asarray(dts)
+        if d.dtype.kind in "iu":
+            t = d.astype(np.float64).ravel() / self.tick_hz
+        else:
+            t = d.astype(np.float64).ravel()
+        if not np.isfinite(t).all() or (t < 0).any():
+            raise ValueError("dts must be finite and >= 0")
+        return t
+
+    def _measurements(self, ys):
+        ys_a = np.asarray(ys)
+        f = self.fixed
+        if f is None:
+            yf = ys_a.astype(np.float64).reshape(self.batch, -1)
+            if not np.isfinite(yf).all():
+                raise ValueError("measurement is NaN or infinite: the front end must not send it")
+            return yf, None
+        fy = f.y
+        if ys_a.dtype.kind in "iu":
+            yi = ys_a.astype(np.int64).reshape(self.batch, -1)
+            nsat = (yi < fy.min_int) | (yi > fy.max_int)
+            return np.clip(yi, fy.min_int, fy.max_int), nsat
+        yf = ys_a.astype(np.float64).reshape(self.batch, -1)
+        if not np.isfinite(yf).all():
+            raise ValueError("measurement is NaN or infinite: the front end must not send it")
+        scaled = np.floor(np.clip(np.ldexp(yf, fy.frac), -2.0 ** 62, 2.0 ** 62)
+                          + (0.5 if fy.rounding == "half_up" else 0.0))
+        nsat = (scaled < fy.min_int) | (scaled > fy.max_int)
+        return np.clip(scaled, fy.min_int, fy.max_int).astype(np.int64), nsat
 
     def run(self, dts, ys, r_mult=None) -> None:
-        """Run a sequence of steps on a shared timeline: ``dts`` (N,), ``ys`` (B, N).
+        """Run steps on a shared timeline.
 
-        Transitions and process noise for the whole sequence are computed at once, and the
-        loop only does the covariance recursion. ``r_mult`` (N,) scales the measurement
-        noise of each pulse (default 1): the receiver uses it to de-weight the clustered
-        pulses of reference bursts.
+        Parameters
+        ----------
+        dts : array (N,)
+            Time since the previous pulse: integer ticks or float seconds.
+        ys : array (B, N)
+            Amplitudes (floats; the fixed core quantises them to ``cfg.y``, counting
+            saturations; integer arrays are taken as raw ``y`` codes).
+        r_mult : array (N,), optional
+            Measurement-noise multipliers (> 0); the fixed core holds them in the ``P``
+            format, clipped to ``[2**-12, 2**12]`` (counted as ``sat_rmult``).
         """
-        dts = np.asarray(dts, dtype=np.float64)
-        ys = np.asarray(ys, dtype=np.float64).reshape(self.batch, -1)
-        if not np.isfinite(ys).all():
-            raise ValueError("measurement is NaN or infinite: the front end must not send it")
-        if dts.size == 0:
+        y, nsat = self._measurements(ys)
+        t = self._ticks(dts) if self.fixed is not None else self._seconds(dts)
+        if t.size != y.shape[1]:
+            raise ValueError(f"{y.shape[1]} measurements for {t.size} time steps")
+        if t.size == 0:
             return
-        As = self.transition(dts)
-        AsT = np.swapaxes(As, 1, 2).copy()
-        qs = np.empty((dts.size, 5))
-        qs[:, :4] = (self.q_rot * dts)[:, None]
-        qs[:, 4] = self.q_dc * dts
-        rm = np.ones(dts.size) if r_mult is None else np.asarray(r_mult, dtype=np.float64)
-        if rm.shape != dts.shape or not (np.isfinite(rm).all() and (rm > 0).all()):
-            raise ValueError("r_mult must hold one finite value > 0 per step")
-        for k in range(dts.size):
-            self._update(self.x @ AsT[k], As[k] @ self.P @ AsT[k], qs[k], ys[:, k], r_mult=rm[k])
-
-    def _update(self, xp, Pp, qd, y, valid=None, r_mult: float = 1.0) -> None:
-        cfg = self.cfg
-        Pp[:, _DIAG, _DIAG] += qd
-        # Scalar update (P and Q are in units of r, so S is too).
-        PH = Pp[:, :, 0] + Pp[:, :, 2] + Pp[:, :, 4]
-        S = PH[:, 0] + PH[:, 2] + PH[:, 4] + r_mult
-        innov = y - (xp[:, 0] + xp[:, 2] + xp[:, 4])
-        e2 = innov * innov / S
-        warm = self.n >= cfg.warmup
-        gated = warm & (e2 > cfg.gate ** 2 * self.r)
-        if valid is not None:
-            gated &= valid
-            use = valid & ~gated
+        if nsat is not None:
+            self._ev[:, _EV["sat_y"]] += nsat.sum(axis=1)
+        if r_mult is None:
+            rmf = np.ones(t.size)
         else:
-            use = ~gated
-        K = PH / S[:, None]
-        # P - K S K^T (the scalar-update Joseph form reduces to this), then symmetrise.
-        Pn = Pp - (S[:, None, None] * K[:, :, None]) * K[:, None, :]
-        Pn += np.swapaxes(Pn, 1, 2)
-        Pn *= 0.5
-        any_gated = gated.any()
-        if any_gated or valid is not None:
-            self.x = np.where(use[:, None], xp + K * innov[:, None], xp)
-            self.P = np.where(use[:, None, None], Pn, Pp)
+            rmf = np.asarray(r_mult, dtype=np.float64)
+            if rmf.shape != t.shape or not (np.isfinite(rmf).all() and (rmf > 0).all()):
+                raise ValueError("r_mult must hold one finite value > 0 per step")
+        if self.fixed is not None:
+            lo, hi = 2.0 ** -12, 2.0 ** 12
+            self._ev[:, _EV["sat_rmult"]] += int(np.count_nonzero((rmf < lo) | (rmf > hi)))
+            rm = np.round(np.ldexp(np.clip(rmf, lo, hi), self.fixed.P.frac)).astype(np.int64)
         else:
-            self.x = xp + K * innov[:, None]
-            self.P = Pn
-        # Innovation-based estimate of r (signal units): running mean over the second half
-        # of the warm-up, then an EWMA of innovations clipped at the gate.
-        upd = use & (self.n >= cfg.warmup // 2)
-        acc = np.minimum(e2, np.where(warm, cfg.gate ** 2 * self.r, np.inf))
-        alpha = np.where(warm, 1.0 / cfg.r_smooth, 1.0 / np.maximum(1, self.n - cfg.warmup // 2 + 1))
-        self.r = np.where(upd, self.r + alpha * (acc - self.r), self.r)
-        self.n += use | gated
-        if any_gated:
-            self.events.gated += gated
-            self.rejects = np.where(gated, self.rejects + 1, np.where(use, 0, self.rejects))
-            diverged = self.rejects >= cfg.max_rejects
-            if diverged.any():
-                self.events.reinit += diverged
-                self.reset(diverged)
-        elif self.rejects.any():
-            self.rejects[use] = 0
-        if not np.isfinite(self.x).all():
-            bad = ~np.isfinite(self.x).all(axis=1)
-            self.events.reinit += bad
-            self.reset(bad)
-        self.n_updates += 1
+            rm = rmf
+        sc = np.empty((t.size, 7), self.x.dtype)
+        _step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
+        kern = _run_parallel if self.parallel else _run_serial
+        kern(self.x, self.P, self._r, self._cnt, self._ev, sc, np.ascontiguousarray(y),
+             self._ci, self._cv)
+        self.n_updates += t.size
 
-    # -- outputs ---------------------------------------------------------------------------
+    # -- outputs -----------------------------------------------------------------------------
+    @property
+    def events(self) -> dict:
+        """Per-trial event counters (name -> (B,) int64); float mode counts only ``gated``,
+        ``reinit`` and ``p_neg``."""
+        return {n: self._ev[:, i].copy() for n, i in _EV.items()}
+
+    def _to_float(self, v, fmt_name):
+        if self.fixed is None:
+            return np.array(v, dtype=np.float64)
+        return getattr(self.fixed, fmt_name).to_float(v)
+
+    @property
+    def r(self) -> np.ndarray:
+        """Estimated measurement noise variance (signal units), per trial."""
+        return self._to_float(self._r, "r")
+
+    def x_float(self) -> np.ndarray:
+        return self._to_float(self.x, "x")
+
+    def P_float(self) -> np.ndarray:
+        return self._to_float(self.P, "P")
+
     def phases(self):
-        """(alpha, beta, m1, m2, dc): envelope phases (rad) at the last update and amplitudes."""
-        x = self.x
+        """(alpha, beta, m1, m2, dc): envelope phases (rad) at the last update and amplitudes
+        (float readout of the state)."""
+        x = self.x_float()
         return (np.arctan2(x[:, 0], x[:, 1]), np.arctan2(x[:, 2], x[:, 3]),
                 np.hypot(x[:, 0], x[:, 1]), np.hypot(x[:, 2], x[:, 3]), x[:, 4])

@@ -15,7 +15,7 @@ from .bearing import TWO_PI, combine_coarse_fine, wrap_deg
 from cosim.tacan_signal import burst_offsets
 
 from .decode import REF_MAIN, DecoderConfig, decode
-from .kalman import F15, F135, EnvelopeKalman, KalmanConfig
+from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 
 
 @dataclass
@@ -35,21 +35,38 @@ class BearingTrack:
     gated: np.ndarray          # (B,) measurements rejected by the innovation gate
     reinit: np.ndarray         # (B,) divergence re-initialisations
     r_est: np.ndarray          # (B,) estimated amplitude noise variance
+    events: dict = field(default_factory=dict)  # DSP core event counters, name -> (B,)
 
 
 @dataclass(frozen=True)
 class ReceiverConfig:
+    """The bearing DSP.
+
+    ``kalman`` chooses the arithmetic of the filter (the one source of
+    :mod:`dsp.tacan.kalman`): a :class:`KalmanConfig` runs it in float64 (golden), a
+    :class:`KalmanFixedConfig` in fixed point with its word lengths.
+    """
+
     mode: str = "X"
-    kalman: KalmanConfig = field(default_factory=KalmanConfig)
+    kalman: KalmanConfig | KalmanFixedConfig = field(default_factory=KalmanConfig)
     decoder: DecoderConfig | None = None
     density_weighting: bool = True
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
             raise ValueError(f"mode must be 'X' or 'Y', not {self.mode!r}")
+        if not isinstance(self.kalman, (KalmanConfig, KalmanFixedConfig)):
+            raise ValueError(f"kalman must be a KalmanConfig (float) or KalmanFixedConfig "
+                             f"(fixed point), not {self.kalman!r}")
+
+    @property
+    def dsp(self) -> str:
+        """``"float"`` or ``"fixed"``."""
+        return "fixed" if isinstance(self.kalman, KalmanFixedConfig) else "float"
 
 
-def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None) -> BearingTrack:
+def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
+                  ticks=None) -> BearingTrack:
     """Run the bearing DSP on pulse peaks.
 
     Parameters
@@ -58,9 +75,16 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None) -> Bea
         Peak times (s), ascending.
     amplitudes : array (N,) or (B, N)
         Peak amplitudes, one row per trial (any common scale).
+    ticks : array of int (N,), optional
+        The same times as integer clock ticks (the FPGA timestamps, unwrapped): the filter
+        then steps by exact tick differences instead of rounded seconds.
     """
     cfg = cfg or ReceiverConfig()
     t = np.asarray(times_s, dtype=np.float64)
+    if ticks is not None:
+        ticks = np.asarray(ticks)
+        if ticks.dtype.kind not in "iu" or ticks.shape != t.shape:
+            raise ValueError("ticks must be integers, one per peak time")
     amps = np.atleast_2d(np.asarray(amplitudes, dtype=np.float64))
     if amps.shape[1] != t.size:
         raise ValueError(f"{amps.shape[1]} amplitudes for {t.size} peak times")
@@ -83,7 +107,11 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None) -> Bea
     ref_k = dec.ref_kinds[ref_order]
     w15, w135 = TWO_PI * F15, TWO_PI * F135
     # Segments of pulses between the moments a reference burst becomes known.
-    dts = np.diff(tm, prepend=tm[:1]) if tm.size else tm
+    if ticks is not None:
+        tk = ticks.astype(np.int64)[sel]
+        dts = np.diff(tk, prepend=tk[:1]) if tk.size else tk
+    else:
+        dts = np.diff(tm, prepend=tm[:1]) if tm.size else tm
     stops = np.searchsorted(tm, ref_done - 1e-9, side="left") + 1  # pulses up to the done time
     k = 0
     for r in range(n_ref):
@@ -116,7 +144,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None) -> Bea
         n_updates=kf.n_updates, n_peaks=int(t.size), n_measurements=int(sel.size),
         n_main_refs=int(np.sum(dec.ref_kinds == REF_MAIN)),
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
-        gated=kf.events.gated.copy(), reinit=kf.events.reinit.copy(), r_est=kf.r.copy())
+        gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
+        events=kf.events)
 
 
 def burst_r_mult(tm: np.ndarray, dec, mode: str) -> np.ndarray:
