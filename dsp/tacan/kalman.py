@@ -333,9 +333,10 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
             xp[i + 1] = sat(rs(-a1 * x[i] + a0 * x[i + 1], csf, xh), xlo, xhi, ev, 1)
         xp[4] = x[4]
         # -- predict P: M = A P (rounded to P), Pp = M A^T + Q (upper triangle, mirrored)
+        # (only the columns the upper triangle of Pp reads: j >= the block of i)
         for i in range(5):
             bi = i - (i & 1) if i < 4 else 4
-            for j in range(5):
+            for j in range(bi, 5):
                 if i == 4:
                     M[i, j] = P[i, j]
                 else:

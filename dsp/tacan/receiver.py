@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..fixed import FixedFormat
 from .bearing import TWO_PI, combine_coarse_fine, wrap_deg
 from cosim.tacan_signal import burst_offsets
 
@@ -36,6 +37,7 @@ class BearingTrack:
     reinit: np.ndarray         # (B,) divergence re-initialisations
     r_est: np.ndarray          # (B,) estimated amplitude noise variance
     events: dict = field(default_factory=dict)  # DSP core event counters, name -> (B,)
+    state: "ReceiverState | None" = None        # to continue with the next block
 
 
 @dataclass(frozen=True)
@@ -65,8 +67,19 @@ class ReceiverConfig:
         return "fixed" if isinstance(self.kalman, KalmanFixedConfig) else "float"
 
 
+@dataclass
+class ReceiverState:
+    """What the bearing processor carries from one block of peaks to the next (streaming):
+    the filter, the latest main reference and the last pulse fed to the filter."""
+
+    kf: EnvelopeKalman
+    last_main_s: float | None = None
+    last_t_s: float | None = None
+    last_tick: int | None = None
+
+
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
-                  ticks=None) -> BearingTrack:
+                  ticks=None, state: ReceiverState | None = None) -> BearingTrack:
     """Run the bearing DSP on pulse peaks.
 
     Parameters
@@ -74,10 +87,14 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     times_s : array (N,)
         Peak times (s), ascending.
     amplitudes : array (N,) or (B, N)
-        Peak amplitudes, one row per trial (any common scale).
+        Peak amplitudes, one row per trial (any common scale), or -- fixed-point DSP only --
+        integer codes in the core's ``y`` format (see :func:`amplitude_codes`).
     ticks : array of int (N,), optional
         The same times as integer clock ticks (the FPGA timestamps, unwrapped): the filter
         then steps by exact tick differences instead of rounded seconds.
+    state : ReceiverState, optional
+        Continue from an earlier block (streaming); the updated state is returned in
+        ``track.state``. A reference burst split across two blocks is not decoded.
     """
     cfg = cfg or ReceiverConfig()
     t = np.asarray(times_s, dtype=np.float64)
@@ -85,21 +102,32 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ticks = np.asarray(ticks)
         if ticks.dtype.kind not in "iu" or ticks.shape != t.shape:
             raise ValueError("ticks must be integers, one per peak time")
-    amps = np.atleast_2d(np.asarray(amplitudes, dtype=np.float64))
+    amps = np.atleast_2d(np.asarray(amplitudes))
+    if amps.dtype.kind in "iu":
+        if cfg.dsp != "fixed":
+            raise ValueError("integer amplitude codes need the fixed-point DSP "
+                             "(ReceiverConfig(kalman=KalmanFixedConfig(...)))")
+        amps = amps.astype(np.int64)
+    else:
+        amps = amps.astype(np.float64)
     if amps.shape[1] != t.size:
         raise ValueError(f"{amps.shape[1]} amplitudes for {t.size} peak times")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(amps))):
+    if not (np.all(np.isfinite(t)) and (amps.dtype.kind == "i" or np.all(np.isfinite(amps)))):
         raise ValueError("peak times and amplitudes must be finite (NaN/inf from the front end)")
     dec = decode(t, cfg.mode, cfg.decoder or DecoderConfig(mode=cfg.mode))
     sel = np.flatnonzero(dec.measurement_mask)
     tm, ym = t[sel], amps[:, sel]
     r_mult = burst_r_mult(tm, dec, cfg.mode) if cfg.density_weighting else None
     B = amps.shape[0]
-    kf = EnvelopeKalman(cfg.kalman, batch=B)
+    if state is None:
+        state = ReceiverState(kf=EnvelopeKalman(cfg.kalman, batch=B))
+    elif state.kf.batch != B or state.kf.cfg != cfg.kalman:
+        raise ValueError("state belongs to a receiver with another batch size or filter")
+    kf = state.kf
 
     n_ref = dec.ref_times_s.size
     out_t, out_k, out_b, out_c = [], [], [], []
-    last_main = None
+    last_main = state.last_main_s
     # Reference bursts become known when their last pulse has arrived.
     ref_order = np.argsort(dec.ref_done_s, kind="stable")
     ref_done = dec.ref_done_s[ref_order]
@@ -109,9 +137,11 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     # Segments of pulses between the moments a reference burst becomes known.
     if ticks is not None:
         tk = ticks.astype(np.int64)[sel]
-        dts = np.diff(tk, prepend=tk[:1]) if tk.size else tk
+        prev = tk[:1] if state.last_tick is None else np.array([state.last_tick], np.int64)
+        dts = np.diff(tk, prepend=prev) if tk.size else tk
     else:
-        dts = np.diff(tm, prepend=tm[:1]) if tm.size else tm
+        prev = tm[:1] if state.last_t_s is None else np.array([state.last_t_s])
+        dts = np.diff(tm, prepend=prev) if tm.size else tm
     stops = np.searchsorted(tm, ref_done - 1e-9, side="left") + 1  # pulses up to the done time
     k = 0
     for r in range(n_ref):
@@ -136,6 +166,10 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         out_c.append(np.degrees(coarse % TWO_PI))
     if k < tm.size:
         kf.run(dts[k:], ym[:, k:], None if r_mult is None else r_mult[k:])
+    if tm.size:
+        state.last_t_s = float(tm[-1])
+        state.last_tick = int(tk[-1]) if ticks is not None else None
+    state.last_main_s = last_main
     M = len(out_t)
     return BearingTrack(
         times_s=np.array(out_t), ref_kinds=np.array(out_k, np.int8),
@@ -145,7 +179,27 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_main_refs=int(np.sum(dec.ref_kinds == REF_MAIN)),
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
-        events=kf.events)
+        events=kf.events, state=state)
+
+
+def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):
+    """DSP input stage: front-end amplitude LSBs -> the core's ``y`` codes, in integers.
+
+    One constant multiply, as the DSP does it: ``y = round(amp * g / 2**gain_frac)`` with
+    ``g = round(scale_to_fs * 2**(y.frac + gain_frac))`` (the float is used once, to build
+    ``g``). Relative error of ``g`` < ``2**-(gain_frac)`` / ``scale``; values beyond the
+    ``y`` range are saturated by the core (counted as ``sat_y``).
+    """
+    a = np.asarray(amp_lsb)
+    if a.dtype.kind not in "iu":
+        raise ValueError(f"amplitudes must be integer LSBs, not dtype {a.dtype}")
+    if not (math.isfinite(scale_to_fs) and scale_to_fs > 0):
+        raise ValueError(f"scale_to_fs must be a finite number > 0, not {scale_to_fs}")
+    g = int(round(scale_to_fs * 2.0 ** (y.frac + gain_frac)))
+    a = a.astype(np.int64)
+    if a.size and (int(np.abs(a).max()) * g).bit_length() > 62:
+        raise ValueError(f"amplitude x gain does not fit 63 bits (gain_frac={gain_frac} too large)")
+    return (a * np.int64(g) + (np.int64(1) << (gain_frac - 1))) >> gain_frac
 
 
 def burst_r_mult(tm: np.ndarray, dec, mode: str) -> np.ndarray:
