@@ -49,7 +49,7 @@ which gives the same samples as sampling the analog IF.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, asdict
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy import signal as sps
@@ -442,6 +442,24 @@ def generate(cfg: TacanSignalConfig) -> TacanSignal:
 
     Runs in chunks (bounded memory); the same ``cfg`` (seed included) gives the same bits.
     """
+    return generate_adc_variants(cfg, (cfg.adc_bits,))[cfg.adc_bits]
+
+
+def generate_adc_variants(cfg: TacanSignalConfig, adc_bits) -> dict:
+    """The same analog record digitised by ADCs of several word lengths (one generation).
+
+    Returns ``{bits: TacanSignal}``; ``result[cfg.adc_bits]`` equals :func:`generate`
+    bit for bit, and every variant is what ``generate(replace(cfg, adc_bits=bits))`` gives
+    (the analog signal and the AGC loading do not depend on the ADC word length).
+    """
+    bits_list = []
+    for b in adc_bits:
+        if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or not 1 <= b <= 24:
+            raise ValueError(f"adc_bits must be integers in 1..24, not {b!r}")
+        if int(b) not in bits_list:
+            bits_list.append(int(b))
+    if not bits_list:
+        raise ValueError("adc_bits must not be empty")
     rng_sched, rng_phase, rng_noise = _streams(cfg.seed)
     t_p, kinds, main_t, aux_t = pulse_schedule(cfg, rng_sched)
     t_ref = main_t[0] if main_t.size else cfg.first_main_ref_s
@@ -474,8 +492,9 @@ def generate(cfg: TacanSignalConfig) -> TacanSignal:
     k_off = np.arange(-half, half + 1)
     w = 2 * np.pi * cfg.digital_if_hz / fs
     sign = -1.0 if cfg.spectrum_inverted else 1.0
-    full = 1 << (cfg.adc_bits - 1)
-    out = np.empty(n, dtype=np.int16 if cfg.adc_bits <= 16 else np.int32)
+    fulls = {b: 1 << (b - 1) for b in bits_list}
+    outs = {b: np.empty(n, dtype=np.int16 if b <= 16 else np.int32) for b in bits_list}
+    n_clips = dict.fromkeys(bits_list, 0)
 
     sos = _noise_filter(cfg) if snr is not None else None
     zi = None
@@ -484,7 +503,6 @@ def generate(cfg: TacanSignalConfig) -> TacanSignal:
         _, zi = sps.sosfilt(sos, rng_noise.standard_normal(4096), zi=np.zeros((sos.shape[0], 2)))
     # White input density so that the filter's passband density is N0 = P / (SNR B).
     sigma_w = 0.0 if snr is None else math.sqrt((a0 * a0 / 2) / (snr * cfg.noise_bw_hz) * fs / 2)
-    n_clip = 0
     centre = np.rint(all_t * fs).astype(np.int64)
     for c0 in range(0, n, _CHUNK):
         c1 = min(n, c0 + _CHUNK)
@@ -501,16 +519,21 @@ def generate(cfg: TacanSignalConfig) -> TacanSignal:
         if snr is not None:
             nz, zi = sps.sosfilt(sos, rng_noise.standard_normal(c1 - c0), zi=zi)
             x += nz * sigma_w
-        codes = np.rint(x * full)
-        clipped = (codes > full - 1) | (codes < -full)
-        n_clip += int(np.count_nonzero(clipped))
-        out[c0:c1] = np.clip(codes, -full, full - 1)
+        for b, full in fulls.items():
+            codes = np.rint(x * full)
+            clipped = (codes > full - 1) | (codes < -full)
+            n_clips[b] += int(np.count_nonzero(clipped))
+            outs[b][c0:c1] = np.clip(codes, -full, full - 1)
 
-    truth = TacanTruth(config=cfg, pulse_times_s=t_p, pulse_amplitudes=a0 * amp_rel,
-                       pulse_kinds=kinds, main_ref_times_s=main_t, aux_ref_times_s=aux_t,
-                       amplitude=a0, noise_rms=noise_rms, digital_if_hz=cfg.digital_if_hz,
-                       n_clipped=n_clip)
-    return TacanSignal(samples=out, truth=truth)
+    result = {}
+    for b in bits_list:
+        c = cfg if b == cfg.adc_bits else replace(cfg, adc_bits=b)
+        truth = TacanTruth(config=c, pulse_times_s=t_p, pulse_amplitudes=a0 * amp_rel,
+                           pulse_kinds=kinds, main_ref_times_s=main_t, aux_ref_times_s=aux_t,
+                           amplitude=a0, noise_rms=noise_rms, digital_if_hz=cfg.digital_if_hz,
+                           n_clipped=n_clips[b])
+        result[b] = TacanSignal(samples=outs[b], truth=truth)
+    return result
 
 
 def pulse_observations(cfg: TacanSignalConfig, bearings_deg=None, rel_sigma: float | None = None,

@@ -190,3 +190,18 @@ def test_bad_input_clear_errors(changes, message):
 def test_bad_multipath():
     with pytest.raises(ValueError, match=r"multipath rel_amplitude must be in \[0, 1\), not 1.5"):
         Multipath(rel_amplitude=1.5)
+
+
+def test_adc_variants_equal_separate_generation():
+    from dataclasses import replace
+
+    from cosim.tacan_signal import generate_adc_variants
+    cfg = TacanSignalConfig(duration_s=0.01, snr_db=10, seed=3)
+    v = generate_adc_variants(cfg, [4, 12, 8])
+    for b in (4, 8, 12):
+        ref = generate(replace(cfg, adc_bits=b))
+        np.testing.assert_array_equal(v[b].samples, ref.samples)
+        assert v[b].truth.n_clipped == ref.truth.n_clipped
+        assert v[b].truth.config.adc_bits == b
+    with pytest.raises(ValueError, match="adc_bits must be integers in 1..24"):
+        generate_adc_variants(cfg, [0])
