@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..fixed import FixedFormat
-from .bearing import TWO_PI, combine_coarse_fine, wrap_deg
+from .bearing import (TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
+                      reference_advances, wrap_deg)
 from cosim.tacan_signal import burst_offsets
 
 from .decode import REF_MAIN, DecoderConfig, decode
@@ -127,6 +128,10 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
 
     n_ref = dec.ref_times_s.size
     out_t, out_k, out_b, out_c = [], [], [], []
+    # Fixed-point DSP with integer timestamps: the bearing is computed with integers only
+    # (CORDIC atan2 and magnitudes, binary angles), after the loop for all outputs at once.
+    integer_bearing = cfg.dsp == "fixed" and ticks is not None
+    out_x, out_dt = [], []
     last_main = state.last_main_s
     # Reference bursts become known when their last pulse has arrived.
     ref_order = np.argsort(dec.ref_done_s, kind="stable")
@@ -157,11 +162,18 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
             last_main = T
         if last_main is None:
             continue
+        out_t.append(T)
+        out_k.append(ref_k[r])
+        if integer_bearing:
+            # the fixed-point DSP: integer state, integer tick differences (see below)
+            t_hz = kf.tick_hz
+            out_x.append(kf.x.copy())
+            out_dt.append((int(tk[k - 1]) - int(round(last_main * t_hz)),
+                           int(tk[k - 1]) - int(round(T * t_hz))))
+            continue
         a, b, m1, m2, _ = kf.phases()
         coarse = w15 * (last_t - last_main) - a
         fine9 = w135 * (last_t - T) - b
-        out_t.append(T)
-        out_k.append(ref_k[r])
         out_b.append(np.degrees(combine_coarse_fine(coarse, fine9, m1 * m1, 81.0 * m2 * m2)))
         out_c.append(np.degrees(coarse % TWO_PI))
     if k < tm.size:
@@ -171,6 +183,14 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         state.last_tick = int(tk[-1]) if ticks is not None else None
     state.last_main_s = last_main
     M = len(out_t)
+    n_invalid = np.zeros(B, np.int64)
+    if integer_bearing and M:
+        dt = np.array(out_dt, dtype=np.int64)
+        adv15, adv135 = reference_advances(dt[:, 0], dt[:, 1], kf.tick_hz)
+        sb = bearing_from_state(np.stack(out_x), cfg.kalman.x, adv15[:, None], adv135[:, None])
+        out_b = list(bangle_to_deg(sb.bearing))
+        out_c = list(bangle_to_deg(sb.coarse))
+        n_invalid = np.count_nonzero(~sb.valid, axis=0).astype(np.int64)
     return BearingTrack(
         times_s=np.array(out_t), ref_kinds=np.array(out_k, np.int8),
         bearing_deg=np.array(out_b).T.reshape(B, M) if M else np.zeros((B, 0)),
@@ -179,7 +199,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_main_refs=int(np.sum(dec.ref_kinds == REF_MAIN)),
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
-        events=kf.events, state=state)
+        events={**kf.events, "invalid_bearings": n_invalid}, state=state)
 
 
 def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):

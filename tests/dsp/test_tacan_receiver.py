@@ -59,3 +59,18 @@ def test_integer_codes_need_the_fixed_core():
         process_peaks(t, amps, ticks=t)
     with pytest.raises(ValueError, match="kalman must be a KalmanConfig"):
         ReceiverConfig(kalman="fixed")
+
+
+def test_fixed_dsp_integer_bearing_matches_float_receiver():
+    """With integer timestamps the fixed DSP computes bearings with integers only (CORDIC,
+    binary angles); they stay within the documented 0.02 deg of the float receiver."""
+    cfg = TacanSignalConfig(duration_s=2.0, snr_db=10, seed=8)
+    bears = [90.0, 270.0, 7.0, 199.0]
+    t, amps, _ = pulse_observations(cfg, bears)
+    ticks = np.round(t * 20e6).astype(np.int64)
+    ref = process_peaks(ticks / 20e6, amps, ticks=ticks)
+    fx = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=KalmanFixedConfig()), ticks=ticks)
+    np.testing.assert_array_equal(fx.times_s, ref.times_s)
+    keep = ref.times_s >= 0.5
+    assert np.abs(wrap_deg(fx.bearing_deg[:, keep] - ref.bearing_deg[:, keep])).max() < 0.02
+    assert (fx.events["invalid_bearings"] == 0).all()
