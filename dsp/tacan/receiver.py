@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..fixed import FixedFormat
-from .bearing import (TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
+from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       reference_advances, wrap_deg)
 from cosim.tacan_signal import burst_offsets
 
@@ -187,7 +187,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     if integer_bearing and M:
         dt = np.array(out_dt, dtype=np.int64)
         adv15, adv135 = reference_advances(dt[:, 0], dt[:, 1], kf.tick_hz)
-        sb = bearing_from_state(np.stack(out_x), cfg.kalman.x, adv15[:, None], adv135[:, None])
+        sb = bearing_from_state(np.stack(out_x), cfg.kalman.x, adv15[:, None], adv135[:, None],
+                                adv_bits=ANGLE_BITS)
         out_b = list(bangle_to_deg(sb.bearing))
         out_c = list(bangle_to_deg(sb.coarse))
         n_invalid = np.count_nonzero(~sb.valid, axis=0).astype(np.int64)
