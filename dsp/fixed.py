@@ -58,6 +58,16 @@ def check_width(name: str, value, *, minimum: int = 1, maximum: int = MAX_WIDTH)
     return int(value)
 
 
+def check_int(name: str, value, minimum: int) -> int:
+    """Validate an integer count or cycle number (``>= minimum``) and return it.
+
+    Raises ``ValueError`` ``"<name> must be an integer >= <minimum>, not <value>"``.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, not {value!r}")
+    return int(value)
+
+
 @dataclass(frozen=True)
 class FixedFormat:
     """A two's-complement (or unsigned) fixed-point format.

@@ -22,20 +22,31 @@ queue's "has space" this cycle):
 4. otherwise an input word is dropped (pending += 1, overflow_count += 1, both saturating).
 
 The queue is ``amaranth.lib.fifo.SyncFIFOBuffered`` (or ``AsyncFIFOBuffered``); the model
-reproduces SyncFIFOBuffered cycle by cycle (``w_rdy``, the output register, ``r_en``). It
-is a Python loop over cycles, skipping idle stretches: which word gets dropped depends on the
-queue level, which depends on every earlier read and write, so there is no practical
-vectorised form. The input is the peak stream (a few thousand words/s), so the loop only
-runs per event in practice.
+reproduces SyncFIFOBuffered cycle by cycle (``w_rdy``, the output register, ``r_en``). Which
+word gets dropped depends on the queue level, which depends on every earlier read and write,
+so there is no vectorised form. :func:`fifo_model` is a compiled (numba) per-cycle state
+machine that jumps over the cycles where nothing can change: no input word this cycle, and
+either everything is empty, or the output register is full while ``ready`` is low and the
+front end has nothing it could write (no hold/pending, or the memory full). Its cost is per
+event (input word, ``ready`` cycle with a word waiting), not per clock cycle, so a second of
+signal (20M cycles, ~15k peak words) takes milliseconds.
+
+The ``ready`` pattern is a per-cycle bool array or a :class:`ReadySchedule` (periodic
+service windows, e.g. a DSP's timer interrupt: see :mod:`cosim.link`), and
+:func:`fifo_model_events` takes the input as write cycles, so long runs need no per-cycle
+array at all. Both take and return a :class:`FifoState`, so a run can be split into chunks
+with the same bits. :func:`_fifo_model_reference` is the original pure-Python loop, kept as
+the reference the tests compare the compiled model with.
 """
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
-from dsp.fixed import check_width
+from dsp.fixed import check_int as _check_int, check_width
 
 TAG_DATA = 0
 TAG_MARKER = 2
@@ -130,24 +141,453 @@ def decode_stream(words, params: FifoParams) -> tuple[np.ndarray, int]:
     return payload[tag == TAG_DATA], int(payload[tag == TAG_MARKER].sum())
 
 
+@dataclass(frozen=True)
+class ReadySchedule:
+    """Periodic ``ready`` pattern: windows of ``count`` pulses, ``stride`` cycles apart.
+
+    ``ready`` is high at the cycles ``offset + k * period + j * stride`` for every ``k >= 0``
+    and ``0 <= j < count``, low elsewhere (in particular before ``offset``). Cycles are
+    counted from reset, as :func:`cosim.pysim.run_stream` counts them.
+
+    Parameters
+    ----------
+    period : int
+        Cycles between window starts (>= 1).
+    offset : int
+        Cycle of the first window start (>= 0).
+    count : int
+        ``ready`` pulses per window (>= 1).
+    stride : int
+        Cycles between the pulses of a window (>= 1); a window spans
+        ``(count - 1) * stride + 1 <= period`` cycles (windows must not overlap).
+
+    Examples
+    --------
+    ``ReadySchedule(period=1)`` is always ready; ``ReadySchedule(period=100, offset=10,
+    count=3, stride=2)`` is ready at 10, 12, 14, 110, 112, 114, ...
+    """
+
+    period: int
+    offset: int = 0
+    count: int = 1
+    stride: int = 1
+
+    def __post_init__(self):
+        _check_int("ReadySchedule period", self.period, 1)
+        _check_int("ReadySchedule offset", self.offset, 0)
+        _check_int("ReadySchedule count", self.count, 1)
+        _check_int("ReadySchedule stride", self.stride, 1)
+        if self.span > self.period:
+            raise ValueError(f"ReadySchedule window ((count - 1) * stride + 1 = {self.span} "
+                             f"cycles) must fit in the period ({self.period})")
+
+    @property
+    def span(self) -> int:
+        """Cycles from the first to the last pulse of a window, inclusive."""
+        return (self.count - 1) * self.stride + 1
+
+    @property
+    def duty(self) -> float:
+        """Fraction of cycles with ``ready`` high (``count / period``)."""
+        return self.count / self.period
+
+    def mask(self, n_cycles: int, start: int = 0) -> np.ndarray:
+        """``ready`` for the cycles ``start .. start + n_cycles - 1`` (bool array)."""
+        n_cycles = _check_int("n_cycles", n_cycles, 0)
+        start = _check_int("start", start, 0)
+        q = np.arange(start, start + n_cycles, dtype=np.int64) - self.offset
+        r = q % self.period
+        return (q >= 0) & (r < self.span) & (r % self.stride == 0)
+
+    def ready_cycles(self, start: int, stop: int) -> np.ndarray:
+        """The cycles in ``[start, stop)`` where ``ready`` is high (int64, increasing)."""
+        k0 = max(0, (start - self.offset) // self.period)
+        k1 = max(0, -(-(stop - self.offset) // self.period))
+        c = (self.offset + np.arange(k0, k1, dtype=np.int64)[:, None] * self.period
+             + np.arange(self.count, dtype=np.int64)[None, :] * self.stride).ravel()
+        return c[(c >= start) & (c < stop)]
+
+
+@dataclass
+class FifoState:
+    """Everything the synchronous FIFO holds between two chunks of a run.
+
+    Attributes
+    ----------
+    cycle : int
+        Next cycle to simulate (cycles are counted from reset).
+    queue : ndarray of int64
+        Packed words in the FIFO memory, oldest first (at most ``depth - 1``; empty for
+        ``depth == 1``).
+    out_full, out_reg : bool, int
+        SyncFIFOBuffered's output register (``o.valid`` and the word offered).
+    hold_valid, hold_data : bool, int
+        The hold register (a data word waiting behind a marker).
+    pending : int
+        Drops not yet reported by a marker (saturating at ``marker_max``).
+    overflow : int
+        The ``overflow_count`` port (saturating at ``count_max``).
+    max_level : int
+        Highest occupancy seen so far (memory + output register, sampled at the end of
+        each cycle).
+    """
+
+    cycle: int = 0
+    queue: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    out_full: bool = False
+    out_reg: int = 0
+    hold_valid: bool = False
+    hold_data: int = 0
+    pending: int = 0
+    overflow: int = 0
+    max_level: int = 0
+
+    @property
+    def level(self) -> int:
+        """Words in the queue (memory + output register), hold register not included."""
+        return len(self.queue) + int(self.out_full)
+
+
 @dataclass
 class FifoResult:
     """What :func:`fifo_model` predicts.
 
-    words : packed output words (payload | tag << width), in order
-    cycles : read-domain cycle of each output transfer
-    overflow_count : per cycle, the value of the ``overflow_count`` port during that cycle
-    dropped : per input word, True if it was dropped
+    Attributes
+    ----------
+    words : ndarray of int64
+        Packed output words (``payload | tag << width``), in order.
+    cycles : ndarray of int64
+        Read-domain cycle (from reset) of each output transfer.
+    overflow_count : ndarray of int64 or None
+        Per cycle of this run, the value of the ``overflow_count`` port during that cycle
+        (``None`` when not asked for: ``trace=False``).
+    dropped : ndarray of bool
+        Per input word, True if it was dropped.
+    state : FifoState or None
+        State after the last cycle (pass it to the next chunk).
+    max_level : int
+        Highest queue occupancy (memory + output register) since reset.
     """
 
     words: np.ndarray
     cycles: np.ndarray
-    overflow_count: np.ndarray
+    overflow_count: np.ndarray | None
     dropped: np.ndarray
+    state: FifoState | None = None
+    max_level: int = 0
 
 
-def fifo_model(in_words, in_valid, out_ready, params: FifoParams) -> FifoResult:
-    """Cycle-level model of the synchronous :class:`hdl.fifo.DspFifo`.
+# -- compiled model ------------------------------------------------------------------------
+# Layout of the int64 state vector the kernel reads and updates.
+_OUT_FULL, _OUT_REG, _HOLD_V, _HOLD_D, _PENDING, _OVF, _HEAD, _CNT, _MAXLVL = range(9)
+
+
+@numba.njit(cache=True, nogil=True)
+def _next_ready(c, lim, rmode, rmask, rbase, period, offset, count, stride):
+    """First cycle in ``[c, lim)`` with ``ready`` high, else ``lim``."""
+    if rmode == 0:
+        while c < lim:
+            if rmask[c - rbase]:
+                return c
+            c += 1
+        return lim
+    if c < offset:
+        c = offset
+    else:
+        r = (c - offset) % period
+        if r > (count - 1) * stride:
+            c += period - r
+        else:
+            m = r % stride
+            if m != 0:
+                c += stride - m
+    return c if c < lim else lim
+
+
+@numba.njit(cache=True, nogil=True)
+def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count, stride,
+                 depth, wmask, marker_tag, count_max, st, ring, out_w, out_c, dropped):
+    """Run cycles ``c .. c_end - 1``; the module docstring's policy, exactly as
+    :func:`_fifo_model_reference` steps it. Returns the number of output words."""
+    out_full = st[_OUT_FULL]
+    out_reg = st[_OUT_REG]
+    hold_v = st[_HOLD_V]
+    hold_d = st[_HOLD_D]
+    pending = st[_PENDING]
+    ovf = st[_OVF]
+    head = st[_HEAD]
+    cnt = st[_CNT]
+    maxlvl = st[_MAXLVL]
+    cap = depth - 1          # memory words (0 for depth 1: the output register only)
+    ring_n = ring.size
+    n_in = wc.size
+    k = 0
+    n_out = 0
+    span = (count - 1) * stride
+    while c < c_end:
+        nin = wc[k] if k < n_in else c_end
+        iv = nin == c
+        if not iv:
+            # Nothing can change while the front end cannot write and the queue cannot
+            # move: skip to the next input word or the next ready cycle.
+            front_idle = hold_v == 0 and pending == 0
+            if front_idle and out_full == 0 and cnt == 0:
+                c = nin
+                continue
+            if depth > 1:
+                w_rdy = cnt != cap
+            else:
+                w_rdy = out_full == 0
+            if out_full != 0 and (front_idle or not w_rdy):
+                nr = _next_ready(c, nin, rmode, rmask, rbase, period, offset, count, stride)
+                if nr > c:
+                    c = nr
+                    continue
+        if rmode == 0:
+            rdy = rmask[c - rbase]
+        else:
+            q = c - offset
+            rdy = False
+            if q >= 0:
+                r = q % period
+                rdy = r <= span and r % stride == 0
+        if out_full != 0 and rdy:
+            out_w[n_out] = out_reg
+            out_c[n_out] = c
+            n_out += 1
+        if depth > 1:
+            w_rdy = cnt != cap
+        else:
+            w_rdy = out_full == 0
+        word = 0
+        if iv:
+            word = words[k] & wmask
+        write = False
+        wv = 0
+        drop = False
+        if hold_v != 0:
+            if w_rdy:
+                write = True
+                wv = hold_d
+                if iv:
+                    if pending == 0:
+                        hold_d = word
+                    else:
+                        drop = True
+                        hold_v = 0
+                else:
+                    hold_v = 0
+            elif iv:
+                drop = True
+        elif pending != 0:
+            if w_rdy:
+                write = True
+                wv = marker_tag | pending
+                pending = 0
+                if iv:
+                    hold_v = 1
+                    hold_d = word
+            elif iv:
+                drop = True
+        elif iv:
+            if w_rdy:
+                write = True
+                wv = word
+            else:
+                drop = True
+        if drop:
+            dropped[k] = True
+            if pending < wmask:
+                pending += 1
+            if ovf < count_max:
+                ovf += 1
+        if iv:
+            k += 1
+        if depth > 1:
+            if cnt > 0 and (out_full == 0 or rdy):
+                out_reg = ring[head]
+                head += 1
+                if head == ring_n:
+                    head = 0
+                cnt -= 1
+                out_full = 1
+            elif rdy:
+                out_full = 0
+            if write:
+                t = head + cnt
+                if t >= ring_n:
+                    t -= ring_n
+                ring[t] = wv
+                cnt += 1
+        else:
+            if write:
+                out_reg = wv
+                out_full = 1
+            elif out_full != 0 and rdy:
+                out_full = 0
+        if cnt + out_full > maxlvl:
+            maxlvl = cnt + out_full
+        c += 1
+    st[_OUT_FULL] = out_full
+    st[_OUT_REG] = out_reg
+    st[_HOLD_V] = hold_v
+    st[_HOLD_D] = hold_d
+    st[_PENDING] = pending
+    st[_OVF] = ovf
+    st[_HEAD] = head
+    st[_CNT] = cnt
+    st[_MAXLVL] = maxlvl
+    return n_out
+
+
+def _check_sync(p: FifoParams):
+    if p.asynchronous:
+        raise ValueError("fifo_model covers the synchronous FIFO only (asynchronous=False)")
+
+
+def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
+         st: FifoState, trace: bool, n_words_total: int) -> FifoResult:
+    """Validated inputs -> compiled kernel -> result (``write_cycles`` absolute, int64)."""
+    D = p.depth
+    if len(st.queue) > max(D - 1, 0):
+        raise ValueError(f"state queue holds {len(st.queue)} words; depth {D} holds at most "
+                         f"{max(D - 1, 0)} in memory")
+    if isinstance(out_ready, ReadySchedule):
+        rmode, rmask = 1, np.zeros(1, dtype=np.bool_)
+        sch = out_ready
+    else:
+        rmode = 0
+        rmask = np.ascontiguousarray(out_ready, dtype=np.bool_)
+        sch = ReadySchedule(period=1)
+    ring = np.zeros(max(D - 1, 1), dtype=np.int64)
+    ring[:len(st.queue)] = st.queue
+    sv = np.array([int(st.out_full), st.out_reg, int(st.hold_valid), st.hold_data, st.pending,
+                   st.overflow, 0, len(st.queue), st.max_level], dtype=np.int64)
+    n_w = write_cycles.size
+    cap = 2 * n_w + len(st.queue) + 3
+    out_w = np.empty(cap, dtype=np.int64)
+    out_c = np.empty(cap, dtype=np.int64)
+    dropped = np.zeros(n_words_total, dtype=bool)
+    ovf0 = st.overflow
+    n_out = _fifo_kernel(write_cycles, in_words, start, start + n_cycles, rmode, rmask, start,
+                         sch.period, sch.offset, sch.count, sch.stride, D,
+                         p.marker_max, TAG_MARKER << p.width, p.count_max, sv, ring,
+                         out_w, out_c, dropped)
+    head, cnt = int(sv[_HEAD]), int(sv[_CNT])
+    queue = np.roll(ring, -head)[:cnt].copy()
+    new = FifoState(cycle=start + n_cycles, queue=queue, out_full=bool(sv[_OUT_FULL]),
+                    out_reg=int(sv[_OUT_REG]), hold_valid=bool(sv[_HOLD_V]),
+                    hold_data=int(sv[_HOLD_D]), pending=int(sv[_PENDING]),
+                    overflow=int(sv[_OVF]), max_level=int(sv[_MAXLVL]))
+    ovf_trace = None
+    if trace:
+        # The counter steps once per drop, the cycle after it, saturating: its trace follows
+        # from the drop cycles alone.
+        steps = np.zeros(n_cycles + 1, dtype=np.int64)
+        steps[write_cycles[dropped[:n_w]] - start + 1] = 1
+        ovf_trace = np.minimum(ovf0 + np.cumsum(steps[:n_cycles]), p.count_max)
+    return FifoResult(words=out_w[:n_out].copy(), cycles=out_c[:n_out].copy(),
+                      overflow_count=ovf_trace, dropped=dropped, state=new,
+                      max_level=new.max_level)
+
+
+def _ready_arg(out_ready, n_cycles: int):
+    if isinstance(out_ready, ReadySchedule):
+        return out_ready
+    r = np.asarray(out_ready, dtype=bool)
+    if r.ndim != 1 or r.size != n_cycles:
+        raise ValueError(f"out_ready must have one entry per cycle ({n_cycles}), "
+                         f"not {r.size}")
+    return r
+
+
+def fifo_model(in_words, in_valid, out_ready, params: FifoParams, *,
+               state: FifoState | None = None, trace: bool = True) -> FifoResult:
+    """Cycle-level model of the synchronous :class:`hdl.fifo.DspFifo` (compiled).
+
+    Parameters
+    ----------
+    in_words : array of int
+        Input payloads, taken in order on the cycles where ``in_valid`` is set (cycles
+        after the last word are idle; words beyond the last valid cycle are not offered).
+    in_valid : array of bool
+        Per cycle; its length is the number of cycles simulated.
+    out_ready : array of bool, or ReadySchedule
+        The reader's ``ready`` per cycle (same length as ``in_valid``), or a periodic
+        schedule (in cycles from reset).
+    params : FifoParams
+        Synchronous FIFO parameters.
+    state : FifoState, optional
+        Where a previous chunk stopped (default: reset). Cycle numbers in the result are
+        counted from reset (``state.cycle + index``).
+    trace : bool
+        Return the per-cycle ``overflow_count`` (default True).
+
+    Returns
+    -------
+    FifoResult
+    """
+    _check_sync(params)
+    st = FifoState() if state is None else state
+    in_words = np.ascontiguousarray(in_words, dtype=np.int64).ravel()
+    in_valid = np.asarray(in_valid, dtype=bool).ravel()
+    n_cycles = in_valid.size
+    ready = _ready_arg(out_ready, n_cycles)
+    wc = np.flatnonzero(in_valid)[:in_words.size].astype(np.int64) + st.cycle
+    return _run(wc, in_words[:wc.size], st.cycle, n_cycles, ready, params, st, trace,
+                in_words.size)
+
+
+def fifo_model_events(write_cycles, in_words, n_cycles: int, out_ready, params: FifoParams, *,
+                      state: FifoState | None = None, trace: bool = False) -> FifoResult:
+    """:func:`fifo_model` with the input given as write cycles (no per-cycle arrays).
+
+    Parameters
+    ----------
+    write_cycles : array of int
+        Cycle (from reset) at which each input word is offered; strictly increasing, in
+        ``[state.cycle, state.cycle + n_cycles)``.
+    in_words : array of int
+        One payload per write cycle.
+    n_cycles : int
+        Cycles to simulate in this call, from ``state.cycle``.
+    out_ready : array of bool, or ReadySchedule
+        ``ready`` for each of the ``n_cycles`` cycles, or a periodic schedule (cycles from
+        reset).
+    params, state, trace
+        As in :func:`fifo_model` (``trace`` defaults to False here: a per-cycle trace of a
+        long run is large; the final count is ``result.state.overflow``).
+
+    Returns
+    -------
+    FifoResult
+    """
+    _check_sync(params)
+    st = FifoState() if state is None else state
+    n_cycles = _check_int("n_cycles", n_cycles, 0)
+    wc = np.asarray(write_cycles)
+    if wc.size and wc.dtype.kind not in "iu":
+        raise ValueError(f"write_cycles must be integers, not dtype {wc.dtype}")
+    wc = np.ascontiguousarray(wc, dtype=np.int64).ravel()
+    words = np.ascontiguousarray(in_words, dtype=np.int64).ravel()
+    if words.size != wc.size:
+        raise ValueError(f"in_words must have one entry per write cycle ({wc.size}), "
+                         f"not {words.size}")
+    if wc.size:
+        if np.any(np.diff(wc) <= 0):
+            raise ValueError("write_cycles must be strictly increasing (one word per cycle)")
+        if wc[0] < st.cycle or wc[-1] >= st.cycle + n_cycles:
+            raise ValueError(f"write_cycles must lie in [{st.cycle}, {st.cycle + n_cycles}), "
+                             f"not [{wc[0]}, {wc[-1]}]")
+    ready = _ready_arg(out_ready, n_cycles)
+    return _run(wc, words, st.cycle, n_cycles, ready, params, st, trace, wc.size)
+
+
+def _fifo_model_reference(in_words, in_valid, out_ready, params: FifoParams) -> FifoResult:
+    """Reference: the original pure-Python per-cycle loop (slow; for the tests only).
+
+    Same result as :func:`fifo_model` from reset (``state`` and ``max_level`` left at their
+    defaults).
 
     Parameters
     ----------

@@ -26,16 +26,18 @@ Pulses (``T`` is the threshold of the sample's own block):
   sample*: the closing sample never opens a new pulse (it matters only for a ``max_len`` cut,
   a ``hold`` close is below threshold anyway).
 
-The model is vectorised except for a loop over blocks (thresholds, ~1 numpy op per 1024
-samples) and a loop over the sub-pulses of groups longer than ``max_len`` (a continuous
-carrier: one iteration per ``max_len`` samples). It runs in chunks with a :class:`PeakState`
-and gives the same bits as one long run.
+The integer model (:func:`peak_search`) is a compiled (numba) per-sample loop that follows
+the steps above as written; :func:`peak_search_numpy` is an independent vectorised
+implementation (a loop over blocks for the thresholds and over the sub-pulses of groups
+longer than ``max_len``), kept as its reference and shared with the float variant. Both run
+in chunks with a :class:`PeakState` and give the same bits as one long run.
 """
 from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from dsp.fixed import check_width
@@ -203,6 +205,16 @@ def peak_search(env, params: PeakParams, state: PeakState | None = None
     env = np.asarray(env)
     if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
         raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
+    return _search_compiled(np.ascontiguousarray(env, dtype=np.int64), params, state)
+
+
+def peak_search_numpy(env, params: PeakParams, state: PeakState | None = None
+                      ) -> tuple[PeakResult, PeakState]:
+    """The vectorised numpy implementation of :func:`peak_search` (same results; the
+    reference the compiled per-sample loop is tested against)."""
+    env = np.asarray(env)
+    if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
+        raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
     return _search(env.astype(np.int64), params, state, False, params.thr_min)
 
 
@@ -221,6 +233,89 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
 
 
 # -- implementation ------------------------------------------------------------------------
+@numba.njit(cache=True, nogil=True)
+def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
+                   block_log2, clip_log2, smooth_log2, thr_mult, thr_frac, thr_min, hold, max_len,
+                   thr, amp, imax, iend):
+    """The integer search, one sample at a time (the module docstring's algorithm as
+    written). Writes the per-sample threshold to ``thr`` and the pulses to ``amp``/``imax``/
+    ``iend`` (capacity ``len(e) // 2 + 1``: a pulse needs two samples, and one may be carried
+    in); returns their count and the new state."""
+    N = e.shape[0]
+    mask = (np.int64(1) << block_log2) - 1
+    inf = np.int64(1) << np.int64(62)
+    b = n >> block_log2
+    T = inf if b == 0 else max(thr_min, (nu * thr_mult) >> thr_frac)
+    clip = nu << clip_log2
+    cnt = 0
+    for j in range(N):
+        x = e[j]
+        thr[j] = T
+        if b == 0:
+            bsum += x
+        else:
+            bsum += min(x, clip)
+        if not is_open:
+            if x >= T:
+                is_open = True
+                start = n
+                pmax = x
+                nmax = n
+                below = 0
+                length = 1
+        else:
+            if x > pmax:
+                pmax = x
+                nmax = n
+            if x >= T:
+                below = 0
+            else:
+                below += 1
+            length += 1
+            if below == hold or length == max_len:
+                amp[cnt] = pmax
+                imax[cnt] = nmax
+                iend[cnt] = n
+                cnt += 1
+                is_open = False
+        if (n & mask) == mask:   # block complete: new floor, threshold of the next block
+            m = bsum >> block_log2
+            nu = m if b == 0 else nu + ((m - nu) >> smooth_log2)
+            bsum = 0
+            b += 1
+            T = max(thr_min, (nu * thr_mult) >> thr_frac)
+            clip = nu << clip_log2
+        n += 1
+    return cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length
+
+
+def _search_compiled(e, p: PeakParams, state):
+    """:func:`_search` (integer) via :func:`_search_kernel`."""
+    st = copy.copy(state) if state is not None else PeakState()
+    N = e.size
+    cap = N // 2 + 1
+    thr = np.empty(N, dtype=np.int64)
+    amp = np.empty(cap, dtype=np.int64)
+    imax = np.empty(cap, dtype=np.int64)
+    iend = np.empty(cap, dtype=np.int64)
+    (cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length) = _search_kernel(
+        e, int(st.n), int(st.nu), int(st.bsum), bool(st.open), int(st.start), int(st.pmax),
+        int(st.nmax), int(st.below), int(st.length), p.block_log2, p.clip_log2,
+        p.smooth_log2, p.thr_mult, p.thr_frac, p.thr_min, p.hold, p.max_len,
+        thr, amp, imax, iend)
+    st.n, st.nu, st.bsum, st.open = int(n), int(nu), int(bsum), bool(is_open)
+    if st.open:
+        st.start, st.pmax, st.nmax = int(start), int(pmax), int(nmax)
+        st.below, st.length = int(below), int(length)
+    else:  # canonical closed state, so equal histories give equal states
+        st.start = st.nmax = st.below = st.length = 0
+        st.pmax = 0
+    index = imax[:cnt].copy()
+    ts = (index * np.int64(p.ts_step)) & np.int64((1 << p.ts_bits) - 1)
+    return PeakResult(amplitude=amp[:cnt].copy(), timestamp=ts, index=index,
+                      end_index=iend[:cnt].copy(), thresholds=thr), st
+
+
 def _thresholds(e, p: PeakParams, st: PeakState, is_float: bool, thr_min):
     """Per-sample threshold; updates ``st.nu``/``st.bsum`` (loop over blocks)."""
     N = e.size

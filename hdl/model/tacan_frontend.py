@@ -46,16 +46,18 @@ the carrier amplitude in FS (its mixer multiplies by ``2 exp(-jwn)``).
 Model
 -----
 :class:`TacanFrontendModel` chains the block models (vectorised, chunkable with a
-:class:`TacanFrontendState`); :meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle
-model for a given DSP ``ready`` pattern.
+:class:`TacanFrontendState`), or runs the same arithmetic as compiled single-threaded
+kernels (:meth:`TacanFrontendModel.envelope`, the default when the word lengths allow);
+:meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle model for a given DSP ``ready``
+pattern.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
-from scipy import signal as sps
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
 from dsp.tacan.frontend import FrontendConfig, Peaks
@@ -371,56 +373,275 @@ def amp_error_terms(p: TacanFrontendParams) -> dict[str, float]:
 
 # -- model ------------------------------------------------------------------------------------
 
-def _round_inplace(v: np.ndarray, rounding: str) -> None:
-    """Round float64 values that are exact binary fractions (|v| < 2**51) to integers, in
-    place, with :func:`dsp.fixed.shift_right`'s modes."""
-    if rounding == "half_even":
-        np.rint(v, out=v)
-    elif rounding == "half_up":
-        v += 0.5
-        np.floor(v, out=v)
-    elif rounding == "floor":
-        np.floor(v, out=v)
-    elif rounding == "zero":
-        np.trunc(v, out=v)
-    else:
+def _round_consts(shift: int, rounding: str) -> tuple[int, int, int, int, int]:
+    """Constants that make :func:`_rnd` equal ``dsp.fixed.shift_right(v, shift, rounding)``:
+    ``(left shift, right shift, bias, even mask, negative bias)``."""
+    if rounding not in ROUNDINGS:
         raise ValueError(f"rounding must be one of {ROUNDINGS}, not {rounding!r}")
+    if shift <= 0:
+        return -shift, 0, 0, 0, 0
+    half = 1 << (shift - 1)
+    return {"floor": (0, shift, 0, 0, 0),
+            "half_up": (0, shift, half, 0, 0),
+            # half to even: carry out of rem + half - 1 + (q & 1)
+            "half_even": (0, shift, half - 1, 1, 0),
+            # toward zero: floor(v + 2**s - 1) = ceil for v < 0
+            "zero": (0, shift, 0, 0, (1 << shift) - 1)}[rounding]
 
 
-def _fast_decimate(h: np.ndarray, z: np.ndarray, hist, down: int):
-    """Outputs ``sum_t h[t] z[k - t]`` at the chunk indices ``k = down-1, 2 down-1, ...``
-    (real float64 holding integers; exact below 2**53), and the new history (last ``L-1``
-    inputs)."""
-    L = len(h)
-    if hist is None:
-        hist = np.zeros(L - 1, dtype=np.float64)
-    buf = np.concatenate([hist, z])
-    new_hist = buf[len(buf) - (L - 1):].copy()
-    count = len(z) // down
-    if count == 0:
-        return np.zeros(0, dtype=np.float64), new_hist
-    if down == 1:
-        return np.convolve(buf, h, mode="valid"), new_hist
-    # Kept outputs sit at buf indices o + i*down, o = L - 1 + down - 1; drop d = o % down
-    # leading samples so that they are the multiples of down upfirdn computes.
-    o = L + down - 2
-    d = o % down
-    y = sps.upfirdn(h, buf[d:], up=1, down=down)
-    j0 = (o - d) // down
-    return y[j0:j0 + count], new_hist
+# Kept here rather than shared with hdl.model.envelope: numba's cache does not see edits
+# to a jitted function in another module, and a stale kernel would lose bits.
+@numba.njit(inline="always")
+def _rnd(v, rc):
+    """``shift_right`` of one int64, branch-free; ``rc`` from :func:`_round_consts`."""
+    ls, rs, c0, em, za = rc
+    v <<= ls
+    return (v + c0 + ((v >> rs) & em) + ((v >> 63) & za)) >> rs
+
+
+@numba.njit(cache=True, nogil=True)
+def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
+                    rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val):
+    """NCO + mixer + CIC on whole decimation groups, sample by sample as the hardware.
+
+    ``ph``: phase of the first sample; ``fw``: NCO word at the first sample, replaced by
+    ``ch_val[j]`` from sample ``ch_idx[j]`` on (strictly increasing; register writes);
+    ``msin_t = -sin``; ``integ`` (2, N) and ``combs``
+    (2, N, M) are the CIC registers (updated in place; ``combs[c, s, 0]`` is the newest
+    delayed value). The integrators wrap mod 2**64, which is exact mod 2**B_max: the
+    combed value fits ``B_max`` bits (no pruning). ``yi``/``yq`` get the rounded CIC
+    outputs. Returns the phase after the last sample, or -1 if an input is out of
+    ``[lo, hi]`` (the outputs are then invalid).
+    """
+    n_st = integ.shape[1]
+    m_dl = combs.shape[2]
+    if n_st == 3 and m_dl == 1 and mix_rc[0] == 0 and mix_rc[4] == 0:
+        return _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
+                         rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val)
+    count = x.shape[0] // rate
+    ii = integ[0].copy()
+    iq = integ[1].copy()
+    bad = False
+    nch = ch_idx.shape[0]
+    j = 0
+    nxt = ch_idx[0] if nch > 0 else -1
+    for k in range(count):
+        xs = x[k * rate:(k + 1) * rate]
+        for r in range(rate):
+            if k * rate + r == nxt:
+                fw = ch_val[j] & pmask
+                j += 1
+                nxt = ch_idx[j] if j < nch else -1
+            xv = np.int64(xs[r])
+            bad |= (xv < lo) | (xv > hi)
+            a = ph >> trunc
+            vi = _rnd(xv * cos_t[a], mix_rc)
+            vq = _rnd(xv * msin_t[a], mix_rc)
+            ph = (ph + fw) & pmask
+            for s in range(n_st):
+                vi += ii[s]
+                ii[s] = vi
+                vq += iq[s]
+                iq[s] = vq
+        # decimated sample: the combs
+        vi = ii[n_st - 1]
+        vq = iq[n_st - 1]
+        for s in range(n_st):
+            oi = combs[0, s, m_dl - 1]
+            oq = combs[1, s, m_dl - 1]
+            for d in range(m_dl - 1, 0, -1):
+                combs[0, s, d] = combs[0, s, d - 1]
+                combs[1, s, d] = combs[1, s, d - 1]
+            combs[0, s, 0] = vi
+            combs[1, s, 0] = vq
+            vi -= oi
+            vq -= oq
+        yi[k] = _rnd(vi, cic_rc)
+        yq[k] = _rnd(vq, cic_rc)
+    integ[0] = ii
+    integ[1] = iq
+    return -1 if bad else ph
+
+
+@numba.njit(inline="always")
+def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
+              rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val):
+    """:func:`_ddc_cic_kernel` for N = 3, M = 1 (the default), registers in locals, and a
+    mixer rounding without left shift or toward-zero bias (the fewer terms matter here)."""
+    _, rs, c0, em, _ = mix_rc
+    count = x.shape[0] // rate
+    i1, i2, i3 = integ[0, 0], integ[0, 1], integ[0, 2]
+    q1, q2, q3 = integ[1, 0], integ[1, 1], integ[1, 2]
+    ci1, ci2, ci3 = combs[0, 0, 0], combs[0, 1, 0], combs[0, 2, 0]
+    cq1, cq2, cq3 = combs[1, 0, 0], combs[1, 1, 0], combs[1, 2, 0]
+    bad = False
+    nch = ch_idx.shape[0]
+    j = 0
+    nxt = ch_idx[0] if nch > 0 else -1
+    for k in range(count):
+        xs = x[k * rate:(k + 1) * rate]
+        for r in range(rate):
+            if k * rate + r == nxt:
+                fw = ch_val[j] & pmask
+                j += 1
+                nxt = ch_idx[j] if j < nch else -1
+            xv = np.int64(xs[r])
+            bad |= (xv < lo) | (xv > hi)
+            a = ph >> trunc
+            pi = xv * cos_t[a]
+            pq = xv * msin_t[a]
+            vi = (pi + c0 + ((pi >> rs) & em)) >> rs
+            vq = (pq + c0 + ((pq >> rs) & em)) >> rs
+            ph = (ph + fw) & pmask
+            i1 += vi
+            i2 += i1
+            i3 += i2
+            q1 += vq
+            q2 += q1
+            q3 += q2
+        d1 = i3 - ci1
+        ci1 = i3
+        d2 = d1 - ci2
+        ci2 = d1
+        yi[k] = _rnd(d2 - ci3, cic_rc)
+        ci3 = d2
+        d1 = q3 - cq1
+        cq1 = q3
+        d2 = d1 - cq2
+        cq2 = d1
+        yq[k] = _rnd(d2 - cq3, cic_rc)
+        cq3 = d2
+    integ[0, 0], integ[0, 1], integ[0, 2] = i1, i2, i3
+    integ[1, 0], integ[1, 1], integ[1, 2] = q1, q2, q3
+    combs[0, 0, 0], combs[0, 1, 0], combs[0, 2, 0] = ci1, ci2, ci3
+    combs[1, 0, 0], combs[1, 1, 0], combs[1, 2, 0] = cq1, cq2, cq3
+    return -1 if bad else ph
+
+
+@numba.njit(cache=True, nogil=True)
+def _fir_kernel(z, hist, h, sym, down, rc, out):
+    """FIR ``sum_t h[t] z[k - t]`` at ``k = down-1, 2 down-1, ...`` of the chunk, preceded
+    by ``hist`` (the last ``L-1`` inputs, updated in place), rounded (``rc``: see
+    :func:`_round_consts`); ``sym``: the taps are symmetric (one product per pair).
+    Accumulates in float64: every product and partial sum is an integer below 2**53, so
+    the sums are exact in any order. Blocks of outputs stay in L1; the tap loop is outer
+    so the inner loop vectorises."""
+    L = h.shape[0]
+    K = z.shape[0]
+    buf = np.empty(L - 1 + K, dtype=np.float64)
+    for t in range(L - 1):
+        buf[t] = hist[t]
+    for k in range(K):
+        buf[L - 1 + k] = z[k]
+    count = K // down
+    blk = 512
+    acc = np.empty(blk, dtype=np.float64)
+    for j0 in range(0, count, blk):
+        nb = min(blk, count - j0)
+        sp = (nb - 1) * down + 1   # input span of nb outputs
+        for j in range(nb):
+            acc[j] = 0.0
+        # Slices: indices from range() are known non-negative, so numba's negative-index
+        # wraparound folds away and the loops vectorise; several taps per pass over acc.
+        top = j0 * down + down - 1 + L - 1
+        if sym:
+            # h[t] == h[L-1-t]: one product per tap pair (as the hardware's pre-adder)
+            t = 0
+            while t + 2 <= L // 2:
+                h0, h1 = h[t], h[t + 1]
+                s0 = buf[top - t:top - t + sp]
+                s1 = buf[top - t - 1:top - t - 1 + sp]
+                r0 = buf[top - (L - 1 - t):top - (L - 1 - t) + sp]
+                r1 = buf[top - (L - 2 - t):top - (L - 2 - t) + sp]
+                if down == 1:
+                    for j in range(nb):
+                        acc[j] += h0 * (s0[j] + r0[j]) + h1 * (s1[j] + r1[j])
+                else:
+                    for j in range(nb):
+                        jj = j * down
+                        acc[j] += h0 * (s0[jj] + r0[jj]) + h1 * (s1[jj] + r1[jj])
+                t += 2
+            while t < L // 2:
+                h0 = h[t]
+                s0 = buf[top - t:top - t + sp]
+                r0 = buf[top - (L - 1 - t):top - (L - 1 - t) + sp]
+                for j in range(nb):
+                    acc[j] += h0 * (s0[j * down] + r0[j * down])
+                t += 1
+            t = L  # the middle tap of an odd length remains
+            if L % 2:
+                h0 = h[L // 2]
+                s0 = buf[top - L // 2:top - L // 2 + sp]
+                for j in range(nb):
+                    acc[j] += h0 * s0[j * down]
+        else:
+            t = 0
+        while t + 4 <= L:
+            h0, h1, h2, h3 = h[t], h[t + 1], h[t + 2], h[t + 3]
+            s0 = buf[top - t:top - t + sp]
+            s1 = buf[top - t - 1:top - t - 1 + sp]
+            s2 = buf[top - t - 2:top - t - 2 + sp]
+            s3 = buf[top - t - 3:top - t - 3 + sp]
+            if down == 1:
+                for j in range(nb):
+                    acc[j] += (h0 * s0[j] + h1 * s1[j]) + (h2 * s2[j] + h3 * s3[j])
+            else:
+                for j in range(nb):
+                    jj = j * down
+                    acc[j] += (h0 * s0[jj] + h1 * s1[jj]) + (h2 * s2[jj] + h3 * s3[jj])
+            t += 4
+        while t < L:
+            ht = h[t]
+            s0 = buf[top - t:top - t + sp]
+            for j in range(nb):
+                acc[j] += ht * s0[j * down]
+            t += 1
+        for j in range(nb):
+            out[j0 + j] = _rnd(np.int64(acc[j]), rc)
+    for t in range(L - 1):
+        hist[t] = np.int64(buf[K + t])
+
+
+def _check_changes(freq_changes, phase_bits: int):
+    """Validated ``freq`` writes as (index, word) int64 arrays (None: no writes)."""
+    if freq_changes is None or isinstance(freq_changes, tuple) and len(freq_changes) == 2 \
+            and isinstance(freq_changes[0], np.ndarray):
+        return freq_changes
+    pairs = list(freq_changes)
+    if any(len(c) != 2 for c in pairs):
+        raise ValueError("freq_changes must be (index, word) pairs")
+    idx = np.array([int(c[0]) for c in pairs], dtype=np.int64)
+    val = np.array([int(c[1]) for c in pairs], dtype=np.int64)
+    if idx.size and (np.any(np.diff(idx) <= 0) or idx[0] < 0):
+        raise ValueError(f"freq_changes indices must be >= 0 and strictly increasing, not "
+                         f"{idx.tolist()[:8]}")
+    if val.size and (val.min() < 0 or val.max() >= 1 << phase_bits):
+        raise ValueError(f"freq words must lie in [0, 2**{phase_bits})")
+    return idx, val
+
+
+def _changes_in(changes, start: int, stop: int):
+    """The changes with ``start <= index < stop``, indices made relative to ``start``."""
+    if changes is None:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    idx, val = changes
+    a, b = np.searchsorted(idx, [start, stop])
+    return np.ascontiguousarray(idx[a:b] - start), np.ascontiguousarray(val[a:b])
+
 
 @dataclass
 class TacanFrontendState:
     """Model state between chunks (``None`` = just after reset)."""
 
     nco: NcoState | None = None
-    cic: object = None         #: CicState (block path) or history array (fast path)
-    fir: object = None         #: FirState (block path) or history array (fast path)
+    cic: object = None         #: CicState (block path) or (integrators, combs) arrays (fast)
+    fir: object = None         #: FirState (block path) or (2, taps-1) history array (fast)
     peak: PeakState | None = None
     n_adc: int = 0            #: ADC samples consumed
     pending: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     #: ADC samples left over (fewer than one decimation group: the CIC/FIR consume whole
     #: groups per chunk so that the integer models' chunks line up).
+    freq: int | None = None   #: NCO word in force at the next sample (None: the model's)
 
 
 @dataclass
@@ -461,7 +682,7 @@ class TacanFrontendModel:
     freq_word : int, optional
         NCO word held on the ``freq`` port (default: the IF word).
     fast : bool, optional
-        Use the fused float64 path when the parameters allow it (default), or force the
+        Use the compiled fused path when the parameters allow it (default), or force the
         chained block models (``False``); both give the same bits.
     """
 
@@ -474,37 +695,45 @@ class TacanFrontendModel:
         self.ddc = DdcModel(self.params.ddc)
         self._fast = self._fast_ok() if fast is None else bool(fast and self._fast_ok())
         p = self.params
-        drop = p.ddc.mixer.drop_bits
-        self._lo = (self.ddc.nco.cos_table * 2.0 ** -drop, -self.ddc.nco.sin_table * 2.0 ** -drop)
-        self._h_cic = np.array(p.cic.impulse_response, dtype=np.float64)
+        self._cos = np.ascontiguousarray(self.ddc.nco.cos_table, dtype=np.int64)
+        self._msin = np.ascontiguousarray(-self.ddc.nco.sin_table, dtype=np.int64)
         self._h_fir = np.array(p.fir.taps_int, dtype=np.float64)
+        self._fir_sym = bool(np.array_equal(self._h_fir, self._h_fir[::-1]))
+        self._rc = {"mixer": _round_consts(p.ddc.mixer.drop_bits, p.ddc.mixer.rounding),
+                    "cic": _round_consts(p.cic.out_shift, p.cic.rounding),
+                    "fir": _round_consts(p.fir.out_shift, p.fir.rounding)}
 
     @property
     def fast(self) -> bool:
-        """Whether :meth:`envelope` takes the float64 fast path (see there)."""
+        """Whether :meth:`envelope` takes the compiled fast path (see there)."""
         return self._fast
 
     def _fast_ok(self) -> bool:
         p = self.params
-        # Exact in float64 when every intermediate is an integer below 2**53 and nothing
-        # saturates (check_headroom) or wraps (no pruning: the CIC sum is exact).
+        # Exact when nothing saturates (check_headroom) or wraps (no pruning: the CIC sum is
+        # exact) and the FIR's float64 accumulation holds integers below 2**53.
         return (p.check_headroom and not p.cic_prune and p.nco_dither_bits == 0
                 and p.fir.acc_width <= 50 and p.cic.full_width <= 50
                 and p.ddc.mixer.product_width <= 50)
 
-    def envelope(self, adc_codes, state: TacanFrontendState | None = None
-                 ) -> tuple[np.ndarray, TacanFrontendState]:
+    def envelope(self, adc_codes, state: TacanFrontendState | None = None, *,
+                 freq_changes=None) -> tuple[np.ndarray, TacanFrontendState]:
         """Envelope samples (envelope LSBs) of the next ADC codes, and the new state
         (the peak search state is carried unchanged).
 
+        ``freq_changes``: ``(index, word)`` pairs, the ``freq`` port taking ``word`` from the
+        ADC sample ``index`` on (counted from reset, strictly increasing); the pairs outside
+        the samples processed by this call are ignored (see :meth:`run`).
+
         Two implementations with the same bits: the block models chained
-        (``fast=False``), and a fused float64 path used when the parameters allow it
-        (:attr:`fast`): every value up to the FIR accumulator is an integer below ``2**50``,
-        so float64 products and sums are exact in any order, and the roundings are exact
-        float operations on ``v * 2**-s`` (``rint`` is round-half-even, ``floor(. + 1/2)``
-        half-up, ...). The CIC and FIR then run as compiled convolutions (``upfirdn``,
-        ``np.convolve``) instead of one numpy pass per tap. The tests check the two paths
-        against each other and the HDL against both.
+        (``fast=False``), and compiled numba kernels used when the parameters allow it
+        (:attr:`fast`), single-threaded: NCO, mixer and CIC fused in one pass over the ADC
+        samples in int64 (integrators and combs as the hardware, wrapping mod 2**64, which
+        is exact because the unpruned CIC's result fits its full width), the FIR at the
+        CIC rate accumulating in float64 (every product and partial sum is an integer below
+        ``2**50``, so exact in any order), then the envelope CORDIC. Every rounding is the
+        integer ``shift_right`` of :mod:`dsp.fixed`. The tests check the two paths against
+        each other and the HDL against both.
         """
         p = self.params
         st = TacanFrontendState() if state is None else state
@@ -517,48 +746,79 @@ class TacanFrontendModel:
         usable = len(x) - len(x) % r
         rest = x[usable:].astype(np.int64)
         x = x[:usable]
+        fw0 = self.freq_word if st.freq is None else st.freq
+        ch_idx, ch_val = _changes_in(freq_changes, st.n_adc, st.n_adc + usable)
+        fw_end = int(ch_val[-1]) if ch_val.size else fw0
         if self._fast:
-            e, nco, cic, fir = self._fast_chain(x, st)
+            e, nco, cic, fir = self._fast_chain(x, st, fw0, ch_idx, ch_val)
         else:
-            i, q, nco = self.ddc.run(x.astype(np.int64), self.freq_word, st.nco)
+            fw = fw0
+            if ch_idx.size:
+                fw = np.full(usable, fw0, dtype=np.int64)
+                for k, v in zip(ch_idx, ch_val):
+                    fw[k:] = v
+            i, q, nco = self.ddc.run(x.astype(np.int64), fw, st.nco)
             c, cic = cic_model(p.cic, np.stack([i, q], axis=-1), st.cic)
             f, fir = fir_model(p.fir, c, st.fir)
             e = envelope_model(f[:, 0], f[:, 1], p.envelope)
         return e, TacanFrontendState(nco=nco, cic=cic, fir=fir, peak=st.peak,
-                                     n_adc=st.n_adc + usable, pending=rest)
+                                     n_adc=st.n_adc + usable, pending=rest, freq=fw_end)
 
-    def _fast_chain(self, x, st: TacanFrontendState):
+    def _fast_chain(self, x, st: TacanFrontendState, fw0: int, ch_idx, ch_val):
+        """Compiled kernels: NCO + mixer + CIC fused (integer, sample by sample), the FIR
+        (float64 accumulation, exact), the envelope CORDIC; states are copied, not
+        modified."""
         p = self.params
-        lo = p.adc_bits - 1
-        if x.size and (x.min() < -(1 << lo) or x.max() >= (1 << lo)):
+        nco_p, mx, cic = p.ddc.nco, p.ddc.mixer, p.cic
+        if x.dtype.kind == "u" and x.size and int(x.max()) >= 1 << (p.adc_bits - 1):
             raise ValueError(f"ADC codes must be signed {p.adc_bits}-bit integers")
-        a, nco = self.ddc.nco.addresses(len(x), self.freq_word, st.nco)
-        xf = x.astype(np.float64)
-        cic_hist = [None, None] if st.cic is None else st.cic
-        fir_hist = [None, None] if st.fir is None else st.fir
-        out = []
-        # I and Q as separate contiguous real arrays (compiled loops on real data are ~2x
-        # faster than on complex); LO tables pre-scaled by 2**-drop (exact).
-        for ch, table in enumerate(self._lo):
-            v = table[a]
-            v *= xf
-            _round_inplace(v, p.ddc.mixer.rounding)
-            # CIC as its integer FIR, decimated; chunks hold whole groups, so the
-            # decimation phase is 0 at every chunk start.
-            v, cic_hist[ch] = _fast_decimate(self._h_cic, v, cic_hist[ch], p.cic.rate)
-            v *= 2.0 ** -p.cic.out_shift
-            _round_inplace(v, p.cic.rounding)
-            v, fir_hist[ch] = _fast_decimate(self._h_fir, v, fir_hist[ch], p.fir.decimation)
-            v *= 2.0 ** -p.fir.out_shift
-            _round_inplace(v, p.fir.rounding)
-            out.append(v.astype(np.int64))
-        e = envelope_model(out[0], out[1], p.envelope)
-        return e, nco, cic_hist, fir_hist
+        x = np.ascontiguousarray(x, dtype=np.int64)   # one kernel signature
+        pmask = (1 << nco_p.phase_bits) - 1
+        acc0 = 0 if st.nco is None else int(st.nco.acc) & pmask
+        fw = int(fw0) & pmask
+        if st.cic is None:
+            integ = np.zeros((2, cic.stages), np.int64)
+            combs = np.zeros((2, cic.stages, cic.diff_delay), np.int64)
+        else:
+            integ, combs = (a.copy() for a in st.cic)
+        L = len(self._h_fir)
+        hist = np.zeros((2, L - 1), np.int64) if st.fir is None else st.fir.copy()
+        count = len(x) // cic.rate
+        ci = np.empty(count, np.int64)
+        cq = np.empty(count, np.int64)
+        lo = p.adc_bits - 1
+        ph = _ddc_cic_kernel(x, acc0, fw, pmask, nco_p.trunc_bits, self._cos, self._msin,
+                             self._rc["mixer"], -(1 << lo), (1 << lo) - 1, cic.rate, integ,
+                             combs, self._rc["cic"], ci, cq, ch_idx, ch_val)
+        if ph < 0:
+            raise ValueError(f"ADC codes must be signed {p.adc_bits}-bit integers")
+        nco = NcoState(acc=int(ph), lfsr=int(nco_p.dither_seed) if st.nco is None else st.nco.lfsr)
+        f = p.fir
+        nf = count // f.decimation
+        fi = np.empty(nf, np.int64)
+        fq = np.empty(nf, np.int64)
+        _fir_kernel(ci, hist[0], self._h_fir, self._fir_sym, f.decimation, self._rc["fir"], fi)
+        _fir_kernel(cq, hist[1], self._h_fir, self._fir_sym, f.decimation, self._rc["fir"], fq)
+        # In range by construction (check_headroom: the FIR output never saturates).
+        e = envelope_model(fi, fq, p.envelope, check=False)
+        return e, nco, (integ, combs), hist
 
-    def run(self, adc_codes, state: TacanFrontendState | None = None
+    def run(self, adc_codes, state: TacanFrontendState | None = None, *, freq_changes=None
             ) -> tuple[FrontendPeaks, TacanFrontendState]:
         """Peaks of the next ADC codes (valid samples only; gaps in valid do not change the
         values), vectorised, in internal chunks of :attr:`CHUNK`.
+
+        Parameters
+        ----------
+        adc_codes : array of int
+        state : TacanFrontendState, optional
+        freq_changes : sequence of (index, word), optional
+            Writes of the ``freq`` port (DSP -> FPGA control path): the NCO steps with
+            ``word`` from ADC sample ``index`` on (valid samples counted from reset, as
+            the state's ``n_adc``; ``index`` strictly increasing). A run split into several
+            calls passes the same list to each: a call applies the changes that fall in its
+            samples, the state carries the word in force, changes before the call's first
+            sample (``state.n_adc``) were applied by the earlier calls.
 
         Returns
         -------
@@ -570,9 +830,10 @@ class TacanFrontendModel:
         p = self.params
         x = np.asarray(adc_codes)
         st = TacanFrontendState() if state is None else state
+        changes = _check_changes(freq_changes, self.params.nco_phase_bits)
         amps, ts, idx, end = [], [], [], []
         for c0 in range(0, max(len(x), 1), self.CHUNK):
-            e, st = self.envelope(x[c0:c0 + self.CHUNK], st)
+            e, st = self.envelope(x[c0:c0 + self.CHUNK], st, freq_changes=changes)
             res, pk = peak_search(e, p.peak, st.peak)
             st.peak = pk
             amps.append(res.amplitude)
@@ -638,3 +899,4 @@ class TacanFrontendModel:
         res = fifo_model(self.words(peaks)[keep], w_valid, rdy, p.fifo)
         return FifoRun(words=res.words, cycles=res.cycles,
                        overflow_count=res.overflow_count, dropped=res.dropped)
+

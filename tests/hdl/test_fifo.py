@@ -1,5 +1,7 @@
 """FIFO towards the DSP: sync sim == cycle model; async conservation at two clock rates;
-the exported Verilog of the sync FIFO (Verilator) == Amaranth simulation == cycle model."""
+the exported Verilog of the sync FIFO (Verilator) == Amaranth simulation == cycle model;
+the compiled cycle model == the pure-Python reference loop (random scenarios, chunks,
+periodic ready schedules)."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,8 +11,9 @@ from amaranth.sim import Simulator
 
 from cosim.pysim import run_stream
 from hdl.fifo import DspFifo
-from hdl.model.fifo import (TAG_DATA, TAG_MARKER, FifoParams, decode_stream, fifo_model,
-                            pack_word, unpack_word)
+from hdl.model.fifo import (TAG_DATA, TAG_MARKER, FifoParams, FifoState, ReadySchedule,
+                            _fifo_model_reference, decode_stream, fifo_model,
+                            fifo_model_events, pack_word, unpack_word)
 
 from _util import assert_lints_clean, assert_same_stream, needs_verilator, verilator_sim
 
@@ -141,6 +144,179 @@ def test_model_validates_inputs():
         fifo_model([1], np.ones(5, bool), np.ones(4, bool), p)
     with pytest.raises(ValueError, match="synchronous FIFO only"):
         fifo_model([1], [1], [1], FifoParams(depth=4, asynchronous=True))
+
+
+# -- compiled model == pure-Python reference ----------------------------------------------
+def _assert_same(got, want, msg=""):
+    for name in ("words", "cycles", "dropped"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name),
+                                      err_msg=f"{name} {msg}")
+    if want.overflow_count is not None and got.overflow_count is not None:
+        np.testing.assert_array_equal(got.overflow_count, want.overflow_count,
+                                      err_msg=f"overflow_count {msg}")
+
+
+def _random_pattern(rng, n):
+    """One of: uniform random, bursty, periodic, all/none, with random densities."""
+    kind = rng.integers(5)
+    if kind == 0:
+        return rng.random(n) < rng.random()
+    if kind == 1:
+        return _bursts(rng, n, int(rng.integers(1, 80)), rng.random(), rng.random())
+    if kind == 2:
+        sch = ReadySchedule(period=int(rng.integers(1, 200)), offset=int(rng.integers(0, 300)))
+        return sch.mask(n)
+    if kind == 3:
+        return np.ones(n, bool)
+    return np.zeros(n, bool) if rng.random() < 0.5 else rng.random(n) < 0.02
+
+
+def _random_scenario(rng):
+    depth = int(rng.choice([1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 33, 512]))
+    p = FifoParams(width=int(rng.integers(1, 13)), depth=depth,
+                   count_width=int(rng.integers(1, 7)))
+    n = int(rng.integers(1, 4000))
+    in_valid = _random_pattern(rng, n)
+    # Words wider than the payload (masked), and sometimes fewer/more words than valid cycles.
+    words = rng.integers(0, 1 << 14, max(0, int(in_valid.sum()) + int(rng.integers(-3, 4))))
+    return p, words, in_valid, _random_pattern(rng, n)
+
+
+def test_fast_model_matches_reference_random():
+    """Many random scenarios (depth, widths, densities, bursts, saturation) and seeds."""
+    n_drop = n_sat = 0
+    for seed in range(400):
+        rng = np.random.default_rng(10_000 + seed)
+        p, words, in_valid, out_ready = _random_scenario(rng)
+        want = _fifo_model_reference(words, in_valid, out_ready, p)
+        got = fifo_model(words, in_valid, out_ready, p)
+        _assert_same(got, want, f"(seed {10_000 + seed}, {p})")
+        n_drop += bool(want.dropped.any())
+        n_sat += bool(want.overflow_count.size and want.overflow_count[-1] == p.count_max)
+    # The scenarios reach the interesting corners.
+    assert n_drop > 100 and n_sat > 30
+
+
+@pytest.mark.parametrize("depth", [1, 2, 4, 64])
+def test_fast_model_matches_reference_schedule(depth):
+    """A periodic ReadySchedule gives the same bits as its per-cycle mask."""
+    p = FifoParams(width=6, depth=depth, count_width=4)
+    for seed in range(40):
+        rng = np.random.default_rng(20_000 + 100 * depth + seed)
+        n = int(rng.integers(1000, 6000))
+        count = int(rng.integers(1, 20))
+        stride = int(rng.integers(1, 6))
+        period = int(rng.integers((count - 1) * stride + 1, 600))
+        sch = ReadySchedule(period=period, offset=int(rng.integers(0, 700)), count=count,
+                            stride=stride)
+        in_valid = _random_pattern(rng, n)
+        words = rng.integers(0, 1 << p.width, int(in_valid.sum()))
+        want = _fifo_model_reference(words, in_valid, sch.mask(n), p)
+        _assert_same(fifo_model(words, in_valid, sch, p), want, f"(seed {seed}, {sch})")
+        ev = fifo_model_events(np.flatnonzero(in_valid), words, n, sch, p, trace=True)
+        _assert_same(ev, want, f"events (seed {seed}, {sch})")
+
+
+def test_chunks_equal_one_run():
+    """Splitting a run at random cycles (state carried) gives the same bits."""
+    for seed in range(60):
+        rng = np.random.default_rng(30_000 + seed)
+        p, words, in_valid, out_ready = _random_scenario(rng)
+        words = words[:int(in_valid.sum())]
+        want = fifo_model(words, in_valid, out_ready, p)
+        n = in_valid.size
+        cuts = np.unique(np.concatenate([[0, n], rng.integers(0, n, int(rng.integers(1, 6)))]))
+        st, k = None, 0
+        parts = []
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            nw = int(in_valid[a:b].sum())
+            r = fifo_model(words[k:k + nw], in_valid[a:b], out_ready[a:b], p, state=st)
+            k += nw
+            st = r.state
+            parts.append(r)
+        for name in ("words", "cycles", "overflow_count", "dropped"):
+            np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]),
+                                          getattr(want, name), err_msg=f"{name} seed {seed}")
+        assert st.cycle == n and st.max_level == want.max_level
+        assert st.overflow == want.state.overflow and st.pending == want.state.pending
+
+
+def test_state_and_level():
+    """Directed: no reads, depth 4: 4 words queued (3 in memory + output register)."""
+    p = FifoParams(width=8, depth=4)
+    n = 12
+    res = fifo_model(np.arange(10), np.r_[np.ones(10, bool), np.zeros(2, bool)],
+                     np.zeros(n, bool), p)
+    st = res.state
+    assert st.cycle == n and st.out_full and st.out_reg == 0 and st.level == 4
+    np.testing.assert_array_equal(st.queue, [1, 2, 3])
+    assert st.pending == 6 and st.overflow == 6 and not st.hold_valid
+    assert res.max_level == 4 and res.words.size == 0
+    # Next chunk: read everything; the marker comes after the 4 queued words.
+    res2 = fifo_model([], np.zeros(10, bool), np.ones(10, bool), p, state=st)
+    np.testing.assert_array_equal(res2.words, pack_word([0, 1, 2, 3, 6], [0, 0, 0, 0, 2], p))
+    assert res2.cycles[0] == n and res2.state.level == 0
+
+
+def test_ready_schedule():
+    sch = ReadySchedule(period=100, offset=10, count=3, stride=2)
+    np.testing.assert_array_equal(np.flatnonzero(sch.mask(250)),
+                                  [10, 12, 14, 110, 112, 114, 210, 212, 214])
+    np.testing.assert_array_equal(np.flatnonzero(sch.mask(50, start=105)) + 105,
+                                  [110, 112, 114])
+    np.testing.assert_array_equal(sch.ready_cycles(11, 213), [12, 14, 110, 112, 114, 210, 212])
+    assert ReadySchedule(period=1).mask(5).all() and sch.span == 5 and sch.duty == 0.03
+    with pytest.raises(ValueError, match=r"ReadySchedule window \(\(count - 1\) \* stride "
+                                         r"\+ 1 = 7 cycles\) must fit in the period \(6\)"):
+        ReadySchedule(period=6, count=4, stride=2)
+    with pytest.raises(ValueError, match=r"ReadySchedule period must be an integer >= 1, not 0"):
+        ReadySchedule(period=0)
+    with pytest.raises(ValueError, match=r"ReadySchedule offset must be an integer >= 0, not -1"):
+        ReadySchedule(period=5, offset=-1)
+
+
+def test_events_validate_inputs():
+    p = FifoParams(width=8, depth=4)
+    sch = ReadySchedule(period=1)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        fifo_model_events([3, 3], [1, 2], 10, sch, p)
+    with pytest.raises(ValueError, match=r"write_cycles must lie in \[0, 10\), not \[3, 10\]"):
+        fifo_model_events([3, 10], [1, 2], 10, sch, p)
+    with pytest.raises(ValueError, match=r"in_words must have one entry per write cycle \(2\)"):
+        fifo_model_events([3, 4], [1], 10, sch, p)
+    with pytest.raises(ValueError, match="write_cycles must be integers"):
+        fifo_model_events([3.0], [1], 10, sch, p)
+    with pytest.raises(ValueError, match=r"out_ready must have one entry per cycle \(10\)"):
+        fifo_model_events([3], [1], 10, np.ones(9, bool), p)
+    with pytest.raises(ValueError, match="state queue holds 4 words; depth 4 holds at most 3"):
+        fifo_model([], [0], [1], p, state=FifoState(queue=np.arange(4)))
+
+
+@pytest.mark.slow
+def test_fast_model_long_tacan_like():
+    """20M cycles (1 s at 20 MHz), ~15k peak words, DSP reading 256 words every 1 ms:
+    compiled model == reference on the first 2M cycles, and the full run is quick."""
+    import time
+    rng = np.random.default_rng(311)
+    n = 20_000_000
+    first = np.sort(rng.choice(n - 300, 7500, replace=False))
+    wc = np.unique(np.concatenate([first, first + 240]))
+    words = rng.integers(0, 1 << 51, wc.size)
+    p = FifoParams()
+    sch = ReadySchedule(period=20_000, offset=200, count=256, stride=4)
+    fifo_model_events(wc[:1], words[:1], int(wc[0]) + 1, sch, p)   # compile outside timing
+    t0 = time.perf_counter()
+    res = fifo_model_events(wc, words, n, sch, p)
+    assert time.perf_counter() - t0 < 2.0
+    assert not res.dropped.any() and res.words.size > 14_000
+    m = 2_000_000
+    k = int(np.searchsorted(wc, m))
+    iv = np.zeros(m, bool)
+    iv[wc[:k]] = True
+    want = _fifo_model_reference(words[:k], iv, sch.mask(m), p)
+    got = fifo_model_events(wc[:k], words[:k], m, sch, p, trace=True)
+    _assert_same(got, want)
+    np.testing.assert_array_equal(res.words[:want.words.size], want.words)
 
 
 # -- asynchronous: two clocks --------------------------------------------------------------

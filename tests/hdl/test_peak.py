@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from cosim.pysim import run_stream, unpack_fields
-from hdl.model.peak import PeakParams, PeakState, peak_search, peak_search_float
+from hdl.model.peak import (PeakParams, PeakState, peak_search, peak_search_float,
+                            peak_search_numpy)
 from hdl.peak import PeakSearch
 
 from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_stream,
@@ -238,6 +239,37 @@ def test_model_chunked_equals_one_run(k):
         np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]),
                                       getattr(whole, name))
     assert st == st_whole
+
+
+@pytest.mark.parametrize("k", range(len(PARAM_SETS)))
+def test_compiled_model_equals_numpy_model(k):
+    """The compiled per-sample search == the vectorised numpy one: pulses, thresholds and
+    the state after every chunk (cuts inside pulses, 1-sample and empty chunks, a carrier
+    longer than max_len, values at the top of the range)."""
+    p = PARAM_SETS[k]
+    rng = np.random.default_rng(245 + k)
+    e = realistic_envelope(rng, 30_000)
+    e[9000:9500] = 4000
+    e[12_000:12_050] = (1 << p.amp_width) - 1
+    whole, st_whole = peak_search(e, p)
+    ref, st_ref = peak_search_numpy(e, p)
+    assert whole.amplitude.size > 50
+    for name in ("amplitude", "timestamp", "index", "end_index", "thresholds"):
+        np.testing.assert_array_equal(getattr(whole, name), getattr(ref, name))
+        assert getattr(whole, name).dtype == np.int64
+    assert st_whole == st_ref
+    cuts = np.unique(np.concatenate((whole.index[::5] + 1, whole.index[3::11] + 3,
+                                     rng.integers(0, e.size, 30), [0, 1, 1, 2, 9200, 9201])))
+    st_a = st_b = None
+    prev = 0
+    for c in list(cuts) + [e.size, e.size]:
+        ra, st_a = peak_search(e[prev:c], p, st_a)
+        rb, st_b = peak_search_numpy(e[prev:c], p, st_b)
+        for name in ("amplitude", "timestamp", "index", "end_index", "thresholds"):
+            np.testing.assert_array_equal(getattr(ra, name), getattr(rb, name))
+        assert st_a == st_b
+        prev = c
+    assert st_a == st_whole
 
 
 def test_state_is_not_modified():

@@ -11,9 +11,11 @@ import pytest
 from cosim.equivalence import check_equivalence, stall_pattern, tacan_record
 from cosim.pysim import run_stream
 from cosim.tacan_signal import TacanSignalConfig, generate
+from dsp.fixed import shift_right
 from dsp.tacan.frontend import FrontendConfig, run_golden_frontend
+from hdl.model.peak import PeakParams
 from hdl.model.tacan_frontend import (TacanFrontendModel, TacanFrontendParams,
-                                      amp_error_terms)
+                                      _fir_kernel, _round_consts, amp_error_terms)
 from hdl.tacan_frontend import TacanFrontEnd
 
 P = TacanFrontendParams()
@@ -108,6 +110,149 @@ def test_fast_path_equals_block_chain_and_chunking():
             np.testing.assert_array_equal(np.concatenate([getattr(q, f) for q in parts]),
                                           getattr(whole, f))
     assert len(whole) > 20
+
+
+def test_freq_changes_fast_equals_block_chain_and_chunking():
+    """NCO word writes (DSP -> FPGA) at arbitrary samples, also inside a decimation group and
+    across chunk boundaries: the compiled path, the block chain and chunked runs agree, and
+    the writes do change the output."""
+    x = tacan_record(120_003, seed=6)
+    f0 = P.nco_freq_word
+    changes = [(5, f0 + 12345), (4_037, f0 - 99_999), (50_001, f0), (50_002, f0 + 7),
+               (99_998, (1 << P.nco_phase_bits) - 3)]
+    fast, slow = TacanFrontendModel(P), TacanFrontendModel(P, fast=False)
+    whole, _ = fast.run(x, freq_changes=changes)
+    ref, _ = slow.run(x, freq_changes=changes)
+    plain, _ = fast.run(x)
+    for f in ("amplitudes", "timestamps"):
+        np.testing.assert_array_equal(getattr(whole, f), getattr(ref, f))
+    assert not np.array_equal(whole.amplitudes, plain.amplitudes)
+    for m in (fast, slow):
+        st, parts = None, []
+        for chunk in np.array_split(x, [3, 4097, 50_001, 99_999]):
+            pk, st = m.run(chunk, st, freq_changes=changes)
+            parts.append(pk)
+        np.testing.assert_array_equal(np.concatenate([q.amplitudes for q in parts]),
+                                      whole.amplitudes)
+        assert st.freq == changes[-1][1]
+    with pytest.raises(ValueError, match="strictly increasing"):
+        fast.run(x, freq_changes=[(10, f0), (10, f0)])
+    with pytest.raises(ValueError, match="freq words must lie in"):
+        fast.run(x, freq_changes=[(10, -1)])
+
+
+def _variant(cfg_kw, **kw):
+    dec = cfg_kw.get("cic_rate", 4) * cfg_kw.get("fir_decim", 1)
+    return TacanFrontendParams(config=FrontendConfig(**cfg_kw, peak=PeakParams(ts_step=dec)), **kw)
+
+
+#: Structures and roundings for the compiled fast path's general branches (any N, R, M,
+#: FIR decimation, every rounding mode, a left-shifting mixer).
+FAST_VARIANTS = [
+    ({}, {}),
+    ({"cic_stages": 4, "cic_rate": 5, "cic_delay": 2, "fir_numtaps": 21, "fir_decim": 2}, {}),
+    ({"cic_stages": 2, "cic_rate": 2, "fir_numtaps": 15, "fir_decim": 2}, {}),
+    ({}, dict(mixer_rounding="zero", cic_rounding="floor", fir_rounding="half_even",
+              env_rounding="floor")),
+    ({}, dict(mixer_rounding="half_up", cic_rounding="zero", fir_rounding="zero",
+              fir_out_shift_rel=1, fir_out_bits=19, env_out_bits=22)),
+    ({}, dict(mixer_headroom_bits=1, mixer_rounding="floor", mixer_out_bits=18,
+              cic_out_bits=18, fir_out_bits=19)),
+    ({}, dict(adc_bits=8, nco_amp_bits=8)),          # mixer drop_bits < 0: a left shift
+]
+
+
+def _hard_record(p, n, seed):
+    """TACAN IF with wideband junk, both rails and long full-scale runs."""
+    rng = np.random.default_rng(seed)
+    lo = 1 << (p.adc_bits - 1)
+    x = tacan_record(n, seed=seed) >> (12 - p.adc_bits)
+    x[1000:1600] = rng.integers(-lo, lo, 600)
+    x[5000:5400] = lo - 1
+    x[5400:5800] = -lo
+    x[20_000:20_300] = np.where(rng.random(300) < 0.5, lo - 1, -lo)
+    return x
+
+
+@pytest.mark.parametrize("k", range(len(FAST_VARIANTS)))
+def test_fast_path_equals_block_chain_variants(k):
+    """The compiled fast path == the chained block models, whole and in odd chunks (down
+    to fewer samples than a decimation group, so ``pending`` carries them)."""
+    p = _variant(FAST_VARIANTS[k][0], **FAST_VARIANTS[k][1])
+    fast, slow = TacanFrontendModel(p), TacanFrontendModel(p, fast=False)
+    assert fast.fast and not slow.fast
+    x = _hard_record(p, 60_001, seed=20 + k)
+    e_fast, st_fast = fast.envelope(x)
+    e_slow, st_slow = slow.envelope(x)
+    np.testing.assert_array_equal(e_fast, e_slow)
+    assert st_fast.nco == st_slow.nco and st_fast.n_adc == st_slow.n_adc
+    np.testing.assert_array_equal(st_fast.pending, st_slow.pending)
+    st, parts = None, []
+    for chunk in np.array_split(x, [3, 5, 4001, 4002, 33_333, 59_990]):
+        e, st = fast.envelope(chunk, st)
+        parts.append(e)
+    np.testing.assert_array_equal(np.concatenate(parts), e_fast)
+    whole, _ = fast.run(x)
+    ref, _ = slow.run(x)
+    for f in ("amplitudes", "timestamps", "index", "end_index"):
+        np.testing.assert_array_equal(getattr(whole, f), getattr(ref, f))
+
+
+def test_fast_path_across_internal_chunks_and_input_dtypes():
+    """Longer than :attr:`TacanFrontendModel.CHUNK` (the CIC/FIR registers carried between
+    internal chunks), random full-range codes included; int16 input gives the same bits;
+    a state passed in is not modified."""
+    x = _hard_record(P, 3 * TacanFrontendModel.CHUNK // 2 + 7, seed=31)
+    rng = np.random.default_rng(31)
+    x[200_000:260_000] = rng.integers(-2048, 2048, 60_000)
+    fast, slow = TacanFrontendModel(P), TacanFrontendModel(P, fast=False)
+    pk_fast, st_fast = fast.run(x)
+    pk_slow, st_slow = slow.run(x)
+    for f in ("amplitudes", "timestamps", "index", "end_index"):
+        np.testing.assert_array_equal(getattr(pk_fast, f), getattr(pk_slow, f))
+    assert st_fast.peak == st_slow.peak and st_fast.nco == st_slow.nco
+    pk16, _ = fast.run(x.astype(np.int16))
+    np.testing.assert_array_equal(pk16.amplitudes, pk_fast.amplitudes)
+    # the same state twice gives the same continuation
+    _, st = fast.envelope(x[:10_000])
+    e1, _ = fast.envelope(x[10_000:30_000], st)
+    e2, _ = fast.envelope(x[10_000:30_000], st)
+    np.testing.assert_array_equal(e1, e2)
+
+
+def test_fast_path_rejects_out_of_range_codes():
+    m = TacanFrontendModel(P)
+    x = np.zeros(4000, np.int64)
+    x[1234] = 2048
+    with pytest.raises(ValueError, match="ADC codes must be signed 12-bit integers"):
+        m.envelope(x)
+    x[1234] = -2049
+    with pytest.raises(ValueError, match="ADC codes must be signed 12-bit integers"):
+        m.run(x)
+
+
+@pytest.mark.parametrize("L", [1, 2, 3, 4, 7, 32, 33])
+@pytest.mark.parametrize("down", [1, 3])
+def test_fir_kernel_equals_direct_sum(L, down):
+    """The compiled FIR (folded when symmetric, several taps per pass) == the exact integer
+    sum, for odd/even, symmetric and not, with history and every rounding."""
+    rng = np.random.default_rng(L * 10 + down)
+    for sym in (False, True):
+        h = rng.integers(-2 ** 17, 2 ** 17, L)
+        if sym:
+            h = (h + h[::-1]) // 2
+        z = rng.integers(-2 ** 16, 2 ** 16, 3001)
+        hist = rng.integers(-2 ** 16, 2 ** 16, L - 1)
+        buf = np.concatenate([hist, z])
+        full = np.array([int(np.dot(h[::-1], buf[k:k + L])) for k in range(len(z))])
+        full = full[down - 1::down]
+        for rounding in ("floor", "half_up", "half_even", "zero"):
+            hh = hist.copy()
+            out = np.empty(len(z) // down, np.int64)
+            _fir_kernel(z, hh, h.astype(np.float64), bool(np.array_equal(h, h[::-1])), down,
+                        _round_consts(7, rounding), out)
+            np.testing.assert_array_equal(out, shift_right(full, 7, rounding))
+            np.testing.assert_array_equal(hh, buf[len(buf) - (L - 1):])
 
 
 # -- Amaranth simulation == model ------------------------------------------------------------
