@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
 .DEFAULT_GOAL := help
-.PHONY: help setup tools run test test-all bench verilog synth clean
+.PHONY: help setup tools run test test-all bench study verilog synth clean
 
 help:  ## show this help
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -17,7 +17,7 @@ setup: $(STAMP) tools  ## create .venv, install the package and the tools the te
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,synth]"
+	$(PY) -m pip install --quiet -e ".[test,synth,cluster]"
 	touch $(STAMP)
 
 tools:  ## install Verilator when missing (apt-get, as root)
@@ -31,8 +31,8 @@ tools:  ## install Verilator when missing (apt-get, as root)
 	  fi; \
 	fi
 
-run: setup  ## run the default TACAN scenario end to end and print the bearing
-	$(PY) -m cosim tacan
+run: setup  ## default TACAN scenario: HDL front-end model -> FIFO link -> fixed-point DSP, vs golden
+	$(PY) -m cosim tacan --backend model --dsp fixed --compare golden
 
 test: setup  ## run the whole test suite (slow tests excluded: see test-all)
 	$(PY) -m pytest -q -m "not slow"
@@ -40,8 +40,13 @@ test: setup  ## run the whole test suite (slow tests excluded: see test-all)
 test-all: setup  ## run every test, slow ones included
 	$(PY) -m pytest -q
 
-bench: setup  ## run the benchmarks; results go to results/ (shown in README.md)
+bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in README.md)
+	$(PY) -m cosim bench dsp-speed
+	$(PY) -m cosim bench dsp-hour
 	$(PY) -m cosim bench tacan-accuracy
+
+study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 20 trials) -> build/studies/default
+	$(PY) -m cosim sweep tacan --out build/studies/default
 
 verilog: setup  ## export every HDL block and the TACAN top to build/verilog and lint them
 	$(PY) -m cosim verilog --out build/verilog

@@ -219,7 +219,17 @@ def _accuracy_markdown(s: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-BENCHMARKS = {"tacan-accuracy": tacan_accuracy}
+def _dsp_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_dsp import dsp_speed
+    return dsp_speed(out, quick=quick)
+
+
+def _dsp_hour(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_dsp import dsp_hour
+    return dsp_hour(out, quick=quick)
+
+
+BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

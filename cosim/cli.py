@@ -35,27 +35,66 @@ def _add_tacan(sub):
     p.add_argument("--adc-bits", type=int, default=12)
     p.add_argument("--memory-s", type=_finite, default=0.5, help="Kalman filter memory")
     p.add_argument("--settle-s", type=_finite, default=None)
-    p.add_argument("--backend", default="golden")
+    p.add_argument("--backend", default="golden",
+                   help="golden | model | pysim | verilator -- front end: float golden model, bit-exact HDL model, Amaranth "
+                        "simulation (short runs only) or Verilator")
+    p.add_argument("--dsp", default="float", choices=["float", "fixed"],
+                   help="arithmetic of the bearing DSP core")
+    p.add_argument("--compare", choices=["golden"], default=None,
+                   help="also run the golden chain and report vs_golden_rms_deg")
+    p.add_argument("--dsp-service", choices=["default", "dma", "undersized"], default="default",
+                   help="how the DSP reads the FIFO (preset; the --dsp-* options below "
+                        "override its fields): default = 1 ms timer, 256 words; dma; "
+                        "undersized = 64 words per 10 ms, too slow for a beacon")
+    p.add_argument("--dsp-stall", action="append", default=[], metavar="START:STOP",
+                   help="seconds during which the DSP does not read the FIFO (repeatable)")
+    p.add_argument("--dsp-period-cycles", type=int, default=None,
+                   help="DSP FIFO service period (FPGA clock cycles)")
+    p.add_argument("--dsp-latency-cycles", type=int, default=None,
+                   help="interrupt latency before the DSP reads (cycles)")
+    p.add_argument("--dsp-batch-words", type=int, default=None,
+                   help="words the DSP reads per service at most")
+    p.add_argument("--dsp-cycles-per-word", type=int, default=None,
+                   help="FPGA cycles per word read while servicing")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_tacan)
 
 
 def _cmd_tacan(a) -> int:
     from dsp.tacan.kalman import KalmanConfig
+    from .link import DSP_PRESETS, DspServiceConfig
     from .tacan import TacanRunConfig, run_tacan
     from .tacan_signal import TacanSignalConfig
 
     sig = TacanSignalConfig(bearing_deg=a.bearing_deg, snr_db=a.snr_db, duration_s=a.duration_s,
                             seed=a.seed, mode=a.mode, mod_15=a.mod_15, mod_135=a.mod_135,
                             fs_hz=a.fs_hz, if_hz=a.if_hz, adc_bits=a.adc_bits)
-    run = TacanRunConfig(signal=sig, backend=a.backend, kalman=KalmanConfig(memory_s=a.memory_s),
-                         settle_s=a.settle_s)
+    base = DSP_PRESETS[a.dsp_service]
+    svc = {f: getattr(base, f) for f in base.__dataclass_fields__}
+    svc.update({k: v for k, v in (("period_cycles", a.dsp_period_cycles),
+                                  ("latency_cycles", a.dsp_latency_cycles),
+                                  ("batch_words", a.dsp_batch_words),
+                                  ("cycles_per_word", a.dsp_cycles_per_word)) if v is not None})
+    stalls = []
+    for text in a.dsp_stall:
+        try:
+            t0, t1 = (float(v) for v in text.split(":"))
+        except ValueError:
+            raise ValueError(f"--dsp-stall takes START:STOP in seconds, not {text!r}") from None
+        if not (math.isfinite(t0) and math.isfinite(t1) and 0 <= t0 < t1):
+            raise ValueError(f"--dsp-stall needs 0 <= START < STOP, not {text!r}")
+        stalls.append((int(round(t0 * a.fs_hz)), int(round(t1 * a.fs_hz))))
+    svc["stalls"] = tuple(sorted(stalls))
+    run = TacanRunConfig(signal=sig, backend=a.backend, dsp=a.dsp,
+                         kalman=KalmanConfig(memory_s=a.memory_s), settle_s=a.settle_s,
+                         service=DspServiceConfig(**svc), compare=a.compare)
     r = run_tacan(run)
     if a.json:
         print(json.dumps(r))
     else:
         snr = "no noise" if r["snr_db"] is None else f"SNR {r['snr_db']:g} dB"
-        print(f"TACAN {r['mode']} mode, {snr}, {r['duration_s']:g} s, backend {r['backend']}, seed {r['seed']}")
+        print(f"TACAN {r['mode']} mode, {snr}, {r['duration_s']:g} s, front end {r['backend']}, "
+              f"{r['dsp']} DSP, seed {r['seed']}")
         print(f"  bearing: true {r['bearing_true_deg']:.3f} deg, estimated {r['bearing_est_deg']:.3f} deg")
         print(f"  after {r['settle_s']:g} s settling ({r['n_bearings']} bearings): RMSE {r['rmse_deg']:.3f} deg, "
               f"mean error {r['mean_error_deg']:+.3f} deg, max {r['max_abs_error_deg']:.3f} deg")
@@ -64,12 +103,67 @@ def _cmd_tacan(a) -> int:
         print(f"  {r['n_peaks']} peaks, {r['n_measurements']} measurements, {r['n_updates']} Kalman updates, "
               f"{r['n_main_refs']} main + {r['n_aux_refs']} aux references, {r['gated']} gated, "
               f"{r['reinit']} re-initialisations, {r['adc_clipped']} ADC samples clipped")
+        ev = ", ".join(f"{k} {v}" for k, v in r["dsp_events"].items() if v) or "none"
+        print(f"  FIFO: {r['fifo_dropped']} peaks dropped (FPGA counter), "
+              f"{r['fifo_dropped_reported']} reported by gap markers; DSP core events: {ev}")
+        if "vs_golden_rms_deg" in r:
+            print(f"  vs golden chain on the same samples: RMS bearing difference "
+                  f"{r['vs_golden_rms_deg']:.4f} deg over {r['vs_golden_n']} bearings "
+                  f"(golden RMSE {r['golden_rmse_deg']:.3f} deg)")
+    return 0
+
+
+def _add_sweep(sub):
+    p = sub.add_parser("sweep", help="quantisation sweep: word lengths/modes x SNR x trials, "
+                                     "report, word-length proposal and its confirmation")
+    p.add_argument("receiver", choices=["tacan"])
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES",
+                   help="swept parameter, e.g. adc_bits=4:14, nco_amp_bits=8,12,16, dsp.P=30:46:4, "
+                        "dsp.K.rounding=floor,half_up (repeatable; default adc_bits=4:14)")
+    p.add_argument("--snr-db", default="0:20:5", help="SNR values (a:b:step or a list)")
+    p.add_argument("--trials", type=int, default=20)
+    p.add_argument("--duration-s", type=_finite, default=1.0)
+    p.add_argument("--memory-s", type=_finite, default=0.25)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--recheck", type=int, default=2,
+                   help="points re-checked on the cycle-accurate backend")
+    p.add_argument("--recheck-backend", choices=["pysim", "verilator"], default="pysim")
+    p.add_argument("--target", type=_finite, default=0.05,
+                   help="proposal target: RMSE within (1 + target) of the float golden")
+    p.add_argument("--no-confirm", action="store_true", help="skip the confirming re-run")
+    p.add_argument("--out", default="build/studies/sweep")
+    p.add_argument("--jobs", type=int, default=None, help="workers (default: all cores)")
+    p.add_argument("--scheduler", default="local",
+                   help="'local' (process pool), 'dask' (local Dask cluster) or a Dask "
+                        "scheduler address")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_sweep)
+
+
+def _cmd_sweep(a) -> int:
+    from .studies.sweep import SweepConfig, parse_param, parse_values, study
+    params = tuple(parse_param(t) for t in a.param) or SweepConfig().params
+    snrs = tuple(float(v) for v in parse_values(a.snr_db))
+    cfg = SweepConfig(params=params, snr_db=snrs, trials=a.trials, duration_s=a.duration_s,
+                      memory_s=a.memory_s, seed=a.seed, recheck=a.recheck,
+                      recheck_backend=a.recheck_backend, target_rel=a.target)
+    s = study(cfg, a.out, jobs=a.jobs, scheduler=a.scheduler, confirm_proposal=not a.no_confirm)
+    if a.json:
+        print(json.dumps({k: s[k] for k in ("proposal", "elapsed_s", "n_points", "rechecks")} |
+                         {"confirmed": (s.get("confirmation") or {}).get("confirmed"),
+                          "report": f"{a.out}/report.md"}))
+    else:
+        print(f"{s['n_points']} points in {s['elapsed_s']:.0f} s; report: {a.out}/report.md")
+        print(f"proposal: {s['proposal']}")
+        if s.get("confirmation"):
+            print(f"confirmed: {s['confirmation']['confirmed']}")
     return 0
 
 
 def _add_bench(sub):
     p = sub.add_parser("bench", help="run a benchmark and write its results under results/")
-    p.add_argument("name", choices=["tacan-accuracy"])
+    from .bench import BENCHMARKS
+    p.add_argument("name", choices=sorted(BENCHMARKS))
     p.add_argument("--quick", action="store_true", help="reduced sweep (smoke test)")
     p.add_argument("--out", default="results")
     p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
@@ -211,6 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 description="FPGA+DSP co-simulation of Kalman-filter navigation receivers")
     sub = p.add_subparsers(dest="command", required=True)
     _add_tacan(sub)
+    _add_sweep(sub)
     _add_bench(sub)
     _add_hdl(sub)
     return p

@@ -36,6 +36,9 @@ class StreamResult:
         Input words the component accepted.
     probes : dict of str to ndarray
         Per-cycle values of signals asked for with ``probe``.
+    final : dict of str to int
+        Values of the signals asked for with ``final``, after the last clock edge (e.g. a
+        status counter, without recording it every cycle).
     """
 
     words: np.ndarray
@@ -43,6 +46,7 @@ class StreamResult:
     n_cycles: int
     in_accepted: int
     probes: dict = field(default_factory=dict)
+    final: dict = field(default_factory=dict)
 
 
 def unpack_fields(words: np.ndarray, layout: list[tuple[str, int, bool]]) -> dict[str, np.ndarray]:
@@ -103,7 +107,7 @@ def _items(inputs):
 def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=None,
                flush_cycles: int = 64, inputs: dict | list | None = None,
                writes: list | None = None, probe: dict | None = None,
-               clk_hz: float = 20e6, vcd: str | Path | None = None,
+               final: dict | None = None, clk_hz: float = 20e6, vcd: str | Path | None = None,
                vcd_window: tuple[int, int] | None = None) -> StreamResult:
     """Run ``dut`` cycle by cycle in ``amaranth.sim`` and collect its output stream.
 
@@ -127,6 +131,8 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
         Register writes: ``port`` (name or ``Value``) takes ``value`` from ``cycle`` on.
     probe : dict of name -> Value
         Signals to record every cycle (sampled at the clock edge).
+    final : dict of name -> Value or port name
+        Signals to read once, after the last clock edge (``StreamResult.final``).
     vcd : path, optional
         Write a waveform (opt-in; place it under ``build/``). ``vcd_window`` is not
         supported by amaranth's VCD writer and is recorded whole.
@@ -139,6 +145,8 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
                     key=lambda w: w[0])
     inputs = [(resolve_port(dut, p), v) for p, v in _items(inputs)]
     probe = dict(probe or {})
+    final = {k: resolve_port(dut, v) for k, v in (final or {}).items()}
+    final_vals: dict[str, int] = {}
     has_in = in_words is not None
 
     i_payload = Value.cast(dut.i.payload) if has_in else None
@@ -205,6 +213,8 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
                 state["accepted"] += 1
             cyc += 1
         state["cycles"] = cyc
+        for name, sig in final.items():
+            final_vals[name] = int(ctx.get(sig))
 
     sim = Simulator(dut)
     sim.add_clock(1.0 / clk_hz)
@@ -223,4 +233,5 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
         words = np.array(out_words, dtype=object)
     return StreamResult(words=words, cycles=np.array(out_cycles, dtype=np.int64),
                         n_cycles=state["cycles"], in_accepted=state["accepted"],
-                        probes={k: np.array(v, dtype=np.int64) for k, v in probe_vals.items()})
+                        probes={k: np.array(v, dtype=np.int64) for k, v in probe_vals.items()},
+                        final=final_vals)

@@ -1,53 +1,117 @@
-"""End-to-end TACAN scenario: IF signal -> front end (a backend) -> bearing DSP -> scores.
+"""End-to-end TACAN scenario: IF signal -> front end (a backend) -> FIFO link -> bearing DSP.
 
-Backends produce pulse peaks from the ADC samples:
+Front-end backends (what turns ADC samples into pulse peaks):
 
-``golden``  float64 model of the front end (:mod:`dsp.tacan.frontend`).
+``golden``     float64 model of the front end (:mod:`dsp.tacan.frontend`); no FIFO.
+``model``      bit-exact numpy model of the HDL (:class:`hdl.model.tacan_frontend.TacanFrontendModel`)
+               and of its FIFO, read by the DSP service model of :mod:`cosim.link`.
+``pysim``      the Amaranth design in ``amaranth.sim`` (cycle-accurate, ~1k cycles/s: short
+               scenarios only).
+``verilator``  the exported Verilog compiled with Verilator (cycle-accurate, compiled speed).
 
-Later backends (bit-exact model, Amaranth simulation, Verilator) plug in through
-:data:`BACKENDS` with the same contract: ``fn(samples, signal_cfg, frontend_cfg) -> Peaks``.
+The three HDL backends produce the same FIFO words on the same cycles (the tests check it);
+the DSP side is common: it decodes the tagged FIFO words (data / gap markers), unwraps the
+32-bit timestamps, converts amplitudes to its input format and runs the bearing processor
+(:func:`dsp.tacan.receiver.process_peaks`) in float (golden) or fixed point (``dsp``).
+
+``compare="golden"`` also runs the golden chain (golden front end + float DSP) on the same
+samples and reports ``vs_golden_rms_deg``: the RMS difference of the bearings produced at the
+same references after settling.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from dsp.tacan.frontend import FrontendConfig, Peaks, run_golden_frontend
-from dsp.tacan.kalman import KalmanConfig
-from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
+from dsp.tacan.frontend import FrontendConfig, run_golden_frontend
+from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
+                                crb_deg, process_peaks)
+from dsp.tacan.bearing import wrap_deg
+from dsp.tacan.fifo_rx import receive_words
+from .link import ControlPath, DspServiceConfig, run_link
 from .tacan_signal import TacanSignalConfig, generate
 
-
-def _golden(samples, sig: TacanSignalConfig, fe: FrontendConfig) -> Peaks:
-    return run_golden_frontend(samples, fe, sig.adc_bits)
-
-
-BACKENDS = {"golden": _golden}
+BACKENDS = ("golden", "model", "pysim", "verilator")
+DSP_MODES = ("float", "fixed")
 
 
 @dataclass(frozen=True)
 class TacanRunConfig:
-    """A whole run: the scenario, the front end, the DSP and how it is scored."""
+    """A whole run: the scenario, the front end, the link, the DSP and how it is scored.
+
+    Parameters
+    ----------
+    signal : TacanSignalConfig
+    backend : str
+        One of :data:`BACKENDS`.
+    dsp : str
+        ``"float"`` (golden arithmetic) or ``"fixed"`` (the fixed-point core, formats
+        ``fixed``).
+    kalman : KalmanConfig
+        The filter (memory, gate, ...), shared by both arithmetics.
+    fixed : KalmanFixedConfig, optional
+        Word lengths of the fixed-point core (default formats; its ``kalman`` is replaced
+        by ``kalman``).
+    settle_s : float, optional
+        Bearings before this time are not scored (default 2 x the filter memory).
+    frontend_changes : tuple of (name, value)
+        Overrides of :class:`dsp.tacan.frontend.FrontendConfig` (rates, structure).
+    hdl_changes : tuple of (name, value)
+        Overrides of :class:`hdl.model.tacan_frontend.TacanFrontendParams` (word lengths).
+    service : DspServiceConfig
+        How the DSP reads the FIFO (HDL backends).
+    control_writes : tuple of (cycle, register, value)
+        Register writes the DSP issues towards the FPGA (through a :class:`ControlPath`
+        with ``control_latency_cycles``); registers: ``"freq"`` (NCO word).
+    control_latency_cycles : int
+    compare : str, optional
+        ``"golden"``: also run the golden chain and report ``vs_golden_rms_deg``.
+    require_bearing : bool
+        Raise if no bearing is produced after settling (default). Short cycle-accurate
+        runs set it False and compare bits instead.
+    """
 
     signal: TacanSignalConfig = field(default_factory=TacanSignalConfig)
     backend: str = "golden"
+    dsp: str = "float"
     kalman: KalmanConfig = field(default_factory=KalmanConfig)
-    settle_s: float | None = None   # default: 2 x the filter memory
-    frontend_changes: tuple = ()     # (name, value) overrides of FrontendConfig
+    fixed: KalmanFixedConfig | None = None
+    settle_s: float | None = None
+    frontend_changes: tuple = ()
+    hdl_changes: tuple = ()
+    service: DspServiceConfig = field(default_factory=DspServiceConfig)
+    control_writes: tuple = ()
+    control_latency_cycles: int = 0
+    compare: str | None = None
+    require_bearing: bool = True
 
     def __post_init__(self):
         if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {sorted(BACKENDS)}, not {self.backend!r}")
+            raise ValueError(f"backend must be one of {list(BACKENDS)}, not {self.backend!r}")
+        if self.dsp not in DSP_MODES:
+            raise ValueError(f"dsp must be one of {list(DSP_MODES)}, not {self.dsp!r}")
+        if self.compare not in (None, "golden"):
+            raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
+        if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
+            raise ValueError(f"fixed must be a KalmanFixedConfig, not {self.fixed!r}")
+        if not isinstance(self.service, DspServiceConfig):
+            raise ValueError(f"service must be a DspServiceConfig, not {self.service!r}")
         if self.settle_s is not None and not (math.isfinite(self.settle_s) and self.settle_s >= 0):
             raise ValueError(f"settle_s must be >= 0, not {self.settle_s}")
-        if self.settle + 0.1 > self.signal.duration_s:
+        if self.require_bearing and self.settle + 0.1 > self.signal.duration_s:
             raise ValueError(
                 f"duration_s={self.signal.duration_s:g} leaves no time after the filter settles "
                 f"({self.settle:g} s); use a duration of at least {self.settle + 0.5:g} s "
                 f"or a shorter settle time")
+        ControlPath(self.control_latency_cycles)      # validates the latency
+        for w in self.control_writes:
+            if len(w) != 3 or w[1] not in ("freq",):
+                raise ValueError(f"control writes are (cycle, 'freq', value), not {w!r}")
 
     @property
     def settle(self) -> float:
@@ -57,36 +121,190 @@ class TacanRunConfig:
     def frontend(self) -> FrontendConfig:
         return FrontendConfig.for_signal(self.signal, **dict(self.frontend_changes))
 
+    @property
+    def hdl_params(self):
+        from hdl.model.tacan_frontend import TacanFrontendParams
+        return TacanFrontendParams(config=self.frontend, adc_bits=self.signal.adc_bits,
+                                   **dict(self.hdl_changes))
 
-def run_tacan(run: TacanRunConfig) -> dict:
-    """Run one scenario end to end; returns the result record (JSON-serialisable)."""
+    @property
+    def receiver(self) -> ReceiverConfig:
+        if self.dsp == "fixed":
+            base = self.fixed or KalmanFixedConfig()
+            k = KalmanFixedConfig(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
+                                     "kalman": self.kalman})
+        else:
+            k = self.kalman
+        return ReceiverConfig(mode=self.signal.mode, kalman=k)
+
+
+@dataclass
+class FrontendOutput:
+    """What the DSP receives from a front-end backend (one record).
+
+    ticks : int64 unwrapped ADC tick of each peak, golden convention (the tick that
+        completes the envelope sample); amplitude_fs : float amplitudes (FS);
+    amplitude_lsb : envelope LSBs (HDL backends) or None; words/cycles : FIFO words read by
+    the DSP and their read cycles (HDL backends); fifo_dropped : FPGA overflow counter at
+    the end; dropped_reported : sum of the gap markers the DSP read.
+    """
+
+    ticks: np.ndarray
+    amplitude_fs: np.ndarray
+    amplitude_lsb: np.ndarray | None = None
+    words: np.ndarray | None = None
+    cycles: np.ndarray | None = None
+    fifo_dropped: int = 0
+    dropped_reported: int = 0
+    n_cycles: int = 0
+    scale_to_fs: float = 1.0
+    extra: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------------------
+# Front-end backends
+# ---------------------------------------------------------------------------------------
+def _golden(samples, run: TacanRunConfig) -> FrontendOutput:
+    pk = run_golden_frontend(samples, run.frontend, run.signal.adc_bits)
+    return FrontendOutput(ticks=np.asarray(pk.timestamps, np.int64),
+                          amplitude_fs=np.asarray(pk.amplitudes, np.float64))
+
+
+def _n_cycles(samples, params) -> int:
+    """Cycles simulated: every ADC sample plus enough to flush the last peak out."""
+    return int(len(samples) + params.latency + 4 * params.decimation + 64)
+
+
+def _freq_segments(run: TacanRunConfig, params, n_cycles: int):
+    ctl = ControlPath(run.control_latency_cycles, initial={"freq": params.nco_freq_word})
+    for c, reg, v in run.control_writes:
+        ctl.write(int(c), reg, int(v))
+    return ctl
+
+
+def _dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
+    """The DSP side of the link: tagged words -> peaks (unwrapped ticks, amplitudes)."""
+    ts, amp, rx = receive_words(words, width=params.fifo.width, amp_width=params.peak.amp_width,
+                                ts_bits=params.peak.ts_bits)
+    ticks = ts + np.int64(params.decimation - 1)     # golden convention (see peaks_to_fs)
+    return FrontendOutput(ticks=ticks, amplitude_fs=amp * params.scale_to_fs, amplitude_lsb=amp,
+                          words=np.asarray(words, np.int64), cycles=np.asarray(cycles, np.int64),
+                          fifo_dropped=int(ovf_count),
+                          dropped_reported=int(rx.stats["dropped_reported"]),
+                          n_cycles=int(n_cycles), scale_to_fs=params.scale_to_fs,
+                          extra={"rx": dict(rx.stats)})
+
+
+def _model(samples, run: TacanRunConfig) -> FrontendOutput:
+    from hdl.model.tacan_frontend import TacanFrontendModel
+    p = run.hdl_params
+    n_cycles = _n_cycles(samples, p)
+    ctl = _freq_segments(run, p, n_cycles)
+    # The ADC delivers one sample per cycle from reset, so a write taking effect at cycle c
+    # changes the NCO word from ADC sample c on.
+    changes = sorted(dict((c, v) for c, _, v in ctl.writes()).items())   # last write wins
+    m = TacanFrontendModel(p)
+    peaks, _ = m.run(samples, freq_changes=changes or None)
+    res = run_link(m.peak_cycles(peaks), m.words(peaks), n_cycles, p.fifo, run.service)
+    return _dsp_receive(res.words, res.read_cycles, p, n_cycles, res.dropped)
+
+
+def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
+    from hdl.tacan_frontend import TacanFrontEnd
+    p = run.hdl_params
+    n_cycles = _n_cycles(samples, p)
+    ctl = _freq_segments(run, p, n_cycles)
+    ready = run.service.ready_mask(n_cycles)
+    dut = TacanFrontEnd(p)
+    writes = [(c, "freq", v) for c, _, v in ctl.writes()]
+    final = {"overflow_count": "overflow_count"}
+    if kind == "pysim":
+        from .pysim import run_stream
+        res = run_stream(dut, samples, out_ready=ready, n_cycles=n_cycles,
+                         inputs={"freq": p.nco_freq_word}, writes=writes, final=final)
+    else:
+        from .verilator import VerilatorStreamSim
+        sim = VerilatorStreamSim(dut, name="tacan_frontend")
+        res = sim.run(samples, out_ready=ready, n_cycles=n_cycles,
+                      inputs={"freq": p.nco_freq_word}, writes=writes, final=final)
+    return _dsp_receive(res.words, res.cycles, p, n_cycles, res.final["overflow_count"])
+
+
+FRONTENDS = {"golden": _golden, "model": _model,
+             "pysim": lambda s, r: _hdl_sim(s, r, "pysim"),
+             "verilator": lambda s, r: _hdl_sim(s, r, "verilator")}
+
+
+# ---------------------------------------------------------------------------------------
+def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float) -> BearingTrack:
+    """The bearing DSP on a front end's output (float or fixed by ``run.dsp``)."""
+    rc = run.receiver
+    times = fo.ticks / fs_hz
+    if rc.dsp == "fixed" and fo.amplitude_lsb is not None:
+        amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
+    else:
+        amps = fo.amplitude_fs
+    return process_peaks(times, amps, rc, ticks=fo.ticks)
+
+
+def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):
+    """RMS difference (deg) of the bearings of two tracks at the same references."""
+    keep = track.times_s >= settle
+    t, b = track.times_s[keep], track.bearing_deg[0, keep]
+    if t.size == 0 or ref.times_s.size == 0:
+        return math.nan, 0
+    j = np.clip(np.searchsorted(ref.times_s, t), 1, ref.times_s.size - 1)
+    j = np.where(np.abs(ref.times_s[j - 1] - t) < np.abs(ref.times_s[j] - t), j - 1, j)
+    ok = np.abs(ref.times_s[j] - t) <= tol_s
+    if not ok.any():
+        return math.nan, 0
+    d = wrap_deg(b[ok] - ref.bearing_deg[0, j[ok]])
+    return float(np.sqrt(np.mean(d ** 2))), int(ok.sum())
+
+
+def _digest(*arrays) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+def run_tacan(run: TacanRunConfig, signal=None) -> dict:
+    """Run one scenario end to end; returns the result record (JSON-serialisable).
+
+    ``signal`` (a :class:`cosim.tacan_signal.TacanSignal` of ``run.signal``) skips the
+    generation (studies digitise one record with several ADCs).
+    """
     sig = run.signal
     t0 = time.perf_counter()
-    s = generate(sig)
+    if signal is not None and signal.truth.config != sig:
+        raise ValueError("signal was generated for another configuration than run.signal")
+    s = generate(sig) if signal is None else signal
     t1 = time.perf_counter()
-    fe = run.frontend
-    peaks = BACKENDS[run.backend](s.samples, sig, fe)
+    fo = FRONTENDS[run.backend](s.samples, run)
     t2 = time.perf_counter()
-    track = process_peaks(peaks.times_s, peaks.amplitudes,
-                          ReceiverConfig(mode=sig.mode, kalman=run.kalman))
+    track = run_dsp(fo, run, sig.fs_hz)
     t3 = time.perf_counter()
     st = bearing_stats(track, s.truth.bearing_deg, run.settle)
     rel_sigma = sig.matched_filter_rel_sigma()
     crb = crb_deg(rel_sigma, sig.mod_15, sig.mod_135, run.kalman.n_eff)
-    if st["n"] == 0:
+    if st["n"] == 0 and run.require_bearing:
         raise RuntimeError(
             "no bearing was produced after the filter settled: no reference bursts were "
             f"decoded ({track.n_main_refs} main, {track.n_aux_refs} auxiliary from "
             f"{track.n_peaks} peaks); the signal may be too weak or the mode wrong")
-    rmse = float(st["rmse_deg"][0])
-    return {
+    locked = st["n"] > 0
+    rmse = float(st["rmse_deg"][0]) if locked else None
+    events = {k: int(v[0]) for k, v in track.events.items()}
+    r = {
         "bearing_true_deg": s.truth.bearing_deg,
-        "bearing_est_deg": float(st["final_deg"][0]),
+        "bearing_est_deg": float(st["final_deg"][0]) if locked else
+        (float(track.bearing_deg[0, -1]) if track.bearing_deg.shape[1] else None),
         "rmse_deg": rmse,
-        "mean_error_deg": float(st["mean_error_deg"][0]),
-        "max_abs_error_deg": float(st["max_abs_error_deg"][0]),
+        "mean_error_deg": float(st["mean_error_deg"][0]) if locked else None,
+        "max_abs_error_deg": float(st["max_abs_error_deg"][0]) if locked else None,
         "crb_deg": crb,
-        "rmse_over_crb": rmse / crb if crb > 0 else math.inf,
+        "rmse_over_crb": (rmse / crb if crb > 0 else math.inf) if locked else None,
         "crb_window_s": run.kalman.memory_s,
         "n_updates": int(track.n_updates),
         "n_bearings": int(st["n"]),
@@ -98,11 +316,42 @@ def run_tacan(run: TacanRunConfig) -> dict:
         "gated": int(track.gated[0]),
         "reinit": int(track.reinit[0]),
         "adc_clipped": int(s.truth.n_clipped),
+        "fifo_dropped": int(fo.fifo_dropped),
+        "fifo_dropped_reported": int(fo.dropped_reported),
+        "dsp_events": events,
         "backend": run.backend,
+        "dsp": run.dsp,
         "mode": sig.mode,
         "snr_db": sig.snr_db,
         "duration_s": sig.duration_s,
         "seed": sig.seed,
         "settle_s": run.settle,
+        "n_cycles": int(fo.n_cycles),
+        "digest": {"peaks": _digest(fo.ticks, fo.amplitude_fs),
+                   "fifo": _digest(fo.words) if fo.words is not None else None,
+                   "bearings": _digest(track.times_s, track.bearing_deg)},
         "elapsed_s": {"signal": t1 - t0, "frontend": t2 - t1, "dsp": t3 - t2},
     }
+    if run.compare == "golden":
+        t4 = time.perf_counter()
+        gfo = _golden(s.samples, run)
+        gold = run_dsp(gfo, TacanRunConfig(**{**_fields(run), "backend": "golden",
+                                               "dsp": "float", "compare": None}), sig.fs_hz)
+        rms, n = _match_rms(track, gold, run.settle)
+        r["vs_golden_rms_deg"] = rms
+        r["vs_golden_n"] = n
+        gst = bearing_stats(gold, s.truth.bearing_deg, run.settle)
+        r["golden_rmse_deg"] = float(gst["rmse_deg"][0]) if gst["n"] else None
+        r["elapsed_s"]["golden"] = time.perf_counter() - t4
+    return r
+
+
+def _fields(run: TacanRunConfig) -> dict:
+    return {f: getattr(run, f) for f in run.__dataclass_fields__}
+
+
+def frontend_output(run: TacanRunConfig) -> tuple[FrontendOutput, BearingTrack]:
+    """The front end's output and the DSP's track for ``run`` (for tests and studies)."""
+    s = generate(run.signal)
+    fo = FRONTENDS[run.backend](s.samples, run)
+    return fo, run_dsp(fo, run, run.signal.fs_hz)

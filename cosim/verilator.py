@@ -541,7 +541,8 @@ class VerilatorStreamSim:
 
     def run(self, in_words=None, *, in_valid=None, out_ready=None, n_cycles=None,
             flush_cycles: int = 64, inputs: dict | None = None, writes: list | None = None,
-            probe: dict | None = None, trace: str | Path | None = None,
+            probe: dict | None = None, final: dict | None = None,
+            trace: str | Path | None = None,
             trace_window: tuple[int, int] | None = None) -> StreamResult:
         """Run from reset; same arguments and result as :func:`cosim.pysim.run_stream`.
 
@@ -558,6 +559,8 @@ class VerilatorStreamSim:
         probe : dict of name -> port
             Record top-level ports (not internal signals) every cycle, sampled where the
             clock edge sees them, as ``run_stream`` does.
+        final : dict of name -> port
+            Top-level ports read once, after the last clock edge (``StreamResult.final``).
         trace : path, optional
             Write a waveform, FST if the suffix is ``.fst``, else VCD (opt-in; builds a
             separate traced library; put the file under ``build/``). Time unit: half a
@@ -593,6 +596,8 @@ class VerilatorStreamSim:
         probe = dict(probe or {})
         probe_idx = np.array([self.port_index(p) for p in probe.values()], dtype=np.int32)
         n_probe = len(probe_idx)
+        final = {k: self.port_index(v) for k, v in (final or {}).items()}
+        final_vals: dict[str, int] = {}
         if n_cycles is not None and n_cycles < 0:
             raise ValueError(f"n_cycles must be >= 0, not {n_cycles}")
 
@@ -642,6 +647,10 @@ class VerilatorStreamSim:
                 if status == _STATUS_FULL:
                     out_chunks[-1] = (out_chunks[-1][0][:a.n_out], out_chunks[-1][1][:a.n_out])
                     new_out_buffer()
+            for fname, idx in final.items():
+                p = self.ports[idx]
+                final_vals[fname] = int(self._from_u64(
+                    np.array([lib.sim_get(handle, idx)], dtype=np.uint64), p.width, p.signed)[0])
         finally:
             lib.sim_free(handle)
         out_chunks[-1] = (out_chunks[-1][0][:a.n_out], out_chunks[-1][1][:a.n_out])
@@ -658,4 +667,4 @@ class VerilatorStreamSim:
                 probes[pname] = self._from_u64(np.ascontiguousarray(allp[:, j]), p.width,
                                                p.signed).astype(np.int64)
         return StreamResult(words=words, cycles=cycles, n_cycles=int(a.cyc),
-                            in_accepted=int(a.accepted), probes=probes)
+                            in_accepted=int(a.accepted), probes=probes, final=final_vals)

@@ -50,3 +50,28 @@ def test_cli_nan_bearing_is_refused():
     assert p.returncode != 0
     assert "must be a finite number, not nan" in p.stderr
     assert p.stdout == ""
+
+
+def test_cli_hdl_model_fixed_dsp_compare_golden(capsys):
+    """The `make run` command line: bit-exact front end, FIFO, fixed-point DSP, vs golden."""
+    rc = main(["tacan", "--backend", "model", "--dsp", "fixed", "--compare", "golden",
+               "--duration-s", "2", "--dsp-stall", "0.8:0.9", "--json"])
+    assert rc == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["backend"] == "model" and r["dsp"] == "fixed"
+    assert r["fifo_dropped"] > 0 and r["fifo_dropped"] == r["fifo_dropped_reported"]
+    assert set(r["dsp_events"]) >= {"reinit", "gated", "sat_P", "p_neg", "invalid_bearings"}
+    assert 0 <= r["vs_golden_rms_deg"] < 0.05 and r["vs_golden_n"] > 50
+    assert r["rmse_deg"] < 0.3
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--dsp-stall", "0.5"], "--dsp-stall takes START:STOP in seconds"),
+    (["--dsp-stall", "0.5:0.2"], "--dsp-stall needs 0 <= START < STOP"),
+    (["--dsp-batch-words", "0"], "batch_words must be an integer >= 1"),
+    (["--dsp-period-cycles", "100"], "must end before the next timer tick"),
+])
+def test_cli_bad_dsp_service(capsys, args, message):
+    rc = main(["tacan", "--backend", "model", "--json"] + args)
+    cap = capsys.readouterr()
+    assert rc != 0 and message in cap.err and cap.out == ""
