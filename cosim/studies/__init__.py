@@ -1,0 +1,1 @@
+"""Quantisation and bit-error studies (sweeps, word-length proposals, fault injection)."""

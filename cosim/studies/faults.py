@@ -1,0 +1,378 @@
+"""Bit-error studies: flip bits in the ADC samples, the FIFO words, an FPGA register or the
+DSP core's state, and see what the TACAN receiver does.
+
+Targets and what ``ber`` means for each
+--------------------------------------
+``adc``        each bit of each ADC sample flips with probability ``ber`` (two's complement
+               codes, ``adc_bits`` wide), before the front end (bit-exact model).
+``fifo``       each bit of each FIFO word read by the DSP (payload and tag) flips with
+               probability ``ber``; the DSP's receiver (:mod:`dsp.tacan.fifo_rx`) rejects
+               implausible timestamps and reserved tags.
+``register``   the NCO frequency register: in each scrub period (the DSP rewrites its
+               configuration registers every ``scrub_period_s``) each bit flips with
+               probability ``ber`` at a random cycle, and stays wrong until the next scrub.
+               Run cycle-accurately (Verilator, or pysim for tiny runs) or on the model.
+``dsp-state``  each bit of the fixed-point Kalman state ``x`` and covariance ``P`` words
+               flips with probability ``ber`` per filter update (applied between blocks of
+               pulses).
+
+``bits`` restricts the flips to chosen bit positions (e.g. the MSBs).
+
+Reported per (target, BER): bearing RMSE and worst error after settling, NaN bearings (must
+be 0), exceptions (must be 0), flips injected, the receiver's events (gated, re-initialised,
+rejected timestamps, ...), the share of disturbed bearings (error > ``disturbed_deg``) and
+the longest disturbance (s): the recovery time.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+import traceback
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+TARGETS = ("adc", "fifo", "register", "dsp-state")
+
+
+def parse_ber(spec: str) -> tuple[float, ...]:
+    """``"1e-6:1e-3"`` -> decades 1e-6, 1e-5, 1e-4, 1e-3; or a comma list."""
+    spec = spec.strip()
+    if ":" in spec:
+        parts = spec.split(":")
+        if len(parts) != 2:
+            raise ValueError(f"BER range must be lo:hi (decades), not {spec!r}")
+        lo, hi = float(parts[0]), float(parts[1])
+        if not (0 < lo <= hi < 1):
+            raise ValueError(f"BER range must satisfy 0 < lo <= hi < 1, not {spec!r}")
+        n = int(round(math.log10(hi / lo)))
+        return tuple(float(f"{lo * 10 ** k:.3g}") for k in range(n + 1))
+    vals = tuple(float(p) for p in spec.split(","))
+    if not all(0 <= v < 1 for v in vals):
+        raise ValueError(f"BER values must lie in [0, 1), not {spec!r}")
+    return vals
+
+
+def flip_bits(words, width: int, ber: float, rng, bits=None):
+    """Flip each bit (of ``bits``, default all ``width``) of each word with probability ``ber``.
+
+    Returns ``(new_words, word_index_of_each_flip, bit_of_each_flip)``; words are taken as
+    unsigned ``width``-bit patterns of int64 values (callers handle signedness).
+    """
+    w = np.asarray(words, dtype=np.int64).copy()
+    if not 0 <= ber < 1:
+        raise ValueError(f"ber must lie in [0, 1), not {ber}")
+    pos = np.arange(width) if bits is None else np.asarray(bits, dtype=np.int64)
+    if pos.size == 0 or (pos < 0).any() or (pos >= width).any():
+        raise ValueError(f"bit positions must lie in 0..{width - 1}, not {bits!r}")
+    total = w.size * pos.size
+    n = int(rng.binomial(total, ber)) if total and ber > 0 else 0
+    if n == 0:
+        return w, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    flat = np.unique(rng.integers(0, total, n))
+    wi, bi = flat // pos.size, pos[flat % pos.size]
+    np.bitwise_xor.at(w, wi, np.int64(1) << bi)
+    return w, wi, bi
+
+
+def _flip_signed(codes, width, ber, rng, bits=None):
+    """Flips in two's complement codes of ``width`` bits."""
+    c = np.asarray(codes).astype(np.int64)
+    m = (np.int64(1) << width) - 1
+    u, wi, bi = flip_bits(c & m, width, ber, rng, bits)
+    s = np.where(u >= (np.int64(1) << (width - 1)), u - (np.int64(1) << width), u)
+    return s.astype(np.asarray(codes).dtype), wi, bi
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """One fault study (see the module doc)."""
+
+    target: str = "adc"
+    ber: tuple = (1e-6, 1e-5, 1e-4, 1e-3)
+    bits: tuple | None = None
+    snr_db: float = 10.0
+    trials: int = 3
+    duration_s: float = 2.0
+    memory_s: float = 0.5
+    seed: int = 0
+    backend: str = "model"
+    scrub_period_s: float = 0.01
+    disturbed_deg: float = 1.0
+
+    def __post_init__(self):
+        if self.target not in TARGETS:
+            raise ValueError(f"target must be one of {list(TARGETS)}, not {self.target!r}")
+        if not self.ber or not all(0 <= b < 1 for b in self.ber):
+            raise ValueError(f"ber values must lie in [0, 1), not {self.ber!r}")
+        if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
+            raise ValueError(f"trials must be an integer >= 1, not {self.trials!r}")
+        if not (math.isfinite(self.duration_s) and self.duration_s > 2 * self.memory_s + 0.1):
+            raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s, not {self.duration_s}")
+        if self.backend not in ("model", "pysim", "verilator"):
+            raise ValueError(f"backend must be model, pysim or verilator, not {self.backend!r}")
+        if self.target != "register" and self.backend != "model":
+            raise ValueError("only the register target runs on a cycle-accurate backend; the "
+                             "others use the bit-exact model")
+        if not (math.isfinite(self.scrub_period_s) and self.scrub_period_s > 0):
+            raise ValueError(f"scrub_period_s must be > 0, not {self.scrub_period_s}")
+
+
+def _run_cfg(fc: FaultConfig, trial: int):
+    from dsp.tacan.kalman import KalmanConfig
+    from cosim.tacan import TacanRunConfig
+    from cosim.tacan_signal import TacanSignalConfig
+    rng = np.random.default_rng([fc.seed, trial, 31337])
+    sig = TacanSignalConfig(snr_db=fc.snr_db, duration_s=fc.duration_s,
+                            seed=int(rng.integers(1 << 31)),
+                            bearing_deg=float(np.round(rng.uniform(0, 360), 3)))
+    return TacanRunConfig(signal=sig, backend="model", dsp="fixed",
+                          kalman=KalmanConfig(memory_s=fc.memory_s), require_bearing=False)
+
+
+def _score(fc: FaultConfig, run, track, truth_deg) -> dict:
+    from dsp.tacan.bearing import wrap_deg
+    keep = track.times_s >= run.settle
+    b = track.bearing_deg[0, keep]
+    t = track.times_s[keep]
+    nan = int(np.count_nonzero(~np.isfinite(b)))
+    err = wrap_deg(b - truth_deg)
+    dist = np.abs(err) > fc.disturbed_deg
+    longest = 0.0
+    if dist.any():
+        # contiguous disturbed stretches: from the last good bearing before to the first after
+        idx = np.flatnonzero(dist)
+        starts = idx[np.r_[True, np.diff(idx) > 1]]
+        ends = idx[np.r_[np.diff(idx) > 1, True]]
+        for s, e in zip(starts, ends):
+            t0 = t[s - 1] if s > 0 else run.settle
+            t1 = t[e + 1] if e + 1 < t.size else t[e]
+            longest = max(longest, float(t1 - t0))
+    ev = {k: int(v[0]) for k, v in track.events.items()}
+    return {"n_bearings": int(b.size), "nan_bearings": nan,
+            "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if b.size else None,
+            "max_abs_error_deg": float(np.abs(err).max()) if b.size else None,
+            "disturbed_fraction": float(dist.mean()) if b.size else None,
+            "longest_disturbance_s": longest, "events": ev}
+
+
+def _one(fc: FaultConfig, ber: float, trial: int, cache: dict) -> dict:
+    from cosim.tacan import FRONTENDS, _dsp_receive, run_dsp
+    from cosim.tacan_signal import TacanSignal, generate
+    run = _run_cfg(fc, trial)
+    rng = np.random.default_rng([fc.seed, trial, int(round(ber * 1e12)), 99])
+    key = ("sig", trial)
+    if key not in cache:
+        cache[key] = generate(run.signal)
+    s = cache[key]
+    truth = s.truth.bearing_deg
+    rec = {"target": fc.target, "ber": ber, "trial": trial, "bearing_deg": truth,
+           "flips": 0, "exception": None}
+    try:
+        p = run.hdl_params
+        if fc.target == "adc":
+            x, wi, _ = _flip_signed(s.samples, run.signal.adc_bits, ber, rng, fc.bits)
+            rec["flips"] = int(wi.size)
+            fo = FRONTENDS["model"](x, run)
+            track = run_dsp(fo, run, run.signal.fs_hz)
+        elif fc.target == "fifo":
+            fkey = ("fo", trial)
+            if fkey not in cache:
+                cache[fkey] = FRONTENDS["model"](s.samples, run)
+            fo0 = cache[fkey]
+            w, wi, _ = flip_bits(fo0.words, p.fifo.word_width, ber, rng, fc.bits)
+            rec["flips"] = int(wi.size)
+            fo = _dsp_receive(w, fo0.cycles, p, fo0.n_cycles, fo0.fifo_dropped)
+            rec["rx"] = fo.extra.get("rx")
+            track = run_dsp(fo, run, run.signal.fs_hz)
+        elif fc.target == "register":
+            track, rec["flips"] = _register_run(fc, run, s, p, ber, rng)
+        else:
+            track, rec["flips"] = _dsp_state_run(fc, run, s, ber, rng, cache, trial)
+        rec.update(_score(fc, run, track, truth))
+    except Exception as e:   # the study's point: report, never crash
+        rec["exception"] = f"{type(e).__name__}: {e}"
+        rec["traceback"] = traceback.format_exc(limit=5)
+    return rec
+
+
+def _register_run(fc: FaultConfig, run, s, p, ber, rng):
+    """NCO frequency register upsets, scrubbed by the DSP every ``scrub_period_s``."""
+    from cosim.tacan import FRONTENDS, run_dsp
+    n = len(s.samples)
+    period = max(1, int(round(fc.scrub_period_s * run.signal.fs_hz)))
+    good = p.nco_freq_word
+    writes, flips = [], 0
+    for k0 in range(0, n, period):
+        _, wi, bi = flip_bits(np.array([good]), p.nco_phase_bits, ber, rng, fc.bits)
+        if bi.size == 0:
+            continue
+        flips += int(bi.size)
+        bad = good
+        for b in bi:
+            bad ^= 1 << int(b)
+        c = k0 + int(rng.integers(0, period))
+        writes.append((c, "freq", bad))
+        if k0 + period < n:
+            writes.append((k0 + period, "freq", good))      # the scrub restores it
+    r = replace(run, control_writes=tuple(writes), control_latency_cycles=0,
+                backend=fc.backend)
+    fo = FRONTENDS[fc.backend](s.samples, r)
+    return run_dsp(fo, r, run.signal.fs_hz), flips
+
+
+def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
+    """Flip bits of the Kalman integer state between blocks of pulses (streaming receiver)."""
+    from cosim.tacan import FRONTENDS
+    from dsp.tacan.receiver import amplitude_codes, process_peaks
+    fkey = ("fo", trial)
+    if fkey not in cache:
+        cache[fkey] = FRONTENDS["model"](s.samples, run)
+    fo = cache[fkey]
+    rc = run.receiver
+    y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
+    fs = run.signal.fs_hz
+    fx = rc.kalman
+    n_bits_x, n_bits_p = fx.x.width, fx.P.width
+    state_bits = 5 * n_bits_x + 25 * n_bits_p
+    n_pulses = fo.ticks.size
+    n_flips = int(rng.binomial(n_pulses * state_bits, ber)) if ber > 0 else 0
+    at = np.sort(rng.integers(1, max(n_pulses, 2), n_flips))
+    cuts = np.unique(np.r_[0, at, n_pulses])
+    st, parts = None, []
+    flips = 0
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if st is not None:
+            for _ in range(int(np.count_nonzero(at == a))):
+                flips += 1
+                j = int(rng.integers(state_bits))
+                if j < 5 * n_bits_x:
+                    arr, idx, w, f = st.kf.x[0], j // n_bits_x, n_bits_x, j % n_bits_x
+                    flat = arr
+                else:
+                    j -= 5 * n_bits_x
+                    arr, idx, w, f = st.kf.P[0], j // n_bits_p, n_bits_p, j % n_bits_p
+                    flat = arr.reshape(-1)
+                m = (np.int64(1) << w) - 1
+                u = (int(flat[idx]) & int(m)) ^ (1 << f)
+                flat[idx] = u - (1 << w) if u >= (1 << (w - 1)) else u
+        tr = process_peaks(fo.ticks[a:b] / fs, y[a:b], rc, ticks=fo.ticks[a:b], state=st)
+        st = tr.state
+        parts.append(tr)
+    from dsp.tacan.receiver import BearingTrack
+    last = parts[-1]
+    track = BearingTrack(
+        times_s=np.concatenate([q.times_s for q in parts]),
+        ref_kinds=np.concatenate([q.ref_kinds for q in parts]),
+        bearing_deg=np.concatenate([q.bearing_deg for q in parts], axis=1),
+        coarse_deg=np.concatenate([q.coarse_deg for q in parts], axis=1),
+        n_updates=last.n_updates, n_peaks=sum(q.n_peaks for q in parts),
+        n_measurements=sum(q.n_measurements for q in parts),
+        n_main_refs=sum(q.n_main_refs for q in parts), n_aux_refs=sum(q.n_aux_refs for q in parts),
+        n_refs_off_grid=sum(q.n_refs_off_grid for q in parts), gated=last.gated,
+        reinit=last.reinit, r_est=last.r_est, events=last.events, state=st)
+    return track, flips
+
+
+def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = True) -> dict:
+    """Run the study (BER 0 baseline included) and write the report under ``out``."""
+    from tqdm import tqdm
+    import sys
+    t0 = time.perf_counter()
+    bers = tuple(sorted(set((0.0,) + tuple(fc.ber))))
+    cache: dict = {}
+    recs = []
+    items = [(ber, tr) for tr in range(fc.trials) for ber in bers]
+    for ber, tr in tqdm(items, desc=f"faults ({fc.target})", file=sys.stderr, disable=not progress):
+        recs.append(_one(fc, ber, tr, cache))
+        if len(cache) > 4:          # keep memory bounded (signals are large)
+            for k in [k for k in cache if k[1] != tr]:
+                del cache[k]
+    rows = []
+    for ber in bers:
+        rs = [r for r in recs if r["ber"] == ber]
+        ok = [r for r in rs if r["exception"] is None and r.get("rmse_deg") is not None]
+        ev: dict = {}
+        for r in ok:
+            for k, v in r["events"].items():
+                ev[k] = ev.get(k, 0) + v
+        rx: dict = {}
+        for r in ok:
+            for k, v in (r.get("rx") or {}).items():
+                rx[k] = rx.get(k, 0) + v
+        rows.append({
+            "ber": ber, "trials": len(rs), "exceptions": sum(r["exception"] is not None for r in rs),
+            "nan_bearings": int(sum(r.get("nan_bearings", 0) for r in rs)),
+            "flips": int(sum(r["flips"] for r in rs)),
+            "rmse_deg": float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in ok]))) if ok else None,
+            "max_abs_error_deg": max((r["max_abs_error_deg"] for r in ok), default=None),
+            "disturbed_fraction": float(np.mean([r["disturbed_fraction"] for r in ok])) if ok else None,
+            "longest_disturbance_s": max((r["longest_disturbance_s"] for r in ok), default=None),
+            "reinit": ev.get("reinit", 0), "gated": ev.get("gated", 0), "p_neg": ev.get("p_neg", 0),
+            "saturations": sum(v for k, v in ev.items() if k.startswith("sat_")),
+            "rx": rx})
+    from cosim.bench import machine_info
+    summary = {"study": "faults", "machine": machine_info(), "config": asdict(fc),
+               "elapsed_s": time.perf_counter() - t0, "rows": rows,
+               "records": [{k: v for k, v in r.items() if k != "traceback"} for r in recs]}
+    if out is not None:
+        _write(fc, summary, Path(out))
+    return summary
+
+
+def _write(fc: FaultConfig, s: dict, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    stem = f"faults_{fc.target}"
+    (out / f"{stem}.json").write_text(json.dumps(s, indent=1, default=str))
+    keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
+            "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s", "reinit",
+            "gated", "p_neg", "saturations"]
+    with open(out / f"{stem}.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(s["rows"])
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    rows = [r for r in s["rows"] if r["ber"] > 0 and r["rmse_deg"] is not None]
+    base = next((r for r in s["rows"] if r["ber"] == 0), None)
+    if rows:
+        ax.loglog([r["ber"] for r in rows], [r["rmse_deg"] for r in rows], "o-", label="RMSE")
+        ax.loglog([r["ber"] for r in rows], [r["max_abs_error_deg"] for r in rows], "s--",
+                  label="worst error")
+    if base and base["rmse_deg"]:
+        ax.axhline(base["rmse_deg"], color="k", ls=":", label="no bit errors (RMSE)")
+    ax.set_xlabel(f"bit error rate ({fc.target})")
+    ax.set_ylabel("bearing error (deg)")
+    ax.set_title(f"TACAN bearing vs bit errors in {fc.target} (SNR {fc.snr_db:g} dB)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / f"{stem}.png", dpi=110)
+    plt.close(fig)
+    m = s["machine"]
+    f_ = lambda v, fmt: "-" if v is None else format(v, fmt)
+    lines = [f"# Bit errors in {fc.target}", "",
+             f"`{m['command']}`, {m['date']}, {m['cpu']}, commit {m['commit']}, "
+             f"{s['elapsed_s']:.0f} s. SNR {fc.snr_db:g} dB, {fc.trials} trials of "
+             f"{fc.duration_s:g} s, fixed-point DSP, backend {fc.backend}"
+             + (f", bits {list(fc.bits)}" if fc.bits else "") + ".", "",
+             f"![{stem}.png]({stem}.png)", "",
+             "| BER | flips | exceptions | NaN bearings | RMSE deg | worst deg | disturbed | "
+             "longest disturbance s | re-inits | gated | saturations |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in s["rows"]:
+        lines.append(f"| {r['ber']:g} | {r['flips']} | {r['exceptions']} | {r['nan_bearings']} | "
+                     f"{f_(r['rmse_deg'], '.4f')} | {f_(r['max_abs_error_deg'], '.3f')} | "
+                     f"{f_(r['disturbed_fraction'], '.2%')} | "
+                     f"{f_(r['longest_disturbance_s'], '.3f')} | {r['reinit']} | {r['gated']} | "
+                     f"{r['saturations']} |")
+    if any(r["rx"] for r in s["rows"]):
+        lines += ["", "DSP receiver (FIFO words): " + "; ".join(
+            f"BER {r['ber']:g}: " + ", ".join(f"{k} {v}" for k, v in r["rx"].items() if v)
+            for r in s["rows"] if r["rx"])]
+    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")

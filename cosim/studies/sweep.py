@@ -1,0 +1,671 @@
+"""Quantisation sweeps: word lengths and modes x SNR x Monte Carlo trials, with a report.
+
+A sweep crosses any word-length or mode parameter of the HDL front end and of the DSP core
+with SNR and trials, runs every point on the bit-exact fast path (the front end's numpy
+model, the FIFO/link model and the fixed-point DSP core), scores it against the float golden
+chain run on the *same* record (paired comparison: the trial-to-trial noise cancels in the
+ratio), and writes CSV/JSON of every point, plots, and a Markdown report with the range and
+saturation log and a word-length proposal.
+
+Parameters (``--param NAME=VALUES``)
+-----------------------------------
+``adc_bits``              ADC word length (the signal is digitised once per record for every
+                          value, :func:`cosim.tacan_signal.generate_adc_variants`).
+``<field>``               any field of :class:`hdl.model.tacan_frontend.TacanFrontendParams`
+                          (``nco_amp_bits``, ``mixer_out_bits``, ``cic_out_bits``,
+                          ``fir_coef_bits``, ``fir_out_bits``, ``env_iterations``,
+                          ``mixer_rounding``, ...).
+``dsp.<fmt>``             total width of a format of the fixed-point core (``y``, ``x``, ``P``,
+                          ``K``, ``cs``, ``innov``, ``r``), integer bits kept: fraction bits
+                          change.
+``dsp.<fmt>.rounding``    rounding of that format (``floor`` / ``half_up``).
+``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
+
+Values: ``a:b`` (integers a..b), ``a:b:s`` (a, a+s, ... <= b), or a comma list.
+
+Execution: tasks are (SNR, trial) records -- one signal generation, the golden chain once,
+then every parameter combination -- run on a local process pool (default: all cores) or a
+Dask cluster (``scheduler="dask"`` starts a local one, or give a scheduler address). Every
+point is cached as ``points/<key>.json`` under the output directory, so an interrupted sweep
+resumes where it stopped; the key hashes everything that defines the point.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+GOLDEN_ADC_BITS = 16
+FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
+
+
+# ---------------------------------------------------------------------------------------
+# Parameter specifications
+# ---------------------------------------------------------------------------------------
+def parse_values(spec: str) -> tuple:
+    """``"4:14"`` -> 4..14, ``"0:20:5"`` -> 0, 5, ..., 20, ``"8,12,16"`` or ``"floor,half_up"``
+    -> the list (numbers where they parse)."""
+    spec = spec.strip()
+    if not spec:
+        raise ValueError("empty value list")
+    if ":" in spec:
+        parts = spec.split(":")
+        if len(parts) not in (2, 3):
+            raise ValueError(f"range must be a:b or a:b:step, not {spec!r}")
+        try:
+            nums = [float(p) for p in parts]
+        except ValueError:
+            raise ValueError(f"range bounds must be numbers, not {spec!r}") from None
+        a, b = nums[0], nums[1]
+        st = nums[2] if len(nums) == 3 else 1.0
+        if not all(math.isfinite(v) for v in nums) or st <= 0 or b < a:
+            raise ValueError(f"range {spec!r} must have finite a <= b and step > 0")
+        n = int(math.floor((b - a) / st + 1e-9)) + 1
+        vals = [a + i * st for i in range(n)]
+        if all(float(v).is_integer() for v in nums):
+            return tuple(int(round(v)) for v in vals)
+        return tuple(round(v, 12) for v in vals)
+    out = []
+    for p in spec.split(","):
+        p = p.strip()
+        if not p:
+            raise ValueError(f"empty item in {spec!r}")
+        try:
+            v = float(p)
+            out.append(int(v) if v.is_integer() and "." not in p else v)
+        except ValueError:
+            out.append(p)
+    return tuple(out)
+
+
+def parse_param(text: str) -> tuple[str, tuple]:
+    """``"NAME=VALUES"`` -> ``(NAME, values)`` (name checked by :func:`check_param`)."""
+    if "=" not in text:
+        raise ValueError(f"--param must be NAME=VALUES, not {text!r}")
+    name, spec = text.split("=", 1)
+    name = name.strip()
+    check_param(name)
+    return name, parse_values(spec)
+
+
+def check_param(name: str) -> None:
+    from dsp.tacan.kalman import KalmanConfig
+    from hdl.model.tacan_frontend import TacanFrontendParams
+    hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
+    if name == "adc_bits" or name in hdl_fields:
+        return
+    parts = name.split(".")
+    if parts[0] == "dsp" and len(parts) in (2, 3) and parts[1] in FORMATS and \
+            (len(parts) == 2 or parts[2] == "rounding"):
+        return
+    if parts[0] == "kalman" and len(parts) == 2 and parts[1] in {f.name for f in fields(KalmanConfig)}:
+        return
+    raise ValueError(
+        f"unknown parameter {name!r}: use adc_bits, a TacanFrontendParams field "
+        f"({', '.join(sorted(hdl_fields))}), dsp.<fmt>[.rounding] with fmt in {FORMATS}, "
+        f"or kalman.<field>")
+
+
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SweepConfig:
+    """One sweep (see the module doc).
+
+    Parameters
+    ----------
+    params : tuple of (name, values)
+        Swept parameters (crossed). Default: ``adc_bits`` 4..14.
+    snr_db : tuple of float
+    trials : int
+        Monte Carlo records per SNR (independent seeds; bearing drawn per trial).
+    duration_s, memory_s : float
+        Record length and the Kalman filter memory (bearings after ``2 memory_s`` count).
+    seed : int
+        Base seed: the same sweep gives the same bits.
+    recheck : int
+        Points re-run on the cycle-accurate backend (``recheck_backend``) over the first
+        ``recheck_samples`` ADC samples, comparing FIFO words with the model.
+    target_rel : float
+        Word-length proposal: RMSE within ``(1 + target_rel)`` of the float golden.
+    """
+
+    receiver: str = "tacan"
+    params: tuple = (("adc_bits", tuple(range(4, 15))),)
+    snr_db: tuple = (0.0, 5.0, 10.0, 15.0, 20.0)
+    trials: int = 20
+    duration_s: float = 1.0
+    memory_s: float = 0.25
+    seed: int = 0
+    recheck: int = 2
+    recheck_backend: str = "pysim"
+    recheck_samples: int = 4000
+    target_rel: float = 0.05
+
+    def __post_init__(self):
+        if self.receiver != "tacan":
+            raise ValueError(f"receiver must be 'tacan' (the others come later), not {self.receiver!r}")
+        names = [n for n, _ in self.params]
+        if len(set(names)) != len(names):
+            raise ValueError(f"parameter given twice: {names}")
+        for n, vals in self.params:
+            check_param(n)
+            if not vals:
+                raise ValueError(f"parameter {n} has no values")
+        if not self.snr_db or not all(isinstance(s, (int, float)) and math.isfinite(s)
+                                      for s in self.snr_db):
+            raise ValueError(f"snr_db must be finite numbers, not {self.snr_db!r}")
+        if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
+            raise ValueError(f"trials must be an integer >= 1, not {self.trials!r}")
+        if not (math.isfinite(self.memory_s) and self.memory_s > 0):
+            raise ValueError(f"memory_s must be > 0, not {self.memory_s}")
+        if not (math.isfinite(self.duration_s) and self.duration_s > 2 * self.memory_s + 0.1):
+            raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s "
+                             f"({2 * self.memory_s + 0.1:g} s), not {self.duration_s}")
+        if self.recheck_backend not in ("pysim", "verilator"):
+            raise ValueError(f"recheck_backend must be 'pysim' or 'verilator', not "
+                             f"{self.recheck_backend!r}")
+        if not (0 < self.target_rel < 10):
+            raise ValueError(f"target_rel must be in (0, 10), not {self.target_rel}")
+
+    @property
+    def combos(self) -> list[tuple]:
+        names = [n for n, _ in self.params]
+        return [tuple(zip(names, vals)) for vals in itertools.product(*(v for _, v in self.params))]
+
+    @property
+    def n_points(self) -> int:
+        return len(self.combos) * len(self.snr_db) * self.trials
+
+
+# ---------------------------------------------------------------------------------------
+# One point
+# ---------------------------------------------------------------------------------------
+def trial_signal(cfg: SweepConfig, snr_db: float, trial: int, adc_bits: int = 12):
+    from cosim.tacan_signal import TacanSignalConfig
+    rng = np.random.default_rng([cfg.seed, trial, 7919])
+    bearing = float(np.round(rng.uniform(0, 360), 3))
+    seed = int(np.random.default_rng([cfg.seed, trial, int(round(snr_db * 1000))]).integers(1 << 31))
+    return TacanSignalConfig(snr_db=float(snr_db), duration_s=cfg.duration_s, seed=seed,
+                             bearing_deg=bearing, adc_bits=adc_bits)
+
+
+def run_config(cfg: SweepConfig, combo: tuple, sig):
+    """The :class:`cosim.tacan.TacanRunConfig` of a point (raises ValueError if invalid)."""
+    from dsp.fixed import FixedFormat
+    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+    from cosim.tacan import TacanRunConfig
+    hdl, kal, fmts = {}, {"memory_s": cfg.memory_s}, {}
+    base = KalmanFixedConfig()
+    for name, v in combo:
+        if name == "adc_bits":
+            sig = replace(sig, adc_bits=int(v))
+        elif name.startswith("dsp."):
+            parts = name.split(".")
+            f = fmts.get(parts[1], getattr(base, parts[1]))
+            if len(parts) == 2:
+                w = int(v)
+                f = FixedFormat(w, f.frac + (w - f.width), f.signed, f.rounding, f.overflow)
+            else:
+                f = FixedFormat(f.width, f.frac, f.signed, str(v), f.overflow)
+            fmts[parts[1]] = f
+        elif name.startswith("kalman."):
+            kal[name.split(".")[1]] = v
+        else:
+            hdl[name] = v
+    kalman = KalmanConfig(**kal)
+    fixed = KalmanFixedConfig(kalman=kalman, **fmts)
+    run = TacanRunConfig(signal=sig, backend="model", dsp="fixed", kalman=kalman, fixed=fixed,
+                         hdl_changes=tuple(sorted(hdl.items())))
+    run.hdl_params  # validates the word lengths (headroom, widths)
+    return run
+
+
+def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:
+    d = {"receiver": cfg.receiver, "combo": [list(c) for c in combo], "snr_db": float(snr_db),
+         "trial": trial, "duration_s": cfg.duration_s, "memory_s": cfg.memory_s,
+         "seed": cfg.seed, "version": 1}
+    return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def _score(r: dict) -> dict:
+    keep = ("rmse_deg", "mean_error_deg", "max_abs_error_deg", "crb_deg", "n_bearings",
+            "gated", "reinit", "adc_clipped", "fifo_dropped", "dsp_events", "ranges", "digest")
+    return {k: r.get(k) for k in keep}
+
+
+def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_dir: str | None,
+             recheck_combos: tuple = ()) -> list[dict]:
+    """All points of one record (SNR, trial): signal generation once, golden once."""
+    from cosim.tacan import TacanRunConfig, run_tacan
+    from cosim.tacan_signal import generate_adc_variants
+    cache = Path(cache_dir) if cache_dir else None
+    out, todo = [], []
+    for combo in combos:
+        key = point_key(cfg, combo, snr_db, trial)
+        f = cache / f"{key}.json" if cache else None
+        if f is not None and f.exists():
+            out.append(json.loads(f.read_text()))
+        else:
+            todo.append((combo, key, f))
+    gkey = point_key(cfg, (("golden", 1),), snr_db, trial)
+    gfile = cache / f"{gkey}.json" if cache else None
+    golden = json.loads(gfile.read_text()) if gfile is not None and gfile.exists() else None
+    if not todo and golden is not None:
+        return out + [golden]
+    sig = trial_signal(cfg, snr_db, trial)
+    bits = sorted({int(dict(c).get("adc_bits", sig.adc_bits)) for c, _, _ in todo} |
+                  {GOLDEN_ADC_BITS})
+    signals = generate_adc_variants(sig, bits)
+    base = {"snr_db": float(snr_db), "trial": trial, "bearing_deg": sig.bearing_deg}
+    if golden is None:
+        from dsp.tacan.kalman import KalmanConfig
+        gs = signals[GOLDEN_ADC_BITS]
+        grun = TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
+                              kalman=KalmanConfig(memory_s=cfg.memory_s), require_bearing=False)
+        golden = {**base, "combo": [["golden", 1]], "kind": "golden", "locked": False}
+        try:
+            g = run_tacan(grun, gs)
+            golden.update(_score(g), locked=g["n_bearings"] > 0)
+        except (ValueError, RuntimeError) as e:
+            golden["error"] = str(e)
+        if gfile is not None:
+            gfile.write_text(json.dumps(golden))
+    for combo, key, f in todo:
+        rec = {**base, "combo": [list(c) for c in combo], "kind": "point", "locked": False,
+               "key": key}
+        try:
+            run = run_config(cfg, combo, sig)
+            run = replace(run, require_bearing=False)
+            s = signals[run.signal.adc_bits]
+            r = run_tacan(run, s)
+            rec.update(_score(r), locked=r["n_bearings"] > 0)
+            if tuple(combo) in recheck_combos:
+                rec["recheck"] = recheck_point(cfg, run, s)
+        except ValueError as e:
+            rec["error"] = f"invalid: {e}"
+        if f is not None:
+            f.write_text(json.dumps(rec))
+        out.append(rec)
+    return out + [golden]
+
+
+def recheck_point(cfg: SweepConfig, run, signal) -> dict:
+    """Re-run the first ``recheck_samples`` samples of a point cycle-accurately and compare
+    the FIFO words and cycles with the bit-exact model."""
+    from cosim.tacan import FRONTENDS
+    x = signal.samples[:cfg.recheck_samples]
+    t0 = time.perf_counter()
+    a = FRONTENDS["model"](x, run)
+    try:
+        b = FRONTENDS[cfg.recheck_backend](x, run)
+    except RuntimeError as e:           # e.g. Verilator missing
+        return {"backend": cfg.recheck_backend, "error": str(e)}
+    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles))
+    return {"backend": cfg.recheck_backend, "samples": int(len(x)),
+            "words": int(len(a.words)), "same_bits": bool(same),
+            "seconds": time.perf_counter() - t0}
+
+
+# ---------------------------------------------------------------------------------------
+# Execution
+# ---------------------------------------------------------------------------------------
+def _task_entry(args):
+    return run_task(*args)
+
+
+def _recheck_choice(cfg: SweepConfig) -> tuple:
+    """Combos re-checked cycle-accurately (seeded choice), each at the first SNR/trial."""
+    combos = cfg.combos
+    if cfg.recheck <= 0:
+        return ()
+    rng = np.random.default_rng([cfg.seed, 4242])
+    idx = rng.choice(len(combos), size=min(cfg.recheck, len(combos)), replace=False)
+    return tuple(tuple(combos[i]) for i in sorted(idx))
+
+
+def run_sweep(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
+              scheduler: str = "local", progress: bool = True) -> dict:
+    """Run (or resume) a sweep and write its report under ``out``; returns the summary.
+
+    ``scheduler``: ``"local"`` (process pool of ``jobs`` workers, default all cores),
+    ``"dask"`` (a local Dask cluster of ``jobs`` workers) or a Dask scheduler address
+    (``"tcp://host:8786"``).
+    """
+    from tqdm import tqdm
+    out = Path(out)
+    cache = out / "points"
+    cache.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.json").write_text(json.dumps(_cfg_dict(cfg), indent=1))
+    t0 = time.perf_counter()
+    rc = _recheck_choice(cfg)
+    combos = cfg.combos
+    tasks = []
+    for si, snr in enumerate(cfg.snr_db):
+        for trial in range(cfg.trials):
+            chk = rc if (si == 0 and trial == 0) else ()
+            tasks.append((cfg, float(snr), trial, combos, str(cache), chk))
+    jobs = jobs or os.cpu_count() or 1
+    bar = tqdm(total=len(tasks), desc=f"sweep ({cfg.n_points} points)", file=sys.stderr,
+               disable=not progress)
+    results = []
+    if scheduler == "local":
+        if jobs <= 1:
+            for t in tasks:
+                results.extend(_task_entry(t))
+                bar.update()
+        else:
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+            with ProcessPoolExecutor(max_workers=jobs) as ex:
+                futs = [ex.submit(_task_entry, t) for t in tasks]
+                for fu in as_completed(futs):
+                    results.extend(fu.result())
+                    bar.update()
+    else:
+        results = _run_dask(tasks, jobs, scheduler, bar)
+    bar.close()
+    elapsed = time.perf_counter() - t0
+    return write_report(cfg, results, out, elapsed=elapsed)
+
+
+def _run_dask(tasks, jobs, scheduler, bar):
+    from distributed import Client, LocalCluster, as_completed
+    cluster = None
+    if scheduler == "dask":
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    results = []
+    try:
+        futs = client.map(_task_entry, tasks, pure=False)
+        for fu in as_completed(futs):
+            results.extend(fu.result())
+            bar.update()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return results
+
+
+def _cfg_dict(cfg: SweepConfig) -> dict:
+    d = asdict(cfg)
+    d["params"] = [[n, list(v)] for n, v in cfg.params]
+    d["snr_db"] = list(cfg.snr_db)
+    return d
+
+
+# ---------------------------------------------------------------------------------------
+# Aggregation, proposal, report
+# ---------------------------------------------------------------------------------------
+def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
+    """Per (combo, SNR): RMSE over the trials (locked ones), lock rate, the paired golden
+    RMSE on the same records, CRB, events, drops."""
+    gold = {(r["snr_db"], r["trial"]): r for r in results if r.get("kind") == "golden"}
+    pts = [r for r in results if r.get("kind") == "point"]
+    rows = []
+    for combo in cfg.combos:
+        cl = [list(c) for c in combo]
+        for snr in cfg.snr_db:
+            rs = [r for r in pts if r["combo"] == cl and r["snr_db"] == float(snr)]
+            if not rs:
+                continue
+            err = [r.get("error") for r in rs if r.get("error")]
+            ok = [r for r in rs if r["locked"] and r.get("rmse_deg") is not None]
+            gok = [gold.get((r["snr_db"], r["trial"])) for r in ok]
+            paired = [(r, g) for r, g in zip(ok, gok) if g and g.get("locked")]
+            ev: dict = {}
+            for r in rs:
+                for k, v in (r.get("dsp_events") or {}).items():
+                    ev[k] = ev.get(k, 0) + int(v)
+            rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in ok]))) if ok else None
+            g_rmse = float(np.sqrt(np.mean([g["rmse_deg"] ** 2 for _, g in paired]))) if paired else None
+            p_rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r, _ in paired]))) if paired else None
+            ng = sum(1 for r in rs if (gold.get((r["snr_db"], r["trial"])) or {}).get("locked"))
+            row = {**{n: v for n, v in combo}, "snr_db": float(snr), "trials": len(rs),
+                   "invalid": err[0] if err else None,
+                   "locked": len(ok), "golden_locked": ng,
+                   "rmse_deg": rmse, "golden_rmse_deg": g_rmse,
+                   "ratio_to_golden": (p_rmse / g_rmse) if (paired and g_rmse) else None,
+                   "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in ok])) if ok else None,
+                   "crb_deg": rs[0].get("crb_deg") or (gold.get((rs[0]["snr_db"], rs[0]["trial"])) or {}).get("crb_deg"),
+                   "adc_clipped": int(sum(r.get("adc_clipped") or 0 for r in rs)),
+                   "fifo_dropped": int(sum(r.get("fifo_dropped") or 0 for r in rs)),
+                   "dsp_events": ev}
+            rows.append(row)
+    return rows
+
+
+def _passes(row: dict, target_rel: float) -> bool:
+    """A point meets the target at one SNR: it locks as often as the golden chain and its
+    paired RMSE is within ``1 + target_rel`` of the golden one (SNRs where the golden chain
+    does not lock on most trials are not judged)."""
+    if row["invalid"]:
+        return False
+    if row["golden_locked"] < 0.8 * row["trials"]:
+        return True
+    if row["locked"] < row["golden_locked"]:
+        return False
+    return row["ratio_to_golden"] is not None and row["ratio_to_golden"] <= 1 + target_rel
+
+
+def propose(cfg: SweepConfig, rows: list[dict]) -> dict:
+    """Smallest value of each numeric swept parameter (the others at their largest swept
+    value) such that it and every larger value pass at every SNR (see :func:`_passes`)."""
+    names = [n for n, _ in cfg.params]
+    ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0]
+           for n, v in cfg.params}
+    out = {}
+    for n, vals in cfg.params:
+        if not all(isinstance(x, (int, float)) for x in vals):
+            continue
+        ok_vals = []
+        for v in sorted(vals):
+            sel = [r for r in rows if r[n] == v and all(r[m] == ref[m] for m in names if m != n)]
+            ok_vals.append((v, bool(sel) and all(_passes(r, cfg.target_rel) for r in sel)))
+        best = None
+        for v, ok in reversed(ok_vals):
+            if not ok:
+                break
+            best = v
+        out[n] = best
+    return out
+
+
+def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler="local",
+            progress=True) -> dict:
+    """Re-run the proposed combination (all proposed values together) on fresh seeds and
+    check it against the golden chain; returns the confirmation summary."""
+    if not proposal or any(v is None for v in proposal.values()):
+        return {"confirmed": False, "reason": "no complete proposal (some parameter never "
+                                             "meets the target in the swept range)"}
+    fixed = tuple((n, (proposal[n],)) for n, _ in cfg.params if n in proposal) + \
+        tuple((n, (max(v) if all(isinstance(x, (int, float)) for x in v) else v[0],))
+              for n, v in cfg.params if n not in proposal)
+    ccfg = replace(cfg, params=fixed, seed=cfg.seed + 1, recheck=0)
+    s = run_sweep(ccfg, out / "confirm", jobs=jobs, scheduler=scheduler, progress=progress)
+    rows = s["rows"]
+    ok = all(_passes(r, cfg.target_rel) for r in rows)
+    return {"confirmed": bool(ok), "params": {n: v[0] for n, v in fixed}, "seed": ccfg.seed,
+            "rows": rows}
+
+
+def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: float = 0.0) -> dict:
+    from cosim.bench import machine_info
+    out = Path(out)
+    rows = aggregate(cfg, results)
+    proposal = propose(cfg, rows)
+    pts = sorted((r for r in results if r.get("kind") in ("point", "golden")),
+                 key=lambda r: (r["snr_db"], r["trial"], json.dumps(r["combo"])))
+    rechecks = [{"combo": r["combo"], **r["recheck"]} for r in pts if r.get("recheck")]
+    ranges = _collect_ranges(pts)
+    summary = {"study": "sweep", "machine": machine_info(), "config": _cfg_dict(cfg),
+               "elapsed_s": elapsed, "n_points": cfg.n_points, "rows": rows,
+               "proposal": proposal, "target_rel": cfg.target_rel, "rechecks": rechecks,
+               "ranges": ranges}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    names = [n for n, _ in cfg.params]
+    with open(out / "points.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["kind", "combo", "snr_db", "trial", "bearing_deg", "locked", "rmse_deg",
+                    "mean_error_deg", "max_abs_error_deg", "crb_deg", "adc_clipped",
+                    "fifo_dropped", "gated", "reinit", "error"])
+        for r in pts:
+            w.writerow([r["kind"], json.dumps(r["combo"]), r["snr_db"], r["trial"],
+                        r.get("bearing_deg"), r["locked"], r.get("rmse_deg"),
+                        r.get("mean_error_deg"), r.get("max_abs_error_deg"), r.get("crb_deg"),
+                        r.get("adc_clipped"), r.get("fifo_dropped"), r.get("gated"),
+                        r.get("reinit"), r.get("error")])
+    with open(out / "summary.csv", "w", newline="") as f:
+        keys = names + ["snr_db", "trials", "locked", "golden_locked", "rmse_deg",
+                        "golden_rmse_deg", "ratio_to_golden", "mean_error_deg", "crb_deg",
+                        "adc_clipped", "fifo_dropped", "invalid"]
+        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    plots = _plot(cfg, rows, out)
+    (out / "report.md").write_text(_report_md(cfg, summary, plots))
+    return summary
+
+
+def _collect_ranges(pts) -> dict:
+    """Per signal: min/max seen and overflow/saturation counts over every point."""
+    agg: dict = {}
+    for r in pts:
+        for sig, d in (r.get("ranges") or {}).items():
+            a = agg.setdefault(sig, {"min": math.inf, "max": -math.inf, "overflows": 0,
+                                     "unit": d.get("unit", "")})
+            a["min"] = min(a["min"], d["min"])
+            a["max"] = max(a["max"], d["max"])
+            a["overflows"] += int(d.get("overflows", 0))
+        for k, v in (r.get("dsp_events") or {}).items():
+            if k.startswith("sat_") or k in ("p_clamps", "p_neg"):
+                a = agg.setdefault(f"dsp.{k[4:] if k.startswith('sat_') else k}",
+                                   {"min": None, "max": None, "overflows": 0, "unit": "events"})
+                a["overflows"] += int(v)
+    return {k: {**v, "min": None if v["min"] in (math.inf, None) else v["min"],
+                "max": None if v["max"] in (-math.inf, None) else v["max"]} for k, v in agg.items()}
+
+
+def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    names = [n for n, _ in cfg.params]
+    ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0] for n, v in cfg.params}
+    files = []
+    for n, vals in cfg.params:
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        numeric = all(isinstance(x, (int, float)) for x in vals)
+        xs = list(vals) if numeric else list(range(len(vals)))
+        for ci, snr in enumerate(cfg.snr_db):
+            sel = {r[n]: r for r in rows if r["snr_db"] == float(snr)
+                   and all(r[m] == ref[m] for m in names if m != n)}
+            ys = [sel[v]["rmse_deg"] if v in sel and sel[v]["rmse_deg"] is not None else np.nan
+                  for v in vals]
+            col = f"C{ci}"
+            ax.semilogy(xs, ys, "o-", color=col, label=f"{snr:g} dB")
+            g = [sel[v]["golden_rmse_deg"] for v in vals if v in sel and sel[v]["golden_rmse_deg"]]
+            if g:
+                ax.axhline(float(np.median(g)), color=col, ls="--", lw=1)
+            c = [sel[v]["crb_deg"] for v in vals if v in sel and sel[v]["crb_deg"]]
+            if c:
+                ax.axhline(float(c[0]), color=col, ls=":", lw=1)
+        if not numeric:
+            ax.set_xticks(xs, [str(v) for v in vals])
+        ax.set_xlabel(n)
+        ax.set_ylabel("bearing RMSE (deg)")
+        others = ", ".join(f"{m}={ref[m]}" for m in names if m != n)
+        ax.set_title(f"TACAN bearing RMSE vs {n}" + (f" ({others})" if others else "") +
+                     "\n-- float golden (same records)   : Cramer-Rao bound", fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(title="SNR", fontsize=8)
+        fig.tight_layout()
+        fn = f"rmse_vs_{n.replace('.', '_')}.png"
+        fig.savefig(out / fn, dpi=110)
+        plt.close(fig)
+        files.append(fn)
+    return files
+
+
+def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
+    m = s["machine"]
+    names = [n for n, _ in cfg.params]
+    f = lambda v, fmt: "-" if v is None else format(v, fmt)
+    lines = [f"# TACAN quantisation sweep", "",
+             f"`{m['command']}` on {m['cpu']} ({m['cores']} cores), {m['date']}, commit "
+             f"{m['commit']}: {s['n_points']} points in {s['elapsed_s']:.0f} s.", "",
+             f"Swept: " + "; ".join(f"`{n}` = {', '.join(map(str, v))}" for n, v in cfg.params) +
+             f"; SNR {', '.join(f'{x:g}' for x in cfg.snr_db)} dB; {cfg.trials} trials of "
+             f"{cfg.duration_s:g} s (filter memory {cfg.memory_s:g} s, bearings after "
+             f"{2 * cfg.memory_s:g} s scored). Path: bit-exact front-end model, FIFO/link model, "
+             f"fixed-point DSP core. Golden: float front end + float DSP on the same records "
+             f"(ADC {GOLDEN_ADC_BITS} bits).", ""]
+    for p in plots:
+        lines += [f"![{p}]({p})", ""]
+    lines += ["## Every setting", "",
+              "| " + " | ".join(names) + " | SNR dB | locked | RMSE deg | golden RMSE | ratio | "
+              "mean err | CRB | ADC clipped | FIFO drops | DSP saturations |",
+              "|" + "---|" * (len(names) + 11)]
+    for r in s["rows"]:
+        sat = sum(v for k, v in r["dsp_events"].items() if k.startswith("sat_"))
+        inv = f" ({r['invalid']})" if r["invalid"] else ""
+        lines.append("| " + " | ".join(str(r[n]) for n in names) +
+                     f" | {r['snr_db']:g} | {r['locked']}/{r['trials']} (golden "
+                     f"{r['golden_locked']}){inv} | {f(r['rmse_deg'], '.4f')} | "
+                     f"{f(r['golden_rmse_deg'], '.4f')} | {f(r['ratio_to_golden'], '.3f')} | "
+                     f"{f(r['mean_error_deg'], '+.4f')} | {f(r['crb_deg'], '.4f')} | "
+                     f"{r['adc_clipped']} | {r['fifo_dropped']} | {sat} |")
+    lines += ["", "## Ranges and overflows (all points)", "",
+              "| signal | min | max | unit | overflows/saturations |", "|---|---:|---:|---|---:|"]
+    for k, v in sorted(s["ranges"].items()):
+        lines.append(f"| {k} | {f(v['min'], 'g')} | {f(v['max'], 'g')} | {v['unit']} | "
+                     f"{v['overflows']} |")
+    lines += ["", "## Word-length proposal", "",
+              f"Smallest value of each parameter (the others at their largest swept value) such "
+              f"that it and every larger value lock as often as the golden chain and keep the "
+              f"paired RMSE within {100 * cfg.target_rel:g} % of it at every SNR where the "
+              f"golden chain locks on >= 80 % of the trials:", ""]
+    for n, v in s["proposal"].items():
+        lines.append(f"- `{n}`: {v if v is not None else 'none in the swept range'}")
+    if s.get("confirmation"):
+        c = s["confirmation"]
+        lines += ["", f"Confirmation re-run (fresh seeds, all proposed values together): "
+                      f"**{'confirmed' if c['confirmed'] else 'NOT confirmed'}**"
+                  + (f" ({c.get('reason')})" if c.get("reason") else "")]
+        for r in c.get("rows", []):
+            lines.append(f"- SNR {r['snr_db']:g} dB: RMSE {f(r['rmse_deg'], '.4f')} deg vs golden "
+                         f"{f(r['golden_rmse_deg'], '.4f')} (ratio {f(r['ratio_to_golden'], '.3f')}), "
+                         f"locked {r['locked']}/{r['trials']} (golden {r['golden_locked']})")
+    if s["rechecks"]:
+        lines += ["", "## Cycle-accurate re-checks", ""]
+        for c in s["rechecks"]:
+            lines.append(f"- {c['combo']}: {c.get('backend')} on {c.get('samples', 0)} samples, "
+                         f"{c.get('words', 0)} FIFO words, same bits: {c.get('same_bits')}"
+                         + (f" ({c['error']})" if c.get("error") else ""))
+    return "\n".join(lines) + "\n"
+
+
+def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
+          scheduler: str = "local", confirm_proposal: bool = True, progress: bool = True) -> dict:
+    """A sweep, its word-length proposal and (optionally) the confirming re-run; the report
+    (``report.md``) includes the confirmation."""
+    out = Path(out)
+    s = run_sweep(cfg, out, jobs=jobs, scheduler=scheduler, progress=progress)
+    if confirm_proposal:
+        s["confirmation"] = confirm(cfg, s["proposal"], out, jobs=jobs, scheduler=scheduler,
+                                    progress=progress)
+        (out / "summary.json").write_text(json.dumps(s, indent=1))
+        plots = sorted(p.name for p in out.glob("rmse_vs_*.png"))
+        (out / "report.md").write_text(_report_md(cfg, s, plots))
+    return s
