@@ -44,6 +44,10 @@ def machine_info() -> dict:
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                 text=True, check=False).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, check=False).stdout.strip()
+        if commit and dirty:
+            commit += "-dirty"      # the results come from uncommitted code
     except OSError:
         commit = ""
     return {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

@@ -121,13 +121,19 @@ def _add_sweep(sub):
                    help="swept parameter, e.g. adc_bits=4:14, nco_amp_bits=8,12,16, dsp.P=30:46:4, "
                         "dsp.K.rounding=floor,half_up (repeatable; default adc_bits=4:14)")
     p.add_argument("--snr-db", default="0:20:5", help="SNR values (a:b:step or a list)")
+    p.add_argument("--design", choices=["grid", "oat"], default="grid",
+                   help="grid: every combination; oat: one parameter at a time (the others "
+                        "at their largest value)")
     p.add_argument("--trials", type=int, default=20)
     p.add_argument("--duration-s", type=_finite, default=1.0)
     p.add_argument("--memory-s", type=_finite, default=0.25)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--recheck", type=int, default=2,
                    help="points re-checked on the cycle-accurate backend")
-    p.add_argument("--recheck-backend", choices=["pysim", "verilator"], default="pysim")
+    p.add_argument("--recheck-backend", choices=["auto", "pysim", "verilator"], default="auto",
+                   help="auto: Verilator when installed, else the Amaranth simulation")
+    p.add_argument("--recheck-samples", type=int, default=None,
+                   help="ADC samples re-checked per point (default 1e6 Verilator, 6e4 pysim)")
     p.add_argument("--target", type=_finite, default=0.05,
                    help="proposal target: RMSE within (1 + target) of the float golden")
     p.add_argument("--no-confirm", action="store_true", help="skip the confirming re-run")
@@ -146,7 +152,9 @@ def _cmd_sweep(a) -> int:
     snrs = tuple(float(v) for v in parse_values(a.snr_db))
     cfg = SweepConfig(params=params, snr_db=snrs, trials=a.trials, duration_s=a.duration_s,
                       memory_s=a.memory_s, seed=a.seed, recheck=a.recheck,
-                      recheck_backend=a.recheck_backend, target_rel=a.target)
+                      recheck_backend=a.recheck_backend,
+                      recheck_samples=a.recheck_samples, target_rel=a.target,
+                      design=a.design)
     s = study(cfg, a.out, jobs=a.jobs, scheduler=a.scheduler, confirm_proposal=not a.no_confirm)
     if a.json:
         print(json.dumps({k: s[k] for k in ("proposal", "elapsed_s", "n_points", "rechecks")} |
@@ -158,6 +166,64 @@ def _cmd_sweep(a) -> int:
         if s.get("confirmation"):
             print(f"confirmed: {s['confirmation']['confirmed']}")
     return 0
+
+
+def _add_faults(sub):
+    p = sub.add_parser("faults", help="bit-error study: flip bits in the ADC samples, FIFO words, "
+                                      "the NCO register or the DSP state")
+    p.add_argument("receiver", choices=["tacan"])
+    p.add_argument("--target", choices=["adc", "fifo", "register", "dsp-state"], default="adc")
+    p.add_argument("--ber", default="1e-6:1e-3",
+                   help="bit error rates: lo:hi (every decade) or a comma list")
+    p.add_argument("--bits", default=None,
+                   help="only these bit positions (comma list, 0 = LSB), e.g. the MSBs")
+    p.add_argument("--snr-db", type=_finite, default=10.0)
+    p.add_argument("--trials", type=int, default=3)
+    p.add_argument("--duration-s", type=_finite, default=2.0)
+    p.add_argument("--memory-s", type=_finite, default=0.5)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--backend", choices=["model", "pysim", "verilator"], default="model",
+                   help="front end for the register target (the others use the model)")
+    p.add_argument("--scrub-period-s", type=_finite, default=0.01,
+                   help="register target: the DSP rewrites the register this often")
+    p.add_argument("--out", default="build/studies/faults")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_faults)
+
+
+def _cmd_faults(a) -> int:
+    from .studies.faults import FaultConfig, parse_ber, run_faults
+    bits = None
+    if a.bits:
+        try:
+            bits = tuple(int(b) for b in a.bits.split(","))
+        except ValueError:
+            raise ValueError(f"--bits takes a comma list of bit positions, not {a.bits!r}") from None
+    fc = FaultConfig(target=a.target, ber=parse_ber(a.ber), bits=bits, snr_db=a.snr_db,
+                     trials=a.trials, duration_s=a.duration_s, memory_s=a.memory_s,
+                     seed=a.seed, backend=a.backend, scrub_period_s=a.scrub_period_s)
+    s = run_faults(fc, a.out, progress=not a.json)
+    if a.json:
+        print(json.dumps({"target": a.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
+                          "report": f"{a.out}/faults_{a.target.replace('-', '_')}.md"},
+                         default=str))
+    else:
+        print(f"{len(s['rows'])} bit error rates x {a.trials} trials in {s['elapsed_s']:.0f} s")
+        for r in s["rows"]:
+            rm = "-" if r["rmse_deg"] is None else f"{r['rmse_deg']:.3f}"
+            mx = "-" if r["max_abs_error_deg"] is None else f"{r['max_abs_error_deg']:.3f}"
+            print(f"  BER {r['ber']:g}: {r['flips']} flips, RMSE {rm} deg, worst {mx} deg, "
+                  f"NaN {r['nan_bearings']}, exceptions {r['exceptions']}, "
+                  f"re-inits {r['reinit']}")
+        print(f"report: {a.out}/faults_{a.target.replace('-', '_')}.md")
+    return 0
+
+
+def _add_adc_loss(sub):
+    # Listed for --help; main() hands the arguments to cosim.studies.adc_loss.main.
+    sub.add_parser("adc-loss", help="ADC quantisation loss on a noise-dominated tone: Monte "
+                                    "Carlo against theory (1.96 dB at 1 bit, ...); see "
+                                    "`python -m cosim adc-loss --help`", add_help=False)
 
 
 def _add_bench(sub):
@@ -306,12 +372,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     _add_tacan(sub)
     _add_sweep(sub)
+    _add_faults(sub)
+    _add_adc_loss(sub)
     _add_bench(sub)
     _add_hdl(sub)
     return p
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["adc-loss"]:        # its own parser (python -m cosim.studies.adc_loss)
+        from .studies.adc_loss import main as adc_loss_main
+        return adc_loss_main(argv[1:])
     parser = build_parser()
     a = parser.parse_args(argv)
     try:

@@ -203,10 +203,13 @@ def _model(samples, run: TacanRunConfig) -> FrontendOutput:
     # The ADC delivers one sample per cycle from reset, so a write taking effect at cycle c
     # changes the NCO word from ADC sample c on.
     changes = sorted(dict((c, v) for c, _, v in ctl.writes()).items())   # last write wins
-    m = TacanFrontendModel(p)
+    m = TacanFrontendModel(p, log_ranges=True)
     peaks, _ = m.run(samples, freq_changes=changes or None)
     res = run_link(m.peak_cycles(peaks), m.words(peaks), n_cycles, p.fifo, run.service)
-    return _dsp_receive(res.words, res.read_cycles, p, n_cycles, res.dropped)
+    fo = _dsp_receive(res.words, res.read_cycles, p, n_cycles, res.dropped)
+    fo.extra["ranges"] = m.ranges()
+    fo.extra["fifo_max_level"] = int(res.max_level)
+    return fo
 
 
 def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
@@ -318,6 +321,7 @@ def run_tacan(run: TacanRunConfig, signal=None) -> dict:
         "adc_clipped": int(s.truth.n_clipped),
         "fifo_dropped": int(fo.fifo_dropped),
         "fifo_dropped_reported": int(fo.dropped_reported),
+        "fifo_max_level": fo.extra.get("fifo_max_level"),
         "dsp_events": events,
         "backend": run.backend,
         "dsp": run.dsp,
@@ -327,6 +331,7 @@ def run_tacan(run: TacanRunConfig, signal=None) -> dict:
         "seed": sig.seed,
         "settle_s": run.settle,
         "n_cycles": int(fo.n_cycles),
+        "ranges": _ranges(fo, track, s.truth.n_clipped),
         "digest": {"peaks": _digest(fo.ticks, fo.amplitude_fs),
                    "fifo": _digest(fo.words) if fo.words is not None else None,
                    "bearings": _digest(track.times_s, track.bearing_deg)},
@@ -344,6 +349,29 @@ def run_tacan(run: TacanRunConfig, signal=None) -> dict:
         r["golden_rmse_deg"] = float(gst["rmse_deg"][0]) if gst["n"] else None
         r["elapsed_s"]["golden"] = time.perf_counter() - t4
     return r
+
+
+def _ranges(fo: FrontendOutput, track: BearingTrack, adc_clipped: int) -> dict:
+    """Range log of the run (Fixed-Point Designer style): per signal the smallest and largest
+    value seen against its word's range, and its overflow/saturation count. Front-end
+    signals (``fe.*``, as fractions of the word's full scale, LSBs in ``min_lsb``/``max_lsb``)
+    with the bit-exact model backend; the fixed-point DSP's formats (``dsp.*``, real units,
+    pre-saturation values)."""
+    out = {}
+    for name, v in (fo.extra.get("ranges") or {}).items():
+        top = v["hi"] + 1          # full scale of the word: 2**(b-1) signed, 2**b unsigned
+        out[f"fe.{name}"] = {"min": v["min"] / top, "max": v["max"] / top,
+                             "lo": v["lo"] / top, "hi": v["hi"] / top,
+                             "min_lsb": v["min"], "max_lsb": v["max"], "bits": v["bits"],
+                             "headroom_bits": v["headroom_bits"], "unit": "FS",
+                             "overflows": int(adc_clipped) if name == "adc" else 0}
+    if track.state is not None:
+        for name, v in track.state.kf.ranges().items():
+            peak = max(abs(v["min"] or 0.0), abs(v["max"] or 0.0))
+            out[f"dsp.{name}"] = {"min": v["min"], "max": v["max"], "lo": v["lo"], "hi": v["hi"],
+                                  "headroom_bits": math.log2(v["hi"] / peak) if peak else None,
+                                  "unit": "value", "overflows": v["saturations"]}
+    return out
 
 
 def _fields(run: TacanRunConfig) -> dict:

@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, replace
 
+import numba
 import numpy as np
 from scipy import signal as sps
 
@@ -420,6 +421,24 @@ def pulse_schedule(cfg: TacanSignalConfig, rng: np.random.Generator | None = Non
 _CHUNK = 1 << 20  # fixed: the noise stream is drawn in chunks of this size (determinism)
 
 
+@numba.njit(cache=True, nogil=True)
+def _adc_codes(x, full, out) -> int:
+    """The ADC: ``clip(rint(x * full), -full, full - 1)`` into ``out`` (round half to even,
+    as ``np.rint``), returning how many samples clipped; one pass, no temporaries."""
+    lo, hi = -full, full - 1
+    n = 0
+    for k in range(x.shape[0]):
+        v = np.rint(x[k] * full)
+        if v > hi:
+            v = hi
+            n += 1
+        elif v < lo:
+            v = lo
+            n += 1
+        out[k] = v
+    return n
+
+
 def _noise_filter(cfg: TacanSignalConfig):
     f0 = cfg.digital_if_hz
     lo, hi = f0 - cfg.noise_bw_hz / 2, f0 + cfg.noise_bw_hz / 2
@@ -520,10 +539,7 @@ def generate_adc_variants(cfg: TacanSignalConfig, adc_bits) -> dict:
             nz, zi = sps.sosfilt(sos, rng_noise.standard_normal(c1 - c0), zi=zi)
             x += nz * sigma_w
         for b, full in fulls.items():
-            codes = np.rint(x * full)
-            clipped = (codes > full - 1) | (codes < -full)
-            n_clips[b] += int(np.count_nonzero(clipped))
-            outs[b][c0:c1] = np.clip(codes, -full, full - 1)
+            n_clips[b] += int(_adc_codes(x, float(full), outs[b][c0:c1]))
 
     result = {}
     for b in bits_list:

@@ -40,6 +40,31 @@ from numba.extending import overload
 _OPTS = {"cache": True}
 #: Bits of the normalised divisor (see :func:`snorm`).
 S_BITS = 28
+#: Range log: the saturating operators also record, in integer mode, the smallest and the
+#: largest value they were asked to store *before* saturation (what Fixed-Point Designer's
+#: min/max logging shows), in ``ev[RANGE_BASE + 2 i]`` and ``ev[RANGE_BASE + 2 i + 1]`` for
+#: the event index ``i`` (``0 <= i < RANGE_SLOTS``). The event array must have
+#: ``RANGE_BASE + 2 RANGE_SLOTS`` entries, the min slots starting at the int64 maximum and the
+#: max slots at the int64 minimum (:func:`new_event_array`).
+RANGE_BASE = 16
+RANGE_SLOTS = 8
+
+
+def new_event_array(shape_prefix) -> np.ndarray:
+    """An event/range array for the operators below: counts 0, range slots empty."""
+    ev = np.zeros(tuple(shape_prefix) + (RANGE_BASE + 2 * RANGE_SLOTS,), np.int64)
+    ev[..., RANGE_BASE::2] = np.iinfo(np.int64).max
+    ev[..., RANGE_BASE + 1::2] = np.iinfo(np.int64).min
+    return ev
+
+
+@njit(inline="always")
+def _note(ev, i, v):
+    j = RANGE_BASE + 2 * i
+    if v < ev[j]:
+        ev[j] = v
+    if v > ev[j + 1]:
+        ev[j + 1] = v
 
 
 def _jit_only(*_):
@@ -96,6 +121,7 @@ def sat(v, lo, hi, ev, i):
 def _ol_sat(v, lo, hi, ev, i):
     if _is_int(v):
         def impl(v, lo, hi, ev, i):
+            _note(ev, i, v)
             if v < lo:
                 ev[i] += 1
                 return lo
@@ -249,6 +275,7 @@ def _ol_div_norm(num, Sn, nb, f, half, lo, hi, ev, i):
                 if half:
                     nn += Sn >> 1
                 q = (q1 << f) + _fdiv(nn, Sn)
+            _note(ev, i, q)
             if q < lo:
                 ev[i] += 1
                 return lo
@@ -286,6 +313,7 @@ def _ol_div_square(v, Sn, nb, t, half, hi, ev, i):
             else:
                 den = Sn << (-tt)
                 e = _fdiv(v2 + ((den >> 1) if half else 0), den)
+            _note(ev, i, e)
             if e > hi:
                 ev[i] += 1
                 return hi
@@ -308,6 +336,7 @@ def _ol_ewma(r, acc, m, half, lo, hi, ev, i):
             if half:
                 d += m // 2
             v = r + _fdiv(d, m)
+            _note(ev, i, v)
             if v < lo:
                 ev[i] += 1
                 return lo

@@ -670,6 +670,9 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
                                "seed", "freq")}
     if elapsed_s is not None:
         meta["elapsed_s"] = round(float(elapsed_s), 2)
+    from cosim.bench import machine_info
+    machine = machine_info()
+    meta["machine"] = machine
     checks = []
     for b, ref in REFERENCE_LOSS_DB.items():
         hit = [r for r in finite if r["bits"] == b]
@@ -690,6 +693,9 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
 
     lines = [
         "# ADC quantisation loss: Monte Carlo vs theory",
+        "",
+        f"`{machine['command']}`, {machine['date']}, {machine['cpu']}, commit "
+        f"{machine['commit']}.",
         "",
         f"Weak tone (per-sample SNR {meta['snr_db']:g} dB, f = {meta['freq']:.6f} cycles/sample, "
         f"random phase) in white Gaussian noise, {meta['trials']} trials x {meta['n_samples']} "

@@ -13,8 +13,8 @@ Targets and what ``ber`` means for each
                probability ``ber`` at a random cycle, and stays wrong until the next scrub.
                Run cycle-accurately (Verilator, or pysim for tiny runs) or on the model.
 ``dsp-state``  each bit of the fixed-point Kalman state ``x`` and covariance ``P`` words
-               flips with probability ``ber`` per filter update (applied between blocks of
-               pulses).
+               (as stored: ``x`` and the upper triangle of ``P``) flips with probability
+               ``ber`` per filter update, inside the compiled core between two updates.
 
 ``bits`` restricts the flips to chosen bit positions (e.g. the MSBs).
 
@@ -225,56 +225,37 @@ def _register_run(fc: FaultConfig, run, s, p, ber, rng):
 
 
 def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
-    """Flip bits of the Kalman integer state between blocks of pulses (streaming receiver)."""
+    """Single-event upsets of the Kalman core's stored state (``x`` and the upper triangle
+    of ``P``): each bit of each word flips with probability ``ber`` per filter update, in
+    the compiled core between two updates (:meth:`EnvelopeKalman.schedule_upsets`)."""
     from cosim.tacan import FRONTENDS
-    from dsp.tacan.receiver import amplitude_codes, process_peaks
+    from dsp.tacan.kalman import EnvelopeKalman
+    from dsp.tacan.receiver import ReceiverState, amplitude_codes, process_peaks
     fkey = ("fo", trial)
     if fkey not in cache:
         cache[fkey] = FRONTENDS["model"](s.samples, run)
     fo = cache[fkey]
     rc = run.receiver
-    y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
-    fs = run.signal.fs_hz
     fx = rc.kalman
-    n_bits_x, n_bits_p = fx.x.width, fx.P.width
-    state_bits = 5 * n_bits_x + 25 * n_bits_p
-    n_pulses = fo.ticks.size
-    n_flips = int(rng.binomial(n_pulses * state_bits, ber)) if ber > 0 else 0
-    at = np.sort(rng.integers(1, max(n_pulses, 2), n_flips))
-    cuts = np.unique(np.r_[0, at, n_pulses])
-    st, parts = None, []
-    flips = 0
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        if st is not None:
-            for _ in range(int(np.count_nonzero(at == a))):
-                flips += 1
-                j = int(rng.integers(state_bits))
-                if j < 5 * n_bits_x:
-                    arr, idx, w, f = st.kf.x[0], j // n_bits_x, n_bits_x, j % n_bits_x
-                    flat = arr
-                else:
-                    j -= 5 * n_bits_x
-                    arr, idx, w, f = st.kf.P[0], j // n_bits_p, n_bits_p, j % n_bits_p
-                    flat = arr.reshape(-1)
-                m = (np.int64(1) << w) - 1
-                u = (int(flat[idx]) & int(m)) ^ (1 << f)
-                flat[idx] = u - (1 << w) if u >= (1 << (w - 1)) else u
-        tr = process_peaks(fo.ticks[a:b] / fs, y[a:b], rc, ticks=fo.ticks[a:b], state=st)
-        st = tr.state
-        parts.append(tr)
-    from dsp.tacan.receiver import BearingTrack
-    last = parts[-1]
-    track = BearingTrack(
-        times_s=np.concatenate([q.times_s for q in parts]),
-        ref_kinds=np.concatenate([q.ref_kinds for q in parts]),
-        bearing_deg=np.concatenate([q.bearing_deg for q in parts], axis=1),
-        coarse_deg=np.concatenate([q.coarse_deg for q in parts], axis=1),
-        n_updates=last.n_updates, n_peaks=sum(q.n_peaks for q in parts),
-        n_measurements=sum(q.n_measurements for q in parts),
-        n_main_refs=sum(q.n_main_refs for q in parts), n_aux_refs=sum(q.n_aux_refs for q in parts),
-        n_refs_off_grid=sum(q.n_refs_off_grid for q in parts), gated=last.gated,
-        reinit=last.reinit, r_est=last.r_est, events=last.events, state=st)
-    return track, flips
+    widths = np.array([fx.x.width if n == "x" else fx.P.width
+                       for n, _, _ in EnvelopeKalman.STATE_WORDS])
+    word_of_bit = np.repeat(np.arange(widths.size), widths)
+    bit_in_word = np.concatenate([np.arange(w) for w in widths])
+    if fc.bits is not None:         # chosen bit positions: only those of each word
+        keep = np.isin(bit_in_word, np.asarray(fc.bits))
+        word_of_bit, bit_in_word = word_of_bit[keep], bit_in_word[keep]
+    n_steps = int(fo.ticks.size)    # an upper bound on the updates (gated ones included)
+    total = n_steps * word_of_bit.size
+    n_flips = int(rng.binomial(total, ber)) if ber > 0 and total else 0
+    flat = np.sort(rng.integers(0, total, n_flips)) if n_flips else np.zeros(0, np.int64)
+    steps = flat // word_of_bit.size
+    sel = flat % word_of_bit.size
+    kf = EnvelopeKalman(fx, batch=1)
+    kf.schedule_upsets(steps, word_of_bit[sel], bit_in_word[sel])
+    y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, fx.y)
+    track = process_peaks(fo.ticks / run.signal.fs_hz, y, rc, ticks=fo.ticks,
+                          state=ReceiverState(kf=kf))
+    return track, int(kf.upsets_applied)
 
 
 def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = True) -> dict:
@@ -325,7 +306,7 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
 
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    stem = f"faults_{fc.target}"
+    stem = f"faults_{fc.target.replace('-', '_')}"
     (out / f"{stem}.json").write_text(json.dumps(s, indent=1, default=str))
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s", "reinit",

@@ -132,10 +132,16 @@ class SweepConfig:
     seed : int
         Base seed: the same sweep gives the same bits.
     recheck : int
-        Points re-run on the cycle-accurate backend (``recheck_backend``) over the first
-        ``recheck_samples`` ADC samples, comparing FIFO words with the model.
+        Points re-run on the cycle-accurate backend (``recheck_backend``: ``"verilator"``,
+        ``"pysim"``, or ``"auto"``, Verilator when installed) over the first
+        ``recheck_samples`` ADC samples (default 1,000,000 with Verilator, 60,000 with the
+        much slower Amaranth simulation), comparing FIFO words and cycles with the model.
     target_rel : float
         Word-length proposal: RMSE within ``(1 + target_rel)`` of the float golden.
+    design : {"grid", "oat"}
+        ``grid``: every combination of the swept values; ``oat``: one parameter at a time,
+        the others at their reference (largest) value -- what the proposal reads, at the
+        cost of a sum instead of a product of the value counts.
     """
 
     receiver: str = "tacan"
@@ -146,9 +152,10 @@ class SweepConfig:
     memory_s: float = 0.25
     seed: int = 0
     recheck: int = 2
-    recheck_backend: str = "pysim"
-    recheck_samples: int = 4000
+    recheck_backend: str = "auto"
+    recheck_samples: int | None = None
     target_rel: float = 0.05
+    design: str = "grid"
 
     def __post_init__(self):
         if self.receiver != "tacan":
@@ -170,16 +177,51 @@ class SweepConfig:
         if not (math.isfinite(self.duration_s) and self.duration_s > 2 * self.memory_s + 0.1):
             raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s "
                              f"({2 * self.memory_s + 0.1:g} s), not {self.duration_s}")
-        if self.recheck_backend not in ("pysim", "verilator"):
-            raise ValueError(f"recheck_backend must be 'pysim' or 'verilator', not "
+        if self.recheck_backend not in ("auto", "pysim", "verilator"):
+            raise ValueError(f"recheck_backend must be 'auto', 'pysim' or 'verilator', not "
                              f"{self.recheck_backend!r}")
+        if self.recheck_samples is not None and (
+                isinstance(self.recheck_samples, bool) or
+                not isinstance(self.recheck_samples, int) or self.recheck_samples < 1000):
+            raise ValueError(f"recheck_samples must be an integer >= 1000, not "
+                             f"{self.recheck_samples!r}")
         if not (0 < self.target_rel < 10):
             raise ValueError(f"target_rel must be in (0, 10), not {self.target_rel}")
+        if self.design not in ("grid", "oat"):
+            raise ValueError(f"design must be 'grid' (every combination) or 'oat' (one "
+                             f"parameter at a time), not {self.design!r}")
+
+    @property
+    def recheck_plan(self) -> tuple[str, int]:
+        """(backend, samples) the re-checks use."""
+        be = self.recheck_backend
+        if be == "auto":
+            from cosim.verilator import verilator_available
+            be = "verilator" if verilator_available() else "pysim"
+        n = self.recheck_samples or (1_000_000 if be == "verilator" else 60_000)
+        return be, n
+
+    @property
+    def reference(self) -> dict:
+        """Each parameter's reference value: its largest swept value (numeric), else its
+        first; the one-at-a-time design holds the others there."""
+        return {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0]
+                for n, v in self.params}
 
     @property
     def combos(self) -> list[tuple]:
         names = [n for n, _ in self.params]
-        return [tuple(zip(names, vals)) for vals in itertools.product(*(v for _, v in self.params))]
+        if self.design == "grid":
+            return [tuple(zip(names, vals))
+                    for vals in itertools.product(*(v for _, v in self.params))]
+        ref = self.reference
+        out = []
+        for n, vals in self.params:
+            for v in vals:
+                c = tuple((m, v if m == n else ref[m]) for m in names)
+                if c not in out:
+                    out.append(c)
+        return out
 
     @property
     def n_points(self) -> int:
@@ -299,20 +341,23 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
 
 
 def recheck_point(cfg: SweepConfig, run, signal) -> dict:
-    """Re-run the first ``recheck_samples`` samples of a point cycle-accurately and compare
-    the FIFO words and cycles with the bit-exact model."""
+    """Re-run the first samples of a point cycle-accurately (:attr:`SweepConfig.recheck_plan`)
+    and compare the FIFO words and their cycles with the bit-exact model."""
     from cosim.tacan import FRONTENDS
-    x = signal.samples[:cfg.recheck_samples]
+    backend, n = cfg.recheck_plan
+    x = signal.samples[:n]
     t0 = time.perf_counter()
     a = FRONTENDS["model"](x, run)
     try:
-        b = FRONTENDS[cfg.recheck_backend](x, run)
+        b = FRONTENDS[backend](x, run)
     except RuntimeError as e:           # e.g. Verilator missing
-        return {"backend": cfg.recheck_backend, "error": str(e)}
-    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles))
-    return {"backend": cfg.recheck_backend, "samples": int(len(x)),
-            "words": int(len(a.words)), "same_bits": bool(same),
-            "seconds": time.perf_counter() - t0}
+        return {"backend": backend, "error": str(e)}
+    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles)
+            and a.fifo_dropped == b.fifo_dropped)
+    return {"backend": backend, "samples": int(len(x)), "words": int(len(a.words)),
+            "same_bits": bool(same), "seconds": time.perf_counter() - t0,
+            **({"error": "no FIFO words in the re-checked samples: inconclusive"}
+               if len(a.words) == 0 else {})}
 
 
 # ---------------------------------------------------------------------------------------
@@ -539,22 +584,24 @@ def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: f
 
 
 def _collect_ranges(pts) -> dict:
-    """Per signal: min/max seen and overflow/saturation counts over every point."""
+    """Per signal over every point: min/max seen, the word's range, the least headroom and
+    the overflow/saturation count (Fixed-Point Designer's range log)."""
     agg: dict = {}
     for r in pts:
         for sig, d in (r.get("ranges") or {}).items():
-            a = agg.setdefault(sig, {"min": math.inf, "max": -math.inf, "overflows": 0,
-                                     "unit": d.get("unit", "")})
-            a["min"] = min(a["min"], d["min"])
-            a["max"] = max(a["max"], d["max"])
-            a["overflows"] += int(d.get("overflows", 0))
-        for k, v in (r.get("dsp_events") or {}).items():
-            if k.startswith("sat_") or k in ("p_clamps", "p_neg"):
-                a = agg.setdefault(f"dsp.{k[4:] if k.startswith('sat_') else k}",
-                                   {"min": None, "max": None, "overflows": 0, "unit": "events"})
-                a["overflows"] += int(v)
-    return {k: {**v, "min": None if v["min"] in (math.inf, None) else v["min"],
-                "max": None if v["max"] in (-math.inf, None) else v["max"]} for k, v in agg.items()}
+            a = agg.setdefault(sig, {"min": None, "max": None, "lo": d.get("lo"),
+                                     "hi": d.get("hi"), "headroom_bits": None,
+                                     "overflows": 0, "unit": d.get("unit", ""), "points": 0})
+            if d.get("min") is not None:
+                a["min"] = d["min"] if a["min"] is None else min(a["min"], d["min"])
+                a["max"] = d["max"] if a["max"] is None else max(a["max"], d["max"])
+            # the word changes with the swept width: keep the tightest case
+            hb = d.get("headroom_bits")
+            if hb is not None and (a["headroom_bits"] is None or hb < a["headroom_bits"]):
+                a["headroom_bits"], a["lo"], a["hi"] = hb, d.get("lo"), d.get("hi")
+            a["overflows"] += int(d.get("overflows") or 0)
+            a["points"] += 1
+    return agg
 
 
 def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
@@ -627,10 +674,17 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
                      f"{f(r['mean_error_deg'], '+.4f')} | {f(r['crb_deg'], '.4f')} | "
                      f"{r['adc_clipped']} | {r['fifo_dropped']} | {sat} |")
     lines += ["", "## Ranges and overflows (all points)", "",
-              "| signal | min | max | unit | overflows/saturations |", "|---|---:|---:|---|---:|"]
+              "Smallest and largest value each signal took over every point (front end `fe.*` "
+              "as a fraction of its word's full scale (FS); fixed-point DSP `dsp.*` in real "
+              "units, before saturation), the word's range and the least headroom (unused "
+              "MSBs) over the points, and the overflow/saturation count (`fe.adc`: samples "
+              "clipped).", "",
+              "| signal | min | max | unit | word range | least headroom bits | "
+              "overflows/saturations |", "|---|---:|---:|---|---:|---:|---:|"]
     for k, v in sorted(s["ranges"].items()):
-        lines.append(f"| {k} | {f(v['min'], 'g')} | {f(v['max'], 'g')} | {v['unit']} | "
-                     f"{v['overflows']} |")
+        rng = "-" if v["lo"] is None else f"[{v['lo']:.4g}, {v['hi']:.4g}]"
+        lines.append(f"| {k} | {f(v['min'], '.4g')} | {f(v['max'], '.4g')} | {v['unit']} | {rng} | "
+                     f"{f(v['headroom_bits'], '.1f')} | {v['overflows']} |")
     lines += ["", "## Word-length proposal", "",
               f"Smallest value of each parameter (the others at their largest swept value) such "
               f"that it and every larger value lock as often as the golden chain and keep the "

@@ -94,8 +94,9 @@ import numba
 import numpy as np
 
 from ..fixed import FixedFormat
-from ..qops import (PHASE_BITS, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm, div_square, ewma,
-                    floor_one, mac2, mulw, rate_dt, rs, sat, scale_sat, sincos_dt, snorm)
+from ..qops import (PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm,
+                    div_square, ewma, floor_one, mac2, mulw, new_event_array, rate_dt, rs, sat,
+                    scale_sat, sincos_dt, snorm)
 
 F15, F135 = 15.0, 135.0
 #: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
@@ -107,6 +108,9 @@ MAX_TICKS = 1 << 38
 EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
                "p_clamps", "p_neg", "reinit", "gated")
 _EV = {n: i for i, n in enumerate(EVENT_NAMES)}
+#: Signals whose range the fixed-point core logs (event index -> format name): every store
+#: of that format goes through a saturating operator with that index (r also holds e2).
+RANGE_SIGNALS = {0: "y", 1: "x", 2: "P", 3: "K", 4: "innov", 5: "r", 6: "rmult"}
 
 
 @dataclass(frozen=True)
@@ -502,9 +506,11 @@ class EnvelopeKalman:
         self.P = np.zeros((self.batch, 5, 5), dtype)
         self._r = np.full(self.batch, self._cv[6], dtype)
         self._cnt = np.zeros((self.batch, 2), np.int64)      # n, consecutive rejects
-        self._ev = np.zeros((self.batch, len(EVENT_NAMES)), np.int64)
+        self._ev = new_event_array((self.batch,))    # counts, then the range log
         self._t_resid = 0.0
         self.n_updates = 0
+        self._upsets = None
+        self.upsets_applied = 0
         self.reset()
 
     @property
@@ -517,6 +523,48 @@ class EnvelopeKalman:
         self.P[:] = 0
         self.P[:, np.arange(5), np.arange(5)] = self._cv[4]
         self._cnt[:] = 0
+
+    # -- upsets (bit-error studies) -------------------------------------------------------
+    #: Words of the state as the DSP stores it: ``x[0..4]``, then the upper triangle of
+    #: ``P`` row by row (``P`` is symmetric, one word per pair).
+    STATE_WORDS = tuple(("x", i, i) for i in range(5)) + tuple(
+        ("P", i, j) for i in range(5) for j in range(i, 5))
+
+    def schedule_upsets(self, steps, words, bits) -> None:
+        """Flip state bits during later :meth:`run` calls (single-event upsets of the DSP's
+        memory; fixed point only). Upset ``k`` flips bit ``bits[k]`` of the stored word
+        ``words[k]`` (an index into :attr:`STATE_WORDS`; a ``P`` word flips both mirrored
+        entries) of every trial just before update number ``steps[k]`` (counted like
+        :attr:`n_updates`). Replaces any schedule not yet applied."""
+        if self.fixed is None:
+            raise ValueError("upsets flip bits of the fixed-point state: use a KalmanFixedConfig")
+        st = np.asarray(steps, dtype=np.int64).ravel()
+        wd = np.asarray(words, dtype=np.int64).ravel()
+        bt = np.asarray(bits, dtype=np.int64).ravel()
+        if not (st.size == wd.size == bt.size):
+            raise ValueError("steps, words and bits must have the same length")
+        if st.size and (np.any(np.diff(st) < 0) or st[0] < self.n_updates):
+            raise ValueError(f"upset steps must be sorted and >= n_updates ({self.n_updates})")
+        if wd.size and (wd.min() < 0 or wd.max() >= len(self.STATE_WORDS)):
+            raise ValueError(f"upset words must lie in 0..{len(self.STATE_WORDS) - 1}")
+        widths = np.array([self.fixed.x.width if n == "x" else self.fixed.P.width
+                           for n, _, _ in self.STATE_WORDS])
+        if bt.size and (bt.min() < 0 or np.any(bt >= widths[wd])):
+            raise ValueError("upset bit positions must lie inside the word (0 = LSB)")
+        self._upsets = (st, wd, bt, 0)
+
+    def _flip(self, word: int, bit: int) -> None:
+        name, i, j = self.STATE_WORDS[word]
+        w = (self.fixed.x if name == "x" else self.fixed.P).width
+        arr = self.x[:, i] if name == "x" else self.P[:, i, j]
+        u = (arr & np.int64((1 << w) - 1)) ^ np.int64(1 << bit)
+        v = np.where(u >= np.int64(1 << (w - 1)), u - np.int64(1 << w), u)
+        if name == "x":
+            self.x[:, i] = v
+        else:
+            self.P[:, i, j] = v
+            self.P[:, j, i] = v
+        self.upsets_applied += 1
 
     # -- boundary conversions ----------------------------------------------------------------
     def _ticks(self, dts) -> np.ndarray:
@@ -561,6 +609,7 @@ class EnvelopeKalman:
         if ys_a.dtype.kind in "iu":
             yi = ys_a.astype(np.int64).reshape(self.batch, -1)
             nsat = (yi < fy.min_int) | (yi > fy.max_int)
+            self._y_raw = yi
             return np.clip(yi, fy.min_int, fy.max_int), nsat
         yf = ys_a.astype(np.float64).reshape(self.batch, -1)
         if not np.isfinite(yf).all():
@@ -568,6 +617,7 @@ class EnvelopeKalman:
         scaled = np.floor(np.clip(np.ldexp(yf, fy.frac), -2.0 ** 62, 2.0 ** 62)
                           + (0.5 if fy.rounding == "half_up" else 0.0))
         nsat = (scaled < fy.min_int) | (scaled > fy.max_int)
+        self._y_raw = scaled
         return np.clip(scaled, fy.min_int, fy.max_int).astype(np.int64), nsat
 
     def run(self, dts, ys, r_mult=None) -> None:
@@ -592,6 +642,7 @@ class EnvelopeKalman:
             return
         if nsat is not None:
             self._ev[:, _EV["sat_y"]] += nsat.sum(axis=1)
+            self._note_python(0, self._y_raw)
         if r_mult is None:
             rmf = np.ones(t.size)
         else:
@@ -602,16 +653,69 @@ class EnvelopeKalman:
             lo, hi = 2.0 ** -12, 2.0 ** 12
             self._ev[:, _EV["sat_rmult"]] += int(np.count_nonzero((rmf < lo) | (rmf > hi)))
             rm = np.round(np.ldexp(np.clip(rmf, lo, hi), self.fixed.P.frac)).astype(np.int64)
+            self._note_python(6, np.round(np.ldexp(rmf, self.fixed.P.frac))[None, :])
         else:
             rm = rmf
         sc = np.empty((t.size, 7), self.x.dtype)
         _step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
         kern = _run_parallel if self.parallel else _run_serial
-        kern(self.x, self.P, self._r, self._cnt, self._ev, sc, np.ascontiguousarray(y),
-             self._ci, self._cv)
+        y = np.ascontiguousarray(y)
+        if self._upsets is None:
+            kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv)
+            self.n_updates += t.size
+            return
+        st, wd, bt, k = self._upsets
+        a, n0 = 0, self.n_updates
+        while a < t.size:
+            # run up to the next upset inside this call, flip, go on
+            b = t.size if k >= st.size or st[k] - n0 >= t.size else int(st[k] - n0)
+            if b > a:
+                kern(self.x, self.P, self._r, self._cnt, self._ev, sc[a:b],
+                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv)
+                a = b
+            while k < st.size and st[k] - n0 == a and a < t.size:
+                self._flip(int(wd[k]), int(bt[k]))
+                k += 1
+            if b == t.size:
+                break
+        self._upsets = (st, wd, bt, k)
         self.n_updates += t.size
 
+    def _note_python(self, i: int, raw) -> None:
+        """Range log of a value stored outside the compiled core (per trial rows)."""
+        raw = np.asarray(raw)
+        if raw.size == 0:
+            return
+        j = RANGE_BASE + 2 * i
+        lo = np.clip(raw.min(axis=-1), -2.0 ** 62, 2.0 ** 62).astype(np.int64)
+        hi = np.clip(raw.max(axis=-1), -2.0 ** 62, 2.0 ** 62).astype(np.int64)
+        self._ev[:, j] = np.minimum(self._ev[:, j], lo)
+        self._ev[:, j + 1] = np.maximum(self._ev[:, j + 1], hi)
+
     # -- outputs -----------------------------------------------------------------------------
+    def ranges(self) -> dict:
+        """Range log of the fixed-point core since construction, per format: ``{name:
+        {"min", "max", "lo", "hi", "saturations"}}`` -- the smallest and largest value each
+        store was asked to hold before saturation (real units; over all trials), the
+        format's representable range and its saturation count. Empty in float mode (the
+        float operators do not quantise, so there is nothing to log)."""
+        if self.fixed is None:
+            return {}
+        out = {}
+        big = np.iinfo(np.int64).max
+        for i, name in RANGE_SIGNALS.items():
+            j = RANGE_BASE + 2 * i
+            mn, mx = int(self._ev[:, j].min()), int(self._ev[:, j + 1].max())
+            fmt = self.fixed.P if name == "rmult" else getattr(self.fixed, name)
+            sat_name = "sat_rmult" if name == "rmult" else f"sat_{name}"
+            lo, hi = (2.0 ** -12, 2.0 ** 12) if name == "rmult" else (fmt.min_value,
+                                                                        fmt.max_value)
+            out[name] = {"min": None if mn == big else math.ldexp(mn, -fmt.frac),
+                         "max": None if mx == -big - 1 else math.ldexp(mx, -fmt.frac),
+                         "lo": lo, "hi": hi,
+                         "saturations": int(self._ev[:, _EV[sat_name]].sum())}
+        return out
+
     @property
     def events(self) -> dict:
         """Per-trial event counters (name -> (B,) int64); float mode counts only ``gated``,

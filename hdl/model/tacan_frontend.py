@@ -401,7 +401,7 @@ def _rnd(v, rc):
 
 @numba.njit(cache=True, nogil=True)
 def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
-                    rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val):
+                    rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng):
     """NCO + mixer + CIC on whole decimation groups, sample by sample as the hardware.
 
     ``ph``: phase of the first sample; ``fw``: NCO word at the first sample, replaced by
@@ -417,7 +417,7 @@ def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
     m_dl = combs.shape[2]
     if n_st == 3 and m_dl == 1 and mix_rc[0] == 0 and mix_rc[4] == 0:
         return _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
-                         rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val)
+                         rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng)
     count = x.shape[0] // rate
     ii = integ[0].copy()
     iq = integ[1].copy()
@@ -437,6 +437,10 @@ def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
             a = ph >> trunc
             vi = _rnd(xv * cos_t[a], mix_rc)
             vq = _rnd(xv * msin_t[a], mix_rc)
+            mrng[0] = min(mrng[0], vi)
+            mrng[1] = max(mrng[1], vi)
+            mrng[2] = min(mrng[2], vq)
+            mrng[3] = max(mrng[3], vq)
             ph = (ph + fw) & pmask
             for s in range(n_st):
                 vi += ii[s]
@@ -465,7 +469,7 @@ def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
 
 @numba.njit(inline="always")
 def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
-              rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val):
+              rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng):
     """:func:`_ddc_cic_kernel` for N = 3, M = 1 (the default), registers in locals, and a
     mixer rounding without left shift or toward-zero bias (the fewer terms matter here)."""
     _, rs, c0, em, _ = mix_rc
@@ -478,6 +482,7 @@ def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
     nch = ch_idx.shape[0]
     j = 0
     nxt = ch_idx[0] if nch > 0 else -1
+    mn_i, mx_i, mn_q, mx_q = mrng[0], mrng[1], mrng[2], mrng[3]
     for k in range(count):
         xs = x[k * rate:(k + 1) * rate]
         for r in range(rate):
@@ -492,6 +497,10 @@ def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
             pq = xv * msin_t[a]
             vi = (pi + c0 + ((pi >> rs) & em)) >> rs
             vq = (pq + c0 + ((pq >> rs) & em)) >> rs
+            mn_i = min(mn_i, vi)
+            mx_i = max(mx_i, vi)
+            mn_q = min(mn_q, vq)
+            mx_q = max(mx_q, vq)
             ph = (ph + fw) & pmask
             i1 += vi
             i2 += i1
@@ -515,6 +524,7 @@ def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
     integ[1, 0], integ[1, 1], integ[1, 2] = q1, q2, q3
     combs[0, 0, 0], combs[0, 1, 0], combs[0, 2, 0] = ci1, ci2, ci3
     combs[1, 0, 0], combs[1, 1, 0], combs[1, 2, 0] = cq1, cq2, cq3
+    mrng[0], mrng[1], mrng[2], mrng[3] = mn_i, mx_i, mn_q, mx_q
     return -1 if bad else ph
 
 
@@ -689,8 +699,11 @@ class TacanFrontendModel:
     CHUNK = 1 << 18   # ADC samples per internal step (cache-sized temporaries)
 
     def __init__(self, params: TacanFrontendParams | None = None, *, freq_word: int | None = None,
-                 fast: bool | None = None):
+                 fast: bool | None = None, log_ranges: bool = False):
         self.params = params if params is not None else TacanFrontendParams()
+        self.log_ranges = bool(log_ranges)
+        #: Range log (``log_ranges=True``): signal -> [min, max] in LSBs over every call.
+        self.range_log: dict[str, list[int]] = {}
         self.freq_word = self.params.nco_freq_word if freq_word is None else int(freq_word)
         self.ddc = DdcModel(self.params.ddc)
         self._fast = self._fast_ok() if fast is None else bool(fast and self._fast_ok())
@@ -749,6 +762,8 @@ class TacanFrontendModel:
         fw0 = self.freq_word if st.freq is None else st.freq
         ch_idx, ch_val = _changes_in(freq_changes, st.n_adc, st.n_adc + usable)
         fw_end = int(ch_val[-1]) if ch_val.size else fw0
+        if self.log_ranges and x.size:
+            self._note("adc", x)
         if self._fast:
             e, nco, cic, fir = self._fast_chain(x, st, fw0, ch_idx, ch_val)
         else:
@@ -761,8 +776,41 @@ class TacanFrontendModel:
             c, cic = cic_model(p.cic, np.stack([i, q], axis=-1), st.cic)
             f, fir = fir_model(p.fir, c, st.fir)
             e = envelope_model(f[:, 0], f[:, 1], p.envelope)
+            if self.log_ranges and x.size:
+                self._note("mixer", np.r_[i.min(), i.max(), q.min(), q.max()])
+                self._note("cic", c)
+                self._note("fir", f)
+        if self.log_ranges and x.size:
+            self._note("envelope", e)
         return e, TacanFrontendState(nco=nco, cic=cic, fir=fir, peak=st.peak,
                                      n_adc=st.n_adc + usable, pending=rest, freq=fw_end)
+
+    def _note(self, name: str, v) -> None:
+        v = np.asarray(v)
+        if v.size == 0:
+            return
+        lo, hi = int(v.min()), int(v.max())
+        r = self.range_log.get(name)
+        self.range_log[name] = [lo, hi] if r is None else [min(r[0], lo), max(r[1], hi)]
+
+    def ranges(self) -> dict:
+        """The range log (``log_ranges=True``) against each signal's word: ``{name: {"min",
+        "max", "lo", "hi", "bits", "headroom_bits"}}`` in LSBs; ``headroom_bits`` = unused
+        MSBs, ``log2(full scale / max |v|)`` (negative means it would have overflowed,
+        which the parameter checks rule out for the default structure)."""
+        p = self.params
+        words = {"adc": p.adc_bits, "mixer": p.ddc.mixer.out_width, "cic": p.cic.out_width,
+                 "fir": p.fir.out_width, "envelope": p.envelope.out_width}
+        out = {}
+        for name, (lo, hi) in self.range_log.items():
+            b = words[name]
+            signed = name != "envelope"
+            top = (1 << (b - 1)) if signed else (1 << b)
+            peak = max(abs(lo), abs(hi), 1)
+            out[name] = {"min": lo, "max": hi, "bits": b,
+                         "lo": -top if signed else 0, "hi": top - 1,
+                         "headroom_bits": math.log2(top / peak)}
+        return out
 
     def _fast_chain(self, x, st: TacanFrontendState, fw0: int, ch_idx, ch_val):
         """Compiled kernels: NCO + mixer + CIC fused (integer, sample by sample), the FIR
@@ -787,9 +835,11 @@ class TacanFrontendModel:
         ci = np.empty(count, np.int64)
         cq = np.empty(count, np.int64)
         lo = p.adc_bits - 1
+        big = np.iinfo(np.int64).max
+        mrng = np.array([big, -big, big, -big], np.int64)
         ph = _ddc_cic_kernel(x, acc0, fw, pmask, nco_p.trunc_bits, self._cos, self._msin,
                              self._rc["mixer"], -(1 << lo), (1 << lo) - 1, cic.rate, integ,
-                             combs, self._rc["cic"], ci, cq, ch_idx, ch_val)
+                             combs, self._rc["cic"], ci, cq, ch_idx, ch_val, mrng)
         if ph < 0:
             raise ValueError(f"ADC codes must be signed {p.adc_bits}-bit integers")
         nco = NcoState(acc=int(ph), lfsr=int(nco_p.dither_seed) if st.nco is None else st.nco.lfsr)
@@ -799,6 +849,11 @@ class TacanFrontendModel:
         fq = np.empty(nf, np.int64)
         _fir_kernel(ci, hist[0], self._h_fir, self._fir_sym, f.decimation, self._rc["fir"], fi)
         _fir_kernel(cq, hist[1], self._h_fir, self._fir_sym, f.decimation, self._rc["fir"], fq)
+        if self.log_ranges and count:
+            self._note("mixer", mrng)
+            self._note("cic", np.r_[ci.min(), ci.max(), cq.min(), cq.max()])
+            if nf:
+                self._note("fir", np.r_[fi.min(), fi.max(), fq.min(), fq.max()])
         # In range by construction (check_headroom: the FIR output never saturates).
         e = envelope_model(fi, fq, p.envelope, check=False)
         return e, nco, (integ, combs), hist

@@ -73,3 +73,68 @@ def test_bad_arguments():
         receive_words([], width=40, amp_width=19, ts_bits=32)
     with pytest.raises(ValueError, match="max_gap_ticks"):
         receive_words([], width=W, amp_width=AW, ts_bits=TB, max_gap_ticks=0)
+
+
+def test_plausible_looking_corruptions_cost_one_word_and_no_time_jump():
+    """Flips of mid timestamp bits move a peak forward by less than max_gap: it looks
+    plausible on its own, but its successor contradicts it. The look-ahead drops exactly
+    the corrupted words; every good word keeps its exact tick."""
+    t, a = _stream(3000, seed=5)
+    words = _pack(t, a)
+    rng = np.random.default_rng(2)
+    bad = np.sort(rng.choice(np.arange(5, 2995, 3), 60, replace=False))   # never adjacent
+    w2 = words.copy()
+    w2[bad] ^= np.int64(1) << (AW + rng.integers(14, 21, bad.size))     # +0.8..52 ms
+    ticks, amps, st = receive_words(w2, width=W, amp_width=AW, ts_bits=TB)
+    good = np.ones(t.size, bool)
+    good[bad] = False
+    # a flip that leaves the peak between its neighbours is indistinguishable (and harmless)
+    m = (1 << TB) - 1
+    moved = (w2[bad] >> AW) & m
+    between = (moved > (t[bad - 1] & m)) & (moved < (t[bad + 1] & m))
+    assert np.isin(t[good], ticks).all()                  # every good word, exact tick
+    assert ticks.size == good.sum() + between.sum()       # corrupted ones out, but those
+    assert st.stats["ts_rejected"] == (~between).sum()
+    assert st.stats["ts_resyncs"] == 0
+    assert np.all(np.diff(ticks) > 0) and ticks[-1] == t[-1]
+
+
+def test_streaming_batches_equal_one_call_with_corruptions_at_the_edges():
+    t, a = _stream(2000, seed=8)
+    w = _pack(t, a)
+    w[[699, 700, 1400]] ^= np.int64(1) << (AW + 18)
+    one, amps1, s1 = receive_words(w, width=W, amp_width=AW, ts_bits=TB)
+    st, parts = RxState(), []
+    edges = [0, 699, 700, 701, 1400, 1401, 2000]
+    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        parts.append(receive_words(w[lo:hi], width=W, amp_width=AW, ts_bits=TB, state=st,
+                                   final=(i == len(edges) - 2))[0])
+    np.testing.assert_array_equal(np.concatenate(parts), one)
+    assert st.stats == s1.stats and st.pending is None
+
+
+def test_a_corrupted_word_that_gets_through_does_not_make_the_timeline_jump():
+    """Two consecutive corruptions that agree with each other get the first accepted: the
+    stream then looks behind it. The receiver re-anchors (no jump of a whole wrap) and the
+    good words after it keep their spacing exactly."""
+    t, a = _stream(300, seed=1, start=1000)
+    w = _pack(t, a)
+    w[100] ^= np.int64(1) << (AW + 19)                # +26 ms
+    w[101] ^= np.int64(1) << (AW + 19)
+    ticks, _, st = receive_words(w, width=W, amp_width=AW, ts_bits=TB, resync_after=4)
+    assert st.stats["ts_resyncs"] == 1
+    assert np.all(np.diff(ticks) > 0)
+    assert ticks[-1] - ticks[0] < 2 * (t[-1] - t[0])  # no wrap-sized jump
+    np.testing.assert_array_equal(np.diff(ticks[-150:]), np.diff(t[-150:]))
+
+
+def test_implausible_marker_counts_are_not_reported_as_drops():
+    t, a = _stream(10)
+    words = list(_pack(t, a))
+    words.insert(4, int(_pack(0, 7, tag=2)))
+    words.insert(6, int(np.int64(1 << 40) | (np.int64(2) << W)))    # corrupted: 2**40 drops
+    ticks, _, st = receive_words(words, width=W, amp_width=AW, ts_bits=TB)
+    np.testing.assert_array_equal(ticks, t)
+    assert st.stats["dropped_reported"] == 7 and st.stats["bad_markers"] == 1
+    with pytest.raises(ValueError, match="max_marker"):
+        receive_words([], width=W, amp_width=AW, ts_bits=TB, max_marker=0)

@@ -386,3 +386,22 @@ def test_quantisation_bound_vs_golden(snr_db):
     if snr_db is None:
         assert np.all(da <= bound + amp * _sampling_phase_bound(p)), \
             (da.max(), bound, _sampling_phase_bound(p))
+
+
+def test_range_log_is_the_same_on_both_paths_and_fits_the_words():
+    x = tacan_record(80_000, seed=9)
+    fast = TacanFrontendModel(P, log_ranges=True)
+    slow = TacanFrontendModel(P, fast=False, log_ranges=True)
+    st_f = st_s = None
+    for chunk in np.array_split(x, [30_001]):
+        _, st_f = fast.run(chunk, st_f)
+        _, st_s = slow.run(chunk, st_s)
+    assert fast.range_log == slow.range_log
+    r = fast.ranges()
+    assert set(r) == {"adc", "mixer", "cic", "fir", "envelope"}
+    for name, v in r.items():
+        assert v["lo"] <= v["min"] <= v["max"] <= v["hi"], name
+        assert v["headroom_bits"] >= 0
+    assert r["adc"]["min"] == int(x.min()) and r["adc"]["max"] == int(x.max())
+    assert TacanFrontendModel(P).run(x)[0].amplitudes.size > 0
+    assert TacanFrontendModel(P).range_log == {}          # opt-in

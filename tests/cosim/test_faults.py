@@ -1,0 +1,147 @@
+"""Bit-error studies: injection, each target end to end, the receiver survives."""
+import json
+
+import numpy as np
+import pytest
+
+from cosim.cli import main
+from cosim.studies.faults import FaultConfig, _flip_signed, flip_bits, parse_ber, run_faults
+from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
+
+QUICK = dict(trials=1, duration_s=1.2, memory_s=0.25)
+
+
+def test_parse_ber():
+    assert parse_ber("1e-6:1e-3") == (1e-6, 1e-5, 1e-4, 1e-3)
+    assert parse_ber("1e-5,3e-5") == (1e-5, 3e-5)
+    for bad in ("1e-3:1e-6", "0:1e-3", "1e-3:2", "1:2:3"):
+        with pytest.raises(ValueError, match="BER"):
+            parse_ber(bad)
+
+
+def test_flip_bits_rate_positions_and_signed_codes():
+    rng = np.random.default_rng(0)
+    w = np.zeros(200_000, np.int64)
+    out, wi, bi = flip_bits(w, 12, 1e-3, rng)
+    assert abs(wi.size - 2400) < 4 * np.sqrt(2400)          # binomial(2.4M bits, 1e-3)
+    want = np.zeros_like(w)
+    np.bitwise_xor.at(want, wi, np.int64(1) << bi)
+    np.testing.assert_array_equal(out, want)                # exactly the reported flips
+    assert np.unique(wi * 12 + bi).size == wi.size          # each bit at most once
+    _, _, bi2 = flip_bits(w, 12, 1e-3, rng, bits=[10, 11])
+    assert set(bi2.tolist()) <= {10, 11}
+    codes = np.array([-2048, -1, 0, 2047], np.int16)
+    flipped, wi3, _ = _flip_signed(codes, 12, 0.999, np.random.default_rng(1), bits=[11])
+    assert flipped.dtype == codes.dtype
+    np.testing.assert_array_equal(flipped[wi3], np.array([0, 2047, -2048, -1], np.int16)[wi3])
+    with pytest.raises(ValueError, match="bit positions"):
+        flip_bits(w, 12, 1e-3, rng, bits=[12])
+
+
+def test_kalman_upsets_equal_a_manual_split_and_flip():
+    rng = np.random.default_rng(3)
+    cfg = KalmanFixedConfig()
+    dts = rng.integers(1000, 8000, 3000)
+    ys = (0.8 + 0.1 * rng.standard_normal(3000))[None, :]
+    steps = np.array([5, 5, 400, 2999])
+    words = np.array([0, 7, 19, 3])          # x0, P[0,2] (word 7), P[4,4], x3
+    bits = np.array([30, 40, 5, 33])
+    a = EnvelopeKalman(cfg)
+    a.schedule_upsets(steps, words, bits)
+    for lo, hi in ((0, 1000), (1000, 3000)):
+        a.run(dts[lo:hi], ys[:, lo:hi])
+    b = EnvelopeKalman(cfg)
+    edges = [0, 5, 400, 2999, 3000]
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        for k in np.flatnonzero(steps == lo):
+            b._flip(int(words[k]), int(bits[k]))
+        b.run(dts[lo:hi], ys[:, lo:hi])
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.P, b.P)
+    assert a.upsets_applied == 4 and np.array_equal(a.P[0], a.P[0].T)
+    with pytest.raises(ValueError, match="sorted"):
+        a.schedule_upsets([3], [0], [0])                    # before n_updates
+    with pytest.raises(ValueError, match="inside the word"):
+        EnvelopeKalman(cfg).schedule_upsets([1], [0], [cfg.x.width])
+    with pytest.raises(ValueError, match="fixed-point"):
+        EnvelopeKalman().schedule_upsets([1], [0], [0])
+
+
+@pytest.fixture(scope="module")
+def adc_fifo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("faults")
+    return out, {t: run_faults(FaultConfig(target=t, ber=(1e-5, 1e-3), **QUICK), out,
+                               progress=False)
+                 for t in ("adc", "fifo")}
+
+
+def _row(s, ber):
+    return next(r for r in s["rows"] if r["ber"] == ber)
+
+
+def test_bit_errors_at_1e5_in_adc_or_fifo_words_leave_the_bearing_intact(adc_fifo):
+    _, res = adc_fifo
+    for t, s in res.items():
+        base, r = _row(s, 0.0), _row(s, 1e-5)
+        assert r["exceptions"] == 0 and r["nan_bearings"] == 0, t
+        assert r["flips"] > 0, t
+        assert r["rmse_deg"] < 0.25 and r["max_abs_error_deg"] < 1.0, t
+        assert r["rmse_deg"] < 1.5 * base["rmse_deg"], t
+
+
+def test_heavy_bit_errors_are_survived(adc_fifo):
+    """BER 1e-3: no exception, no NaN, the FIFO receiver rejects implausible words, and the
+    bearing stays bounded (no wrap-sized time jump, no filter lost for good)."""
+    out, res = adc_fifo
+    for t, s in res.items():
+        r = _row(s, 1e-3)
+        assert r["exceptions"] == 0 and r["nan_bearings"] == 0, t
+        assert r["rmse_deg"] is not None and r["max_abs_error_deg"] < 20, t
+        assert r["longest_disturbance_s"] < 1.0, t
+    assert _row(res["fifo"], 1e-3)["rx"]["ts_rejected"] > 0
+    for f in ("faults_adc.md", "faults_adc.csv", "faults_adc.png", "faults_fifo.json"):
+        assert (out / f).stat().st_size > 0
+
+
+def test_dsp_state_upsets_are_detected_and_recovered(tmp_path):
+    s = run_faults(FaultConfig(target="dsp-state", ber=(1e-5,), seed=2,
+                               **{**QUICK, "duration_s": 2.0}), tmp_path, progress=False)
+    r = _row(s, 1e-5)
+    assert r["exceptions"] == 0 and r["nan_bearings"] == 0
+    assert r["flips"] > 10 and r["reinit"] > 0              # divergence detected ...
+    rec = s["records"][-1]
+    assert rec["n_bearings"] > 100                          # ... and the receiver goes on
+    assert r["longest_disturbance_s"] < 1.5
+
+
+def test_register_upsets_are_scrubbed(tmp_path):
+    s = run_faults(FaultConfig(target="register", ber=(3e-3,), seed=1, scrub_period_s=0.005,
+                               **QUICK), tmp_path, progress=False)
+    r = _row(s, 3e-3)
+    assert r["exceptions"] == 0 and r["nan_bearings"] == 0 and r["flips"] > 0
+    assert r["longest_disturbance_s"] < 1.0
+
+
+def test_cli_faults_json(tmp_path, capsys):
+    rc = main(["faults", "tacan", "--target", "adc", "--ber", "1e-4", "--trials", "1",
+               "--duration-s", "1.2", "--memory-s", "0.25", "--out", str(tmp_path), "--json"])
+    assert rc == 0
+    r = json.loads(capsys.readouterr().out)
+    assert [row["ber"] for row in r["rows"]] == [0.0, 1e-4]
+    assert (tmp_path / "faults_adc.md").exists()
+    assert main(["faults", "tacan", "--bits", "x,y"]) == 2
+
+
+@pytest.mark.skipif(not __import__("cosim.verilator").verilator.verilator_available(),
+                    reason="Verilator not installed")
+def test_register_upsets_in_the_compiled_rtl_equal_the_model(tmp_path):
+    """The same NCO-register upsets and scrubs, applied as port writes to the Verilated
+    front end, give the same bearings as on the bit-exact model."""
+    kw = dict(target="register", ber=(3e-3,), seed=1, scrub_period_s=0.005, trials=1,
+              duration_s=0.7, memory_s=0.15)
+    m = run_faults(FaultConfig(**kw), None, progress=False)
+    v = run_faults(FaultConfig(**kw, backend="verilator"), None, progress=False)
+    rm, rv = (next(r for r in s["records"] if r["ber"] == 3e-3) for s in (m, v))
+    assert rm["flips"] == rv["flips"] > 0
+    for k in ("rmse_deg", "max_abs_error_deg", "n_bearings", "events"):
+        assert rm[k] == rv[k], k

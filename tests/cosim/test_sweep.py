@@ -1,0 +1,161 @@
+"""Quantisation sweeps: parameters, one small sweep end to end, resume, Dask, the proposal."""
+import json
+
+import numpy as np
+import pytest
+
+import cosim.studies.sweep as sw
+import cosim.tacan
+from cosim.cli import main
+from cosim.studies.sweep import SweepConfig, parse_param, parse_values, propose, study
+from cosim.verilator import verilator_available
+
+SMALL = dict(params=(("adc_bits", (4, 10)),), snr_db=(15.0,), trials=2, duration_s=0.7,
+             memory_s=0.15, recheck=0)
+
+
+def test_parse_values_and_params():
+    assert parse_values("4:8") == (4, 5, 6, 7, 8)
+    assert parse_values("0:20:5") == (0, 5, 10, 15, 20)
+    assert parse_values("8,12,16") == (8, 12, 16)
+    assert parse_values("floor,half_up") == ("floor", "half_up")
+    assert parse_values("0.5:1.5:0.5") == (0.5, 1.0, 1.5)
+    assert parse_param("dsp.P=30:46:8") == ("dsp.P", (30, 38, 46))
+    assert parse_param("nco_amp_bits=8,12") == ("nco_amp_bits", (8, 12))
+    for bad, msg in (("adc_bits", "NAME=VALUES"), ("nope=1", "unknown parameter"),
+                     ("dsp.Z=3", "unknown parameter"), ("adc_bits=8:4", "a <= b"),
+                     ("adc_bits=", "empty value list"), ("adc_bits=1:2:3:4", "a:b or a:b:step")):
+        with pytest.raises(ValueError, match=msg):
+            parse_param(bad)
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(trials=0), "trials must be an integer >= 1"),
+    (dict(snr_db=()), "snr_db must be finite numbers"),
+    (dict(duration_s=0.4, memory_s=0.25), "duration_s must exceed"),
+    (dict(params=(("adc_bits", (4,)), ("adc_bits", (5,)))), "parameter given twice"),
+    (dict(params=(("adc_bits", ()),)), "has no values"),
+    (dict(recheck_backend="iverilog"), "recheck_backend must be"),
+    (dict(recheck_samples=10), "recheck_samples must be an integer >= 1000"),
+    (dict(target_rel=0), "target_rel must be in"),
+])
+def test_sweep_config_errors(kw, msg):
+    with pytest.raises(ValueError, match=msg):
+        SweepConfig(**kw)
+
+
+def _rows(table):
+    """Synthetic aggregate rows: {bits: ratio} at one SNR where the golden chain locks."""
+    return [{"adc_bits": b, "snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10,
+             "golden_locked": 10, "ratio_to_golden": r} for b, r in table.items()]
+
+
+def test_proposal_is_the_smallest_width_from_which_every_larger_one_passes():
+    cfg = SweepConfig(params=(("adc_bits", (4, 5, 6, 7, 8)),), recheck=0)
+    assert propose(cfg, _rows({4: 1.5, 5: 1.2, 6: 1.04, 7: 1.01, 8: 1.0})) == {"adc_bits": 6}
+    # passing at 5 by chance but failing at 6 does not make 5 the proposal
+    assert propose(cfg, _rows({4: 1.5, 5: 1.03, 6: 1.06, 7: 1.01, 8: 1.0})) == {"adc_bits": 7}
+    assert propose(cfg, _rows({4: 1.5, 5: 1.3, 6: 1.2, 7: 1.1, 8: 1.07})) == {"adc_bits": None}
+    # fewer locks than the golden chain fail even with a good RMSE
+    rows = _rows({4: 1.0, 5: 1.0, 6: 1.0, 7: 1.0, 8: 1.0})
+    rows[0]["locked"] = 7
+    assert propose(cfg, rows) == {"adc_bits": 5}
+
+
+@pytest.fixture(scope="module")
+def small_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep")
+    cfg = SweepConfig(**{**SMALL, "recheck": 1, "recheck_samples": 200_000})
+    s = study(cfg, out, jobs=1, progress=False)
+    return cfg, out, s
+
+
+def test_small_sweep_writes_every_output(small_sweep):
+    cfg, out, s = small_sweep
+    for f in ("summary.json", "points.csv", "summary.csv", "report.md", "rmse_vs_adc_bits.png",
+              "sweep.json"):
+        assert (out / f).stat().st_size > 0, f
+    assert s["n_points"] == 4 and len(list((out / "points").glob("*.json"))) == 4 + 2  # + golden
+    rows = {r["adc_bits"]: r for r in s["rows"]}
+    assert set(rows) == {4, 10}
+    for r in rows.values():
+        assert r["locked"] == r["golden_locked"] == 2
+        assert 0 < r["rmse_deg"] < 0.5 and r["golden_rmse_deg"] > 0
+    # 10 bits is indistinguishable from the golden chain, 4 bits is measurably worse
+    assert abs(rows[10]["ratio_to_golden"] - 1) < 0.1
+    # the range log covers the front end and the DSP core
+    assert {"fe.adc", "fe.mixer", "fe.cic", "fe.fir", "fe.envelope", "dsp.x", "dsp.P",
+            "dsp.K"} <= set(s["ranges"])
+    assert s["ranges"]["fe.adc"]["max"] <= s["ranges"]["fe.adc"]["hi"]
+    report = (out / "report.md").read_text()
+    assert "## Ranges and overflows" in report and "## Word-length proposal" in report
+    assert "Confirmation re-run" in report
+    assert s["confirmation"]["params"] == {"adc_bits": s["proposal"]["adc_bits"]} or \
+        s["proposal"]["adc_bits"] is None
+
+
+@pytest.mark.skipif(not verilator_available(), reason="Verilator not installed")
+def test_small_sweep_rechecks_a_point_cycle_accurately(small_sweep):
+    _, _, s = small_sweep
+    (rc,) = s["rechecks"]
+    assert rc["backend"] == "verilator" and rc["samples"] == 200_000
+    assert rc["words"] > 0 and rc["same_bits"] is True and "error" not in rc
+
+
+def test_interrupted_sweep_resumes_from_its_cache(small_sweep, monkeypatch):
+    cfg, out, s = small_sweep
+    pts = sorted((out / "points").glob("*.json"))
+    victim = next(p for p in pts if json.loads(p.read_text())["kind"] == "point")
+    victim.unlink()                          # as if interrupted before this point finished
+    calls = []
+    real = cosim.tacan.run_tacan
+    monkeypatch.setattr(cosim.tacan, "run_tacan", lambda *a, **k: calls.append(1) or real(*a, **k))
+    s2 = sw.run_sweep(replace_recheck(cfg), out, jobs=1, progress=False)
+    assert len(calls) == 1                   # only the missing point was run again
+    assert s2["rows"] == s["rows"]           # and it gave the same bits
+
+
+def replace_recheck(cfg):
+    from dataclasses import replace
+    return replace(cfg, recheck=0)
+
+
+def test_same_sweep_on_a_local_dask_cluster_gives_the_same_rows(small_sweep, tmp_path):
+    pytest.importorskip("distributed")
+    cfg, _, s = small_sweep
+    d = sw.run_sweep(replace_recheck(cfg), tmp_path, jobs=2, scheduler="dask", progress=False)
+    assert d["rows"] == s["rows"]
+
+
+def test_dsp_format_and_rounding_parameters_run(tmp_path):
+    cfg = SweepConfig(params=(("dsp.P", (30, 46)), ("dsp.K.rounding", ("floor", "half_up"))),
+                      snr_db=(15.0,), trials=1, duration_s=0.7, memory_s=0.15, recheck=0)
+    s = sw.run_sweep(cfg, tmp_path, jobs=1, progress=False)
+    assert len(s["rows"]) == 4 and all(r["invalid"] is None for r in s["rows"])
+    narrow = [r for r in s["rows"] if r["dsp.P"] == 30]
+    # a 30-bit P with the default 16 integer bits has only 14 fraction bits: worse
+    assert all(r["rmse_deg"] is None or r["ratio_to_golden"] > 1.0 for r in narrow)
+
+
+def test_cli_sweep_json(tmp_path, capsys):
+    rc = main(["sweep", "tacan", "--param", "adc_bits=6,12", "--snr-db", "15", "--trials", "1",
+               "--duration-s", "0.7", "--memory-s", "0.15", "--recheck", "0", "--no-confirm",
+               "--jobs", "1", "--out", str(tmp_path), "--json"])
+    assert rc == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["n_points"] == 2 and "adc_bits" in r["proposal"]
+    assert (tmp_path / "report.md").exists()
+
+
+def test_one_at_a_time_design():
+    cfg = SweepConfig(params=(("adc_bits", (6, 8, 12)), ("dsp.P", (38, 46)),
+                              ("mixer_rounding", ("half_even", "floor"))), design="oat",
+                      recheck=0)
+    assert cfg.reference == {"adc_bits": 12, "dsp.P": 46, "mixer_rounding": "half_even"}
+    c = cfg.combos
+    assert len(c) == 3 + 2 + 2 - 2 and len(set(c)) == len(c)
+    assert (("adc_bits", 6), ("dsp.P", 46), ("mixer_rounding", "half_even")) in c
+    assert (("adc_bits", 12), ("dsp.P", 46), ("mixer_rounding", "floor")) in c
+    assert len(SweepConfig(params=cfg.params, recheck=0).combos) == 12
+    with pytest.raises(ValueError, match="design must be"):
+        SweepConfig(design="random")
