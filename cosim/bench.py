@@ -233,7 +233,13 @@ def _dsp_hour(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     return dsp_hour(out, quick=quick)
 
 
-BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour}
+def _sim_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_sim import sim_speed
+    return sim_speed(out, quick=quick)
+
+
+BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
+              "sim-speed": _sim_speed}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

@@ -56,6 +56,11 @@ def _add_tacan(sub):
                    help="words the DSP reads per service at most")
     p.add_argument("--dsp-cycles-per-word", type=int, default=None,
                    help="FPGA cycles per word read while servicing")
+    p.add_argument("--trace", default=None, metavar="FILE",
+                   help="waveform of the cycle-accurate front end (pysim: VCD; verilator: VCD, "
+                        "or FST for *.fst); put it under build/")
+    p.add_argument("--trace-window", default=None, metavar="START:STOP",
+                   help="seconds of the run to dump (verilator; pysim dumps the whole run)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_tacan)
 
@@ -85,9 +90,18 @@ def _cmd_tacan(a) -> int:
             raise ValueError(f"--dsp-stall needs 0 <= START < STOP, not {text!r}")
         stalls.append((int(round(t0 * a.fs_hz)), int(round(t1 * a.fs_hz))))
     svc["stalls"] = tuple(sorted(stalls))
+    window = None
+    if a.trace_window:
+        try:
+            w0, w1 = (float(v) for v in a.trace_window.split(":"))
+        except ValueError:
+            raise ValueError(f"--trace-window takes START:STOP in seconds, not "
+                             f"{a.trace_window!r}") from None
+        window = (int(round(w0 * a.fs_hz)), int(round(w1 * a.fs_hz)))
     run = TacanRunConfig(signal=sig, backend=a.backend, dsp=a.dsp,
                          kalman=KalmanConfig(memory_s=a.memory_s), settle_s=a.settle_s,
-                         service=DspServiceConfig(**svc), compare=a.compare)
+                         service=DspServiceConfig(**svc), compare=a.compare,
+                         trace=a.trace, trace_window=window)
     r = run_tacan(run)
     if a.json:
         print(json.dumps(r))

@@ -39,7 +39,7 @@ def stall_pattern(n_cycles: int, seed: int, *, p_ready: float = 0.5,
 
 def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                       backends=BACKENDS, seed: int = 1, stall: bool = False,
-                      params=None) -> dict:
+                      params=None, pysim_max_samples: int = PYSIM_MAX_SAMPLES) -> dict:
     """Run the backends on the same stimulus and count mismatching FIFO words.
 
     Parameters
@@ -55,6 +55,9 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     stall : bool
         DSP ``ready`` pattern with long off bursts and a 4-word FIFO (drops and markers).
     params : TacanFrontendParams, optional
+    pysim_max_samples : int
+        Longest record the Amaranth simulation is run on (default
+        :data:`PYSIM_MAX_SAMPLES`: about 15 s at ~3k cycles/s).
 
     Returns
     -------
@@ -97,9 +100,9 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         run.append(name)
 
     if "pysim" in backends:
-        if samples > PYSIM_MAX_SAMPLES:
-            skipped["pysim"] = (f"pysim runs only for samples <= {PYSIM_MAX_SAMPLES} "
-                                f"(~1e3 cycles/s for the whole top)")
+        if samples > pysim_max_samples:
+            skipped["pysim"] = (f"pysim runs only for samples <= {pysim_max_samples} "
+                                f"(~3e3 cycles/s for the whole top)")
         else:
             from hdl.tacan_frontend import TacanFrontEnd
             from .pysim import run_stream

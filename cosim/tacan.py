@@ -74,6 +74,11 @@ class TacanRunConfig:
     require_bearing : bool
         Raise if no bearing is produced after settling (default). Short cycle-accurate
         runs set it False and compare bits instead.
+    trace : str, optional
+        Waveform file of the cycle-accurate front end (``pysim``: VCD; ``verilator``: FST
+        if it ends in ``.fst``, else VCD); put it under ``build/``.
+    trace_window : (start, stop), optional
+        Cycles to dump (Verilator; the Amaranth VCD writer records the whole run).
     """
 
     signal: TacanSignalConfig = field(default_factory=TacanSignalConfig)
@@ -89,6 +94,8 @@ class TacanRunConfig:
     control_latency_cycles: int = 0
     compare: str | None = None
     require_bearing: bool = True
+    trace: str | None = None
+    trace_window: tuple | None = None
 
     def __post_init__(self):
         if self.backend not in BACKENDS:
@@ -112,6 +119,15 @@ class TacanRunConfig:
         for w in self.control_writes:
             if len(w) != 3 or w[1] not in ("freq",):
                 raise ValueError(f"control writes are (cycle, 'freq', value), not {w!r}")
+        if self.trace is not None and self.backend not in ("pysim", "verilator"):
+            raise ValueError(f"trace needs a cycle-accurate backend (pysim or verilator), "
+                             f"not {self.backend!r}")
+        if self.trace_window is not None:
+            tw = self.trace_window
+            if not (len(tw) == 2 and all(isinstance(v, (int, np.integer)) for v in tw)
+                    and 0 <= tw[0] < tw[1]):
+                raise ValueError(f"trace_window must be (start, stop) cycles with "
+                                 f"0 <= start < stop, not {tw!r}")
 
     @property
     def settle(self) -> float:
@@ -224,12 +240,14 @@ def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
     if kind == "pysim":
         from .pysim import run_stream
         res = run_stream(dut, samples, out_ready=ready, n_cycles=n_cycles,
-                         inputs={"freq": p.nco_freq_word}, writes=writes, final=final)
+                         inputs={"freq": p.nco_freq_word}, writes=writes, final=final,
+                         vcd=run.trace)
     else:
         from .verilator import VerilatorStreamSim
         sim = VerilatorStreamSim(dut, name="tacan_frontend")
         res = sim.run(samples, out_ready=ready, n_cycles=n_cycles,
-                      inputs={"freq": p.nco_freq_word}, writes=writes, final=final)
+                      inputs={"freq": p.nco_freq_word}, writes=writes, final=final,
+                      trace=run.trace, trace_window=run.trace_window)
     return _dsp_receive(res.words, res.cycles, p, n_cycles, res.final["overflow_count"])
 
 

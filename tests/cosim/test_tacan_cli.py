@@ -75,3 +75,23 @@ def test_cli_bad_dsp_service(capsys, args, message):
     rc = main(["tacan", "--backend", "model", "--json"] + args)
     cap = capsys.readouterr()
     assert rc != 0 and message in cap.err and cap.out == ""
+
+
+@pytest.mark.skipif(not __import__("cosim.verilator").verilator.verilator_available(),
+                    reason="Verilator not installed")
+def test_cli_waveform_window_from_verilator(tmp_path, capsys):
+    f = tmp_path / "front.vcd"
+    rc = main(["tacan", "--backend", "verilator", "--duration-s", "0.2", "--memory-s", "0.02",
+               "--settle-s", "0.05", "--trace", str(f), "--trace-window", "0.001:0.0012",
+               "--json"])
+    assert rc == 0 and json.loads(capsys.readouterr().out)["backend"] == "verilator"
+    text = f.read_text()
+    assert "$enddefinitions" in text and "o__valid" in text
+    # only the window: 4000 cycles = 8000 half-cycle time steps
+    times = [int(line[1:]) for line in text.splitlines() if line.startswith("#")]
+    assert min(times) >= 2 * 20_000 and max(times) < 2 * 24_000
+
+
+def test_cli_trace_needs_a_cycle_accurate_backend(capsys):
+    assert main(["tacan", "--backend", "model", "--trace", "build/x.vcd"]) != 0
+    assert "trace needs a cycle-accurate backend" in capsys.readouterr().err

@@ -150,3 +150,13 @@ def test_undersized_dsp_drops_all_the_time_but_never_silently():
 def test_run_config_errors(kw, msg):
     with pytest.raises(ValueError, match=msg):
         TacanRunConfig(**kw)
+
+
+@needs_verilator
+def test_verilator_default_scenario_same_bearing_bits_as_the_model():
+    """Issue 5's must-show: `python -m cosim tacan --backend verilator --duration-s 3 --dsp
+    fixed` gives the same bearing bits as `--backend model` (60M cycles of RTL)."""
+    r = {b: run_tacan(TacanRunConfig(backend=b, dsp="fixed")) for b in ("model", "verilator")}
+    assert r["model"]["digest"] == r["verilator"]["digest"]
+    assert r["model"]["bearing_est_deg"] == r["verilator"]["bearing_est_deg"]
+    assert r["verilator"]["n_bearings"] > 200 and r["verilator"]["rmse_deg"] < 0.25

@@ -297,7 +297,8 @@ def test_pysim_gaps_in_valid_and_dsp_stalls():
 
 @pytest.mark.slow
 def test_pysim_equals_model_long():
-    r = check_equivalence(samples=100_000, backends=("model", "pysim"), seed=3)
+    r = check_equivalence(samples=100_000, backends=("model", "pysim"), seed=3,
+                          pysim_max_samples=100_000)
     assert r["mismatches"] == 0 and "pysim" in r["backends"]
 
 
