@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
 .DEFAULT_GOAL := help
-.PHONY: help setup tools run test test-all bench study verilog synth clean
+.PHONY: help setup tools run test test-all bench study study-wordlength verilog synth clean
 
 help:  ## show this help
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -48,6 +48,14 @@ bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in RE
 
 study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 20 trials) -> build/studies/default
 	$(PY) -m cosim sweep tacan --out build/studies/default
+
+WORDLENGTH_PARAMS = --param adc_bits=4:12 --param nco_amp_bits=6:16:2 --param fir_coef_bits=8:18:2 \
+	--param env_iterations=6:12 --param dsp.y=10:18:2 --param dsp.P=34:46:4 --param dsp.K=26:38:4 \
+	--param dsp.cs=12:24:4
+
+study-wordlength: setup  ## word-length proposal for the default scenario (one parameter at a time) + its confirmation
+	$(PY) -m cosim sweep tacan --design oat $(WORDLENGTH_PARAMS) --snr-db 5,10,20 --trials 10 \
+	  --out build/studies/wordlength
 
 verilog: setup  ## export every HDL block and the TACAN top to build/verilog and lint them
 	$(PY) -m cosim verilog --out build/verilog

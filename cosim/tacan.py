@@ -290,11 +290,20 @@ def _digest(*arrays) -> str:
     return h.hexdigest()[:16]
 
 
-def run_tacan(run: TacanRunConfig, signal=None) -> dict:
+def frontend_key(run: TacanRunConfig) -> tuple:
+    """What a front end's output depends on: runs with equal keys on the same samples get
+    the same :class:`FrontendOutput` (the DSP side may differ)."""
+    return (run.backend, run.signal, run.frontend_changes, run.hdl_changes, run.service,
+            run.control_writes, run.control_latency_cycles)
+
+
+def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = None) -> dict:
     """Run one scenario end to end; returns the result record (JSON-serialisable).
 
     ``signal`` (a :class:`cosim.tacan_signal.TacanSignal` of ``run.signal``) skips the
-    generation (studies digitise one record with several ADCs).
+    generation (studies digitise one record with several ADCs). ``frontend_cache`` (a dict
+    the caller keeps) reuses the front end's output between runs that differ only in the
+    DSP (:func:`frontend_key`), e.g. a sweep of DSP word lengths.
     """
     sig = run.signal
     t0 = time.perf_counter()
@@ -302,7 +311,13 @@ def run_tacan(run: TacanRunConfig, signal=None) -> dict:
         raise ValueError("signal was generated for another configuration than run.signal")
     s = generate(sig) if signal is None else signal
     t1 = time.perf_counter()
-    fo = FRONTENDS[run.backend](s.samples, run)
+    key = frontend_key(run) if frontend_cache is not None and run.trace is None else None
+    if key is not None and key in frontend_cache:
+        fo = frontend_cache[key]
+    else:
+        fo = FRONTENDS[run.backend](s.samples, run)
+        if key is not None:
+            frontend_cache[key] = fo
     t2 = time.perf_counter()
     track = run_dsp(fo, run, sig.fs_hz)
     t3 = time.perf_counter()

@@ -321,6 +321,7 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
             golden["error"] = str(e)
         if gfile is not None:
             gfile.write_text(json.dumps(golden))
+    fe_cache: dict = {}      # combos that differ only in the DSP share the front end's run
     for combo, key, f in todo:
         rec = {**base, "combo": [list(c) for c in combo], "kind": "point", "locked": False,
                "key": key}
@@ -328,7 +329,7 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
             run = run_config(cfg, combo, sig)
             run = replace(run, require_bearing=False)
             s = signals[run.signal.adc_bits]
-            r = run_tacan(run, s)
+            r = run_tacan(run, s, frontend_cache=fe_cache)
             rec.update(_score(r), locked=r["n_bearings"] > 0)
             if tuple(combo) in recheck_combos:
                 rec["recheck"] = recheck_point(cfg, run, s)
