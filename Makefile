@@ -31,8 +31,8 @@ tools:  ## install Verilator when missing (apt-get, as root)
 	  fi; \
 	fi
 
-run: setup  ## default TACAN scenario: HDL front-end model -> FIFO link -> fixed-point DSP, vs golden
-	$(PY) -m cosim tacan --backend model --dsp fixed --compare golden
+run: setup  ## default TACAN scenario: HDL front-end model -> FIFO link -> fixed-point DSP, vs golden; start re-checked on the RTL
+	$(PY) -m cosim tacan --backend model --dsp fixed --compare golden --recheck auto
 
 test: setup  ## run the whole test suite (slow tests excluded: see test-all)
 	$(PY) -m pytest -q -m "not slow"

@@ -61,6 +61,11 @@ def _add_tacan(sub):
                         "or FST for *.fst); put it under build/")
     p.add_argument("--trace-window", default=None, metavar="START:STOP",
                    help="seconds of the run to dump (verilator; pysim dumps the whole run)")
+    p.add_argument("--recheck", choices=["auto", "pysim", "verilator"], default=None,
+                   help="with --backend model: re-run the start of the record cycle-accurately "
+                        "(auto = Verilator when installed) and compare the FIFO words")
+    p.add_argument("--recheck-samples", type=int, default=None,
+                   help="ADC samples re-checked (default 1e6 with Verilator, 4e4 with pysim)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_tacan)
 
@@ -101,8 +106,10 @@ def _cmd_tacan(a) -> int:
     run = TacanRunConfig(signal=sig, backend=a.backend, dsp=a.dsp,
                          kalman=KalmanConfig(memory_s=a.memory_s), settle_s=a.settle_s,
                          service=DspServiceConfig(**svc), compare=a.compare,
-                         trace=a.trace, trace_window=window)
+                         trace=a.trace, trace_window=window, recheck=a.recheck,
+                         recheck_samples=a.recheck_samples)
     r = run_tacan(run)
+    rc = 0 if r.get("recheck", {}).get("same_bits", True) else 1
     if a.json:
         print(json.dumps(r))
     else:
@@ -120,11 +127,15 @@ def _cmd_tacan(a) -> int:
         ev = ", ".join(f"{k} {v}" for k, v in r["dsp_events"].items() if v) or "none"
         print(f"  FIFO: {r['fifo_dropped']} peaks dropped (FPGA counter), "
               f"{r['fifo_dropped_reported']} reported by gap markers; DSP core events: {ev}")
+        if "recheck" in r:
+            c = r["recheck"]
+            print(f"  cycle-accurate re-check ({c['backend']}, first {c['samples']:,} samples, "
+                  f"{c['words']} FIFO words): {'same bits' if c['same_bits'] else 'MISMATCH'}")
         if "vs_golden_rms_deg" in r:
             print(f"  vs golden chain on the same samples: RMS bearing difference "
                   f"{r['vs_golden_rms_deg']:.4f} deg over {r['vs_golden_n']} bearings "
                   f"(golden RMSE {r['golden_rmse_deg']:.3f} deg)")
-    return 0
+    return rc
 
 
 def _add_sweep(sub):

@@ -79,6 +79,10 @@ class TacanRunConfig:
         if it ends in ``.fst``, else VCD); put it under ``build/``.
     trace_window : (start, stop), optional
         Cycles to dump (Verilator; the Amaranth VCD writer records the whole run).
+    recheck : str, optional
+        With the ``model`` backend: also run the first ``recheck_samples`` ADC samples
+        cycle-accurately (``"auto"``, ``"verilator"``, ``"pysim"``) and report whether the
+        FIFO words are the same bits (:func:`recheck_cycle_accurate`).
     """
 
     signal: TacanSignalConfig = field(default_factory=TacanSignalConfig)
@@ -96,6 +100,8 @@ class TacanRunConfig:
     require_bearing: bool = True
     trace: str | None = None
     trace_window: tuple | None = None
+    recheck: str | None = None
+    recheck_samples: int | None = None
 
     def __post_init__(self):
         if self.backend not in BACKENDS:
@@ -119,6 +125,18 @@ class TacanRunConfig:
         for w in self.control_writes:
             if len(w) != 3 or w[1] not in ("freq",):
                 raise ValueError(f"control writes are (cycle, 'freq', value), not {w!r}")
+        if self.recheck is not None:
+            if self.recheck not in ("auto", "pysim", "verilator"):
+                raise ValueError(f"recheck must be auto, pysim or verilator, not "
+                                 f"{self.recheck!r}")
+            if self.backend != "model":
+                raise ValueError("recheck compares a model run with a cycle-accurate one: "
+                                 "use it with backend='model'")
+        if self.recheck_samples is not None and (
+                isinstance(self.recheck_samples, bool) or
+                not isinstance(self.recheck_samples, int) or self.recheck_samples < 1):
+            raise ValueError(f"recheck_samples must be an integer >= 1, not "
+                             f"{self.recheck_samples!r}")
         if self.trace is not None and self.backend not in ("pysim", "verilator"):
             raise ValueError(f"trace needs a cycle-accurate backend (pysim or verilator), "
                              f"not {self.backend!r}")
@@ -370,11 +388,15 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
                    "bearings": _digest(track.times_s, track.bearing_deg)},
         "elapsed_s": {"signal": t1 - t0, "frontend": t2 - t1, "dsp": t3 - t2},
     }
+    if run.recheck is not None:
+        r["recheck"] = recheck_cycle_accurate(run, s.samples, run.recheck,
+                                              run.recheck_samples)
     if run.compare == "golden":
         t4 = time.perf_counter()
         gfo = _golden(s.samples, run)
         gold = run_dsp(gfo, TacanRunConfig(**{**_fields(run), "backend": "golden",
-                                               "dsp": "float", "compare": None}), sig.fs_hz)
+                                               "dsp": "float", "compare": None,
+                                               "recheck": None}), sig.fs_hz)
         rms, n = _match_rms(track, gold, run.settle)
         r["vs_golden_rms_deg"] = rms
         r["vs_golden_n"] = n
@@ -405,6 +427,32 @@ def _ranges(fo: FrontendOutput, track: BearingTrack, adc_clipped: int) -> dict:
                                   "headroom_bits": math.log2(v["hi"] / peak) if peak else None,
                                   "unit": "value", "overflows": v["saturations"]}
     return out
+
+
+def recheck_cycle_accurate(run: TacanRunConfig, samples, backend: str = "auto",
+                           n: int | None = None) -> dict:
+    """Re-run the first ``n`` ADC samples of a model run on a cycle-accurate backend and
+    compare the FIFO words and their cycles (and the overflow count) bit for bit.
+
+    ``backend``: ``"verilator"``, ``"pysim"`` or ``"auto"`` (Verilator when installed);
+    ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with pysim.
+    """
+    from .verilator import verilator_available
+    if backend == "auto":
+        backend = "verilator" if verilator_available() else "pysim"
+    if backend not in ("pysim", "verilator"):
+        raise ValueError(f"recheck backend must be auto, pysim or verilator, not {backend!r}")
+    n = int(n or (1_000_000 if backend == "verilator" else 40_000))
+    x = np.asarray(samples)[:n]
+    t0 = time.perf_counter()
+    ref_run = TacanRunConfig(**{**_fields(run), "backend": "model", "trace": None,
+                                "compare": None, "recheck": None})
+    a = _model(x, ref_run)
+    b = FRONTENDS[backend](x, TacanRunConfig(**{**_fields(ref_run), "backend": backend}))
+    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles)
+            and a.fifo_dropped == b.fifo_dropped)
+    return {"backend": backend, "samples": int(x.size), "words": int(a.words.size),
+            "same_bits": bool(same), "seconds": time.perf_counter() - t0}
 
 
 def _fields(run: TacanRunConfig) -> dict:

@@ -95,3 +95,13 @@ def test_cli_waveform_window_from_verilator(tmp_path, capsys):
 def test_cli_trace_needs_a_cycle_accurate_backend(capsys):
     assert main(["tacan", "--backend", "model", "--trace", "build/x.vcd"]) != 0
     assert "trace needs a cycle-accurate backend" in capsys.readouterr().err
+
+
+def test_cli_model_run_rechecked_cycle_accurately(capsys):
+    rc = main(["tacan", "--backend", "model", "--dsp", "fixed", "--duration-s", "0.7",
+               "--memory-s", "0.15", "--recheck", "auto", "--recheck-samples", "60000", "--json"])
+    assert rc == 0
+    c = json.loads(capsys.readouterr().out)["recheck"]
+    assert c["same_bits"] is True and c["samples"] == 60000 and c["words"] > 0
+    assert main(["tacan", "--backend", "golden", "--recheck", "auto"]) != 0
+    assert "use it with backend='model'" in capsys.readouterr().err
