@@ -633,9 +633,12 @@ def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
             ax.set_xticks(xs, [str(v) for v in vals])
         ax.set_xlabel(n)
         ax.set_ylabel("bearing RMSE (deg)")
+        import textwrap
         others = ", ".join(f"{m}={ref[m]}" for m in names if m != n)
-        ax.set_title(f"TACAN bearing RMSE vs {n}" + (f" ({others})" if others else "") +
-                     "\n-- float golden (same records)   : Cramer-Rao bound", fontsize=9)
+        sub = "\n".join(textwrap.wrap(f"others at {others}", 95)) + "\n" if others else ""
+        ax.set_title(f"TACAN bearing RMSE vs {n}\n{sub}"
+                     "dashed: float golden (same records)   dotted: Cramer-Rao bound",
+                     fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(title="SNR", fontsize=8)
         fig.tight_layout()
