@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
 .DEFAULT_GOAL := help
-.PHONY: help setup tools run test test-all bench study study-wordlength verilog synth clean
+.PHONY: help setup tools run test test-all bench study study-wordlength faults verilog synth clean
 
 help:  ## show this help
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -46,8 +46,14 @@ bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in RE
 	$(PY) -m cosim bench dsp-hour
 	$(PY) -m cosim bench tacan-accuracy
 
-study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 20 trials) -> build/studies/default
+# A study's report, tables and plots are copied to results/ (shown in README.md); its
+# per-point cache stays under build/.
+PUBLISH = mkdir -p results/$(2) && cp build/studies/$(1)/report.md build/studies/$(1)/summary.csv \
+	build/studies/$(1)/*.png results/$(2)/
+
+study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 20 trials) -> results/study_default
 	$(PY) -m cosim sweep tacan --out build/studies/default
+	$(call PUBLISH,default,study_default)
 
 WORDLENGTH_PARAMS = --param adc_bits=4:12 --param nco_amp_bits=6:16:2 --param fir_coef_bits=8:18:2 \
 	--param env_iterations=6:12 --param dsp.y=10:18:2 --param dsp.P=34:46:4 --param dsp.K=26:38:4 \
@@ -56,6 +62,13 @@ WORDLENGTH_PARAMS = --param adc_bits=4:12 --param nco_amp_bits=6:16:2 --param fi
 study-wordlength: setup  ## word-length proposal for the default scenario (one parameter at a time) + its confirmation
 	$(PY) -m cosim sweep tacan --design oat $(WORDLENGTH_PARAMS) --snr-db 5,10,20 --trials 10 \
 	  --out build/studies/wordlength
+	$(call PUBLISH,wordlength,study_wordlength)
+
+faults: setup  ## bit-error studies (ADC, FIFO, NCO register, DSP state; BER 1e-6..1e-3) -> results/faults
+	for t in adc fifo register dsp-state; do \
+	  $(PY) -m cosim faults tacan --target $$t --ber 1e-6:1e-3 --trials 3 --out results/faults || exit 1; \
+	done
+	rm -f results/faults/*.json
 
 verilog: setup  ## export every HDL block and the TACAN top to build/verilog and lint them
 	$(PY) -m cosim verilog --out build/verilog

@@ -31,6 +31,30 @@ def _command_line() -> str:
     return " ".join(head + sys.argv[1:])
 
 
+_REPO = Path(__file__).resolve().parent.parent
+_COMMIT: str | None = None
+
+
+def source_commit() -> str:
+    """The commit of the code this process runs: read once, when first asked (the CLI asks
+    at start-up), so a long run edited meanwhile in the working tree still names the code
+    it started with; ``-dirty`` when tracked files differed from it."""
+    global _COMMIT
+    if _COMMIT is None:
+        try:
+            commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                                    text=True, check=False, cwd=_REPO).stdout.strip()
+            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                                   capture_output=True, text=True, check=False,
+                                   cwd=_REPO).stdout.strip()
+            if commit and dirty:
+                commit += "-dirty"      # the results come from uncommitted code
+        except OSError:
+            commit = ""
+        _COMMIT = commit
+    return _COMMIT
+
+
 def machine_info() -> dict:
     cpu = platform.processor() or ""
     try:
@@ -41,15 +65,7 @@ def machine_info() -> dict:
                     break
     except OSError:
         pass
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, check=False).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, check=False).stdout.strip()
-        if commit and dirty:
-            commit += "-dirty"      # the results come from uncommitted code
-    except OSError:
-        commit = ""
+    commit = source_commit()
     return {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "host": platform.node(), "cpu": cpu, "cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__,

@@ -406,6 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    from .bench import source_commit
+    source_commit()         # results name the code this run started with
     if argv[:1] == ["adc-loss"]:        # its own parser (python -m cosim.studies.adc_loss)
         from .studies.adc_loss import main as adc_loss_main
         return adc_loss_main(argv[1:])
