@@ -454,6 +454,24 @@ def _cfg_dict(cfg: SweepConfig) -> dict:
 # ---------------------------------------------------------------------------------------
 # Aggregation, proposal, report
 # ---------------------------------------------------------------------------------------
+def _ratio_ci(pairs, key: str, n_boot: int = 2000) -> list[float] | None:
+    """95 % bootstrap interval (over trials, paired) of the RMSE ratio point / golden.
+
+    Within one trial the bearings are strongly correlated (the filter's memory spans a good
+    part of the scored time), so the trials are the independent samples; resampling them
+    in pairs keeps the cancellation of the common noise. Seeded from ``key``: the same
+    results give the same interval."""
+    if len(pairs) < 3:
+        return None
+    a = np.array([r["rmse_deg"] ** 2 for r, _ in pairs])
+    b = np.array([g["rmse_deg"] ** 2 for _, g in pairs])
+    seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "little")
+    idx = np.random.default_rng(seed).integers(0, len(pairs), (n_boot, len(pairs)))
+    ratio = np.sqrt(a[idx].mean(axis=1) / np.maximum(b[idx].mean(axis=1), 1e-300))
+    lo, hi = np.quantile(ratio, [0.025, 0.975])
+    return [float(lo), float(hi)]
+
+
 def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
     """Per (combo, SNR): RMSE over the trials (locked ones), lock rate, the paired golden
     RMSE on the same records, CRB, events, drops."""
@@ -483,6 +501,7 @@ def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
                    "locked": len(ok), "golden_locked": ng,
                    "rmse_deg": rmse, "golden_rmse_deg": g_rmse,
                    "ratio_to_golden": (p_rmse / g_rmse) if (paired and g_rmse) else None,
+                   "ratio_ci95": _ratio_ci(paired, json.dumps([cl, float(snr)])),
                    "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in ok])) if ok else None,
                    "crb_deg": rs[0].get("crb_deg") or (gold.get((rs[0]["snr_db"], rs[0]["trial"])) or {}).get("crb_deg"),
                    "adc_clipped": int(sum(r.get("adc_clipped") or 0 for r in rs)),
@@ -494,15 +513,22 @@ def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
 
 def _passes(row: dict, target_rel: float) -> bool:
     """A point meets the target at one SNR: it locks as often as the golden chain and its
-    paired RMSE is within ``1 + target_rel`` of the golden one (SNRs where the golden chain
-    does not lock on most trials are not judged)."""
+    paired RMSE ratio to the golden one is within ``1 + target_rel`` -- or not significantly
+    above it (the lower end of its 95 % bootstrap interval is): at low SNR the trial-to-trial
+    spread of a short run is several per cent, and a width must not be refused for noise
+    the study cannot resolve (the report shows the intervals). SNRs where the golden chain
+    does not lock on most trials are not judged."""
     if row["invalid"]:
         return False
     if row["golden_locked"] < 0.8 * row["trials"]:
         return True
     if row["locked"] < row["golden_locked"]:
         return False
-    return row["ratio_to_golden"] is not None and row["ratio_to_golden"] <= 1 + target_rel
+    r = row["ratio_to_golden"]
+    if r is None:
+        return False
+    ci = row.get("ratio_ci95")
+    return r <= 1 + target_rel or (ci is not None and ci[0] <= 1 + target_rel)
 
 
 def propose(cfg: SweepConfig, rows: list[dict]) -> dict:
@@ -666,8 +692,8 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
         lines += [f"![{p}]({p})", ""]
     lines += ["## Every setting", "",
               "| " + " | ".join(names) + " | SNR dB | locked | RMSE deg | golden RMSE | ratio | "
-              "mean err | CRB | ADC clipped | FIFO drops | DSP saturations |",
-              "|" + "---|" * (len(names) + 11)]
+              "ratio 95 % CI | mean err | CRB | ADC clipped | FIFO drops | DSP saturations |",
+              "|" + "---|" * (len(names) + 12)]
     for r in s["rows"]:
         sat = sum(v for k, v in r["dsp_events"].items() if k.startswith("sat_"))
         inv = f" ({r['invalid']})" if r["invalid"] else ""
@@ -675,7 +701,7 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
                      f" | {r['snr_db']:g} | {r['locked']}/{r['trials']} (golden "
                      f"{r['golden_locked']}){inv} | {f(r['rmse_deg'], '.4f')} | "
                      f"{f(r['golden_rmse_deg'], '.4f')} | {f(r['ratio_to_golden'], '.3f')} | "
-                     f"{f(r['mean_error_deg'], '+.4f')} | {f(r['crb_deg'], '.4f')} | "
+                     f"{_ci_text(r.get('ratio_ci95'))} | {f(r['mean_error_deg'], '+.4f')} | {f(r['crb_deg'], '.4f')} | "
                      f"{r['adc_clipped']} | {r['fifo_dropped']} | {sat} |")
     lines += ["", "## Ranges and overflows (all points)", "",
               "Smallest and largest value each signal took over every point (front end `fe.*` "
@@ -692,8 +718,10 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
     lines += ["", "## Word-length proposal", "",
               f"Smallest value of each parameter (the others at their largest swept value) such "
               f"that it and every larger value lock as often as the golden chain and keep the "
-              f"paired RMSE within {100 * cfg.target_rel:g} % of it at every SNR where the "
-              f"golden chain locks on >= 80 % of the trials:", ""]
+              f"paired RMSE within {100 * cfg.target_rel:g} % of it -- or not significantly "
+              f"above (the lower end of the ratio's 95 % bootstrap interval over the trials "
+              f"is) -- at every SNR where the golden chain locks on >= 80 % of the trials:",
+              ""]
     for n, v in s["proposal"].items():
         lines.append(f"- `{n}`: {v if v is not None else 'none in the swept range'}")
     if s.get("confirmation"):
@@ -703,7 +731,8 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
                   + (f" ({c.get('reason')})" if c.get("reason") else "")]
         for r in c.get("rows", []):
             lines.append(f"- SNR {r['snr_db']:g} dB: RMSE {f(r['rmse_deg'], '.4f')} deg vs golden "
-                         f"{f(r['golden_rmse_deg'], '.4f')} (ratio {f(r['ratio_to_golden'], '.3f')}), "
+                         f"{f(r['golden_rmse_deg'], '.4f')} (ratio {f(r['ratio_to_golden'], '.3f')}, "
+                         f"95 % CI {_ci_text(r.get('ratio_ci95'))}), "
                          f"locked {r['locked']}/{r['trials']} (golden {r['golden_locked']})")
     if s["rechecks"]:
         lines += ["", "## Cycle-accurate re-checks", ""]
@@ -712,6 +741,10 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
                          f"{c.get('words', 0)} FIFO words, same bits: {c.get('same_bits')}"
                          + (f" ({c['error']})" if c.get("error") else ""))
     return "\n".join(lines) + "\n"
+
+
+def _ci_text(ci) -> str:
+    return "-" if not ci else f"{ci[0]:.3f}-{ci[1]:.3f}"
 
 
 def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,

@@ -62,6 +62,25 @@ def test_proposal_is_the_smallest_width_from_which_every_larger_one_passes():
     assert propose(cfg, rows) == {"adc_bits": 5}
 
 
+def test_proposal_does_not_refuse_a_width_for_unresolved_noise():
+    cfg = SweepConfig(params=(("adc_bits", (4, 5, 6)),), recheck=0)
+    rows = _rows({4: 1.30, 5: 1.07, 6: 1.04})
+    rows[1]["ratio_ci95"] = [1.02, 1.12]          # 7 % measured, 2 % is as likely: passes
+    rows[0]["ratio_ci95"] = [1.20, 1.40]          # significantly worse: fails
+    assert propose(cfg, rows) == {"adc_bits": 5}
+    rows[1]["ratio_ci95"] = [1.06, 1.08]          # resolved, and above the target
+    assert propose(cfg, rows) == {"adc_bits": 6}
+
+
+def test_ratio_interval_is_paired_and_deterministic():
+    pairs = [({"rmse_deg": 0.2 * (1 + 0.1 * k)}, {"rmse_deg": 0.2 * (1 + 0.1 * k) / 1.05})
+             for k in range(10)]
+    ci = sw._ratio_ci(pairs, "x")
+    assert ci == sw._ratio_ci(pairs, "x")
+    assert ci[0] == pytest.approx(1.05) and ci[1] == pytest.approx(1.05)  # exact pairing
+    assert sw._ratio_ci(pairs[:2], "x") is None
+
+
 @pytest.fixture(scope="module")
 def small_sweep(tmp_path_factory):
     out = tmp_path_factory.mktemp("sweep")
