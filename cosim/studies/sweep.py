@@ -295,7 +295,7 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
         key = point_key(cfg, combo, snr_db, trial)
         f = cache / f"{key}.json" if cache else None
         if f is not None and f.exists():
-            out.append(json.loads(f.read_text()))
+            out.append({**json.loads(f.read_text()), "from_cache": True})
         else:
             todo.append((combo, key, f))
     gkey = point_key(cfg, (("golden", 1),), snr_db, trial)
@@ -581,7 +581,9 @@ def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: f
                  key=lambda r: (r["snr_db"], r["trial"], json.dumps(r["combo"])))
     rechecks = [{"combo": r["combo"], **r["recheck"]} for r in pts if r.get("recheck")]
     ranges = _collect_ranges(pts)
+    cached = sum(1 for r in results if r.get("kind") == "point" and r.get("from_cache"))
     summary = {"study": "sweep", "machine": machine_info(), "config": _cfg_dict(cfg),
+               "from_cache": cached,
                "elapsed_s": elapsed, "n_points": cfg.n_points, "rows": rows,
                "proposal": proposal, "target_rel": cfg.target_rel, "rechecks": rechecks,
                "ranges": ranges}
@@ -681,7 +683,9 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
     lines = [f"# TACAN quantisation sweep", "",
              f"`{m['command']}` on {m['cpu']} ({m['cores']} cores), {m['date']}, commit "
-             f"{m['commit']}: {s['n_points']} points in {s['elapsed_s']:.0f} s.", "",
+             f"{m['commit']}: {s['n_points']} points in {s['elapsed_s']:.0f} s"
+             + (f" ({s['from_cache']} of them read from the cache of an earlier run)"
+                if s.get("from_cache") else "") + ".", "",
              f"Swept: " + "; ".join(f"`{n}` = {', '.join(map(str, v))}" for n, v in cfg.params) +
              f"; SNR {', '.join(f'{x:g}' for x in cfg.snr_db)} dB; {cfg.trials} trials of "
              f"{cfg.duration_s:g} s (filter memory {cfg.memory_s:g} s, bearings after "
