@@ -55,9 +55,10 @@ study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 2
 	$(PY) -m cosim sweep tacan --out build/studies/default
 	$(call PUBLISH,default,study_default)
 
-WORDLENGTH_PARAMS = --param adc_bits=4:12 --param nco_amp_bits=6:16:2 --param fir_coef_bits=8:18:2 \
-	--param env_iterations=6:12 --param dsp.y=10:18:2 --param dsp.P=34:46:4 --param dsp.K=26:38:4 \
-	--param dsp.cs=12:24:4
+WORDLENGTH_PARAMS = --param adc_bits=2:12 --param nco_amp_bits=3,4,5,6,8,10,12,16 \
+	--param fir_coef_bits=4,5,6,8,10,12,14,18 --param env_iterations=2,3,4,5,6,8,12 \
+	--param dsp.y=4,6,8,10,12,18 --param dsp.P=30,34,38,46 --param dsp.K=18,22,26,38 \
+	--param dsp.cs=14,16,18,20,22,24
 
 study-wordlength: setup  ## word-length proposal for the default scenario (one parameter at a time) + its confirmation
 	$(PY) -m cosim sweep tacan --design oat $(WORDLENGTH_PARAMS) --snr-db 5,10,20 --trials 10 \

@@ -726,8 +726,12 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
               f"above (the lower end of the ratio's 95 % bootstrap interval over the trials "
               f"is) -- at every SNR where the golden chain locks on >= 80 % of the trials:",
               ""]
+    lows = {n: min(v) for n, v in cfg.params if all(isinstance(x, (int, float)) for x in v)}
     for n, v in s["proposal"].items():
-        lines.append(f"- `{n}`: {v if v is not None else 'none in the swept range'}")
+        note = ""
+        if v is not None and v == lows.get(n):
+            note = " (the smallest value swept: the true minimum may be lower, extend the range)"
+        lines.append(f"- `{n}`: {v if v is not None else 'none in the swept range'}{note}")
     if s.get("confirmation"):
         c = s["confirmation"]
         lines += ["", f"Confirmation re-run (fresh seeds, all proposed values together): "
