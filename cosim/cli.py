@@ -184,12 +184,15 @@ def _cmd_sweep(a) -> int:
     if a.json:
         print(json.dumps({k: s[k] for k in ("proposal", "elapsed_s", "n_points", "rechecks")} |
                          {"confirmed": (s.get("confirmation") or {}).get("confirmed"),
+                          "confirmed_params": (s.get("confirmation") or {}).get("params"),
                           "report": f"{a.out}/report.md"}))
     else:
         print(f"{s['n_points']} points in {s['elapsed_s']:.0f} s; report: {a.out}/report.md")
         print(f"proposal: {s['proposal']}")
         if s.get("confirmation"):
-            print(f"confirmed: {s['confirmation']['confirmed']}")
+            c = s["confirmation"]
+            print(f"confirmed: {c['confirmed']}" + (f" with {c['params']}" if c.get("params")
+                                                    else ""))
     return 0
 
 

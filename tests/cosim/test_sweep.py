@@ -109,8 +109,10 @@ def test_small_sweep_writes_every_output(small_sweep):
     report = (out / "report.md").read_text()
     assert "## Ranges and overflows" in report and "## Word-length proposal" in report
     assert "Confirmation re-run" in report
-    assert s["confirmation"]["params"] == {"adc_bits": s["proposal"]["adc_bits"]} or \
-        s["proposal"]["adc_bits"] is None
+    c = s["confirmation"]
+    if s["proposal"]["adc_bits"] is not None:
+        assert c["params"]["adc_bits"] >= s["proposal"]["adc_bits"]
+        assert c["attempts"][0]["params"] == s["proposal"]
 
 
 @pytest.mark.skipif(not verilator_available(), reason="Verilator not installed")
@@ -178,3 +180,32 @@ def test_one_at_a_time_design():
     assert len(SweepConfig(params=cfg.params, recheck=0).combos) == 12
     with pytest.raises(ValueError, match="design must be"):
         SweepConfig(design="random")
+
+
+def test_confirmation_widens_every_parameter_until_it_holds(monkeypatch, tmp_path):
+    """Widths that pass one at a time can fail together: the confirmation widens all of
+    them one swept step and tries again, and is strict about the measured ratio and about
+    filter re-initialisations."""
+    cfg = SweepConfig(params=(("adc_bits", (4, 6, 8)), ("dsp.P", (34, 38, 46))), recheck=0,
+                      design="oat")
+    tried = []
+
+    def fake_run_sweep(ccfg, out, **kw):
+        p = {n: v[0] for n, v in ccfg.params}
+        tried.append(p)
+        good = p["adc_bits"] >= 8 and p["dsp.P"] >= 38
+        row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10,
+               "golden_locked": 10, "golden_reinit": 0,
+               "dsp_events": {"reinit": 0 if good else 3},
+               "ratio_to_golden": 1.01 if good else 1.04, "ratio_ci95": [0.9, 1.1]}
+        return {"rows": [row]}
+    monkeypatch.setattr(sw, "run_sweep", fake_run_sweep)
+    c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False)
+    assert tried == [{"adc_bits": 4, "dsp.P": 34}, {"adc_bits": 6, "dsp.P": 38},
+                     {"adc_bits": 8, "dsp.P": 46}]
+    assert c["confirmed"] and c["params"] == {"adc_bits": 8, "dsp.P": 46}
+    assert [a["confirmed"] for a in c["attempts"]] == [False, False, True]
+    row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
+           "golden_reinit": 0, "dsp_events": {}, "ratio_to_golden": 1.07,
+           "ratio_ci95": [1.0, 1.1]}
+    assert sw._passes(row, 0.05) and not sw._confirms(row, 0.05)
