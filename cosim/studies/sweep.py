@@ -613,8 +613,17 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
             break
         params = wider
     last = attempts[-1]
-    return {"confirmed": last["confirmed"], "params": last["params"], "seed": cfg.seed + 1,
-            "rows": last["rows"], "attempts": attempts}
+    res = {"confirmed": last["confirmed"], "params": last["params"], "seed": cfg.seed + 1,
+           "rows": last["rows"], "attempts": attempts}
+    if cfg.recheck > 0:
+        # the combination proposed is the one to build: prove its bits on the RTL too
+        from cosim.tacan_signal import generate
+        combo = tuple((n, last["params"][n]) for n, _ in cfg.params)
+        sig = trial_signal(cfg, cfg.snr_db[0], 0)
+        run = replace(run_config(cfg, combo, sig), require_bearing=False)
+        res["recheck"] = {"combo": [list(c) for c in combo],
+                          **recheck_point(cfg, run, generate(run.signal))}
+    return res
 
 
 def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: float = 0.0) -> dict:
@@ -797,8 +806,15 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
                     f"95 % CI {_ci_text(r.get('ratio_ci95'))}), locked {r['locked']}/"
                     f"{r['trials']} (golden {r['golden_locked']}), re-inits "
                     f"{ev.get('reinit', 0)} (golden {r.get('golden_reinit', 0)})")
-    if s["rechecks"]:
+    cr = (s.get("confirmation") or {}).get("recheck")
+    if s["rechecks"] or cr:
         lines += ["", "## Cycle-accurate re-checks", ""]
+    if cr:
+        lines.append(f"- the confirmed combination {cr['combo']}: {cr.get('backend')} on "
+                     f"{cr.get('samples', 0)} samples, {cr.get('words', 0)} FIFO words, same "
+                     f"bits: {cr.get('same_bits')}" + (f" ({cr['error']})" if cr.get("error")
+                                                       else ""))
+    if s["rechecks"]:
         for c in s["rechecks"]:
             lines.append(f"- {c['combo']}: {c.get('backend')} on {c.get('samples', 0)} samples, "
                          f"{c.get('words', 0)} FIFO words, same bits: {c.get('same_bits')}"

@@ -121,6 +121,8 @@ def test_small_sweep_rechecks_a_point_cycle_accurately(small_sweep):
     (rc,) = s["rechecks"]
     assert rc["backend"] == "verilator" and rc["samples"] == 200_000
     assert rc["words"] > 0 and rc["same_bits"] is True and "error" not in rc
+    cr = s["confirmation"].get("recheck")       # the combination to build, on the RTL too
+    assert cr is None or (cr["same_bits"] is True and cr["words"] > 0)
 
 
 def test_interrupted_sweep_resumes_from_its_cache(small_sweep, monkeypatch):
