@@ -180,7 +180,8 @@ def _cmd_sweep(a) -> int:
                       recheck_backend=a.recheck_backend,
                       recheck_samples=a.recheck_samples, target_rel=a.target,
                       design=a.design)
-    s = study(cfg, a.out, jobs=a.jobs, scheduler=a.scheduler, confirm_proposal=not a.no_confirm)
+    s = study(cfg, a.out, jobs=a.jobs, scheduler=a.scheduler, confirm_proposal=not a.no_confirm,
+              progress=not a.json)
     if a.json:
         print(json.dumps({k: s[k] for k in ("proposal", "elapsed_s", "n_points", "rechecks")} |
                          {"confirmed": (s.get("confirmation") or {}).get("confirmed"),

@@ -261,6 +261,7 @@ def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
 def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = True) -> dict:
     """Run the study (BER 0 baseline included) and write the report under ``out``."""
     from tqdm import tqdm
+    tqdm.monitor_interval = 0     # no monitor thread left behind in the caller's process
     import sys
     t0 = time.perf_counter()
     bers = tuple(sorted(set((0.0,) + tuple(fc.ber))))

@@ -387,6 +387,7 @@ def run_sweep(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
     (``"tcp://host:8786"``).
     """
     from tqdm import tqdm
+    tqdm.monitor_interval = 0     # no monitor thread left behind in the caller's process
     out = Path(out)
     cache = out / "points"
     cache.mkdir(parents=True, exist_ok=True)
