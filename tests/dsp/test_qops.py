@@ -33,13 +33,18 @@ def _ops(v, w, ev):
 
 
 def test_operators_compile_for_int_and_float():
-    ev = np.zeros(2, np.int64)
+    # The event array must have the range-log slots (new_event_array): the operators write
+    # ev[RANGE_BASE + 2 i] unchecked, and a bare np.zeros(2) here once corrupted the heap.
+    ev = qops.new_event_array(())
     r_int = _ops(np.int64(100), np.int64(48), ev)
     assert r_int == ((100 * 48 + 8) >> 4, 8, (2 * 100 * 48 + 8) >> 4, round(100 / 48 * 64))
-    assert ev.tolist() == [1, 0]
+    assert ev[:2].tolist() == [1, 0]
+    q = round(100 / 48 * 64)
+    assert ev[qops.RANGE_BASE:qops.RANGE_BASE + 4].tolist() == [100, 100, q, q]  # pre-saturation
+    before = ev.copy()
     r_flt = _ops(100.0, 48.0, ev)
     assert r_flt == pytest.approx((4800.0, 100.0, 9600.0, 100 / 48))
-    assert ev.tolist() == [1, 0]           # floats never saturate
+    np.testing.assert_array_equal(ev, before)   # floats never saturate, nor log ranges
 
 
 def test_python_call_is_refused():
