@@ -62,6 +62,46 @@ def test_decoder_robust_to_missing_and_extra_pulses(mode):
     assert np.max(np.min(np.abs(a[:, None] - auxs[None, :]), axis=1)) < 0.2e-6
 
 
+@pytest.mark.parametrize("mode", ["X", "Y"])
+def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
+    """The compiled hypothesis scorer (one walking pointer per template pulse) gives the
+    numpy nearest-neighbour matching's scores exactly, also at ties and at the tolerance."""
+    from cosim.tacan_signal import burst_offsets
+    from dsp.tacan import decode as dec
+    rng = np.random.default_rng(4)
+    cfg = TacanSignalConfig(mode=mode, duration_s=0.5, seed=12)
+    t, _, _, _ = pulse_schedule(cfg)
+    tol = DecoderConfig().tol_s
+    for offs in (burst_offsets(mode, "main"), burst_offsets(mode, "aux")):
+        tt = np.sort(np.concatenate([t + rng.normal(0, 0.5e-6, t.size),
+                                     rng.uniform(0, 0.5, 300)]))
+        starts = np.unique(np.round((tt[:, None] - offs[None, :4]).ravel(), 12))
+        # Hypotheses whose targets sit exactly at the tolerance or midway between two peaks.
+        edge = np.concatenate([tt[:50] - offs[3] + tol, tt[50:100] - offs[2] - tol,
+                               (tt[100:150] + tt[101:151]) / 2 - offs[1],
+                               [tt[0] - 1.0, tt[-1] + 1.0]])
+        starts = np.unique(np.concatenate([starts, edge]))
+        got = dec._scores(tt, starts, offs, tol)
+        want = dec._scores_numpy(tt, starts, offs, tol)
+        np.testing.assert_array_equal(got, want)
+        assert want.max() == offs.size and (want == 0).any()
+    # Dyadic times: distances of exactly tol (matched), tol + 1 LSB (not) and exact midpoints.
+    q = 2.0 ** -20
+    tt = np.sort(rng.choice(np.arange(4000), 900, replace=False)) * q
+    offs = np.array([0.0, 7, 16, 40]) * q
+    starts = np.unique(np.concatenate([tt - 2 * q, tt + 2 * q, tt - 3 * q, tt + 0.5 * q,
+                                       tt - 40 * q]))
+    got = dec._scores(tt, starts, offs, 2 * q)
+    np.testing.assert_array_equal(got, dec._scores_numpy(tt, starts, offs, 2 * q))
+    at_tol = dec._scores(tt[:1], np.array([tt[0] - 2 * q, tt[0] - 3 * q]), offs[:1], 2 * q)
+    assert at_tol.tolist() == [1, 0]
+
+
+def test_decoder_refuses_nan_times():
+    with pytest.raises(ValueError, match="peak times must be finite"):
+        decode(np.array([0.0, np.nan, 1.0]))
+
+
 def test_decoder_bad_config():
     with pytest.raises(ValueError, match=r"decoder min_fraction must be in \(0, 1\], not 1.5"):
         DecoderConfig(min_fraction=1.5)
