@@ -21,7 +21,11 @@ Targets and what ``ber`` means for each
 Reported per (target, BER): bearing RMSE and worst error after settling, NaN bearings (must
 be 0), exceptions (must be 0), flips injected, the receiver's events (gated, re-initialised,
 rejected timestamps, ...), the share of disturbed bearings (error > ``disturbed_deg``) and
-the longest disturbance (s): the recovery time.
+the longest disturbance (s): the recovery time. Integrity, as for a bearing indicator with a
+warning flag: the share of bearings the receiver flagged (``BearingTrack.valid`` False:
+filter warming up after a re-initialisation, or its latest measurements gated), the share of
+*misleading* bearings (disturbed but not flagged: what a user would be shown as good), and
+the RMSE / worst error of the unflagged bearings.
 """
 from __future__ import annotations
 
@@ -141,6 +145,8 @@ def _score(fc: FaultConfig, run, track, truth_deg) -> dict:
     nan = int(np.count_nonzero(~np.isfinite(b)))
     err = wrap_deg(b - truth_deg)
     dist = np.abs(err) > fc.disturbed_deg
+    valid = track.valid[0, keep] if track.valid is not None else np.ones(b.size, bool)
+    ev_ok = err[valid]
     longest = 0.0
     if dist.any():
         # contiguous disturbed stretches: from the last good bearing before to the first after
@@ -156,7 +162,11 @@ def _score(fc: FaultConfig, run, track, truth_deg) -> dict:
             "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if b.size else None,
             "max_abs_error_deg": float(np.abs(err).max()) if b.size else None,
             "disturbed_fraction": float(dist.mean()) if b.size else None,
-            "longest_disturbance_s": longest, "events": ev}
+            "longest_disturbance_s": longest, "events": ev,
+            "flagged_fraction": float(np.mean(~valid)) if b.size else None,
+            "misleading_fraction": float(np.mean(dist & valid)) if b.size else None,
+            "valid_rmse_deg": float(np.sqrt(np.mean(ev_ok ** 2))) if ev_ok.size else None,
+            "valid_max_abs_error_deg": float(np.abs(ev_ok).max()) if ev_ok.size else None}
 
 
 def _one(fc: FaultConfig, ber: float, trial: int, cache: dict) -> dict:
@@ -293,6 +303,14 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
             "max_abs_error_deg": max((r["max_abs_error_deg"] for r in ok), default=None),
             "disturbed_fraction": float(np.mean([r["disturbed_fraction"] for r in ok])) if ok else None,
             "longest_disturbance_s": max((r["longest_disturbance_s"] for r in ok), default=None),
+            "flagged_fraction": _mean_of(ok, "flagged_fraction"),
+            "misleading_fraction": _mean_of(ok, "misleading_fraction"),
+            "valid_rmse_deg": (float(np.sqrt(np.mean([r["valid_rmse_deg"] ** 2 for r in ok
+                                                      if r.get("valid_rmse_deg") is not None])))
+                               if any(r.get("valid_rmse_deg") is not None for r in ok) else None),
+            "valid_max_abs_error_deg": max((r["valid_max_abs_error_deg"] for r in ok
+                                            if r.get("valid_max_abs_error_deg") is not None),
+                                           default=None),
             "reinit": ev.get("reinit", 0), "gated": ev.get("gated", 0), "p_neg": ev.get("p_neg", 0),
             "saturations": sum(v for k, v in ev.items() if k.startswith("sat_")),
             "rx": rx})
@@ -305,13 +323,19 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
     return summary
 
 
+def _mean_of(recs, key):
+    vals = [r[key] for r in recs if r.get(key) is not None]
+    return float(np.mean(vals)) if vals else None
+
+
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     stem = f"faults_{fc.target.replace('-', '_')}"
     (out / f"{stem}.json").write_text(json.dumps(s, indent=1, default=str))
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
-            "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s", "reinit",
-            "gated", "p_neg", "saturations"]
+            "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",
+            "flagged_fraction", "misleading_fraction", "valid_rmse_deg",
+            "valid_max_abs_error_deg", "reinit", "gated", "p_neg", "saturations"]
     with open(out / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
@@ -344,15 +368,25 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
              f"{fc.duration_s:g} s, fixed-point DSP, backend {fc.backend}"
              + (f", bits {list(fc.bits)}" if fc.bits else "") + ".", "",
              f"![{stem}.png]({stem}.png)", "",
+             f"Every bearing after settling: RMSE, worst error, disturbed (error > "
+             f"{fc.disturbed_deg:g} deg) and the longest disturbance. Integrity: flagged (the "
+             "receiver's warning flag: warming up after a re-initialisation, or latest "
+             "measurements gated), misleading (disturbed and *not* flagged) and the errors "
+             "of the unflagged bearings.", "",
              "| BER | flips | exceptions | NaN bearings | RMSE deg | worst deg | disturbed | "
-             "longest disturbance s | re-inits | gated | saturations |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "longest disturbance s | flagged | misleading | unflagged RMSE deg | "
+             "unflagged worst deg | re-inits | gated | saturations |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in s["rows"]:
         lines.append(f"| {r['ber']:g} | {r['flips']} | {r['exceptions']} | {r['nan_bearings']} | "
                      f"{f_(r['rmse_deg'], '.4f')} | {f_(r['max_abs_error_deg'], '.3f')} | "
                      f"{f_(r['disturbed_fraction'], '.2%')} | "
-                     f"{f_(r['longest_disturbance_s'], '.3f')} | {r['reinit']} | {r['gated']} | "
-                     f"{r['saturations']} |")
+                     f"{f_(r['longest_disturbance_s'], '.3f')} | "
+                     f"{f_(r.get('flagged_fraction'), '.2%')} | "
+                     f"{f_(r.get('misleading_fraction'), '.2%')} | "
+                     f"{f_(r.get('valid_rmse_deg'), '.4f')} | "
+                     f"{f_(r.get('valid_max_abs_error_deg'), '.3f')} | {r['reinit']} | "
+                     f"{r['gated']} | {r['saturations']} |")
     if any(r["rx"] for r in s["rows"]):
         lines += ["", "DSP receiver (FIFO words): " + "; ".join(
             f"BER {r['ber']:g}: " + ", ".join(f"{k} {v}" for k, v in r["rx"].items() if v)

@@ -732,6 +732,17 @@ class EnvelopeKalman:
         """Estimated measurement noise variance (signal units), per trial."""
         return self._to_float(self._r, "r")
 
+    def health(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per trial: updates since the last (re)initialisation, how many of the latest
+        measurements in a row the innovation gate rejected, and the estimated amplitude
+        noise relative to the pulse level, ``sqrt(r) / |dc|`` (``inf`` for ``dc = 0``; a
+        float readout, for monitoring only)."""
+        dc = np.abs(self._to_float(self.x[:, 4], "x"))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(dc > 0, np.sqrt(np.maximum(self.r, 0.0)) / np.where(dc > 0, dc, 1.0),
+                             np.inf)
+        return self._cnt[:, 0].copy(), self._cnt[:, 1].copy(), ratio
+
     def x_float(self) -> np.ndarray:
         return self._to_float(self.x, "x")
 

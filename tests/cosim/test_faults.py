@@ -104,7 +104,7 @@ def test_heavy_bit_errors_are_survived(adc_fifo):
 
 
 def test_dsp_state_upsets_are_detected_and_recovered(tmp_path):
-    s = run_faults(FaultConfig(target="dsp-state", ber=(1e-5,), seed=2,
+    s = run_faults(FaultConfig(target="dsp-state", ber=(1e-6, 1e-5), seed=2,
                                **{**QUICK, "duration_s": 2.0}), tmp_path, progress=False)
     r = _row(s, 1e-5)
     assert r["exceptions"] == 0 and r["nan_bearings"] == 0
@@ -112,6 +112,14 @@ def test_dsp_state_upsets_are_detected_and_recovered(tmp_path):
     rec = s["records"][-1]
     assert rec["n_bearings"] > 100                          # ... and the receiver goes on
     assert r["longest_disturbance_s"] < 1.5
+    # Integrity: the receiver's flag covers the disturbed bearings.
+    assert _row(s, 0.0)["flagged_fraction"] == 0.0
+    lo = _row(s, 1e-6)
+    assert lo["flips"] > 0 and lo["disturbed_fraction"] > 0
+    assert lo["misleading_fraction"] == 0.0                 # every disturbed bearing flagged
+    assert lo["valid_rmse_deg"] < 0.25 and lo["valid_max_abs_error_deg"] < 1.0
+    assert r["misleading_fraction"] < 0.25 * r["disturbed_fraction"]
+    assert "| flagged | misleading |" in (tmp_path / "faults_dsp_state.md").read_text()
 
 
 def test_register_upsets_are_scrubbed(tmp_path):

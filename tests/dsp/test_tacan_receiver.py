@@ -74,3 +74,39 @@ def test_fixed_dsp_integer_bearing_matches_float_receiver():
     keep = ref.times_s >= 0.5
     assert np.abs(wrap_deg(fx.bearing_deg[:, keep] - ref.bearing_deg[:, keep])).max() < 0.02
     assert (fx.events["invalid_bearings"] == 0).all()
+
+
+@pytest.mark.parametrize("dsp", ["float", "fixed"])
+def test_bearings_are_flagged_while_the_filter_warms_up_or_misfits(dsp):
+    """The warning flag (``track.valid``): set at start-up until ``warmup`` updates, clear in
+    steady state, set over most of what a burst of garbage amplitudes does. The gate rejects
+    the garbage until the filter re-initialises -- while the garbage still arrives, so the
+    new fit includes it and the bearing is off by up to 150 deg until the filter forgets it
+    (float ~1.2 s, fixed ~0.25 s: its y format saturates the garbage at 2). Known limit,
+    measured here: in the tail of that refit the 15 Hz phase is 25-35 deg off while the
+    noise estimate looks plausible again, a 40 deg sector slip the flag cannot see; the
+    flag covers 74 % (float) / 49 % (fixed) of the disturbed bearings."""
+    cfg = TacanSignalConfig(duration_s=3.5, snr_db=15, seed=6)
+    t, amps, _ = pulse_observations(cfg, [40.0])
+    ticks = np.round(t * 20e6).astype(np.int64)
+    bad = (t > 1.2) & (t < 1.22)
+    amps = amps.copy()
+    amps[0, bad] = 40.0                                    # a burst of garbage
+    rc = ReceiverConfig(kalman=KalmanFixedConfig()) if dsp == "fixed" else ReceiverConfig()
+    tr = process_peaks(ticks / 20e6, amps, rc, ticks=ticks)
+    assert tr.valid.shape == tr.bearing_deg.shape and tr.reinit[0] == 1
+    v, ts = tr.valid[0], tr.times_s
+    err = np.abs(wrap_deg(tr.bearing_deg[0] - 40.0))
+    assert (~v).sum() == tr.events["flagged_bearings"][0]
+    warm = 400 / 7200                                      # warmup updates at 7200 pulses/s
+    assert not v[ts < warm].any() and v[(ts > warm + 0.01) & (ts < 1.2)].all()
+    assert err[v & (ts < 1.2)].max() < 0.5
+    assert not v[(ts > 1.2) & (ts < 1.25)].any()          # the garbage and the re-init
+    disturbed = (ts > 1.2) & (err > 1.0)
+    assert (~v[disturbed]).mean() > (0.7 if dsp == "float" else 0.45)
+    assert v[ts > 3.0].all() and err[ts > 3.0].max() < 0.5  # recovered
+    for bad_cfg, msg in ((dict(flag_gated=0), "flag_gated must be an integer >= 1"),
+                         (dict(flag_sector_deg=25), r"flag_sector_deg must be in \(0, 20\]"),
+                         (dict(flag_noise_ratio=0), "flag_noise_ratio must be > 0")):
+        with pytest.raises(ValueError, match=msg):
+            ReceiverConfig(**bad_cfg)
