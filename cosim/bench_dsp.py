@@ -213,7 +213,8 @@ def dsp_hour(out: Path, quick: bool = False) -> dict:
             link_state = res.state
             ts, amp, rx_state = receive_words(res.words, width=params.fifo.width,
                                               amp_width=params.peak.amp_width,
-                                              ts_bits=params.peak.ts_bits, state=rx_state)
+                                              ts_bits=params.peak.ts_bits, state=rx_state,
+                                              parity=params.fifo.parity)
             t2 = time.perf_counter()
             acc_t.append(ts + np.int64(params.decimation - 1))
             acc_a.append(amp)

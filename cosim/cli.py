@@ -215,13 +215,15 @@ def _add_faults(sub):
                    help="front end for the register target (the others use the model)")
     p.add_argument("--scrub-period-s", type=_finite, default=0.01,
                    help="register target: the DSP rewrites the register this often")
+    p.add_argument("--fifo-parity", action="store_true",
+                   help="FIFO words carry an even-parity bit, checked by the DSP")
     p.add_argument("--out", default="build/studies/faults")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_faults)
 
 
 def _cmd_faults(a) -> int:
-    from .studies.faults import FaultConfig, parse_ber, run_faults
+    from .studies.faults import FaultConfig, parse_ber, report_stem, run_faults
     bits = None
     if a.bits:
         try:
@@ -230,11 +232,12 @@ def _cmd_faults(a) -> int:
             raise ValueError(f"--bits takes a comma list of bit positions, not {a.bits!r}") from None
     fc = FaultConfig(target=a.target, ber=parse_ber(a.ber), bits=bits, snr_db=a.snr_db,
                      trials=a.trials, duration_s=a.duration_s, memory_s=a.memory_s,
-                     seed=a.seed, backend=a.backend, scrub_period_s=a.scrub_period_s)
+                     seed=a.seed, backend=a.backend, scrub_period_s=a.scrub_period_s,
+                     fifo_parity=a.fifo_parity)
     s = run_faults(fc, a.out, progress=not a.json)
     if a.json:
         print(json.dumps({"target": a.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
-                          "report": f"{a.out}/faults_{a.target.replace('-', '_')}.md"},
+                          "report": f"{a.out}/{report_stem(fc)}.md"},
                          default=str))
     else:
         print(f"{len(s['rows'])} bit error rates x {a.trials} trials in {s['elapsed_s']:.0f} s")
@@ -244,7 +247,7 @@ def _cmd_faults(a) -> int:
             print(f"  BER {r['ber']:g}: {r['flips']} flips, RMSE {rm} deg, worst {mx} deg, "
                   f"NaN {r['nan_bearings']}, exceptions {r['exceptions']}, "
                   f"re-inits {r['reinit']}")
-        print(f"report: {a.out}/faults_{a.target.replace('-', '_')}.md")
+        print(f"report: {a.out}/{report_stem(fc)}.md")
     return 0
 
 

@@ -219,7 +219,7 @@ def _freq_segments(run: TacanRunConfig, params, n_cycles: int):
 def _dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
     """The DSP side of the link: tagged words -> peaks (unwrapped ticks, amplitudes)."""
     ts, amp, rx = receive_words(words, width=params.fifo.width, amp_width=params.peak.amp_width,
-                                ts_bits=params.peak.ts_bits)
+                                ts_bits=params.peak.ts_bits, parity=params.fifo.parity)
     ticks = ts + np.int64(params.decimation - 1)     # golden convention (see peaks_to_fs)
     return FrontendOutput(ticks=ticks, amplitude_fs=amp * params.scale_to_fs, amplitude_lsb=amp,
                           words=np.asarray(words, np.int64), cycles=np.asarray(cycles, np.int64),

@@ -2,7 +2,8 @@
 
 Word format (LSB first): ``width`` payload bits, then a 2-bit tag (0 = data word,
 2 = marker whose payload is the number of words dropped just before it, saturating at
-``2**width - 1``; 1 and 3 reserved). The drop/marker policy and the model are in
+``2**width - 1``; 1 and 3 reserved), then with ``parity`` an even-parity bit over the word,
+computed at the write side and stored with it. The drop/marker policy and the model are in
 :mod:`hdl.model.fifo`.
 """
 from __future__ import annotations
@@ -55,8 +56,10 @@ class DspFifo(wiring.Component):
     def __init__(self, params: FifoParams | None = None):
         self.params = params if params is not None else FifoParams()
         p = self.params
-        self.out_layout = data.StructLayout({"payload": unsigned(p.width),
-                                             "tag": unsigned(2)})
+        fields = {"payload": unsigned(p.width), "tag": unsigned(2)}
+        if p.parity:
+            fields["parity"] = unsigned(1)
+        self.out_layout = data.StructLayout(fields)
         super().__init__({
             "i": In(stream.Signature(unsigned(p.width), always_ready=True)),
             "o": Out(stream.Signature(self.out_layout)),
@@ -83,7 +86,10 @@ class DspFifo(wiring.Component):
         word = self.i.payload
 
         def put(payload, tag):
-            m.d.comb += [fifo.w_en.eq(1), fifo.w_data.eq(Cat(payload, Const(tag, 2)))]
+            w = Cat(payload, Const(tag, 2))
+            if p.parity:
+                w = Cat(w, w.xor())
+            m.d.comb += [fifo.w_en.eq(1), fifo.w_data.eq(w)]
 
         with m.If(hold_v):
             with m.If(fifo.w_rdy):

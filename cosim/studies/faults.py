@@ -16,7 +16,10 @@ Targets and what ``ber`` means for each
                (as stored: ``x`` and the upper triangle of ``P``) flips with probability
                ``ber`` per filter update, inside the compiled core between two updates.
 
-``bits`` restricts the flips to chosen bit positions (e.g. the MSBs).
+``bits`` restricts the flips to chosen bit positions (e.g. the MSBs). ``fifo_parity`` builds
+the front end with the FIFO's even-parity bit (``TacanFrontendParams.fifo_parity``), which
+the DSP's receiver checks: the flips then cover the parity bit too (reports
+``faults_<target>_parity.*``).
 
 Reported per (target, BER): bearing RMSE and worst error after settling, NaN bearings (must
 be 0), exceptions (must be 0), flips injected, the receiver's events (gated, re-initialised,
@@ -106,8 +109,11 @@ class FaultConfig:
     backend: str = "model"
     scrub_period_s: float = 0.01
     disturbed_deg: float = 1.0
+    fifo_parity: bool = False
 
     def __post_init__(self):
+        if not isinstance(self.fifo_parity, bool):
+            raise ValueError(f"fifo_parity must be a bool, not {self.fifo_parity!r}")
         if self.target not in TARGETS:
             raise ValueError(f"target must be one of {list(TARGETS)}, not {self.target!r}")
         if not self.ber or not all(0 <= b < 1 for b in self.ber):
@@ -134,7 +140,8 @@ def _run_cfg(fc: FaultConfig, trial: int):
                             seed=int(rng.integers(1 << 31)),
                             bearing_deg=float(np.round(rng.uniform(0, 360), 3)))
     return TacanRunConfig(signal=sig, backend="model", dsp="fixed",
-                          kalman=KalmanConfig(memory_s=fc.memory_s), require_bearing=False)
+                          kalman=KalmanConfig(memory_s=fc.memory_s), require_bearing=False,
+                          hdl_changes=(("fifo_parity", True),) if fc.fifo_parity else ())
 
 
 def _score(fc: FaultConfig, run, track, truth_deg) -> dict:
@@ -323,6 +330,10 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
     return summary
 
 
+def report_stem(fc: FaultConfig) -> str:
+    return f"faults_{fc.target.replace('-', '_')}" + ("_parity" if fc.fifo_parity else "")
+
+
 def _mean_of(recs, key):
     vals = [r[key] for r in recs if r.get(key) is not None]
     return float(np.mean(vals)) if vals else None
@@ -330,7 +341,7 @@ def _mean_of(recs, key):
 
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    stem = f"faults_{fc.target.replace('-', '_')}"
+    stem = report_stem(fc)
     (out / f"{stem}.json").write_text(json.dumps(s, indent=1, default=str))
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",
@@ -366,7 +377,9 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
              f"`{m['command']}`, {m['date']}, {m['cpu']}, commit {m['commit']}, "
              f"{s['elapsed_s']:.0f} s. SNR {fc.snr_db:g} dB, {fc.trials} trials of "
              f"{fc.duration_s:g} s, fixed-point DSP, backend {fc.backend}"
-             + (f", bits {list(fc.bits)}" if fc.bits else "") + ".", "",
+             + (f", bits {list(fc.bits)}" if fc.bits else "")
+             + (", FIFO words with an even-parity bit (checked by the DSP)" if fc.fifo_parity
+                else "") + ".", "",
              f"![{stem}.png]({stem}.png)", "",
              f"Every bearing after settling: RMSE, worst error, disturbed (error > "
              f"{fc.disturbed_deg:g} deg) and the longest disturbance. Integrity: flagged (the "

@@ -6,6 +6,9 @@ gap marker (payload = peaks the FPGA dropped just before it), tags 1 and 3 reser
 
 Nothing is taken on trust, because the link may carry bit errors:
 
+* with ``parity`` (the FIFO's optional even-parity bit above the tag), a word whose bits do
+  not have even parity is counted (``parity_errors``) and skipped: any odd number of
+  flipped bits is caught before the word is interpreted;
 * reserved tags are counted (``bad_tags``) and the word skipped;
 * timestamps are unwrapped against the last *accepted* one: a data word is accepted when
   its tick advances by ``1 .. max_gap_ticks`` (peaks are strictly increasing in time and a
@@ -27,7 +30,7 @@ import numba
 import numpy as np
 
 STAT_NAMES = ("words", "data", "markers", "dropped_reported", "bad_tags", "ts_rejected",
-              "ts_resyncs", "bad_markers")
+              "ts_resyncs", "bad_markers", "parity_errors")
 
 
 @dataclass
@@ -42,8 +45,8 @@ class RxState:
 
 
 @numba.njit(cache=True, nogil=True)
-def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, final, st,
-        out_t, out_a, stats):
+def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, final, parity,
+        st, out_t, out_a, stats):
     """``st`` = [last wrapped ts (-1: none), last tick, consecutive rejects, pending flag,
     pending ts, pending amplitude]; see :func:`receive_words` for the rules."""
     pmask = (np.int64(1) << width) - 1
@@ -56,6 +59,16 @@ def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, fin
         if k < words.size:
             w = words[k]
             stats[0] += 1
+            if parity:
+                v = w ^ (w >> 32)
+                v ^= v >> 16
+                v ^= v >> 8
+                v ^= v >> 4
+                v ^= v >> 2
+                v ^= v >> 1
+                if v & 1:
+                    stats[8] += 1
+                    continue
             tag = (w >> width) & 3
             pay = w & pmask
             if tag == 2:
@@ -128,7 +141,7 @@ def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, fin
 def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
                   max_gap_ticks: int = 1 << 22, resync_after: int = 8,
                   max_marker: int = 1 << 24, state: RxState | None = None,
-                  final: bool = True):
+                  final: bool = True, parity: bool = False):
     """Decode FIFO words.
 
     A data word is accepted when its timestamp advances by ``1 .. max_gap_ticks`` from the
@@ -164,6 +177,8 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
         The stream ends with this batch: decide the last data word without a successor
         (default). With ``final=False`` it stays pending in ``state`` until the next batch
         (a DSP streaming batch after batch).
+    parity : bool
+        The words carry the FIFO's even-parity bit (``FifoParams.parity``): check it.
 
     Returns
     -------
@@ -185,6 +200,10 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
         raise ValueError(f"max_marker must be an integer >= 1, not {max_marker!r}")
     if not (isinstance(max_gap_ticks, (int, np.integer)) and 1 <= max_gap_ticks < (1 << ts_bits) // 2):
         raise ValueError(f"max_gap_ticks must be in 1..2**(ts_bits-1), not {max_gap_ticks!r}")
+    if not isinstance(parity, (bool, np.bool_)):
+        raise ValueError(f"parity must be a bool, not {parity!r}")
+    if parity and width > 60:
+        raise ValueError(f"with parity the payload width must be <= 60, not {width}")
     w = np.ascontiguousarray(np.asarray(words, dtype=np.int64))
     state = state or RxState()
     pend = state.pending
@@ -195,7 +214,7 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     out_a = np.empty(w.size + 1, np.int64)
     stats = np.zeros(len(STAT_NAMES), np.int64)
     n = _rx(w, int(width), int(amp_width), int(ts_bits), int(max_gap_ticks), int(resync_after),
-            int(max_marker), bool(final), st, out_t, out_a, stats)
+            int(max_marker), bool(final), bool(parity), st, out_t, out_a, stats)
     state.last_wrapped, state.last_tick, state.rejects = (int(v) for v in st[:3])
     state.pending = (int(st[4]), int(st[5])) if st[3] else None
     for name, v in zip(STAT_NAMES, stats):

@@ -1,12 +1,15 @@
 """FIFO towards the DSP: parameters, word format and a cycle-level model.
 
-Word format (``word_width = width + 2`` bits, LSB first)::
+Word format (``word_width = width + 2`` bits, ``+ 1`` with ``parity``, LSB first)::
 
     bits [0, width)          payload
     bits [width, width + 2)  tag: 0 = data word (payload = the input word)
                                    2 = marker: payload = words dropped in the gap just
                                        before it (saturates at 2**width - 1)
                                    1, 3 reserved
+    bit  width + 2           parity (optional): even parity over the whole word, computed
+                             where the word is written, so it covers the queue memory and
+                             the link to the DSP
 
 Nothing is lost silently: a word that arrives while the queue is full is dropped, counted in
 ``overflow_count`` (saturating, ``count_width`` bits) and in the pending gap count; the gap
@@ -69,6 +72,9 @@ class FifoParams:
         Width of the saturating ``overflow_count`` (1..32 bits).
     w_domain, r_domain : str
         Clock domains of the write (FPGA) and read (DSP) sides; asynchronous only.
+    parity : bool
+        Append an even-parity bit to every word (width <= 60, so the word fits in int64):
+        the DSP detects any odd number of flipped bits in the memory or on the link.
     """
 
     width: int = 51
@@ -77,9 +83,12 @@ class FifoParams:
     count_width: int = 16
     w_domain: str = "sync"
     r_domain: str = "dsp"
+    parity: bool = False
 
     def __post_init__(self):
-        check_width("FIFO width", self.width, minimum=1, maximum=61)
+        if not isinstance(self.parity, bool):
+            raise ValueError(f"FIFO parity must be a bool, not {self.parity!r}")
+        check_width("FIFO width", self.width, minimum=1, maximum=60 if self.parity else 61)
         if isinstance(self.depth, bool) or not isinstance(self.depth, (int, np.integer)) \
                 or self.depth < 1:
             raise ValueError(f"FIFO depth must be >= 1, not {self.depth!r}")
@@ -94,7 +103,7 @@ class FifoParams:
 
     @property
     def word_width(self) -> int:
-        return self.width + 2
+        return self.width + 2 + int(self.parity)
 
     @property
     def actual_depth(self) -> int:
@@ -114,7 +123,8 @@ class FifoParams:
     @property
     def out_layout(self) -> list[tuple[str, int, bool]]:
         """Output word, LSB first (for ``cosim.pysim.unpack_fields``)."""
-        return [("payload", self.width, False), ("tag", 2, False)]
+        return [("payload", self.width, False), ("tag", 2, False)] + \
+            ([("parity", 1, False)] if self.parity else [])
 
     @property
     def count_latency(self) -> str:
@@ -124,9 +134,25 @@ class FifoParams:
         return "the cycle after the drop"
 
 
+def parity_bit(words) -> np.ndarray:
+    """XOR of all bits of each (non-negative) int64 word."""
+    v = np.asarray(words, dtype=np.int64).astype(np.uint64)
+    for s in (32, 16, 8, 4, 2, 1):
+        v = v ^ (v >> np.uint64(s))
+    return (v & np.uint64(1)).astype(np.int64)
+
+
+def with_parity(words, params: FifoParams) -> np.ndarray:
+    """Output words: the stored ``payload | tag`` plus the parity bit when enabled."""
+    w = np.asarray(words, dtype=np.int64)
+    if not params.parity:
+        return w
+    return w | (parity_bit(w) << np.int64(params.width + 2))
+
+
 def pack_word(payload, tag, params: FifoParams) -> np.ndarray:
-    return (np.asarray(payload, dtype=np.int64) & np.int64(params.marker_max)) | \
-        (np.asarray(tag, dtype=np.int64) << np.int64(params.width))
+    return with_parity((np.asarray(payload, dtype=np.int64) & np.int64(params.marker_max)) |
+                       (np.asarray(tag, dtype=np.int64) << np.int64(params.width)), params)
 
 
 def unpack_word(words, params: FifoParams) -> tuple[np.ndarray, np.ndarray]:
@@ -486,7 +512,7 @@ def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
         steps = np.zeros(n_cycles + 1, dtype=np.int64)
         steps[write_cycles[dropped[:n_w]] - start + 1] = 1
         ovf_trace = np.minimum(ovf0 + np.cumsum(steps[:n_cycles]), p.count_max)
-    return FifoResult(words=out_w[:n_out].copy(), cycles=out_c[:n_out].copy(),
+    return FifoResult(words=with_parity(out_w[:n_out].copy(), p), cycles=out_c[:n_out].copy(),
                       overflow_count=ovf_trace, dropped=dropped, state=new,
                       max_level=new.max_level)
 
@@ -695,6 +721,6 @@ def _fifo_model_reference(in_words, in_valid, out_ready, params: FifoParams) -> 
             elif out_full and rdy:
                 out_full = False
         c += 1
-    return FifoResult(words=np.array(out_words, dtype=np.int64),
+    return FifoResult(words=with_parity(np.array(out_words, dtype=np.int64), params),
                       cycles=np.array(out_cycles, dtype=np.int64),
                       overflow_count=ovf_trace, dropped=dropped)

@@ -119,6 +119,8 @@ class TacanFrontendParams:
         Peak timestamp width (wraps).
     fifo_depth, fifo_count_bits : int
         FIFO depth (words) and overflow-counter width.
+    fifo_parity : bool
+        Even-parity bit on every FIFO word (checked by the DSP's FIFO receiver).
     check_headroom : bool
         Refuse word lengths where a legal input could overflow a stage (default True).
     """
@@ -146,6 +148,7 @@ class TacanFrontendParams:
     ts_bits: int = 32
     fifo_depth: int = 512
     fifo_count_bits: int = 16
+    fifo_parity: bool = False
     check_headroom: bool = True
     _blocks: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -208,7 +211,7 @@ class TacanFrontendParams:
                                thr_min=min(thr_min, (1 << env.out_width) - 1),
                                hold=pk.hold, max_len=pk.max_len)
         b["fifo"] = FifoParams(width=env.out_width + self.ts_bits, depth=self.fifo_depth,
-                               count_width=self.fifo_count_bits)
+                               count_width=self.fifo_count_bits, parity=self.fifo_parity)
         if self.check_headroom:
             self._check_headroom()
 

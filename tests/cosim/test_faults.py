@@ -122,6 +122,20 @@ def test_dsp_state_upsets_are_detected_and_recovered(tmp_path):
     assert "| flagged | misleading |" in (tmp_path / "faults_dsp_state.md").read_text()
 
 
+def test_fifo_parity_turns_link_errors_into_skipped_words(tmp_path):
+    """FIFO words at BER 1e-3 can hurt the bearing (corrupted timestamps slip through: 36 deg
+    worst in `make faults`); with the parity bit the DSP skips the corrupted words instead
+    and the bearing stays intact."""
+    s = run_faults(FaultConfig(target="fifo", ber=(1e-3,), fifo_parity=True, **QUICK), tmp_path,
+                   progress=False)
+    r = _row(s, 1e-3)
+    assert r["exceptions"] == 0 and r["rx"]["parity_errors"] > 0.8 * r["flips"]
+    assert r["rmse_deg"] < 0.25 and r["max_abs_error_deg"] < 1.0 and r["misleading_fraction"] == 0
+    assert (tmp_path / "faults_fifo_parity.md").exists()
+    with pytest.raises(ValueError, match="fifo_parity must be a bool"):
+        FaultConfig(fifo_parity="yes")
+
+
 def test_register_upsets_are_scrubbed(tmp_path):
     s = run_faults(FaultConfig(target="register", ber=(3e-3,), seed=1, scrub_period_s=0.005,
                                **QUICK), tmp_path, progress=False)

@@ -5,6 +5,8 @@ fixed-point DSP (accuracy, and against the golden chain), the same answer bit fo
 the model and the Amaranth simulation, and a DSP too slow for the FIFO (drops counted and
 reported, the bearing recovers).
 """
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -160,3 +162,22 @@ def test_verilator_default_scenario_same_bearing_bits_as_the_model():
     assert r["model"]["digest"] == r["verilator"]["digest"]
     assert r["model"]["bearing_est_deg"] == r["verilator"]["bearing_est_deg"]
     assert r["verilator"]["n_bearings"] > 200 and r["verilator"]["rmse_deg"] < 0.25
+
+
+@needs_verilator
+def test_fifo_parity_on_the_rtl_equals_the_model_and_changes_nothing_else(short_model):
+    """The whole front end with the FIFO's parity bit: Verilated RTL == bit-exact model
+    (words, cycles, drops, bearing bits); the words are the ones without parity plus the
+    parity bit, the DSP checks it (no errors on a clean link) and gets the same bearings."""
+    def run(backend):
+        r = _short_run(backend)
+        return r, frontend_output(replace(r, hdl_changes=r.hdl_changes + (("fifo_parity", True),)))
+    r, model = run("model")
+    _, rtl = run("verilator")
+    _assert_same(model, rtl)
+    (fp, tp), (f0, t0) = model, short_model
+    width = r.hdl_params.fifo.width
+    np.testing.assert_array_equal(fp.words & ((1 << (width + 2)) - 1), f0.words)
+    assert (fp.words >> (width + 2)).max() == 1
+    assert fp.extra["rx"]["parity_errors"] == 0 and fp.extra["rx"]["data"] > 0
+    np.testing.assert_array_equal(tp.bearing_deg, t0.bearing_deg)

@@ -138,3 +138,31 @@ def test_implausible_marker_counts_are_not_reported_as_drops():
     assert st.stats["dropped_reported"] == 7 and st.stats["bad_markers"] == 1
     with pytest.raises(ValueError, match="max_marker"):
         receive_words([], width=W, amp_width=AW, ts_bits=TB, max_marker=0)
+
+
+def test_parity_errors_are_counted_and_the_words_skipped():
+    """With the FIFO's parity bit: a word with an odd number of flipped bits (anywhere,
+    parity bit included) is counted and skipped before it is interpreted; clean words pass."""
+    from hdl.model.fifo import FifoParams, with_parity
+    p = FifoParams(width=W, parity=True)
+    t, a = _stream(2000, seed=7)
+    words = with_parity(_pack(t, a), p)
+    ticks, amps, st = receive_words(words, width=W, amp_width=AW, ts_bits=TB, parity=True)
+    np.testing.assert_array_equal(ticks, t)
+    assert st.stats["parity_errors"] == 0
+    rng = np.random.default_rng(8)
+    hit = np.sort(rng.choice(2000, 60, replace=False))
+    bad = words.copy()
+    bits = rng.integers(0, W + 3, hit.size)                  # payload, tag or parity bit
+    bad[hit] ^= np.int64(1) << bits.astype(np.int64)
+    two = hit[:10]                                            # an even number: undetectable
+    bad[two] ^= np.int64(1) << ((bits[:10] + 1) % (W + 3)).astype(np.int64)
+    ticks, amps, st = receive_words(bad, width=W, amp_width=AW, ts_bits=TB, parity=True)
+    assert st.stats["parity_errors"] == 50
+    keep = np.setdiff1d(np.arange(2000), hit[10:])
+    ok = np.isin(ticks, t[keep])
+    assert ok.sum() >= keep.size - 12 and (ticks == np.sort(ticks)).all()
+    with pytest.raises(ValueError, match="parity must be a bool"):
+        receive_words(words, width=W, amp_width=AW, ts_bits=TB, parity=1)
+    with pytest.raises(ValueError, match="with parity the payload width must be <= 60"):
+        receive_words(words, width=61, amp_width=AW, ts_bits=TB, parity=True)

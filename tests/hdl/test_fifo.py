@@ -397,6 +397,26 @@ def test_async_two_clock_rates(w_hz, r_hz):
     assert ovf[-1] == lost.sum()
 
 
+def test_parity_sim_matches_model():
+    """With ``parity`` the HDL stores an even-parity bit above the tag: same words as the
+    model, every output word has even parity, and the rest of the word is unchanged."""
+    p = FifoParams(width=12, depth=8, parity=True)
+    rng = np.random.default_rng(301)
+    words, ref = _check_sim(p, rng, 20_000)
+    assert ref.dropped.sum() > 100 and ref.words.size > 1000
+    _check_accounting(words, ref, p)
+    pop = np.array([bin(int(w)).count("1") for w in ref.words])
+    assert (pop % 2 == 0).all() and (ref.words >> 14).max() == 1 and p.word_width == 15
+    plain = fifo_model(*_stimulus(FifoParams(width=12, depth=8), np.random.default_rng(301),
+                                  20_000), FifoParams(width=12, depth=8))
+    np.testing.assert_array_equal(ref.words & ((1 << 14) - 1), plain.words)
+    np.testing.assert_array_equal(ref.cycles, plain.cycles)
+    ref2 = _fifo_model_reference(*_stimulus(p, np.random.default_rng(301), 20_000), p)
+    np.testing.assert_array_equal(ref2.words, ref.words)
+    np.testing.assert_array_equal(pack_word(ref.words & 0xFFF, (ref.words >> 12) & 3, p),
+                                  ref.words)
+
+
 # -- parameters and Verilog ----------------------------------------------------------------
 @pytest.mark.parametrize("kw, msg", [
     (dict(depth=0), r"FIFO depth must be >= 1, not 0"),
@@ -405,6 +425,8 @@ def test_async_two_clock_rates(w_hz, r_hz):
     (dict(count_width=0), r"FIFO count_width must be an integer in \[1, 32\], not 0"),
     (dict(asynchronous=True, r_domain="sync"),
      r"asynchronous FIFO needs two different domains, not 'sync' twice"),
+    (dict(parity=1), r"FIFO parity must be a bool, not 1"),
+    (dict(width=61, parity=True), r"FIFO width must be an integer in \[1, 60\], not 61"),
 ])
 def test_bad_params(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -419,11 +441,11 @@ def test_actual_depth():
 
 
 @pytest.mark.verilator
-@pytest.mark.parametrize("asynchronous", [False, True])
-def test_verilog_lints_clean(asynchronous):
+@pytest.mark.parametrize("asynchronous, parity", [(False, False), (True, False), (False, True)])
+def test_verilog_lints_clean(asynchronous, parity):
     """Waived: cosim.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH)."""
-    p = FifoParams(depth=16, asynchronous=asynchronous)
-    name = "dsp_fifo_async" if asynchronous else "dsp_fifo"
+    p = FifoParams(depth=16, asynchronous=asynchronous, parity=parity)
+    name = ("dsp_fifo_async" if asynchronous else "dsp_fifo") + ("_parity" if parity else "")
     # Exported on its own, the asynchronous FIFO gets its read domain as ports (dsp_clk,
     # dsp_rst); inside _TwoClocks that clock would be an undriven constant.
     assert_lints_clean(DspFifo(p), name)
@@ -464,3 +486,18 @@ def test_verilator_matches_model_long(vl_fifo):
     np.testing.assert_array_equal(res.cycles, ref.cycles)
     np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
     _check_accounting(words, ref, p)
+
+
+@needs_verilator
+def test_verilator_with_parity_matches_model():
+    p = FifoParams(width=12, depth=8, parity=True)
+    dut = DspFifo(p)
+    sim = verilator_sim(dut, "dsp_fifo_parity_vl")
+    words, in_valid, out_ready = _stimulus(p, np.random.default_rng(311), 200_000)
+    res = sim.run(words, in_valid=in_valid, out_ready=out_ready, n_cycles=in_valid.size,
+                  probe={"ovf": "overflow_count"})
+    ref = fifo_model(words, in_valid, out_ready, p)
+    assert ref.dropped.sum() > 1000
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(res.cycles, ref.cycles)
+    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
