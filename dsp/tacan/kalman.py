@@ -79,6 +79,10 @@ Fixed-point stability
 * Every store saturates to its format and counts the event per signal (``sat_*``).
 * Gated measurements are counted; ``max_rejects`` consecutive gated ones re-initialise the
   trial (``reinit``), as in the float filter. Integers cannot be NaN.
+* An input the ``y`` format cannot hold (or beyond ``KalmanConfig.input_limit``) is not
+  saturated into a measurement: the step only predicts (``implausible``; in float the same
+  with ``input_limit``), so garbage never enters the state, not even right after a
+  re-initialisation.
 
 Timestamps: ``run`` takes ``dts`` as integer ticks (``tick_hz``, default 20 MHz, the ADC
 clock) or float seconds. The fixed core converts seconds by rounding the *cumulative* time to
@@ -106,7 +110,7 @@ Q_EXTRA = 16
 MAX_TICKS = 1 << 38
 
 EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
-               "p_clamps", "p_neg", "reinit", "gated")
+               "p_clamps", "p_neg", "reinit", "gated", "implausible")
 _EV = {n: i for i, n in enumerate(EVENT_NAMES)}
 #: Signals whose range the fixed-point core logs (event index -> format name): every store
 #: of that format goes through a saturating operator with that index (r also holds e2).
@@ -133,6 +137,14 @@ class KalmanConfig:
         Consecutive gated measurements that count as divergence (re-initialise).
     r_smooth : int
         Time constant (updates) of the innovation-based ``r`` estimate.
+    input_limit : float, optional
+        Largest plausible ``|amplitude|`` (signal units). A value beyond it is not a
+        measurement: the step only predicts, counted as ``implausible``, and neither the
+        gate, the divergence count nor the ``r`` estimate sees it -- so garbage cannot be
+        fitted, not even by a filter that has just re-initialised. ``None`` (default): the
+        fixed core's input range, i.e. its ``y`` format (a value it cannot hold is
+        implausible rather than saturated); no limit in float (the golden filter takes
+        amplitudes on any scale).
     """
 
     memory_s: float = 0.5
@@ -142,8 +154,14 @@ class KalmanConfig:
     warmup: int = 400
     max_rejects: int = 64
     r_smooth: int = 512
+    input_limit: float | None = None
 
     def __post_init__(self):
+        if self.input_limit is not None and not (
+                isinstance(self.input_limit, (int, float)) and math.isfinite(self.input_limit)
+                and self.input_limit > 0):
+            raise ValueError(f"input_limit must be a finite number > 0 or None, not "
+                             f"{self.input_limit!r}")
         for name in ("memory_s", "pulse_rate_hz", "p0", "gate"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -263,12 +281,14 @@ class KalmanFixedConfig:
             int(round(k.p0 * 2.0 ** self.P.frac)),                   # p0
             min(int(round(k.gate ** 2 * (1 << GATE_FRAC))), 1 << 40),  # gate^2
             1 << self.r.frac,                                        # r init = 1
+            np.iinfo(np.int64).min,                                  # "no measurement"
         ], dtype=np.int64)
 
 
 def _float_consts(k: KalmanConfig) -> np.ndarray:
     q_rot, q_dc = k.q_rates()
-    return np.array([2 * math.pi * F15, 2 * math.pi * F135, q_rot, q_dc, k.p0, k.gate ** 2, 1.0])
+    return np.array([2 * math.pi * F15, 2 * math.pi * F135, q_rot, q_dc, k.p0, k.gate ** 2, 1.0,
+                     math.nan])                                      # "no measurement"
 
 
 # ---------------------------------------------------------------------------------------
@@ -302,7 +322,9 @@ def _reset(x, P, p0):
 
 @_jit
 def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
-    """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, rejects]."""
+    """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
+    gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
+    minimum) or NaN (float) is no measurement: predict only."""
     yf = ci[_Y]
     xf, xlo, xhi, xh = ci[_X], ci[_X + 1], ci[_X + 2], ci[_X + 3]
     pf, plo, phi, ph = ci[_P], ci[_P + 1], ci[_P + 2], ci[_P + 3]
@@ -317,7 +339,7 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
         kw_bits += 1
     ksplit = min(62 - kw_bits, kf)
     warmup, max_rej, r_smooth, gfrac = ci[0], ci[1], ci[2], ci[3]
-    p0, g2 = cv[4], cv[5]
+    p0, g2, skip = cv[4], cv[5], cv[7]
     zero = p0 - p0
     M = np.empty_like(P)
     Pp = np.empty_like(P)
@@ -358,11 +380,21 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
                 v = sat(v, plo, phi, ev, 2)
                 Pp[i, j] = v
                 Pp[j, i] = v
+        y = ys[k]
+        if y != y or y == skip:     # implausible input: not a measurement
+            ev[11] += 1
+            cnt[2] += 1
+            for i in range(5):
+                x[i] = xp[i]
+                for j in range(5):
+                    P[i, j] = Pp[i, j]
+            continue
+        cnt[2] = 0
         # -- innovation, S, e2 = innov^2 / S
         for i in range(5):
             PH[i] = Pp[i, 0] + Pp[i, 2] + Pp[i, 4]
         S = PH[0] + PH[2] + PH[4] + sc[k, 6]
-        iv = sat(rs(align(ys[k], xf - yf) - (xp[0] + xp[2] + xp[4]), xf - ivf, ivh),
+        iv = sat(rs(align(y, xf - yf) - (xp[0] + xp[2] + xp[4]), xf - ivf, ivh),
                  ivlo, ivhi, ev, 4)
         r = r_st[0]
         n = cnt[0]
@@ -505,7 +537,7 @@ class EnvelopeKalman:
         self.x = np.zeros((self.batch, 5), dtype)
         self.P = np.zeros((self.batch, 5, 5), dtype)
         self._r = np.full(self.batch, self._cv[6], dtype)
-        self._cnt = np.zeros((self.batch, 2), np.int64)      # n, consecutive rejects
+        self._cnt = np.zeros((self.batch, 3), np.int64)   # n, gated / implausible in a row
         self._ev = new_event_array((self.batch,))    # counts, then the range log
         self._t_resid = 0.0
         self.n_updates = 0
@@ -598,27 +630,37 @@ class EnvelopeKalman:
         return t
 
     def _measurements(self, ys):
+        """Validated measurements for the kernel: float, or integer ``y`` codes (saturated
+        to the format, counted as ``sat_y``, when ``input_limit`` lies beyond it); inputs
+        beyond ``input_limit`` (fixed default: the ``y`` range) become the kernel's "no
+        measurement" value (NaN / the int64 minimum)."""
         ys_a = np.asarray(ys)
         f = self.fixed
+        lim = (f.kalman if f is not None else self.cfg).input_limit
         if f is None:
             yf = ys_a.astype(np.float64).reshape(self.batch, -1)
             if not np.isfinite(yf).all():
                 raise ValueError("measurement is NaN or infinite: the front end must not send it")
-            return yf, None
+            if lim is None:
+                return yf, None
+            bad = np.abs(yf) > lim
+            return (np.where(bad, np.nan, yf) if bad.any() else yf), None
         fy = f.y
         if ys_a.dtype.kind in "iu":
-            yi = ys_a.astype(np.int64).reshape(self.batch, -1)
-            nsat = (yi < fy.min_int) | (yi > fy.max_int)
-            self._y_raw = yi
-            return np.clip(yi, fy.min_int, fy.max_int), nsat
-        yf = ys_a.astype(np.float64).reshape(self.batch, -1)
-        if not np.isfinite(yf).all():
-            raise ValueError("measurement is NaN or infinite: the front end must not send it")
-        scaled = np.floor(np.clip(np.ldexp(yf, fy.frac), -2.0 ** 62, 2.0 ** 62)
-                          + (0.5 if fy.rounding == "half_up" else 0.0))
-        nsat = (scaled < fy.min_int) | (scaled > fy.max_int)
-        self._y_raw = scaled
-        return np.clip(scaled, fy.min_int, fy.max_int).astype(np.int64), nsat
+            raw = ys_a.astype(np.int64).reshape(self.batch, -1)
+        else:
+            yf = ys_a.astype(np.float64).reshape(self.batch, -1)
+            if not np.isfinite(yf).all():
+                raise ValueError("measurement is NaN or infinite: the front end must not send it")
+            raw = np.floor(np.clip(np.ldexp(yf, fy.frac), -2.0 ** 62, 2.0 ** 62)
+                           + (0.5 if fy.rounding == "half_up" else 0.0)).astype(np.int64)
+        outside = (raw < fy.min_int) | (raw > fy.max_int)
+        bad = outside if lim is None else np.abs(raw.astype(np.float64)) > math.ldexp(lim, fy.frac)
+        nsat = outside & ~bad
+        self._y_raw = raw
+        out = np.clip(raw, fy.min_int, fy.max_int)
+        out[bad] = np.iinfo(np.int64).min
+        return out, nsat
 
     def run(self, dts, ys, r_mult=None) -> None:
         """Run steps on a shared timeline.
@@ -628,8 +670,9 @@ class EnvelopeKalman:
         dts : array (N,)
             Time since the previous pulse: integer ticks or float seconds.
         ys : array (B, N)
-            Amplitudes (floats; the fixed core quantises them to ``cfg.y``, counting
-            saturations; integer arrays are taken as raw ``y`` codes).
+            Amplitudes (floats; the fixed core quantises them to ``cfg.y``; integer arrays
+            are taken as raw ``y`` codes). Values beyond ``input_limit`` (fixed default:
+            the ``y`` range) are no measurement (``implausible``).
         r_mult : array (N,), optional
             Measurement-noise multipliers (> 0); the fixed core holds them in the ``P``
             format, clipped to ``[2**-12, 2**12]`` (counted as ``sat_rmult``).
@@ -642,7 +685,8 @@ class EnvelopeKalman:
             return
         if nsat is not None:
             self._ev[:, _EV["sat_y"]] += nsat.sum(axis=1)
-            self._note_python(0, self._y_raw)
+            # range log of the values taken as measurements (not the implausible ones)
+            self._note_python(0, self._y_raw, used=y != np.iinfo(np.int64).min)
         if r_mult is None:
             rmf = np.ones(t.size)
         else:
@@ -681,14 +725,23 @@ class EnvelopeKalman:
         self._upsets = (st, wd, bt, k)
         self.n_updates += t.size
 
-    def _note_python(self, i: int, raw) -> None:
-        """Range log of a value stored outside the compiled core (per trial rows)."""
-        raw = np.asarray(raw)
+    def _note_python(self, i: int, raw, used=None) -> None:
+        """Range log of a value stored outside the compiled core (per trial rows; only the
+        entries where ``used`` is set)."""
+        raw = np.asarray(raw, dtype=np.float64)
         if raw.size == 0:
             return
         j = RANGE_BASE + 2 * i
-        lo = np.clip(raw.min(axis=-1), -2.0 ** 62, 2.0 ** 62).astype(np.int64)
-        hi = np.clip(raw.max(axis=-1), -2.0 ** 62, 2.0 ** 62).astype(np.int64)
+        if used is None:
+            lo_f, hi_f = raw.min(axis=-1), raw.max(axis=-1)
+        else:
+            lo_f = np.where(used, raw, np.inf).min(axis=-1)
+            hi_f = np.where(used, raw, -np.inf).max(axis=-1)
+        big = np.iinfo(np.int64)
+        lo = np.where(np.isfinite(lo_f), np.clip(lo_f, -2.0 ** 62, 2.0 ** 62), 0).astype(np.int64)
+        hi = np.where(np.isfinite(hi_f), np.clip(hi_f, -2.0 ** 62, 2.0 ** 62), 0).astype(np.int64)
+        lo = np.where(np.isfinite(lo_f), lo, big.max)      # a row with nothing used: no change
+        hi = np.where(np.isfinite(hi_f), hi, big.min)
         self._ev[:, j] = np.minimum(self._ev[:, j], lo)
         self._ev[:, j + 1] = np.maximum(self._ev[:, j + 1], hi)
 
@@ -734,14 +787,14 @@ class EnvelopeKalman:
 
     def health(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per trial: updates since the last (re)initialisation, how many of the latest
-        measurements in a row the innovation gate rejected, and the estimated amplitude
+        inputs in a row were not used (gated, or implausible), and the estimated amplitude
         noise relative to the pulse level, ``sqrt(r) / |dc|`` (``inf`` for ``dc = 0``; a
         float readout, for monitoring only)."""
         dc = np.abs(self._to_float(self.x[:, 4], "x"))
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(dc > 0, np.sqrt(np.maximum(self.r, 0.0)) / np.where(dc > 0, dc, 1.0),
                              np.inf)
-        return self._cnt[:, 0].copy(), self._cnt[:, 1].copy(), ratio
+        return self._cnt[:, 0].copy(), self._cnt[:, 1:].max(axis=1), ratio
 
     def x_float(self) -> np.ndarray:
         return self._to_float(self.x, "x")

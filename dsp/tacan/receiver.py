@@ -70,11 +70,13 @@ class ReceiverConfig:
     #:   pulse level ``dc``: the filter has fitted something that is not the signal (its
     #:   ``r`` estimate grows from the misfit; ~0.44 at -3 dB SNR in normal operation).
     #:
-    #: Known limit: when implausible input lasts long enough to re-initialise the filter
-    #: (``max_rejects`` gated in a row) and is still arriving, the new fit includes it; late
-    #: in that refit the 15 Hz phase can be 25-35 deg off with a plausible noise estimate,
-    #: and the resulting 40 deg sector slip is not flagged (see
-    #: ``tests/dsp/test_tacan_receiver.py``; the fault study reports it as *misleading*).
+    #: Input beyond the DSP's input range is never measured (``KalmanConfig.input_limit``)
+    #: and flags the bearings while it lasts. Known limit: garbage *within* the range that
+    #: lasts long enough to re-initialise the filter (``max_rejects`` gated in a row) and is
+    #: still arriving enters the new fit; late in that refit the 15 Hz phase can be 25-35
+    #: deg off with a plausible noise estimate, and the resulting 40 deg sector slip is not
+    #: flagged (see ``tests/dsp/test_tacan_receiver.py``; the fault study reports it as
+    #: *misleading*).
     flag_gated: int = 1
     flag_sector_deg: float = 12.0
     flag_noise_ratio: float = 0.5
@@ -253,7 +255,8 @@ def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int 
     One constant multiply, as the DSP does it: ``y = round(amp * g / 2**gain_frac)`` with
     ``g = round(scale_to_fs * 2**(y.frac + gain_frac))`` (the float is used once, to build
     ``g``). Relative error of ``g`` < ``2**-(gain_frac)`` / ``scale``; values beyond the
-    ``y`` range are saturated by the core (counted as ``sat_y``).
+    ``y`` range are not measurements for the core (counted as ``implausible``, see
+    ``KalmanConfig.input_limit``).
     """
     a = np.asarray(amp_lsb)
     if a.dtype.kind not in "iu":

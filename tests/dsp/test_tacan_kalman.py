@@ -111,16 +111,20 @@ def test_covariance_stays_symmetric_psd_over_a_long_run():
 
 def test_outliers_are_gated_and_divergence_reinitialises():
     rng = np.random.default_rng(1)
-    cfg = KalmanConfig(warmup=100, max_rejects=20)
+    cfg = KalmanConfig(warmup=100, max_rejects=20, input_limit=2.0)
     kf = EnvelopeKalman(cfg)
     dts = rng.exponential(1 / 7200, 3000)
     y = 1.0 + 0.05 * rng.standard_normal(3000)
-    y[1000] = 50.0                      # one wild pulse: gated
-    y[2000:2100] = 40.0                 # the level jumps: divergence -> re-initialise
+    y[1000] = 1.95                      # one wild pulse: gated
+    y[2000:2100] = 1.8                  # the level jumps: divergence -> re-initialise
+    y[500] = y[2500] = 50.0             # beyond input_limit: not a measurement at all
     kf.run(dts, y[None, :])
     assert kf.events["gated"][0] >= 21
     assert kf.events["reinit"][0] == 1
+    assert kf.events["implausible"][0] == 2
     assert np.all(np.isfinite(kf.x))
+    with pytest.raises(ValueError, match="input_limit must be a finite number > 0 or None"):
+        KalmanConfig(input_limit=0.0)
 
 
 def test_nan_measurement_is_refused():

@@ -99,6 +99,10 @@ class _Ref:
                 if i == j:
                     v += qr if i < 4 else qd
                 Pp[i][j] = Pp[j][i] = self.sat(v, fP, "sat_P")
+        if y is None:                                   # implausible input: predict only
+            self.ev["implausible"] += 1
+            self.x, self.P = xp, Pp
+            return
         PH = [Pp[i][0] + Pp[i][2] + Pp[i][4] for i in range(5)]
         S = PH[0] + PH[2] + PH[4] + rm
         iv = self.sat(_rs((y << (fx.frac - fy.frac)) - (xp[0] + xp[2] + xp[4]),
@@ -164,17 +168,20 @@ def _stream(seed, n, batch, outliers=()):
 
 def test_kernel_equals_unbounded_integer_reference():
     n, B = 400, 4
-    outl = [(k, 1.9) for k in range(250, 256)] + [(300, -1.9)]
+    outl = [(k, 1.9) for k in range(250, 256)] + [(300, -1.9)] + \
+        [(k, 7.5) for k in range(100, 104)] + [(k, -40.0) for k in range(320, 330)]
     dt, y, rm = _stream(7, n, B, outl)
     cfg = KalmanFixedConfig(KalmanConfig(warmup=60, max_rejects=5, r_smooth=64))
     kf = EnvelopeKalmanFixed(cfg, batch=B)
     kf.run(dt, y, rm)
     yi = cfg.y.quantize(y)[0]
+    raw = np.floor(np.ldexp(y, cfg.y.frac) + 0.5)                 # y codes before saturation
+    implausible = (raw < cfg.y.min_int) | (raw > cfg.y.max_int)   # beyond the y range
     rmi = np.round(np.ldexp(rm, cfg.P.frac)).astype(np.int64)
     for b in range(B):
         ref = _Ref(cfg)
         for k in range(n):
-            ref.step(int(dt[k]), int(yi[b, k]), int(rmi[k]))
+            ref.step(int(dt[k]), None if implausible[b, k] else int(yi[b, k]), int(rmi[k]))
         assert [int(v) for v in kf.x[b]] == ref.x
         assert kf.P[b].tolist() == ref.P
         assert int(kf._r[b]) == ref.r
@@ -183,6 +190,7 @@ def test_kernel_equals_unbounded_integer_reference():
             if name != "sat_y":
                 assert ev[name][b] == v, name
         assert ev["gated"][b] > 0 and ev["reinit"][b] >= 1      # both paths exercised
+        assert ev["implausible"][b] == 14
 
 
 def test_sin_cos_from_phase_accumulator():
@@ -261,7 +269,11 @@ def test_long_run_stays_psd_without_reinit():
     np.testing.assert_allclose(dc, 0.8, rtol=0.005)
 
 
-def test_garbage_input_reinitialises_and_recovers():
+@pytest.mark.parametrize("dsp", ["fixed", "float"])
+def test_garbage_input_reinitialises_and_recovers(dsp):
+    """Garbage within the input range is gated until the filter re-initialises; garbage
+    beyond ``input_limit`` is no measurement at all (counted ``implausible``): the filter
+    only predicts through it and is not disturbed (the same in both arithmetics)."""
     rng = np.random.default_rng(5)
     n = 12_000
     dts = rng.exponential(1 / 7200, n)
@@ -269,18 +281,29 @@ def test_garbage_input_reinitialises_and_recovers():
     clean = 0.7 * (1 + 0.21 * np.sin(2 * np.pi * F15 * t - 1.0)
                    + 0.21 * np.sin(2 * np.pi * F135 * t - 2.0))
     y = clean + rng.standard_normal(n) * 0.02
-    y[3000:3200] = 1e9 * np.sign(rng.standard_normal(200))   # front end gone mad
-    kx = EnvelopeKalmanFixed(batch=1)
-    kx.run(dts[:6000], y[None, :6000])
-    ev = kx.events
-    assert ev["sat_y"][0] == 200 and ev["reinit"][0] >= 1 and ev["gated"][0] >= 64
-    kx.run(dts[6000:], y[None, 6000:])
-    a, b, m1, m2, dc = kx.phases()
+    sign = np.sign(rng.standard_normal(200))
     truth = np.array([0.7 * 0.21 * np.sin(2 * np.pi * F15 * t[-1] - 1.0),
                       0.7 * 0.21 * np.cos(2 * np.pi * F15 * t[-1] - 1.0)])
-    np.testing.assert_allclose(kx.x_float()[0, :2], truth, atol=0.01)
-    assert dc[0] == pytest.approx(0.7, abs=0.01)
-    assert np.isfinite(kx.x_float()).all()
+    make = (lambda: EnvelopeKalmanFixed(batch=1)) if dsp == "fixed" else \
+        (lambda: EnvelopeKalman(KalmanConfig(input_limit=2.0), batch=1))
+    for level, inside in ((1.9, True), (1e9, False)):
+        yy = y.copy()
+        yy[3000:3200] = level * sign                          # front end gone mad
+        kx = make()
+        kx.run(dts[:6000], yy[None, :6000])
+        ev = kx.events
+        if inside:                                            # gated, then re-initialised
+            assert ev["reinit"][0] >= 1 and ev["gated"][0] >= 64 and ev["implausible"][0] == 0
+        else:                                                 # not measurements at all
+            assert ev["implausible"][0] == 200 and ev["reinit"][0] == 0
+            assert ev["sat_y"][0] == 0 and ev["gated"][0] <= 2
+            if dsp == "fixed":
+                assert kx.ranges()["y"]["max"] < 1.5          # the range log ignores them
+        kx.run(dts[6000:], yy[None, 6000:])
+        a, b, m1, m2, dc = kx.phases()
+        np.testing.assert_allclose(kx.x_float()[0, :2], truth, atol=0.01)
+        assert dc[0] == pytest.approx(0.7, abs=0.01)
+        assert np.isfinite(kx.x_float()).all()
 
 
 def test_ticks_and_seconds_agree():
