@@ -58,6 +58,16 @@ def check_width(name: str, value, *, minimum: int = 1, maximum: int = MAX_WIDTH)
     return int(value)
 
 
+def parity_bit(words) -> np.ndarray:
+    """XOR of all bits of each word (int64 array in, 0/1 int64 array out): even parity is 0.
+    The FIFO model appends it (:mod:`hdl.model.fifo`) and the DSP's receiver checks it
+    (:mod:`dsp.tacan.fifo_rx`)."""
+    v = np.asarray(words, dtype=np.int64).astype(np.uint64)
+    for s in (32, 16, 8, 4, 2, 1):
+        v = v ^ (v >> np.uint64(s))
+    return (v & np.uint64(1)).astype(np.int64)
+
+
 def check_int(name: str, value, minimum: int) -> int:
     """Validate an integer count or cycle number (``>= minimum``) and return it.
 

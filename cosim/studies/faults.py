@@ -25,8 +25,8 @@ Reported per (target, BER): bearing RMSE and worst error after settling, NaN bea
 be 0), exceptions (must be 0), flips injected, the receiver's events (gated, re-initialised,
 rejected timestamps, ...), the share of disturbed bearings (error > ``disturbed_deg``) and
 the longest disturbance (s): the recovery time. Integrity, as for a bearing indicator with a
-warning flag: the share of bearings the receiver flagged (``BearingTrack.valid`` False:
-filter warming up after a re-initialisation, or its latest measurements gated), the share of
+warning flag: the share of bearings the receiver flagged (``BearingTrack.valid`` False, for
+the reasons listed at :class:`dsp.tacan.receiver.ReceiverConfig`), the share of
 *misleading* bearings (disturbed but not flagged: what a user would be shown as good), and
 the RMSE / worst error of the unflagged bearings.
 """
@@ -312,12 +312,8 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
             "longest_disturbance_s": max((r["longest_disturbance_s"] for r in ok), default=None),
             "flagged_fraction": _mean_of(ok, "flagged_fraction"),
             "misleading_fraction": _mean_of(ok, "misleading_fraction"),
-            "valid_rmse_deg": (float(np.sqrt(np.mean([r["valid_rmse_deg"] ** 2 for r in ok
-                                                      if r.get("valid_rmse_deg") is not None])))
-                               if any(r.get("valid_rmse_deg") is not None for r in ok) else None),
-            "valid_max_abs_error_deg": max((r["valid_max_abs_error_deg"] for r in ok
-                                            if r.get("valid_max_abs_error_deg") is not None),
-                                           default=None),
+            "valid_rmse_deg": _rms_of(ok, "valid_rmse_deg"),
+            "valid_max_abs_error_deg": _max_of(ok, "valid_max_abs_error_deg"),
             "reinit": ev.get("reinit", 0), "gated": ev.get("gated", 0), "p_neg": ev.get("p_neg", 0),
             "saturations": sum(v for k, v in ev.items() if k.startswith("sat_")),
             "rx": rx})
@@ -334,9 +330,23 @@ def report_stem(fc: FaultConfig) -> str:
     return f"faults_{fc.target.replace('-', '_')}" + ("_parity" if fc.fifo_parity else "")
 
 
+def _values(recs, key):
+    return [r[key] for r in recs if r.get(key) is not None]
+
+
 def _mean_of(recs, key):
-    vals = [r[key] for r in recs if r.get(key) is not None]
-    return float(np.mean(vals)) if vals else None
+    v = _values(recs, key)
+    return float(np.mean(v)) if v else None
+
+
+def _rms_of(recs, key):
+    v = _values(recs, key)
+    return float(np.sqrt(np.mean(np.square(v)))) if v else None
+
+
+def _max_of(recs, key):
+    v = _values(recs, key)
+    return float(max(v)) if v else None
 
 
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
@@ -383,9 +393,9 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
              f"![{stem}.png]({stem}.png)", "",
              f"Every bearing after settling: RMSE, worst error, disturbed (error > "
              f"{fc.disturbed_deg:g} deg) and the longest disturbance. Integrity: flagged (the "
-             "receiver's warning flag: warming up after a re-initialisation, or latest "
-             "measurements gated), misleading (disturbed and *not* flagged) and the errors "
-             "of the unflagged bearings.", "",
+             "receiver's warning flag: filter warming up, latest inputs rejected, ambiguous "
+             "fine sector or implausible noise estimate), misleading (disturbed and *not* "
+             "flagged) and the errors of the unflagged bearings.", "",
              "| BER | flips | exceptions | NaN bearings | RMSE deg | worst deg | disturbed | "
              "longest disturbance s | flagged | misleading | unflagged RMSE deg | "
              "unflagged worst deg | re-inits | gated | saturations |",

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from dsp.fixed import parity_bit
+
 STAT_NAMES = ("words", "data", "markers", "dropped_reported", "bad_tags", "ts_rejected",
               "ts_resyncs", "bad_markers", "parity_errors")
 
@@ -45,10 +47,11 @@ class RxState:
 
 
 @numba.njit(cache=True, nogil=True)
-def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, final, parity,
+def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, final, odd,
         st, out_t, out_a, stats):
     """``st`` = [last wrapped ts (-1: none), last tick, consecutive rejects, pending flag,
-    pending ts, pending amplitude]; see :func:`receive_words` for the rules."""
+    pending ts, pending amplitude]; ``odd[k]``: word ``k`` fails the parity check (all False
+    without parity); see :func:`receive_words` for the rules."""
     pmask = (np.int64(1) << width) - 1
     amask = (np.int64(1) << amp_width) - 1
     tmask = (np.int64(1) << ts_bits) - 1
@@ -59,16 +62,9 @@ def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, fin
         if k < words.size:
             w = words[k]
             stats[0] += 1
-            if parity:
-                v = w ^ (w >> 32)
-                v ^= v >> 16
-                v ^= v >> 8
-                v ^= v >> 4
-                v ^= v >> 2
-                v ^= v >> 1
-                if v & 1:
-                    stats[8] += 1
-                    continue
+            if odd[k]:
+                stats[8] += 1
+                continue
             tag = (w >> width) & 3
             pay = w & pmask
             if tag == 2:
@@ -205,6 +201,7 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     if parity and width > 60:
         raise ValueError(f"with parity the payload width must be <= 60, not {width}")
     w = np.ascontiguousarray(np.asarray(words, dtype=np.int64))
+    odd = parity_bit(w).astype(bool) if parity else np.zeros(w.size, bool)
     state = state or RxState()
     pend = state.pending
     st = np.array([state.last_wrapped, state.last_tick, state.rejects,
@@ -214,7 +211,7 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     out_a = np.empty(w.size + 1, np.int64)
     stats = np.zeros(len(STAT_NAMES), np.int64)
     n = _rx(w, int(width), int(amp_width), int(ts_bits), int(max_gap_ticks), int(resync_after),
-            int(max_marker), bool(final), bool(parity), st, out_t, out_a, stats)
+            int(max_marker), bool(final), odd, st, out_t, out_a, stats)
     state.last_wrapped, state.last_tick, state.rejects = (int(v) for v in st[:3])
     state.pending = (int(st[4]), int(st[5])) if st[3] else None
     for name, v in zip(STAT_NAMES, stats):

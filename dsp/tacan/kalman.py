@@ -636,7 +636,7 @@ class EnvelopeKalman:
         measurement" value (NaN / the int64 minimum)."""
         ys_a = np.asarray(ys)
         f = self.fixed
-        lim = (f.kalman if f is not None else self.cfg).input_limit
+        lim = self.kalman.input_limit
         if f is None:
             yf = ys_a.astype(np.float64).reshape(self.batch, -1)
             if not np.isfinite(yf).all():
@@ -732,18 +732,15 @@ class EnvelopeKalman:
         if raw.size == 0:
             return
         j = RANGE_BASE + 2 * i
-        if used is None:
-            lo_f, hi_f = raw.min(axis=-1), raw.max(axis=-1)
-        else:
-            lo_f = np.where(used, raw, np.inf).min(axis=-1)
-            hi_f = np.where(used, raw, -np.inf).max(axis=-1)
-        big = np.iinfo(np.int64)
-        lo = np.where(np.isfinite(lo_f), np.clip(lo_f, -2.0 ** 62, 2.0 ** 62), 0).astype(np.int64)
-        hi = np.where(np.isfinite(hi_f), np.clip(hi_f, -2.0 ** 62, 2.0 ** 62), 0).astype(np.int64)
-        lo = np.where(np.isfinite(lo_f), lo, big.max)      # a row with nothing used: no change
-        hi = np.where(np.isfinite(hi_f), hi, big.min)
-        self._ev[:, j] = np.minimum(self._ev[:, j], lo)
-        self._ev[:, j + 1] = np.maximum(self._ev[:, j + 1], hi)
+        used = np.ones(raw.shape, bool) if used is None else used
+        shape = (self.batch,)       # one row of raw may stand for every trial
+        rows = np.broadcast_to(used.any(axis=-1), shape)   # nothing used: slots unchanged
+        lo = np.broadcast_to(np.where(used, raw, np.inf).min(axis=-1), shape)[rows]
+        hi = np.broadcast_to(np.where(used, raw, -np.inf).max(axis=-1), shape)[rows]
+        self._ev[rows, j] = np.minimum(self._ev[rows, j],
+                                       np.clip(lo, -2.0 ** 62, 2.0 ** 62).astype(np.int64))
+        self._ev[rows, j + 1] = np.maximum(self._ev[rows, j + 1],
+                                           np.clip(hi, -2.0 ** 62, 2.0 ** 62).astype(np.int64))
 
     # -- outputs -----------------------------------------------------------------------------
     def ranges(self) -> dict:
@@ -791,9 +788,8 @@ class EnvelopeKalman:
         noise relative to the pulse level, ``sqrt(r) / |dc|`` (``inf`` for ``dc = 0``; a
         float readout, for monitoring only)."""
         dc = np.abs(self._to_float(self.x[:, 4], "x"))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(dc > 0, np.sqrt(np.maximum(self.r, 0.0)) / np.where(dc > 0, dc, 1.0),
-                             np.inf)
+        ratio = np.full(self.batch, np.inf)
+        np.divide(np.sqrt(np.maximum(self.r, 0.0)), dc, out=ratio, where=dc > 0)
         return self._cnt[:, 0].copy(), self._cnt[:, 1:].max(axis=1), ratio
 
     def x_float(self) -> np.ndarray:

@@ -167,8 +167,6 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     integer_bearing = cfg.dsp == "fixed" and ticks is not None
     out_x, out_dt = [], []
     out_ok = []
-    kc = cfg.kalman.kalman if isinstance(cfg.kalman, KalmanFixedConfig) else cfg.kalman
-    warmup = int(kc.warmup)
     last_main = state.last_main_s
     # Reference bursts become known when their last pulse has arrived.
     ref_order = np.argsort(dec.ref_done_s, kind="stable")
@@ -202,7 +200,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         out_t.append(T)
         out_k.append(ref_k[r])
         n_up, n_gated, noise = kf.health()
-        out_ok.append((n_up >= warmup) & (n_gated < cfg.flag_gated)
+        out_ok.append((n_up >= kf.kalman.warmup) & (n_gated < cfg.flag_gated)
                       & (noise <= cfg.flag_noise_ratio))
         if integer_bearing:
             # the fixed-point DSP: integer state, integer tick differences (see below)

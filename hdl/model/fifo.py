@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from dsp.fixed import check_int as _check_int, check_width
+from dsp.fixed import check_int as _check_int, check_width, parity_bit
 
 TAG_DATA = 0
 TAG_MARKER = 2
@@ -132,14 +132,6 @@ class FifoParams:
         if self.asynchronous:
             return "<= 1 write-clock + 3 read-clock cycles (Gray code, 2-flop synchroniser)"
         return "the cycle after the drop"
-
-
-def parity_bit(words) -> np.ndarray:
-    """XOR of all bits of each (non-negative) int64 word."""
-    v = np.asarray(words, dtype=np.int64).astype(np.uint64)
-    for s in (32, 16, 8, 4, 2, 1):
-        v = v ^ (v >> np.uint64(s))
-    return (v & np.uint64(1)).astype(np.int64)
 
 
 def with_parity(words, params: FifoParams) -> np.ndarray:
