@@ -219,18 +219,22 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
         On any difference (message: backend, first differing index, cycle, expected and
         actual values, VCD paths).
     """
+    def reject(msg):
+        # The caller's mistake, not the component's: no "created but never used" warning.
+        component._MustUse__silence = True
+        raise ValueError(msg)
     backends = tuple(backends)
     for b in backends:
         if b not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, not {b!r}")
+            reject(f"backend must be one of {BACKENDS}, not {b!r}")
     if not backends:
-        raise ValueError("check_stream needs at least one backend")
+        reject("check_stream needs at least one backend")
     if vcd not in ("on_failure", "always", "never"):
-        raise ValueError(f"vcd must be 'on_failure', 'always' or 'never', not {vcd!r}")
+        reject(f"vcd must be 'on_failure', 'always' or 'never', not {vcd!r}")
     from hdl.model.fifo import ReadySchedule
     if isinstance(ready, ReadySchedule):
         if n_cycles is None:
-            raise ValueError("a ReadySchedule needs n_cycles")
+            reject("a ReadySchedule needs n_cycles")
         ready = ready.mask(n_cycles)
     expected = model(stimulus) if callable(model) else model
     want_words, want_cycles, want_probes = _as_expected(expected)
