@@ -93,3 +93,18 @@ def test_schedule_and_probe_and_bad_arguments():
         check_stream(EX.Fir(EX.TAPS), want, x, backends=("iverilog",))
     with pytest.raises(ValueError, match="a ReadySchedule needs n_cycles"):
         check_stream(EX.Fir(EX.TAPS), want, x, ready=ReadySchedule(period=3))
+
+
+def test_without_verilator_pysim_is_checked_then_skipped(monkeypatch):
+    import cosim.verilator
+    monkeypatch.setattr(cosim.verilator, "verilator_available", lambda: False)
+    x, ready = _stim(6, 100)
+    want = EX.fir_model(EX.TAPS, x)
+    with pytest.raises(pytest.skip.Exception, match=r"verilator not run: Verilator, make or a "
+                                                    r"C\+\+ compiler not found on PATH "
+                                                    r"\(checked on pysim\)"):
+        check_stream(EX.Fir(EX.TAPS), want, x, ready=ready)
+    bad = want.copy()
+    bad[0] += 1
+    with pytest.raises(StreamMismatch, match="pysim vs model"):   # a failure is not skipped
+        check_stream(EX.Fir(EX.TAPS), bad, x, ready=ready, vcd="never")
