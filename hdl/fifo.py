@@ -51,9 +51,9 @@ class DspFifo(wiring.Component):
         Tagged words with a real ``ready`` (the DSP). SyncFIFOBuffered: a word written to an
         empty queue is offered 2 cycles later.
     overflow_count : Out(unsigned(count_width))
-        Words (records) dropped since reset, saturating. Synchronous: write domain, updated the cycle
-        after the drop. Asynchronous: in the read domain, Gray-coded across; it lags by at
-        most 1 write-clock + 3 read-clock cycles and every value it shows was true.
+        Words (records) dropped since reset, saturating. Synchronous: write domain, updated
+        the cycle after the drop. Asynchronous: in the read domain, Gray-coded across; it
+        lags by at most 1 write-clock + 3 read-clock cycles and every value it shows was true.
     """
 
     def __init__(self, params: FifoParams | None = None):

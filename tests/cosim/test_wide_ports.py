@@ -23,7 +23,8 @@ class _AddOne(wiring.Component):
         m = Module()
         m.d.comb += self.i.ready.eq(~self.o.valid | self.o.ready)
         with m.If(self.i.ready):
-            m.d.sync += [self.o.valid.eq(self.i.valid), self.o.payload.eq(Value.cast(self.i.payload) + 1)]
+            m.d.sync += [self.o.valid.eq(self.i.valid),
+                         self.o.payload.eq(Value.cast(self.i.payload) + 1)]
         return m
 
 
@@ -34,7 +35,7 @@ def _wide_ints(rng, width, n):
 
 
 @pytest.mark.verilator
-@pytest.mark.parametrize("width", [64, 65, 96, 128, 150])
+@pytest.mark.parametrize("width", [64, 128, 150])   # 1, 2 and 2.3 uint64 limbs
 def test_unsigned_wide_payload_both_backends(width):
     rng = np.random.default_rng(width)
     x = _wide_ints(rng, width, 300)
@@ -70,7 +71,8 @@ def test_pack_unpack_struct_wider_than_63_bits():
 @pytest.mark.verilator
 def test_struct_payload_144_bits_both_backends():
     """A correlator-dump struct (6 x signed 24) through both backends."""
-    layout = data.StructLayout({f"{a}_{b}": signed(24) for a in ("early", "prompt", "late") for b in "iq"})
+    layout = data.StructLayout({f"{a}_{b}": signed(24)
+                                for a in ("early", "prompt", "late") for b in "iq"})
     rng = np.random.default_rng(9)
     x = _wide_ints(rng, 144, 200)
     want = np.array([(int(v) + 1) % (1 << 144) for v in x], dtype=object)

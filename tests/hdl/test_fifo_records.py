@@ -33,9 +33,10 @@ def _bursts(rng, n, burst, p_on, p_fine):
 
 def _stall_stimulus(p, rng, n_cycles, *, period=40, count=12, stall=(0.3, 0.6),
                     p_rec=0.08):
-    """Records at random cycles (at least ``record_words`` apart would never drop; these are
-    not) for 90 % of the run, a DSP serving the FIFO from a timer (``count`` reads every ``period`` cycles) that
-    stalls (``ready`` low) for the fraction ``stall`` of the run."""
+    """Records at random cycles for 90 % of the run (not always ``record_words`` apart, so
+    some arrive while the hold register is busy), a DSP serving the FIFO from a timer
+    (``count`` reads every ``period`` cycles) that stalls (``ready`` low) for the fraction
+    ``stall`` of the run."""
     in_valid = rng.random(n_cycles) < p_rec
     in_valid[int(0.9 * n_cycles):] = False      # the DSP catches up: queue drained at the end
     ready = ReadySchedule(period=period, offset=5, count=count).mask(n_cycles)
