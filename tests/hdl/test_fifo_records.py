@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from amaranth.hdl import Fragment
 
+from cosim.link import DspServiceConfig, run_link
 from cosim.testing import check_stream
 from dsp.records import receive_records
 from hdl.fifo import DspFifo
@@ -34,13 +35,16 @@ def _bursts(rng, n, burst, p_on, p_fine):
 def _stall_stimulus(p, rng, n_cycles, *, period=40, count=12, stall=(0.3, 0.6),
                     p_rec=0.08):
     """Records at random cycles for 90 % of the run (not always ``record_words`` apart, so
-    some arrive while the hold register is busy), a DSP serving the FIFO from a timer
-    (``count`` reads every ``period`` cycles) that stalls (``ready`` low) for the fraction
-    ``stall`` of the run."""
+    some arrive while the hold register is busy), read by a DSP serving the FIFO from a
+    timer interrupt (:class:`cosim.link.DspServiceConfig`: ``count`` words every ``period``
+    cycles) that stalls (``ready`` low) for the fraction ``stall`` of the run."""
     in_valid = rng.random(n_cycles) < p_rec
     in_valid[int(0.9 * n_cycles):] = False      # the DSP catches up: queue drained at the end
-    ready = ReadySchedule(period=period, offset=5, count=count).mask(n_cycles)
-    ready[int(stall[0] * n_cycles):int(stall[1] * n_cycles)] = False
+    service = DspServiceConfig(period_cycles=period, latency_cycles=5, batch_words=count,
+                               cycles_per_word=1,
+                               stalls=((int(stall[0] * n_cycles), int(stall[1] * n_cycles)),))
+    ready = service.ready_mask(n_cycles)
+    assert not ready[int(stall[0] * n_cycles):int(stall[1] * n_cycles)].any()
     return _records(rng, p, int(in_valid.sum())), in_valid, ready
 
 
@@ -301,3 +305,9 @@ def test_single_word_ports_unchanged():
 def test_verilog_lints_clean_records():
     assert_lints_clean(DspFifo(FifoParams(width=24, depth=16, record_words=3, parity=True)),
                        "dsp_fifo_rec3")
+
+
+def test_run_link_refuses_records():
+    with pytest.raises(ValueError, match=r"run_link carries single words \(record_words=1\), "
+                                         r"not record_words=3"):
+        run_link([0], [1], 10, P3, DspServiceConfig())
