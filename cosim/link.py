@@ -327,6 +327,11 @@ def run_link(write_cycles, payloads, n_cycles: int, fifo_params: FifoParams,
     if state is not None and not isinstance(state, FifoState):
         raise ValueError(f"state must be a FifoState, not {type(state).__name__}")
     p = fifo_params
+    if p.record_words != 1:
+        # Its data/cycle/index bookkeeping is per word; records: fifo_model_events with
+        # service.ready_mask, and dsp.records.receive_records on the DSP side.
+        raise ValueError(f"run_link carries single words (record_words=1), not "
+                         f"record_words={p.record_words}")
     wc = np.asarray(write_cycles)
     if wc.size and wc.dtype.kind not in "iu":
         raise ValueError(f"write_cycles must be integers, not dtype {wc.dtype}")

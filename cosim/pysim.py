@@ -71,10 +71,18 @@ def unpack_fields(words: np.ndarray, layout: list[tuple[str, int, bool]]) -> dic
 
 
 def pack_fields(fields: dict[str, np.ndarray], layout: list[tuple[str, int, bool]]) -> np.ndarray:
-    """Inverse of :func:`unpack_fields` (total width <= 63 bits)."""
+    """Inverse of :func:`unpack_fields`: int64 words up to 63 bits, an object array of
+    Python ints for wider payloads."""
     total = sum(w for _, w, _ in layout)
     if total > 63:
-        raise ValueError(f"packed payload must be <= 63 bits wide for int64 words, not {total}")
+        out = 0
+        offset = 0
+        for name, width, _signed in layout:
+            v = np.array([int(x) & ((1 << width) - 1) for x in np.asarray(fields[name]).ravel()],
+                         dtype=object)
+            out = out + v * (1 << offset)
+            offset += width
+        return np.asarray(out, dtype=object)
     out = None
     offset = 0
     for name, width, _signed in layout:

@@ -230,7 +230,7 @@ API int32_t sim_run(void* h, RunArgs* a) {
             offer = !drained && (cyc >= n_valid || in_valid[cyc]);
             top->@I_VALID@ = offer;
 #if @HAS_I_PAYLOAD@
-            if (offer) top->@I_PAYLOAD@ = in_words[accepted] & @I_MASK@ULL;
+            if (offer) { @I_PAYLOAD_SET@ }
 #endif
         }
 #endif
@@ -248,7 +248,7 @@ API int32_t sim_run(void* h, RunArgs* a) {
         const bool o_fire = top->@O_VALID@;
 #endif
         if (o_fire) {
-            out_words[n_out] = (uint64_t)top->@O_PAYLOAD@;
+            @O_PAYLOAD_GET@
             out_cycles[n_out] = cyc;
             n_out++;
         }
@@ -400,6 +400,42 @@ def _parse_header_ports(header_text: str) -> dict[str, tuple[str, str, int]]:
     return ports
 
 
+# -- stream payloads wider than 64 bits --------------------------------------------------------
+# Verilator holds a port of up to 64 bits in an integer and a wider one in a VlWide array of
+# 32-bit words (LSB first). The harness moves payloads through uint64 buffers of
+# ``_limbs(width)`` entries per word (LSB first), so a narrow payload is one entry as before.
+def _limbs(width: int) -> int:
+    return 1 if width <= 64 else (width + 63) // 64
+
+
+def _payload_set_code(member: str, width: int) -> str:
+    """C++ statements: ``top-><member>`` = input word ``accepted``, masked to ``width``."""
+    if width <= 64:
+        return f"top->{member} = in_words[accepted] & {(1 << width) - 1}ULL;"
+    n32 = (width + 31) // 32
+    src = f"in_words[accepted * {_limbs(width)} + %d]"
+    parts = []
+    for j in range(n32):
+        v = f"(uint32_t)({src % (j // 2)}{' >> 32' if j % 2 else ''})"
+        if j == n32 - 1 and width % 32:
+            v = f"({v} & {(1 << (width % 32)) - 1}u)"
+        parts.append(f"top->{member}[{j}] = {v};")
+    return " ".join(parts)
+
+
+def _payload_get_code(member: str, width: int) -> str:
+    """C++ statements: output word ``n_out`` = ``top-><member>``."""
+    if width <= 64:
+        return f"out_words[n_out] = (uint64_t)top->{member};"
+    n32, nl = (width + 31) // 32, _limbs(width)
+    parts = []
+    for j in range(nl):
+        lo = f"(uint64_t)top->{member}[{2 * j}]"
+        hi = f" | ((uint64_t)top->{member}[{2 * j + 1}] << 32)" if 2 * j + 1 < n32 else ""
+        parts.append(f"out_words[n_out * {nl} + {j}] = {lo}{hi};")
+    return " ".join(parts)
+
+
 def _as_value(port) -> Value:
     if isinstance(port, ValueCastable):
         port = port.as_value()
@@ -413,8 +449,9 @@ class VerilatorStreamSim:
     ----------
     component : wiring.Component
         A ``sync``-domain component with an output stream ``o`` and optionally an input
-        stream ``i`` (``amaranth.lib.stream``), payloads up to 64 bits; other ports up to
-        64 bits can be set (``inputs``, ``writes``) or read (``probe``).
+        stream ``i`` (``amaranth.lib.stream``), payloads of any width (wider than 63 bits:
+        object arrays of Python ints, as ``run_stream`` returns them); other ports up to 64
+        bits can be set (``inputs``, ``writes``) or read (``probe``).
     name : str
         Verilog top module name.
     build_dir : path, optional
@@ -453,11 +490,6 @@ class VerilatorStreamSim:
         for p in self.ports:
             if p.name in ("clk", "rst"):
                 raise ValueError(f"port name {p.name!r} clashes with the sync domain's clock/reset")
-        for pname in ("i__payload", "o__payload"):
-            if pname in self._by_name and self.ports[self._by_name[pname]].width > 64:
-                raise NotImplementedError(
-                    f"stream payloads wider than 64 bits are not supported by the Verilator "
-                    f"backend ({pname} is {self.ports[self._by_name[pname]].width} bits)")
         self.verilog = verilog_text(component, name=name, emit_src=False)
         # Checked after the export so that the component is elaborated either way (no
         # UnusedElaboratable warning when the tool is missing).
@@ -596,6 +628,8 @@ class VerilatorStreamSim:
         # A zero-width input payload (a bare strobe stream) is not a port: only valid is driven.
         has_in = "i__valid" in cxx
         has_i_payload = has_in and "i__payload" in cxx
+        i_set = _payload_set_code(c("i__payload"), cxx["i__payload"][2]) if has_i_payload else ""
+        o_get = _payload_get_code(c("o__payload"), cxx["o__payload"][2])
         subs = {
             "@VERSION@": HARNESS_VERSION,
             "@TRACED@": "1" if trace_kind else "0",
@@ -611,7 +645,8 @@ class VerilatorStreamSim:
             "@HAS_O_READY@": "1" if "o__ready" in cxx else "0",
             "@I_VALID@": c("i__valid") if has_in else "",
             "@I_PAYLOAD@": c("i__payload") if has_i_payload else "",
-            "@I_MASK@": str((1 << cxx["i__payload"][2]) - 1) if has_i_payload else "0",
+            "@I_PAYLOAD_SET@": i_set,
+            "@O_PAYLOAD_GET@": o_get,
             "@I_READY@": c("i__ready") if "i__ready" in cxx else "",
             "@O_VALID@": c("o__valid"),
             "@O_PAYLOAD@": c("o__payload"),
@@ -654,6 +689,11 @@ class VerilatorStreamSim:
         # The harness masks to the port width, so int64/uint64 arrays are passed as they are
         # (two's complement bits, as amaranth.sim truncates negative values).
         words = np.asarray(words)
+        if width > 64:   # _limbs(width) uint64 entries per word, LSB first
+            nl, m64 = _limbs(width), (1 << 64) - 1
+            mask = (1 << width) - 1
+            return np.array([(int(w) & mask) >> (64 * j) & m64 for w in words.ravel()
+                             for j in range(nl)], dtype=np.uint64)
         if words.dtype == object:
             mask = (1 << width) - 1
             return np.array([int(w) & mask for w in words], dtype=np.uint64)
@@ -665,6 +705,13 @@ class VerilatorStreamSim:
 
     @staticmethod
     def _from_u64(raw: np.ndarray, width: int, signed: bool) -> np.ndarray:
+        if width > 64:
+            nl = _limbs(width)
+            ints = [sum(int(v) << (64 * j) for j, v in enumerate(row))
+                    for row in raw.reshape(-1, nl)]
+            if signed:
+                ints = [v - (1 << width) if v >> (width - 1) else v for v in ints]
+            return np.array(ints, dtype=object)
         if width <= 63:
             vals = raw.view(np.int64)
             if signed:
@@ -722,7 +769,8 @@ class VerilatorStreamSim:
             words_u64 = self._to_u64(in_words, pin.width)
         else:
             words_u64 = np.zeros(0, dtype=np.uint64)
-        n_in = len(words_u64)
+        n_in = len(words_u64) // (_limbs(self.ports[self._by_name["i__payload"]].width)
+                                  if has_in and "i__payload" in self._by_name else 1)
         valid_u8 = np.zeros(0, np.uint8) if in_valid is None else \
             np.ascontiguousarray(np.asarray(in_valid, dtype=bool).astype(np.uint8))
         ready_u8 = np.zeros(0, np.uint8) if out_ready is None else \
@@ -754,8 +802,10 @@ class VerilatorStreamSim:
         probe_buf = np.zeros((chunk_max, max(n_probe, 1)), dtype=np.uint64)
         a.probe_buf = probe_buf.ctypes.data
 
+        o_nl = _limbs(self.ports[self._by_name["o__payload"]].width)
+
         def new_out_buffer():
-            ow = np.empty(out_cap, dtype=np.uint64)
+            ow = np.empty(out_cap * o_nl, dtype=np.uint64)
             oc = np.empty(out_cap, dtype=np.int64)
             out_chunks.append((ow, oc))
             a.out_words, a.out_cycles, a.out_cap, a.n_out = ow.ctypes.data, oc.ctypes.data, out_cap, 0
@@ -782,7 +832,8 @@ class VerilatorStreamSim:
                 if status == _STATUS_DONE:
                     break
                 if status == _STATUS_FULL:
-                    out_chunks[-1] = (out_chunks[-1][0][:a.n_out], out_chunks[-1][1][:a.n_out])
+                    out_chunks[-1] = (out_chunks[-1][0][:a.n_out * o_nl],
+                                      out_chunks[-1][1][:a.n_out])
                     new_out_buffer()
             for fname, idx in final.items():
                 p = self.ports[idx]
@@ -790,7 +841,7 @@ class VerilatorStreamSim:
                     np.array([lib.sim_get(handle, idx)], dtype=np.uint64), p.width, p.signed)[0])
         finally:
             lib.sim_free(handle)
-        out_chunks[-1] = (out_chunks[-1][0][:a.n_out], out_chunks[-1][1][:a.n_out])
+        out_chunks[-1] = (out_chunks[-1][0][:a.n_out * o_nl], out_chunks[-1][1][:a.n_out])
 
         pout = self.ports[self._by_name["o__payload"]]
         raw = np.concatenate([ow for ow, _ in out_chunks])

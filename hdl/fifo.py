@@ -3,18 +3,20 @@
 Word format (LSB first): ``width`` payload bits, then a 2-bit tag (0 = data word,
 2 = marker whose payload is the number of words dropped just before it, saturating at
 ``2**width - 1``; 1 and 3 reserved), then with ``parity`` an even-parity bit over the word,
-computed at the write side and stored with it. The drop/marker policy and the model are in
-:mod:`hdl.model.fifo`.
+computed at the write side and stored with it. With ``record_words = n > 1`` the input is a
+record of ``n`` payloads in one cycle, queued as ``n`` words (the first tagged 1, start of
+record) or dropped whole, and markers count records. The drop/marker policy and the model
+are in :mod:`hdl.model.fifo`.
 """
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.fifo import AsyncFIFOBuffered, SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
-from hdl.model.fifo import TAG_DATA, TAG_MARKER, FifoParams
+from hdl.model.fifo import TAG_DATA, TAG_MARKER, TAG_START, FifoParams
 
 __all__ = ["DspFifo", "FifoParams"]
 
@@ -41,16 +43,17 @@ class DspFifo(wiring.Component):
 
     Ports
     -----
-    i : In(stream.Signature(unsigned(width), always_ready=True)), write domain
-        Words from the front end (the peak search cannot be stalled).
+    i : In(stream.Signature(unsigned(record_words * width), always_ready=True)), write domain
+        Words (records: word ``j`` in bits ``[j * width, (j + 1) * width)``) from the front
+        end (the peak search cannot be stalled).
     o : Out(stream.Signature(StructLayout({"payload": unsigned(width), "tag": unsigned(2)}))),
         read domain
         Tagged words with a real ``ready`` (the DSP). SyncFIFOBuffered: a word written to an
         empty queue is offered 2 cycles later.
     overflow_count : Out(unsigned(count_width))
-        Words dropped since reset, saturating. Synchronous: write domain, updated the cycle
-        after the drop. Asynchronous: in the read domain, Gray-coded across; it lags by at
-        most 1 write-clock + 3 read-clock cycles and every value it shows was true.
+        Words (records) dropped since reset, saturating. Synchronous: write domain, updated
+        the cycle after the drop. Asynchronous: in the read domain, Gray-coded across; it
+        lags by at most 1 write-clock + 3 read-clock cycles and every value it shows was true.
     """
 
     def __init__(self, params: FifoParams | None = None):
@@ -61,7 +64,7 @@ class DspFifo(wiring.Component):
             fields["parity"] = unsigned(1)
         self.out_layout = data.StructLayout(fields)
         super().__init__({
-            "i": In(stream.Signature(unsigned(p.width), always_ready=True)),
+            "i": In(stream.Signature(unsigned(p.in_width), always_ready=True)),
             "o": Out(stream.Signature(self.out_layout)),
             "overflow_count": Out(unsigned(p.count_width)),
         })
@@ -77,27 +80,43 @@ class DspFifo(wiring.Component):
             fifo = SyncFIFOBuffered(width=p.word_width, depth=p.depth)
         m.submodules.fifo = fifo
 
-        hold_v = Signal()
-        hold_d = Signal(unsigned(p.width))
+        n, W = p.record_words, p.width
+        # Hold register: one record, shifted down a word per write; hold_left words to go.
+        hold = Signal(unsigned(p.in_width))
+        hold_left = Signal(range(n + 1))
         pending = Signal(unsigned(p.width))
         ovf = Signal(unsigned(p.count_width))
         drop = Signal()
+        marker_drop = Signal()      # the marker is written and the record dropped (n > 1)
         iv = self.i.valid
         word = self.i.payload
+        if n == 1:
+            fits = fifo.w_rdy
+        else:
+            # Free memory words: SyncFIFOBuffered's level counts its output register too.
+            used = Signal(range(p.depth + 1))
+            m.d.comb += used.eq(fifo.level - fifo.r_rdy)
+            fits = Signal()
+            m.d.comb += fits.eq(used <= p.depth - 1 - n)
+        start_tag = TAG_START if n > 1 else TAG_DATA
 
         def put(payload, tag):
-            w = Cat(payload, Const(tag, 2))
+            w = Cat(payload, tag if isinstance(tag, Value) else Const(tag, 2))
             if p.parity:
                 w = Cat(w, w.xor())
             m.d.comb += [fifo.w_en.eq(1), fifo.w_data.eq(w)]
 
-        with m.If(hold_v):
+        with m.If(hold_left != 0):
             with m.If(fifo.w_rdy):
-                put(hold_d, TAG_DATA)
-                with m.If(iv & (pending == 0)):
-                    m.d[wd] += hold_d.eq(word)
+                if n == 1:
+                    put(hold[:W], TAG_DATA)
+                else:
+                    put(hold[:W], Mux(hold_left == n, Const(TAG_START, 2), Const(TAG_DATA, 2)))
+                    m.d[wd] += hold.eq(hold >> W)
+                with m.If(iv & (hold_left == 1) & (pending == 0) & fits):
+                    m.d[wd] += [hold.eq(word), hold_left.eq(n)]
                 with m.Else():
-                    m.d[wd] += hold_v.eq(0)
+                    m.d[wd] += hold_left.eq(hold_left - 1)
                     m.d.comb += drop.eq(iv)
             with m.Else():
                 m.d.comb += drop.eq(iv)
@@ -106,18 +125,25 @@ class DspFifo(wiring.Component):
                 put(pending, TAG_MARKER)
                 m.d[wd] += pending.eq(0)
                 with m.If(iv):
-                    m.d[wd] += [hold_v.eq(1), hold_d.eq(word)]
+                    with m.If(fits):
+                        m.d[wd] += [hold_left.eq(n), hold.eq(word)]
+                    with m.Else():
+                        m.d.comb += [drop.eq(1), marker_drop.eq(1)]
             with m.Else():
                 m.d.comb += drop.eq(iv)
         with m.Elif(iv):
-            with m.If(fifo.w_rdy):
-                put(word, TAG_DATA)
+            with m.If(fits):
+                put(word[:W], start_tag)
+                if n > 1:
+                    m.d[wd] += [hold_left.eq(n - 1), hold.eq(word >> W)]
             with m.Else():
                 m.d.comb += drop.eq(1)
 
         with m.If(drop):
-            # pending is never cleared in a cycle that drops (the marker needs w_rdy).
-            with m.If(pending != p.marker_max):
+            with m.If(marker_drop):
+                m.d[wd] += pending.eq(1)
+            # Otherwise pending is not cleared in a cycle that drops.
+            with m.Elif(pending != p.marker_max):
                 m.d[wd] += pending.eq(pending + 1)
             with m.If(ovf != p.count_max):
                 m.d[wd] += ovf.eq(ovf + 1)

@@ -20,7 +20,9 @@ Nothing is taken on trust, because the link may carry bit errors:
 * marker payloads add to ``dropped_reported``; a marker claiming more drops than the link
   can produce (``max_marker``) is counted as ``bad_markers`` instead.
 
-The loop is compiled (numba): a word costs a few nanoseconds.
+Parity, tags and markers are the generic receiver's (:func:`dsp.records.receive_records`,
+one-word records); this module adds the timestamp checks on the data words it hands over.
+The loops are compiled (numba): a word costs a few nanoseconds.
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from dsp.fixed import parity_bit
+from dsp.records import receive_records
 
 STAT_NAMES = ("words", "data", "markers", "dropped_reported", "bad_tags", "ts_rejected",
               "ts_resyncs", "bad_markers", "parity_errors")
@@ -47,37 +49,18 @@ class RxState:
 
 
 @numba.njit(cache=True, nogil=True)
-def _rx(words, width, amp_width, ts_bits, max_gap, resync_after, max_marker, final, odd,
-        st, out_t, out_a, stats):
-    """``st`` = [last wrapped ts (-1: none), last tick, consecutive rejects, pending flag,
-    pending ts, pending amplitude]; ``odd[k]``: word ``k`` fails the parity check (all False
-    without parity); see :func:`receive_words` for the rules."""
-    pmask = (np.int64(1) << width) - 1
+def _rx(data, amp_width, ts_bits, max_gap, resync_after, final, st, out_t, out_a, stats):
+    """``data``: the payloads of the data words, in order (parity, tags and markers already
+    handled); ``st`` = [last wrapped ts (-1: none), last tick, consecutive rejects, pending
+    flag, pending ts, pending amplitude]; see :func:`receive_words` for the rules."""
     amask = (np.int64(1) << amp_width) - 1
     tmask = (np.int64(1) << ts_bits) - 1
     last_w, last_t, rej = st[0], st[1], st[2]
     have_c, c_ts, c_amp = st[3], st[4], st[5]
     n = 0
-    for k in range(words.size + (1 if final else 0)):
-        if k < words.size:
-            w = words[k]
-            stats[0] += 1
-            if odd[k]:
-                stats[8] += 1
-                continue
-            tag = (w >> width) & 3
-            pay = w & pmask
-            if tag == 2:
-                if pay > max_marker:        # not a count the link can produce
-                    stats[7] += 1
-                    continue
-                stats[2] += 1
-                stats[3] += pay
-                continue
-            if tag != 0:
-                stats[4] += 1
-                continue
-            stats[1] += 1
+    for k in range(data.size + (1 if final else 0)):
+        if k < data.size:
+            pay = data[k]
             n_ts = (pay >> amp_width) & tmask
             n_amp = pay & amask
             if have_c == 0:
@@ -201,17 +184,23 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     if parity and width > 60:
         raise ValueError(f"with parity the payload width must be <= 60, not {width}")
     w = np.ascontiguousarray(np.asarray(words, dtype=np.int64))
-    odd = parity_bit(w).astype(bool) if parity else np.zeros(w.size, bool)
+    link = receive_records(w, width=int(width), parity=bool(parity), max_marker=int(max_marker))
+    data = np.ascontiguousarray(link.records[:, 0])
     state = state or RxState()
     pend = state.pending
     st = np.array([state.last_wrapped, state.last_tick, state.rejects,
                    0 if pend is None else 1, 0 if pend is None else pend[0],
                    0 if pend is None else pend[1]], np.int64)
-    out_t = np.empty(w.size + 1, np.int64)
-    out_a = np.empty(w.size + 1, np.int64)
+    out_t = np.empty(data.size + 1, np.int64)
+    out_a = np.empty(data.size + 1, np.int64)
     stats = np.zeros(len(STAT_NAMES), np.int64)
-    n = _rx(w, int(width), int(amp_width), int(ts_bits), int(max_gap_ticks), int(resync_after),
-            int(max_marker), bool(final), odd, st, out_t, out_a, stats)
+    n = _rx(data, int(amp_width), int(ts_bits), int(max_gap_ticks), int(resync_after),
+            bool(final), st, out_t, out_a, stats)
+    ls = link.state.stats
+    for name, generic in (("words", "words"), ("data", "records"), ("markers", "markers"),
+                          ("dropped_reported", "dropped_reported"), ("bad_tags", "bad_tags"),
+                          ("bad_markers", "bad_markers"), ("parity_errors", "parity_errors")):
+        stats[STAT_NAMES.index(name)] = ls[generic]
     state.last_wrapped, state.last_tick, state.rejects = (int(v) for v in st[:3])
     state.pending = (int(st[4]), int(st[5])) if st[3] else None
     for name, v in zip(STAT_NAMES, stats):

@@ -11,18 +11,34 @@ Word format (``word_width = width + 2`` bits, ``+ 1`` with ``parity``, LSB first
                              where the word is written, so it covers the queue memory and
                              the link to the DSP
 
-Nothing is lost silently: a word that arrives while the queue is full is dropped, counted in
-``overflow_count`` (saturating, ``count_width`` bits) and in the pending gap count; the gap
-is reported by a marker word written before the next data word. Drop/marker policy (the HDL
-and :func:`fifo_model` implement exactly this, per write-domain cycle, ``w_rdy`` being the
-queue's "has space" this cycle):
+Records (``record_words = n > 1``): the input port carries a whole record of ``n`` payloads
+(``n * width`` bits, word 0 in the low bits) in one cycle; it leaves as ``n`` consecutive
+words, the first tagged 1 (start of record), the others 0; a marker's payload then counts
+*records* dropped. A record is queued whole or dropped whole. With ``n == 1`` (the default)
+every word is a record, tagged 0, and the format and the policy below are exactly those of
+single words.
 
-1. a *hold* register (one word) has priority: if ``w_rdy`` it is written; an input word that
-   arrives in the same cycle takes its place if no drops are pending, else it is dropped;
+Nothing is lost silently: a record that arrives while the queue has no room for it is
+dropped, counted in ``overflow_count`` (saturating, ``count_width`` bits) and in the pending
+gap count; the gap is reported by a marker word written before the next record. Drop/marker
+policy (the HDL and :func:`fifo_model` implement exactly this, per write-domain cycle,
+``free`` being the words the queue memory can take this cycle -- ``w_rdy`` is ``free > 0``
+-- and a record *fits* when ``free >= n``):
+
+1. the *hold* register (one record, written a word per cycle) has priority: if ``w_rdy``
+   its next word is written; an input record that arrives in the same cycle takes its
+   place if this write empties it, no drops are pending and it fits, else it is dropped;
 2. else, if drops are pending and ``w_rdy``: the marker is written (pending cleared) and an
-   input word arriving in the same cycle goes to the hold register (written next);
-3. else an input word is written if ``w_rdy``;
-4. otherwise an input word is dropped (pending += 1, overflow_count += 1, both saturating).
+   input record arriving in the same cycle goes to the hold register if it fits (else it is
+   dropped and pending becomes 1);
+3. else an input record is taken if it fits: its first word is written, the others go to
+   the hold register;
+4. otherwise an input record is dropped (pending += 1, overflow_count += 1, both
+   saturating).
+
+With ``n == 1``, "fits" is ``w_rdy`` and the hold register holds one word. With ``n > 1`` a
+record is only taken when the memory holds all of it (rule 3) or all but the word that may
+wait in the hold register (rules 1-2), so once taken it is always written whole.
 
 The queue is ``amaranth.lib.fifo.SyncFIFOBuffered`` (or ``AsyncFIFOBuffered``); the model
 reproduces SyncFIFOBuffered cycle by cycle (``w_rdy``, the output register, ``r_en``). Which
@@ -52,6 +68,7 @@ import numpy as np
 from dsp.fixed import check_int as _check_int, check_width, parity_bit
 
 TAG_DATA = 0
+TAG_START = 1     # first word of a record (record_words > 1 only)
 TAG_MARKER = 2
 
 
@@ -75,6 +92,11 @@ class FifoParams:
     parity : bool
         Append an even-parity bit to every word (width <= 60, so the word fits in int64):
         the DSP detects any odd number of flipped bits in the memory or on the link.
+    record_words : int
+        Words per record (1..64; default 1, single words). With ``n > 1`` the input port is
+        ``n * width`` bits wide, a record leaves as ``n`` words (the first tagged
+        :data:`TAG_START`), is dropped whole, and markers count records. Synchronous FIFO
+        only, ``depth > n``.
     """
 
     width: int = 51
@@ -84,6 +106,7 @@ class FifoParams:
     w_domain: str = "sync"
     r_domain: str = "dsp"
     parity: bool = False
+    record_words: int = 1
 
     def __post_init__(self):
         if not isinstance(self.parity, bool):
@@ -100,6 +123,19 @@ class FifoParams:
         if self.asynchronous and self.w_domain == self.r_domain:
             raise ValueError(f"asynchronous FIFO needs two different domains, not "
                              f"{self.w_domain!r} twice")
+        check_width("FIFO record_words", self.record_words, minimum=1, maximum=64)
+        if self.record_words > 1:
+            if self.asynchronous:
+                raise ValueError("FIFO records (record_words > 1) need the synchronous FIFO "
+                                 "(asynchronous=False)")
+            if self.depth <= self.record_words:
+                raise ValueError(f"FIFO depth must exceed record_words ({self.record_words}) "
+                                 f"so that a record fits, not {self.depth}")
+
+    @property
+    def in_width(self) -> int:
+        """Bits of the input port: one record, ``record_words * width``."""
+        return self.record_words * self.width
 
     @property
     def word_width(self) -> int:
@@ -151,6 +187,36 @@ def unpack_word(words, params: FifoParams) -> tuple[np.ndarray, np.ndarray]:
     """``(payload, tag)`` of packed output words."""
     w = np.asarray(words, dtype=np.int64)
     return w & np.int64(params.marker_max), (w >> np.int64(params.width)) & np.int64(3)
+
+
+def pack_records(records, params: FifoParams) -> np.ndarray:
+    """Records ``(n_records, record_words)`` of payloads -> values of the wide input port
+    (word 0 in the low bits; object array of Python ints when wider than 63 bits)."""
+    r = np.asarray(records, dtype=np.int64)
+    n = params.record_words
+    if r.ndim == 1 and n == 1:
+        r = r[:, None]
+    if r.ndim != 2 or r.shape[1] != n:
+        raise ValueError(f"records must have shape (n_records, {n}), not {r.shape}")
+    r = r & np.int64(params.marker_max)
+    if params.in_width <= 63:
+        out = np.zeros(r.shape[0], np.int64)
+        for j in range(n):
+            out |= r[:, j] << np.int64(j * params.width)
+        return out
+    out = np.zeros(r.shape[0], dtype=object)
+    for j in range(n):
+        out += np.array([int(v) << (j * params.width) for v in r[:, j]], dtype=object)
+    return out
+
+
+def unpack_records(values, params: FifoParams) -> np.ndarray:
+    """Inverse of :func:`pack_records`: port values -> ``(n_records, record_words)``."""
+    n, w = params.record_words, params.width
+    mask = (1 << w) - 1
+    vals = [int(v) for v in np.asarray(values).ravel()]
+    return np.array([[(v >> (j * w)) & mask for j in range(n)] for v in vals],
+                    dtype=np.int64).reshape(len(vals), n)
 
 
 def decode_stream(words, params: FifoParams) -> tuple[np.ndarray, int]:
@@ -240,7 +306,11 @@ class FifoState:
     out_full, out_reg : bool, int
         SyncFIFOBuffered's output register (``o.valid`` and the word offered).
     hold_valid, hold_data : bool, int
-        The hold register (a data word waiting behind a marker).
+        The hold register (a data word waiting behind a marker); single words
+        (``record_words == 1``).
+    hold_left, hold_record : int, tuple of int
+        Records (``record_words > 1``): words of the hold register still to write and the
+        record it holds (``hold_valid`` is ``hold_left > 0``).
     pending : int
         Drops not yet reported by a marker (saturating at ``marker_max``).
     overflow : int
@@ -256,6 +326,8 @@ class FifoState:
     out_reg: int = 0
     hold_valid: bool = False
     hold_data: int = 0
+    hold_left: int = 0
+    hold_record: tuple = ()
     pending: int = 0
     overflow: int = 0
     max_level: int = 0
@@ -280,7 +352,7 @@ class FifoResult:
         Per cycle of this run, the value of the ``overflow_count`` port during that cycle
         (``None`` when not asked for: ``trace=False``).
     dropped : ndarray of bool
-        Per input word, True if it was dropped.
+        Per input word (record), True if it was dropped.
     state : FifoState or None
         State after the last cycle (pass it to the next chunk).
     max_level : int
@@ -297,7 +369,8 @@ class FifoResult:
 
 # -- compiled model ------------------------------------------------------------------------
 # Layout of the int64 state vector the kernel reads and updates.
-_OUT_FULL, _OUT_REG, _HOLD_V, _HOLD_D, _PENDING, _OVF, _HEAD, _CNT, _MAXLVL = range(9)
+# (_HOLD_V: hold words still to write; the hold words themselves are a separate array.)
+_OUT_FULL, _OUT_REG, _HOLD_V, _PENDING, _OVF, _HEAD, _CNT, _MAXLVL = range(8)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -324,13 +397,16 @@ def _next_ready(c, lim, rmode, rmask, rbase, period, offset, count, stride):
 
 @numba.njit(cache=True, nogil=True)
 def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count, stride,
-                 depth, wmask, marker_tag, count_max, st, ring, out_w, out_c, dropped):
+                 depth, wmask, marker_tag, count_max, st, ring, out_w, out_c, dropped,
+                 hold, tagw):
     """Run cycles ``c .. c_end - 1``; the module docstring's policy, exactly as
-    :func:`_fifo_model_reference` steps it. Returns the number of output words."""
+    :func:`_fifo_model_reference` steps it (``record_words == 1``). ``words`` is
+    ``(n_in, n)``, ``hold`` the hold register's ``n`` words, ``tagw[j]`` the tag bits of a
+    record's word ``j``. Returns the number of output words."""
     out_full = st[_OUT_FULL]
     out_reg = st[_OUT_REG]
-    hold_v = st[_HOLD_V]
-    hold_d = st[_HOLD_D]
+    left = st[_HOLD_V]          # hold words still to write
+    nrec = hold.size
     pending = st[_PENDING]
     ovf = st[_OVF]
     head = st[_HEAD]
@@ -348,7 +424,7 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
         if not iv:
             # Nothing can change while the front end cannot write and the queue cannot
             # move: skip to the next input word or the next ready cycle.
-            front_idle = hold_v == 0 and pending == 0
+            front_idle = left == 0 and pending == 0
             if front_idle and out_full == 0 and cnt == 0:
                 c = nin
                 continue
@@ -374,27 +450,27 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
             out_c[n_out] = c
             n_out += 1
         if depth > 1:
-            w_rdy = cnt != cap
+            free = cap - cnt
         else:
-            w_rdy = out_full == 0
-        word = 0
-        if iv:
-            word = words[k] & wmask
+            free = 1 - out_full
+        w_rdy = free > 0
+        fits = free >= nrec
         write = False
         wv = 0
         drop = False
-        if hold_v != 0:
+        if left != 0:
             if w_rdy:
                 write = True
-                wv = hold_d
+                j = nrec - left
+                wv = hold[j] | tagw[j]
+                left -= 1
                 if iv:
-                    if pending == 0:
-                        hold_d = word
+                    if left == 0 and pending == 0 and fits:
+                        for j in range(nrec):
+                            hold[j] = words[k, j] & wmask
+                        left = nrec
                     else:
                         drop = True
-                        hold_v = 0
-                else:
-                    hold_v = 0
             elif iv:
                 drop = True
         elif pending != 0:
@@ -403,14 +479,22 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
                 wv = marker_tag | pending
                 pending = 0
                 if iv:
-                    hold_v = 1
-                    hold_d = word
+                    if fits:
+                        for j in range(nrec):
+                            hold[j] = words[k, j] & wmask
+                        left = nrec
+                    else:
+                        drop = True
             elif iv:
                 drop = True
         elif iv:
-            if w_rdy:
+            if fits:
                 write = True
-                wv = word
+                wv = (words[k, 0] & wmask) | tagw[0]
+                if nrec > 1:
+                    for j in range(nrec):
+                        hold[j] = words[k, j] & wmask
+                    left = nrec - 1
             else:
                 drop = True
         if drop:
@@ -448,8 +532,7 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
         c += 1
     st[_OUT_FULL] = out_full
     st[_OUT_REG] = out_reg
-    st[_HOLD_V] = hold_v
-    st[_HOLD_D] = hold_d
+    st[_HOLD_V] = left
     st[_PENDING] = pending
     st[_OVF] = ovf
     st[_HEAD] = head
@@ -479,10 +562,21 @@ def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
         sch = ReadySchedule(period=1)
     ring = np.zeros(max(D - 1, 1), dtype=np.int64)
     ring[:len(st.queue)] = st.queue
-    sv = np.array([int(st.out_full), st.out_reg, int(st.hold_valid), st.hold_data, st.pending,
+    n = p.record_words
+    hold = np.zeros(n, dtype=np.int64)
+    if n == 1:
+        left = int(st.hold_valid)
+        hold[0] = st.hold_data
+    else:
+        left = int(st.hold_left)
+        hold[:len(st.hold_record)] = st.hold_record
+    tagw = np.zeros(n, dtype=np.int64)
+    if n > 1:
+        tagw[0] = TAG_START << p.width
+    sv = np.array([int(st.out_full), st.out_reg, left, st.pending,
                    st.overflow, 0, len(st.queue), st.max_level], dtype=np.int64)
     n_w = write_cycles.size
-    cap = 2 * n_w + len(st.queue) + 3
+    cap = (n + 1) * n_w + len(st.queue) + n + 3
     out_w = np.empty(cap, dtype=np.int64)
     out_c = np.empty(cap, dtype=np.int64)
     dropped = np.zeros(n_words_total, dtype=bool)
@@ -490,12 +584,15 @@ def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
     n_out = _fifo_kernel(write_cycles, in_words, start, start + n_cycles, rmode, rmask, start,
                          sch.period, sch.offset, sch.count, sch.stride, D,
                          p.marker_max, TAG_MARKER << p.width, p.count_max, sv, ring,
-                         out_w, out_c, dropped)
+                         out_w, out_c, dropped, hold, tagw)
     head, cnt = int(sv[_HEAD]), int(sv[_CNT])
     queue = np.roll(ring, -head)[:cnt].copy()
     new = FifoState(cycle=start + n_cycles, queue=queue, out_full=bool(sv[_OUT_FULL]),
                     out_reg=int(sv[_OUT_REG]), hold_valid=bool(sv[_HOLD_V]),
-                    hold_data=int(sv[_HOLD_D]), pending=int(sv[_PENDING]),
+                    hold_data=int(hold[0]) if n == 1 else 0,
+                    hold_left=int(sv[_HOLD_V]) if n > 1 else 0,
+                    hold_record=tuple(int(v) for v in hold) if n > 1 else (),
+                    pending=int(sv[_PENDING]),
                     overflow=int(sv[_OVF]), max_level=int(sv[_MAXLVL]))
     ovf_trace = None
     if trace:
@@ -507,6 +604,20 @@ def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
     return FifoResult(words=with_parity(out_w[:n_out].copy(), p), cycles=out_c[:n_out].copy(),
                       overflow_count=ovf_trace, dropped=dropped, state=new,
                       max_level=new.max_level)
+
+
+def _in_records(in_words, p: FifoParams) -> np.ndarray:
+    """Input as a contiguous ``(n_in, record_words)`` int64 array: single words (1-D), or
+    records given as ``(n_in, record_words)`` payloads or as packed port values (1-D)."""
+    if p.record_words == 1:
+        return np.ascontiguousarray(in_words, dtype=np.int64).reshape(-1, 1)
+    a = np.asarray(in_words)
+    if a.ndim == 2:
+        if a.shape[1] != p.record_words:
+            raise ValueError(f"records must have shape (n_records, {p.record_words}), "
+                             f"not {a.shape}")
+        return np.ascontiguousarray(a, dtype=np.int64)
+    return unpack_records(a, p)
 
 
 def _ready_arg(out_ready, n_cycles: int):
@@ -528,6 +639,8 @@ def fifo_model(in_words, in_valid, out_ready, params: FifoParams, *,
     in_words : array of int
         Input payloads, taken in order on the cycles where ``in_valid`` is set (cycles
         after the last word are idle; words beyond the last valid cycle are not offered).
+        Records (``record_words > 1``): ``(n_records, record_words)`` payloads, or the
+        packed port values of :func:`pack_records`.
     in_valid : array of bool
         Per cycle; its length is the number of cycles simulated.
     out_ready : array of bool, or ReadySchedule
@@ -547,13 +660,14 @@ def fifo_model(in_words, in_valid, out_ready, params: FifoParams, *,
     """
     _check_sync(params)
     st = FifoState() if state is None else state
-    in_words = np.ascontiguousarray(in_words, dtype=np.int64).ravel()
+    in_words = _in_records(in_words, params)
     in_valid = np.asarray(in_valid, dtype=bool).ravel()
     n_cycles = in_valid.size
     ready = _ready_arg(out_ready, n_cycles)
-    wc = np.flatnonzero(in_valid)[:in_words.size].astype(np.int64) + st.cycle
-    return _run(wc, in_words[:wc.size], st.cycle, n_cycles, ready, params, st, trace,
-                in_words.size)
+    n_in = in_words.shape[0]
+    wc = np.flatnonzero(in_valid)[:n_in].astype(np.int64) + st.cycle
+    return _run(wc, np.ascontiguousarray(in_words[:wc.size]), st.cycle, n_cycles, ready,
+                params, st, trace, n_in)
 
 
 def fifo_model_events(write_cycles, in_words, n_cycles: int, out_ready, params: FifoParams, *,
@@ -566,7 +680,8 @@ def fifo_model_events(write_cycles, in_words, n_cycles: int, out_ready, params: 
         Cycle (from reset) at which each input word is offered; strictly increasing, in
         ``[state.cycle, state.cycle + n_cycles)``.
     in_words : array of int
-        One payload per write cycle.
+        One payload per write cycle (records: one record per write cycle, as in
+        :func:`fifo_model`).
     n_cycles : int
         Cycles to simulate in this call, from ``state.cycle``.
     out_ready : array of bool, or ReadySchedule
@@ -587,10 +702,10 @@ def fifo_model_events(write_cycles, in_words, n_cycles: int, out_ready, params: 
     if wc.size and wc.dtype.kind not in "iu":
         raise ValueError(f"write_cycles must be integers, not dtype {wc.dtype}")
     wc = np.ascontiguousarray(wc, dtype=np.int64).ravel()
-    words = np.ascontiguousarray(in_words, dtype=np.int64).ravel()
-    if words.size != wc.size:
+    words = _in_records(in_words, params)
+    if words.shape[0] != wc.size:
         raise ValueError(f"in_words must have one entry per write cycle ({wc.size}), "
-                         f"not {words.size}")
+                         f"not {words.shape[0]}")
     if wc.size:
         if np.any(np.diff(wc) <= 0):
             raise ValueError("write_cycles must be strictly increasing (one word per cycle)")
@@ -618,6 +733,8 @@ def _fifo_model_reference(in_words, in_valid, out_ready, params: FifoParams) -> 
     p = params
     if p.asynchronous:
         raise ValueError("fifo_model covers the synchronous FIFO only (asynchronous=False)")
+    if p.record_words != 1:
+        raise ValueError("the reference loop covers single words only (record_words=1)")
     in_words = np.asarray(in_words, dtype=np.int64)
     in_valid = np.asarray(in_valid, dtype=bool)
     out_ready = np.asarray(out_ready, dtype=bool)

@@ -9,13 +9,13 @@ import pytest
 from amaranth.hdl import ClockDomain, Elaboratable, Module, Value
 from amaranth.sim import Simulator
 
-from cosim.pysim import run_stream
+from cosim.testing import check_stream
 from hdl.fifo import DspFifo
 from hdl.model.fifo import (TAG_DATA, TAG_MARKER, FifoParams, FifoState, ReadySchedule,
                             _fifo_model_reference, decode_stream, fifo_model,
                             fifo_model_events, pack_word, unpack_word)
 
-from _util import assert_lints_clean, assert_same_stream, needs_verilator, verilator_sim
+from _util import assert_lints_clean, needs_verilator
 
 
 def _bursts(rng, n, burst, p_on, p_fine):
@@ -32,16 +32,19 @@ def _stimulus(p, rng, n_cycles, w=(20, 0.5, 0.8), r=(15, 0.6, 0.8)):
     return words, in_valid, out_ready
 
 
+def _check(p, words, in_valid, out_ready, *, backends=("pysim",), name=None):
+    """The model's words, cycles and per-cycle ``overflow_count`` on ``backends``."""
+    ref = fifo_model(words, in_valid, out_ready, p)
+    check_stream(DspFifo(p), dict(words=ref.words, cycles=ref.cycles,
+                                  probes={"ovf": ref.overflow_count}),
+                 words, valid=in_valid, ready=out_ready, n_cycles=in_valid.size,
+                 probe={"ovf": "overflow_count"}, backends=backends, name=name)
+    return ref
+
+
 def _check_sim(p, rng, n_cycles, *, w=(20, 0.5, 0.8), r=(15, 0.6, 0.8)):
     words, in_valid, out_ready = _stimulus(p, rng, n_cycles, w, r)
-    dut = DspFifo(p)
-    res = run_stream(dut, words, in_valid=in_valid, out_ready=out_ready, n_cycles=n_cycles,
-                     probe={"ovf": dut.overflow_count})
-    ref = fifo_model(words, in_valid, out_ready, p)
-    np.testing.assert_array_equal(res.words, ref.words)
-    np.testing.assert_array_equal(res.cycles, ref.cycles)
-    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
-    return words, ref
+    return words, _check(p, words, in_valid, out_ready)
 
 
 def _check_accounting(words, ref, p):
@@ -98,12 +101,9 @@ def test_back_to_back_writes_and_no_overflow():
     words = rng.integers(0, 1 << p.width, n)
     in_valid = np.ones(n + 10, bool)
     ready = np.ones(n + 10, bool)
-    dut = DspFifo(p)
-    res = run_stream(dut, words, in_valid=in_valid, out_ready=ready, n_cycles=n + 10)
-    ref = fifo_model(words, in_valid, ready, p)
-    np.testing.assert_array_equal(res.words, ref.words)
+    ref = _check(p, words, in_valid, ready)
     np.testing.assert_array_equal(ref.words, words)
-    np.testing.assert_array_equal(res.cycles, np.arange(n) + 2)
+    np.testing.assert_array_equal(ref.cycles, np.arange(n) + 2)
 
 
 def test_marker_words_directed():
@@ -115,16 +115,11 @@ def test_marker_words_directed():
     ready = np.zeros(n, bool)
     ready[20:] = True
     words = np.arange(100, 113)
-    dut = DspFifo(p)
-    res = run_stream(dut, words, in_valid=in_valid, out_ready=ready, n_cycles=n,
-                     probe={"ovf": dut.overflow_count})
     expected = pack_word([100, 101, 102, 103, 6, 110, 111, 112],
                          [0, 0, 0, 0, TAG_MARKER, 0, 0, 0], p)
-    np.testing.assert_array_equal(res.words, expected)
-    ref = fifo_model(words, in_valid, ready, p)
+    ref = _check(p, words, in_valid, ready)
     np.testing.assert_array_equal(ref.words, expected)
-    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
-    assert res.probes["ovf"][-1] == 6
+    assert ref.overflow_count[-1] == 6
     # The marker cycle had an input word too: it went through the hold register.
     assert ref.dropped.tolist() == [False] * 4 + [True] * 6 + [False] * 3
 
@@ -455,49 +450,29 @@ def test_verilog_lints_clean(asynchronous, parity):
 VL_PARAMS = FifoParams(width=12, depth=8)
 
 
-@pytest.fixture(scope="module")
-def vl_fifo():
-    dut = DspFifo(VL_PARAMS)
-    return dut, verilator_sim(dut, "dsp_fifo_vl")
-
-
 @needs_verilator
-def test_verilator_matches_pysim(vl_fifo):
-    """The quick sim test's stimulus (bursty writes, back-pressure), overflow count probed."""
-    dut, sim = vl_fifo
+def test_verilator_matches_pysim():
+    """The quick sim test's stimulus (bursty writes, back-pressure), overflow count probed:
+    model == pysim == Verilator."""
     words, in_valid, out_ready = _stimulus(VL_PARAMS, np.random.default_rng(309), 6000)
-    kw = dict(in_valid=in_valid, out_ready=out_ready, n_cycles=in_valid.size)
-    want = run_stream(dut, words, probe={"ovf": dut.overflow_count}, **kw)
-    got = sim.run(words, probe={"ovf": "overflow_count"}, **kw)
-    assert_same_stream(got, want, "verilator vs pysim")
-    assert got.probes["ovf"][-1] > 20 and len(got.words) > 500
+    ref = _check(VL_PARAMS, words, in_valid, out_ready, backends=("pysim", "verilator"),
+                 name="dsp_fifo_vl")
+    assert ref.overflow_count[-1] > 20 and len(ref.words) > 500
 
 
 @needs_verilator
-def test_verilator_matches_model_long(vl_fifo):
+def test_verilator_matches_model_long():
     p = VL_PARAMS
-    _, sim = vl_fifo
     words, in_valid, out_ready = _stimulus(p, np.random.default_rng(310), 1_000_000)
-    res = sim.run(words, in_valid=in_valid, out_ready=out_ready, n_cycles=in_valid.size,
-                  probe={"ovf": "overflow_count"})
-    ref = fifo_model(words, in_valid, out_ready, p)
+    ref = _check(p, words, in_valid, out_ready, backends=("verilator",), name="dsp_fifo_vl")
     assert ref.dropped.sum() > 10_000
-    np.testing.assert_array_equal(res.words, ref.words)
-    np.testing.assert_array_equal(res.cycles, ref.cycles)
-    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)
     _check_accounting(words, ref, p)
 
 
 @needs_verilator
 def test_verilator_with_parity_matches_model():
     p = FifoParams(width=12, depth=8, parity=True)
-    dut = DspFifo(p)
-    sim = verilator_sim(dut, "dsp_fifo_parity_vl")
     words, in_valid, out_ready = _stimulus(p, np.random.default_rng(311), 200_000)
-    res = sim.run(words, in_valid=in_valid, out_ready=out_ready, n_cycles=in_valid.size,
-                  probe={"ovf": "overflow_count"})
-    ref = fifo_model(words, in_valid, out_ready, p)
+    ref = _check(p, words, in_valid, out_ready, backends=("verilator",),
+                 name="dsp_fifo_parity_vl")
     assert ref.dropped.sum() > 1000
-    np.testing.assert_array_equal(res.words, ref.words)
-    np.testing.assert_array_equal(res.cycles, ref.cycles)
-    np.testing.assert_array_equal(res.probes["ovf"], ref.overflow_count)

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from cosim.pysim import pack_fields, run_stream, unpack_fields
+from cosim.testing import check_stream
 from hdl.mixer import Mixer
 from hdl.model.mixer import MixerModel, MixerParams
 
-from _util import (accepted_cycles, assert_lints_clean, assert_same_stream, needs_verilator,
-                   verilator_sim)
+from _util import accepted_cycles, assert_lints_clean, needs_verilator
 
 ROUNDINGS = ("floor", "half_up", "half_even", "zero")
 
@@ -43,24 +43,30 @@ def _model(p: MixerParams, f: dict):
     return MixerModel(p).run(x, f["cos"], f["sin"])
 
 
+def _out_layout(p: MixerParams):
+    return [("i", p.out_width, True), ("q", p.out_width, True)]
+
+
 def _sim(p: MixerParams, f: dict, in_valid=None):
     dut = Mixer(p)
     res = run_stream(dut, pack_fields(f, _in_layout(p)), in_valid=in_valid,
                      flush_cycles=p.latency + 4)
-    o = unpack_fields(res.words, [("i", p.out_width, True), ("q", p.out_width, True)])
+    o = unpack_fields(res.words, _out_layout(p))
     return o["i"], o["q"], res
 
 
-def _check(p: MixerParams, n: int, seed: int, gaps: bool = True):
+def _check(p: MixerParams, n: int, seed: int, gaps: bool = True, backends=("pysim",),
+           name=None):
+    """Random operands (seeded) through ``backends``: the model's words, each on the cycle
+    its input was taken plus the latency (cosim.testing.check_stream)."""
     rng = np.random.default_rng(seed)
     f = _random_inputs(p, n, rng)
     in_valid = rng.random(n + n // 4) < 0.8 if gaps else None
-    i, q, res = _sim(p, f, in_valid)
     mi, mq = _model(p, f)
-    assert len(i) == n, f"seed {seed}"
-    np.testing.assert_array_equal(i, mi, err_msg=f"seed {seed} {p}")
-    np.testing.assert_array_equal(q, mq, err_msg=f"seed {seed} {p}")
-    np.testing.assert_array_equal(res.cycles, accepted_cycles(n, in_valid) + p.latency)
+    want = pack_fields({"i": mi, "q": mq}, _out_layout(p)), \
+        accepted_cycles(n, in_valid) + p.latency
+    check_stream(Mixer(p), want, pack_fields(f, _in_layout(p)), valid=in_valid,
+                 flush_cycles=p.latency + 4, backends=backends, name=name)
 
 
 @pytest.mark.parametrize("rounding,overflow", list(itertools.product(ROUNDINGS, ("wrap", "saturate"))))
@@ -201,37 +207,19 @@ VL_PARAMS = {"real": MixerParams(rounding="half_up", overflow="saturate"),
                                     rounding="half_even", overflow="saturate")}
 
 
-@pytest.fixture(scope="module", params=sorted(VL_PARAMS))
-def vl_mixer(request):
-    p = VL_PARAMS[request.param]
-    dut = Mixer(p)
-    return p, dut, verilator_sim(dut, f"mixer_{request.param}_vl")
+@needs_verilator
+@pytest.mark.parametrize("kind", sorted(VL_PARAMS))
+def test_verilator_matches_pysim_and_model(kind):
+    """Same stimulus as the random sim tests (10 % full-scale operands, gaps in valid):
+    model == pysim == Verilator, words and cycles."""
+    p = VL_PARAMS[kind]
+    _check(p, 2500, seed=500 + p.complex_input, backends=("pysim", "verilator"),
+           name=f"mixer_{kind}_vl")
 
 
 @needs_verilator
-def test_verilator_matches_pysim(vl_mixer):
-    """Same stimulus as the random sim tests: 10 % full scale operands, gaps in valid."""
-    p, dut, sim = vl_mixer
-    rng = np.random.default_rng(500 + p.complex_input)
-    n = 2500
-    words = pack_fields(_random_inputs(p, n, rng), _in_layout(p))
-    kw = dict(in_valid=rng.random(n + n // 4) < 0.8, flush_cycles=p.latency + 4)
-    want = run_stream(dut, words, **kw)
-    got = sim.run(words, **kw)
-    assert_same_stream(got, want, "verilator vs pysim")
-    assert len(got.words) == n
-
-
-@needs_verilator
-def test_verilator_matches_model_long(vl_mixer):
-    p, _, sim = vl_mixer
-    rng = np.random.default_rng(510 + p.complex_input)
-    n = 1_000_000
-    f = _random_inputs(p, n, rng)
-    in_valid = rng.random(n + n // 4) < 0.8
-    res = sim.run(pack_fields(f, _in_layout(p)), in_valid=in_valid, flush_cycles=p.latency + 4)
-    o = unpack_fields(res.words, [("i", p.out_width, True), ("q", p.out_width, True)])
-    mi, mq = _model(p, f)
-    np.testing.assert_array_equal(o["i"], mi)
-    np.testing.assert_array_equal(o["q"], mq)
-    np.testing.assert_array_equal(res.cycles, accepted_cycles(n, in_valid) + p.latency)
+@pytest.mark.parametrize("kind", sorted(VL_PARAMS))
+def test_verilator_matches_model_long(kind):
+    p = VL_PARAMS[kind]
+    _check(p, 1_000_000, seed=510 + p.complex_input, backends=("verilator",),
+           name=f"mixer_{kind}_vl")
