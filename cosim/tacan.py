@@ -56,7 +56,8 @@ class TacanRunConfig:
         The filter (memory, gate, ...), shared by both arithmetics.
     fixed : KalmanFixedConfig, optional
         Word lengths of the fixed-point core (default formats; its ``kalman`` is replaced
-        by ``kalman``).
+        by ``kalman`` and its ``tick_hz`` by the signal's ``fs_hz``, the clock of the
+        FPGA timestamps).
     settle_s : float, optional
         Bearings before this time are not scored (default 2 x the filter memory).
     frontend_changes : tuple of (name, value)
@@ -165,8 +166,9 @@ class TacanRunConfig:
     def receiver(self) -> ReceiverConfig:
         if self.dsp == "fixed":
             base = self.fixed or KalmanFixedConfig()
+            # the core counts the FPGA's timestamps: ticks of the ADC clock of this run
             k = KalmanFixedConfig(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
-                                     "kalman": self.kalman})
+                                     "kalman": self.kalman, "tick_hz": float(self.signal.fs_hz)})
         else:
             k = self.kalman
         return ReceiverConfig(mode=self.signal.mode, kalman=k)
@@ -283,7 +285,7 @@ def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float) -> BearingTra
         amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
     else:
         amps = fo.amplitude_fs
-    return process_peaks(times, amps, rc, ticks=fo.ticks)
+    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz)
 
 
 def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):

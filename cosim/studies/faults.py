@@ -271,7 +271,7 @@ def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
     kf.schedule_upsets(steps, word_of_bit[sel], bit_in_word[sel])
     y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, fx.y)
     track = process_peaks(fo.ticks / run.signal.fs_hz, y, rc, ticks=fo.ticks,
-                          state=ReceiverState(kf=kf))
+                          tick_hz=run.signal.fs_hz, state=ReceiverState(kf=kf))
     return track, int(kf.upsets_applied)
 
 
