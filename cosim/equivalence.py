@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-__all__ = ["check_equivalence", "PYSIM_MAX_SAMPLES", "TOPS"]
+__all__ = ["check_equivalence", "check_record_size", "PYSIM_MAX_SAMPLES", "TOPS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
@@ -20,6 +20,20 @@ PYSIM_MAX_SAMPLES = 40_000
 FLUSH_CYCLES = 400
 TOPS = ("tacan",)
 BACKENDS = ("model", "pysim", "verilator")
+
+
+#: Memory per ADC sample of a check (the IF record, the codes, the model's working arrays
+#: and the backends' outputs; bytes, with margin).
+BYTES_PER_SAMPLE = 64
+
+
+def check_record_size(samples) -> int:
+    """Refuse, before any work, a record that is not a positive integer or cannot fit this
+    machine's memory."""
+    from .validate import check_int, check_memory
+    n = check_int("--samples", samples, 1)
+    check_memory(n * BYTES_PER_SAMPLE, f"--samples {n:,}", "--samples")
+    return n
 
 
 def tacan_record(samples: int, seed: int, snr_db: float | None = 10.0) -> np.ndarray:
@@ -65,7 +79,10 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         ``top``, ``samples``, ``mismatches`` (words differing from the model, plus the
         difference in word count, over all backends run), ``backends`` (those run),
         ``skipped`` ({backend: reason}), ``words``, ``peaks``, ``markers``, ``dropped``,
-        ``per_backend`` ({backend: {"mismatches", "words", "seconds"}}).
+        ``per_backend`` ({backend: {"mismatches", "words", "seconds"}}), ``compared``
+        (which backend was compared with the model on how many words), ``equivalent``
+        (True only when at least two backends compared a non-empty record and nothing
+        differed) and ``verdict`` (why, in words).
     """
     from hdl.model.tacan_frontend import TacanFrontendModel, TacanFrontendParams
     if top not in TOPS:
@@ -124,10 +141,26 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
 
     fields = model.unpack(ref.words)
     markers = fields["tag"] == 2
+    compared = [f"{name} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
+                f"{v['mismatches']} mismatches" for name, v in per.items() if name != "model"]
+    total = int(sum(v["mismatches"] for v in per.values()))
+    if len(run) < 2:
+        verdict = (f"nothing was compared: only {', '.join(run)} ran"
+                   + "".join(f"; {k} skipped: {w}" for k, w in skipped.items()))
+    elif len(ref.words) == 0:
+        verdict = (f"nothing was compared: the {samples} samples gave no FIFO word (use "
+                   f"--samples of a few 10,000 at least, a pulse pair every ~280 us)")
+    elif total:
+        verdict = f"{total} mismatches ({'; '.join(compared)})"
+    else:
+        verdict = f"equivalent: {'; '.join(compared)}"
     return {
         "top": top,
         "samples": int(samples),
-        "mismatches": int(sum(v["mismatches"] for v in per.values())),
+        "mismatches": total,
+        "equivalent": bool(len(run) >= 2 and len(ref.words) > 0 and total == 0),
+        "verdict": verdict,
+        "compared": compared,
         "backends": run,
         "skipped": skipped,
         "stall": bool(stall),

@@ -129,6 +129,31 @@ class FaultConfig:
                              "others use the bit-exact model")
         if not (math.isfinite(self.scrub_period_s) and self.scrub_period_s > 0):
             raise ValueError(f"scrub_period_s must be > 0, not {self.scrub_period_s}")
+        if self.fifo_parity and self.target != "fifo":
+            raise ValueError(f"fifo_parity protects the FIFO words: it changes nothing for "
+                             f"target {self.target!r} (use target 'fifo')")
+        if self.bits is not None:
+            w = self.word_width()
+            if not self.bits or any(isinstance(b, bool) or not isinstance(b, (int, np.integer))
+                                    or not 0 <= b < w for b in self.bits):
+                raise ValueError(f"bits must be positions 0..{w - 1} of the {self.target} "
+                                 f"words ({w} bits), not {list(self.bits)}")
+        # Every trial's record is built (and its front end validated) before the first point.
+        _run_cfg(self, 0).hdl_params
+
+    def word_width(self) -> int:
+        """Width (bits) of the words the target's flips hit (``dsp-state``: the widest of
+        ``x`` and ``P``)."""
+        run = _run_cfg(self, 0)
+        if self.target == "adc":
+            return int(run.signal.adc_bits)
+        p = run.hdl_params
+        if self.target == "fifo":
+            return int(p.fifo.word_width)
+        if self.target == "register":
+            return int(p.nco_phase_bits)
+        fx = run.receiver.kalman
+        return int(max(fx.x.width, fx.P.width))
 
 
 def _run_cfg(fc: FaultConfig, trial: int):
@@ -352,7 +377,8 @@ def _max_of(recs, key):
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     stem = report_stem(fc)
-    (out / f"{stem}.json").write_text(json.dumps(s, indent=1, default=str))
+    from cosim.validate import dumps
+    (out / f"{stem}.json").write_text(dumps(s, indent=1, default=str))
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",
             "flagged_fraction", "misleading_fraction", "valid_rmse_deg",
