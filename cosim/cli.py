@@ -518,8 +518,9 @@ def _cmd_check_equivalence(a) -> int:
             print(f"  compared {c}")
         for name, why in r["skipped"].items():
             print(f"  skipped {name}: {why}")
-    if not r["equivalent"]:
-        print(f"error: {r['verdict']}", file=sys.stderr)
+    if not r["equivalent"] or r["mismatches"]:
+        print(f"error: {r['verdict'] if not r['equivalent'] else str(r['mismatches']) + ' mismatches'}",
+              file=sys.stderr)
         return 1
     return 0
 
