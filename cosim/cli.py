@@ -13,7 +13,15 @@ EXPECTED_ERRORS = (ValueError, RuntimeError, OSError, OverflowError, MemoryError
 
 
 class _Help(argparse.ArgumentDefaultsHelpFormatter):
-    """--help shows every option's default (units are in each help text)."""
+    """--help shows every option's default (units are in each help text); an option that
+    is unset by default (None, a flag, an empty list) says what unset means in its help."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        d = action.default
+        if "default" in text or d is None or d is False or d == [] or d == argparse.SUPPRESS:
+            return text
+        return super()._get_help_string(action)
 
 
 def _parser(sub, name, **kw):
@@ -507,7 +515,7 @@ def _cmd_check_equivalence(a) -> int:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
     check_record_size(a.samples)
     r = check_equivalence(top=a.top, samples=a.samples, backends=backends, seed=a.seed,
-                          stall=a.stall)
+                          stall=a.stall, progress=not a.json)
     if a.json:
         print(dumps(r))
     else:

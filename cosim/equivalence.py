@@ -53,7 +53,8 @@ def stall_pattern(n_cycles: int, seed: int, *, p_ready: float = 0.5,
 
 def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                       backends=BACKENDS, seed: int = 1, stall: bool = False,
-                      params=None, pysim_max_samples: int = PYSIM_MAX_SAMPLES) -> dict:
+                      params=None, pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                      progress: bool = False) -> dict:
     """Run the backends on the same stimulus and count mismatching FIFO words.
 
     Parameters
@@ -99,6 +100,10 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     ready = stall_pattern(n_cycles, seed) if stall else None
     freq = params.nco_freq_word
 
+    import sys
+    from tqdm import tqdm
+    bar = tqdm(total=len(set(backends) | {"model"}), desc="check-equivalence", unit="backend",
+               file=sys.stderr, disable=not progress, leave=False)
     t0 = time.perf_counter()
     model = TacanFrontendModel(params)
     peaks, _ = model.run(x)
@@ -107,6 +112,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                      "seconds": time.perf_counter() - t0}}
     skipped = {}
     run = ["model"]
+    bar.update()
 
     def compare(name, res, seconds):
         n = min(len(res.words), len(ref.words))
@@ -115,6 +121,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         bad += abs(len(res.words) - len(ref.words))
         per[name] = {"mismatches": bad, "words": int(len(res.words)), "seconds": seconds}
         run.append(name)
+        bar.update()
 
     if "pysim" in backends:
         if samples > pysim_max_samples:
@@ -139,6 +146,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
             res = sim.run(x, out_ready=ready, n_cycles=n_cycles, inputs={"freq": freq})
             compare("verilator", res, time.perf_counter() - t)
 
+    bar.close()
     fields = model.unpack(ref.words)
     markers = fields["tag"] == 2
     compared = [f"{name} vs model: {v['words']} vs {per['model']['words']} FIFO words, "

@@ -108,7 +108,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import ndtr
 
 from cosim.validate import (MAX_LIST_VALUES, check_choice, check_float, check_int,
-                            check_out_dir, dumps)
+                            check_memory, check_out_dir, dumps)
 
 #: Largest ADC word length accepted (as :class:`cosim.tacan_signal.TacanSignalConfig`).
 MAX_BITS = 24
@@ -457,7 +457,7 @@ def _ideal_snr_and_ci(u: np.ndarray, energy: np.ndarray, amp: float
 def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int = 1000,
                    trials: int = 200_000, seed: int = 0, loading="optimal",
                    quantizer: str = "mid_rise", freq: float = DEFAULT_FREQ,
-                   reference: bool = True) -> list[dict]:
+                   reference: bool = True, progress: bool = False) -> list[dict]:
     """Monte Carlo matched-filter loss of b-bit ADCs on a weak tone in white Gaussian noise.
 
     Parameters
@@ -551,9 +551,13 @@ def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int =
     # sum_n r_n (sum_n (c + 1/2) r = sum_n c r + sum_n r / 2).
     sum_cos, sum_sin = float(cos_w.sum()), float(sin_w.sum())
     half = 0.5 if quantizer == "mid_rise" else 0.0
+    from tqdm import tqdm
+    bar = tqdm(total=m, desc="adc-loss trials", file=sys.stderr, disable=not progress,
+               leave=False)
     for t0 in range(0, m, batch):
         t1 = min(m, t0 + batch)
         nb = t1 - t0
+        bar.update(nb)
         phase = rng.uniform(0.0, 2.0 * math.pi, nb)
         cp, sp = np.cos(phase), np.sin(phase)
         xb, rb, tmp = x[:nb], r[:nb], buf[:nb]
@@ -573,6 +577,7 @@ def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int =
     for b in bits_list:
         c_q[b] *= steps[b]
 
+    bar.close()
     common = {"quantizer": quantizer,
               "loading": loading if isinstance(loading, str) else float(loading),
               "snr_db": float(snr_db), "n_samples": n, "trials": m, "seed": int(seed), "freq": f}
@@ -805,9 +810,13 @@ def main(argv=None) -> int:
             except ValueError:
                 raise ValueError(f"--loading must be optimal, agc or a number (full scale in "
                                  f"noise sigmas), not {a.loading!r}") from None
+        if isinstance(a.trials, int) and a.trials > 0:
+            check_memory(8.0 * a.trials * (len(bits) + 3), f"--trials {a.trials:,} x "
+                         f"{len(bits)} word lengths", "--trials or --bits")
         t0 = time.perf_counter()
         rows = adc_loss_sweep(bits, snr_db=a.snr_db, n_samples=a.n_samples, trials=a.trials,
-                              seed=a.seed, loading=loading, quantizer=a.quantizer)
+                              seed=a.seed, loading=loading, quantizer=a.quantizer,
+                              progress=True)
         elapsed = time.perf_counter() - t0
         paths = write_report(rows, a.out, elapsed_s=elapsed)
     except (ValueError, OSError, OverflowError, MemoryError) as exc:
