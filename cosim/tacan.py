@@ -367,6 +367,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
     t0 = time.perf_counter()
     if signal is not None and signal.truth.config != sig:
         raise ValueError("signal was generated for another configuration than run.signal")
+    check_run_size(run)
     bar = _Stages(run, progress)
     bar.stage("signal")
     s = generate(sig) if signal is None else signal

@@ -48,6 +48,11 @@ TARGETS = ("adc", "fifo", "register", "dsp-state")
 def parse_ber(spec: str) -> tuple[float, ...]:
     """``"1e-6:1e-3"`` -> decades 1e-6, 1e-5, 1e-4, 1e-3; or a comma list."""
     spec = spec.strip()
+    try:
+        [float(p) for p in spec.replace(":", ",").split(",")]
+    except ValueError:
+        raise ValueError(f"BER must be lo:hi (decades) or a comma list of numbers, "
+                         f"not {spec!r}") from None
     if ":" in spec:
         parts = spec.split(":")
         if len(parts) != 2:
@@ -138,8 +143,21 @@ class FaultConfig:
                                     or not 0 <= b < w for b in self.bits):
                 raise ValueError(f"bits must be positions 0..{w - 1} of the {self.target} "
                                  f"words ({w} bits), not {list(self.bits)}")
-        # Every trial's record is built (and its front end validated) before the first point.
-        _run_cfg(self, 0).hdl_params
+        # Every trial's record is built (and its front end validated) before the first point,
+        # and the study must fit the machine (memory of a record, total time).
+        from cosim.tacan import check_run_size
+        from cosim.studies.sweep import CPU_S_PER_RECORD_S, MAX_STUDY_H
+        from cosim.validate import cores
+        run = _run_cfg(self, 0)
+        run.hdl_params
+        check_run_size(replace(run, backend=self.backend if self.target == "register"
+                               else "model"))
+        n = self.trials * (len(set(self.ber) | {0.0}))
+        hours = n * self.duration_s * CPU_S_PER_RECORD_S / 3600
+        if hours > MAX_STUDY_H:
+            raise ValueError(f"{n:,} runs of {self.duration_s:g} s would take about "
+                             f"{hours:,.0f} h (limit {MAX_STUDY_H:g} h): reduce --trials, "
+                             f"--ber or --duration-s")
 
     def word_width(self) -> int:
         """Width (bits) of the words the target's flips hit (``dsp-state``: the widest of

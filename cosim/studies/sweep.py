@@ -46,6 +46,10 @@ import numpy as np
 from cosim.validate import check_jobs, dumps
 
 GOLDEN_ADC_BITS = 16
+#: CPU seconds one point costs per second of record (model front end, FIFO, fixed DSP and
+#: its share of the golden chain; measured ~1 s, with margin) and the longest study started.
+CPU_S_PER_RECORD_S = 1.5
+MAX_STUDY_H = 48.0
 FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
 
 
@@ -299,6 +303,12 @@ def check_points(cfg: SweepConfig) -> None:
     # the summary holds every point (a few kB each with its range log)
     check_memory(cfg.n_points * 20e3, f"{cfg.n_points:,} points", "the swept values, "
                  "--snr-db or --trials")
+    from cosim.validate import cores
+    hours = cfg.n_points * cfg.duration_s * CPU_S_PER_RECORD_S / cores() / 3600
+    if hours > MAX_STUDY_H:
+        raise ValueError(f"{cfg.n_points:,} points of {cfg.duration_s:g} s would take about "
+                         f"{hours:,.0f} h on {cores()} cores (limit {MAX_STUDY_H:g} h): reduce "
+                         f"the swept values, --snr-db, --trials or --duration-s")
 
 
 def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:

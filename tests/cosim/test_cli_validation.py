@@ -179,6 +179,10 @@ def test_adc_loss_bad_input(capsys, tmp_path):
      "pysim simulates about 3e+03 cycles/s: 24,000,000 cycles would take ~2.2 h"),
     (["tacan", "--backend", "model", "--recheck", "pysim", "--recheck-samples", "1e8"],
      "reduce --recheck-samples"),
+    (["sweep", "tacan", "--snr-db", "0:100", "--trials", "100", "--duration-s", "10"],
+     "111,100 points of 10 s would take about"),
+    (["faults", "tacan", "--trials", "100000"], "500,000 runs of 2 s would take about"),
+    (["faults", "tacan", "--duration-s", "1e4"], "reduce --duration-s or --fs-hz"),
 ])
 def test_runs_too_big_are_refused_up_front(capsys, argv, message):
     line, _ = refused(capsys, argv, message)
