@@ -103,7 +103,8 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     import sys
     from tqdm import tqdm
     bar = tqdm(total=len(set(backends) | {"model"}), desc="check-equivalence", unit="backend",
-               file=sys.stderr, disable=not progress, leave=False)
+               file=sys.stderr, disable=not progress or not sys.stderr.isatty(),
+               leave=False)
     t0 = time.perf_counter()
     model = TacanFrontendModel(params)
     peaks, _ = model.run(x)

@@ -460,7 +460,8 @@ class _Stages:
 
     def __init__(self, run: TacanRunConfig, enabled: bool):
         self.bar = None
-        if not enabled:
+        import sys
+        if not enabled or not sys.stderr.isatty():     # a bar on a terminal, not in logs
             return
         import sys
         from tqdm import tqdm

@@ -552,8 +552,8 @@ def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int =
     sum_cos, sum_sin = float(cos_w.sum()), float(sin_w.sum())
     half = 0.5 if quantizer == "mid_rise" else 0.0
     from tqdm import tqdm
-    bar = tqdm(total=m, desc="adc-loss trials", file=sys.stderr, disable=not progress,
-               leave=False)
+    bar = tqdm(total=m, desc="adc-loss trials", file=sys.stderr, leave=False,
+               disable=not progress or not sys.stderr.isatty())
     for t0 in range(0, m, batch):
         t1 = min(m, t0 + batch)
         nb = t1 - t0
