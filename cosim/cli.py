@@ -313,6 +313,11 @@ def _cmd_sweep(a) -> int:
     if not all(isinstance(v, (int, float)) for v in snrs):
         raise ValueError(f"--snr-db takes numbers (dB), not {a.snr_db!r}")
     jobs = check_jobs(a.jobs)
+    import re
+    if a.scheduler not in ("local", "dask") and not re.fullmatch(
+            r"(tcp|tls|inproc|ucx)://[^\s:/]+(:\d+)?|[^\s:/]+:\d+", a.scheduler):
+        raise ValueError(f"--scheduler must be local, dask or a Dask scheduler address "
+                         f"(tcp://HOST:PORT), not {a.scheduler!r}")
     if a.scheduler not in ("local", "dask") and a.jobs is not None:
         raise ValueError("--jobs sizes the local pool or cluster; a remote Dask scheduler "
                          "(--scheduler ADDRESS) has its own workers")

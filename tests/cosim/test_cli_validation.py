@@ -286,6 +286,10 @@ def test_study_options_without_effect_are_refused(capsys, tmp_path):
                      "--out", out], "--scrub-period-s only affect(s) --target register")
     refused(capsys, ["sweep", "tacan", "--recheck", "0", "--recheck-samples", "5000",
                      "--out", out], "--recheck 0 runs none")
+    refused(capsys, ["sweep", "tacan", "--scheduler", "sideways", "--out", out],
+            "--scheduler must be local, dask or a Dask scheduler address")
+    refused(capsys, ["sweep", "tacan", "--scheduler", "tcp://10.0.0.1:8786", "--jobs", "1",
+                     "--out", out], "a remote Dask scheduler (--scheduler ADDRESS) has its own")
 
 
 def test_short_cycle_accurate_record_is_allowed(capsys):
