@@ -70,6 +70,9 @@ def _window(text: str, option: str) -> tuple[float, float]:
     return t0, t1
 
 
+#: Clock the DSP service presets (``cosim.link.DSP_PRESETS``) are written for.
+PRESET_CLK_HZ = 20e6
+
 #: DSP-link options of ``tacan`` (the FIFO between the FPGA and the DSP) and their CLI names.
 _LINK_OPTIONS = (("dsp_period_cycles", "--dsp-period-cycles", "period_cycles"),
                  ("dsp_latency_cycles", "--dsp-latency-cycles", "latency_cycles"),
@@ -111,8 +114,8 @@ def _add_tacan(sub):
                    default=None,
                    help="how the DSP reads the FIFO (preset; the --dsp-* options below "
                         "override its fields): default = 1 ms timer, 256 words; dma; "
-                        "undersized = 64 words per 10 ms, too slow for a beacon "
-                        "(HDL backends; default: default)")
+                        "undersized = 64 words per 10 ms, too slow for a beacon; the times "
+                        "hold at any --fs-hz (HDL backends; default: default)")
     p.add_argument("--dsp-stall", action="append", default=[], metavar="START:STOP",
                    help="seconds during which the DSP does not read the FIFO (repeatable; "
                         "HDL backends)")
@@ -183,6 +186,12 @@ def tacan_run_config(a):
                             fs_hz=a.fs_hz, if_hz=a.if_hz, adc_bits=a.adc_bits)
     base = DSP_PRESETS[a.dsp_service or "default"]
     svc = {f: getattr(base, f) for f in base.__dataclass_fields__}
+    if a.fs_hz != PRESET_CLK_HZ:
+        # the presets are times (1 ms timer, ...) written in cycles of a 20 MHz clock: on
+        # another clock they keep their times, not their cycle counts
+        k = a.fs_hz / PRESET_CLK_HZ
+        for f in ("period_cycles", "latency_cycles", "cycles_per_word"):
+            svc[f] = max(1 if f != "latency_cycles" else 0, int(round(svc[f] * k)))
     svc.update({field: getattr(a, attr) for attr, _, field in _LINK_OPTIONS
                 if getattr(a, attr) is not None})
     stalls = []

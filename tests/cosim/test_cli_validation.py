@@ -70,6 +70,17 @@ def test_fixed_core_runs_on_the_signal_clock():
     assert run.receiver.kalman.tick_hz == 24e6
 
 
+def test_dsp_service_presets_keep_their_times_at_any_clock():
+    """The presets are times in cycles of 20 MHz: the 1 ms timer stays 1 ms at 40 MS/s."""
+    from cosim.cli import tacan_run_config
+    p = build_parser()
+    at = lambda *x: tacan_run_config(p.parse_args(["tacan", "--backend", "model", *x])).service
+    d20, d40 = at(), at("--fs-hz", "40e6")
+    assert (d20.period_cycles, d20.latency_cycles) == (20_000, 200)
+    assert (d40.period_cycles, d40.latency_cycles, d40.cycles_per_word) == (40_000, 400, 8)
+    assert at("--fs-hz", "40e6", "--dsp-period-cycles", "30000").period_cycles == 30_000
+
+
 def test_bearing_out_of_range_is_refused(capsys):
     refused(capsys, ["tacan", "--bearing-deg", "1e20"],
             "bearing_deg must be in [-360, 360] deg, not 1e+20")
