@@ -184,7 +184,7 @@ def dsp_hour(out: Path, quick: bool = False) -> dict:
     params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
     fe = TacanFrontendModel(params)
     svc = DspServiceConfig()
-    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig()))
+    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(), tick_hz=sig0.fs_hz))
     fs, n_blk = sig0.fs_hz, sig0.n_samples
     settle = 2 * rc.kalman.kalman.memory_s
     fe_state, link_state, rx_state, dsp_state = None, None, None, None
@@ -227,7 +227,7 @@ def dsp_hour(out: Path, quick: bool = False) -> dict:
                 ticks = np.concatenate(acc_t)
                 y = amplitude_codes(np.concatenate(acc_a), params.scale_to_fs, rc.kalman.y)
                 acc_t, acc_a = [], []
-                tr = process_peaks(ticks / fs, y, rc, ticks=ticks, state=dsp_state)
+                tr = process_peaks(ticks / fs, y, rc, ticks=ticks, tick_hz=fs, state=dsp_state)
                 dsp_state = tr.state
                 t_dsp += time.perf_counter() - t3
                 keep = tr.times_s >= settle

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-__all__ = ["check_equivalence", "PYSIM_MAX_SAMPLES", "TOPS"]
+__all__ = ["check_equivalence", "check_record_size", "PYSIM_MAX_SAMPLES", "TOPS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
@@ -20,6 +20,20 @@ PYSIM_MAX_SAMPLES = 40_000
 FLUSH_CYCLES = 400
 TOPS = ("tacan",)
 BACKENDS = ("model", "pysim", "verilator")
+
+
+#: Memory per ADC sample of a check (the IF record, the codes, the model's working arrays
+#: and the backends' outputs; bytes, with margin).
+BYTES_PER_SAMPLE = 64
+
+
+def check_record_size(samples) -> int:
+    """Refuse, before any work, a record that is not a positive integer or cannot fit this
+    machine's memory."""
+    from .validate import check_int, check_memory
+    n = check_int("--samples", samples, 1)
+    check_memory(n * BYTES_PER_SAMPLE, f"--samples {n:,}", "--samples")
+    return n
 
 
 def tacan_record(samples: int, seed: int, snr_db: float | None = 10.0) -> np.ndarray:
@@ -39,7 +53,8 @@ def stall_pattern(n_cycles: int, seed: int, *, p_ready: float = 0.5,
 
 def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                       backends=BACKENDS, seed: int = 1, stall: bool = False,
-                      params=None, pysim_max_samples: int = PYSIM_MAX_SAMPLES) -> dict:
+                      params=None, pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                      progress: bool = False) -> dict:
     """Run the backends on the same stimulus and count mismatching FIFO words.
 
     Parameters
@@ -65,7 +80,10 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         ``top``, ``samples``, ``mismatches`` (words differing from the model, plus the
         difference in word count, over all backends run), ``backends`` (those run),
         ``skipped`` ({backend: reason}), ``words``, ``peaks``, ``markers``, ``dropped``,
-        ``per_backend`` ({backend: {"mismatches", "words", "seconds"}}).
+        ``per_backend`` ({backend: {"mismatches", "words", "seconds"}}), ``compared``
+        (which backend was compared with the model on how many words), ``equivalent``
+        (True only when at least two backends compared a non-empty record and nothing
+        differed) and ``verdict`` (why, in words).
     """
     from hdl.model.tacan_frontend import TacanFrontendModel, TacanFrontendParams
     if top not in TOPS:
@@ -82,6 +100,11 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     ready = stall_pattern(n_cycles, seed) if stall else None
     freq = params.nco_freq_word
 
+    import sys
+    from tqdm import tqdm
+    bar = tqdm(total=len(set(backends) | {"model"}), desc="check-equivalence", unit="backend",
+               file=sys.stderr, disable=not progress or not sys.stderr.isatty(),
+               leave=False)
     t0 = time.perf_counter()
     model = TacanFrontendModel(params)
     peaks, _ = model.run(x)
@@ -90,6 +113,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                      "seconds": time.perf_counter() - t0}}
     skipped = {}
     run = ["model"]
+    bar.update()
 
     def compare(name, res, seconds):
         n = min(len(res.words), len(ref.words))
@@ -98,6 +122,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         bad += abs(len(res.words) - len(ref.words))
         per[name] = {"mismatches": bad, "words": int(len(res.words)), "seconds": seconds}
         run.append(name)
+        bar.update()
 
     if "pysim" in backends:
         if samples > pysim_max_samples:
@@ -122,12 +147,29 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
             res = sim.run(x, out_ready=ready, n_cycles=n_cycles, inputs={"freq": freq})
             compare("verilator", res, time.perf_counter() - t)
 
+    bar.close()
     fields = model.unpack(ref.words)
     markers = fields["tag"] == 2
+    compared = [f"{name} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
+                f"{v['mismatches']} mismatches" for name, v in per.items() if name != "model"]
+    total = int(sum(v["mismatches"] for v in per.values()))
+    if len(run) < 2:
+        verdict = (f"nothing was compared: only {', '.join(run)} ran"
+                   + "".join(f"; {k} skipped: {w}" for k, w in skipped.items()))
+    elif len(ref.words) == 0:
+        verdict = (f"nothing was compared: the {samples} samples gave no FIFO word (use "
+                   f"--samples of a few 10,000 at least, a pulse pair every ~280 us)")
+    elif total:
+        verdict = f"{total} mismatches ({'; '.join(compared)})"
+    else:
+        verdict = f"equivalent: {'; '.join(compared)}"
     return {
         "top": top,
         "samples": int(samples),
-        "mismatches": int(sum(v["mismatches"] for v in per.values())),
+        "mismatches": total,
+        "equivalent": bool(len(run) >= 2 and len(ref.words) > 0 and total == 0),
+        "verdict": verdict,
+        "compared": compared,
         "backends": run,
         "skipped": skipped,
         "stall": bool(stall),

@@ -39,6 +39,14 @@ from .tacan_signal import TacanSignalConfig, generate
 BACKENDS = ("golden", "model", "pysim", "verilator")
 DSP_MODES = ("float", "fixed")
 
+#: Memory a run holds per ADC sample (bytes; measured ~14 on the model backend: the IF
+#: record, the ADC codes and the front end's working arrays), with margin.
+BYTES_PER_SAMPLE = {"golden": 32, "model": 32, "pysim": 48, "verilator": 48}
+#: Simulation speed of the cycle-accurate backends (cycles/s, whole TACAN top) and the
+#: longest run they are started for (s of wall time).
+CYCLES_PER_S = {"pysim": 3e3, "verilator": 5e6}
+MAX_WALL_S = 3600.0
+
 
 @dataclass(frozen=True)
 class TacanRunConfig:
@@ -56,7 +64,8 @@ class TacanRunConfig:
         The filter (memory, gate, ...), shared by both arithmetics.
     fixed : KalmanFixedConfig, optional
         Word lengths of the fixed-point core (default formats; its ``kalman`` is replaced
-        by ``kalman``).
+        by ``kalman`` and its ``tick_hz`` by the signal's ``fs_hz``, the clock of the
+        FPGA timestamps).
     settle_s : float, optional
         Bearings before this time are not scored (default 2 x the filter memory).
     frontend_changes : tuple of (name, value)
@@ -116,6 +125,11 @@ class TacanRunConfig:
             raise ValueError(f"service must be a DspServiceConfig, not {self.service!r}")
         if self.settle_s is not None and not (math.isfinite(self.settle_s) and self.settle_s >= 0):
             raise ValueError(f"settle_s must be >= 0, not {self.settle_s}")
+        if not (self.signal.mod_15 > 0 and self.signal.mod_135 > 0):
+            raise ValueError(
+                f"the bearing is the phase of the 15 Hz (coarse) and 135 Hz (fine) "
+                f"modulation: both depths must be > 0, not mod_15={self.signal.mod_15:g}, "
+                f"mod_135={self.signal.mod_135:g}")
         if self.require_bearing and self.settle + 0.1 > self.signal.duration_s:
             raise ValueError(
                 f"duration_s={self.signal.duration_s:g} leaves no time after the filter settles "
@@ -165,8 +179,9 @@ class TacanRunConfig:
     def receiver(self) -> ReceiverConfig:
         if self.dsp == "fixed":
             base = self.fixed or KalmanFixedConfig()
+            # the core counts the FPGA's timestamps: ticks of the ADC clock of this run
             k = KalmanFixedConfig(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
-                                     "kalman": self.kalman})
+                                     "kalman": self.kalman, "tick_hz": float(self.signal.fs_hz)})
         else:
             k = self.kalman
         return ReceiverConfig(mode=self.signal.mode, kalman=k)
@@ -283,7 +298,7 @@ def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float) -> BearingTra
         amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
     else:
         amps = fo.amplitude_fs
-    return process_peaks(times, amps, rc, ticks=fo.ticks)
+    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz)
 
 
 def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):
@@ -315,20 +330,49 @@ def frontend_key(run: TacanRunConfig) -> tuple:
             run.control_writes, run.control_latency_cycles)
 
 
-def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = None) -> dict:
+def check_run_size(run: TacanRunConfig) -> None:
+    """Refuse, before any work, a run that cannot fit this machine: the memory its record
+    needs (:data:`BYTES_PER_SAMPLE`) and, on a cycle-accurate backend, the simulation time
+    (:data:`CYCLES_PER_S`, at most :data:`MAX_WALL_S`). The message names the option."""
+    from .validate import check_memory
+    sig = run.signal
+    n = sig.duration_s * sig.fs_hz
+    per = BYTES_PER_SAMPLE[run.backend] + (16 if run.compare else 0)
+    check_memory(n * per, f"{n:.3g} ADC samples (--duration-s {sig.duration_s:g} x --fs-hz "
+                          f"{sig.fs_hz:g})", "--duration-s or --fs-hz")
+    for be, cycles in ((run.backend, n), (run.recheck, run.recheck_samples or 0)):
+        if be in CYCLES_PER_S and cycles / CYCLES_PER_S[be] > MAX_WALL_S:
+            opt = "--duration-s" if be == run.backend else "--recheck-samples"
+            raise ValueError(
+                f"{be} simulates about {CYCLES_PER_S[be]:.0e} cycles/s: {cycles:,.0f} cycles "
+                f"would take ~{cycles / CYCLES_PER_S[be] / 3600:.1f} h (limit "
+                f"{MAX_WALL_S / 3600:g} h, {CYCLES_PER_S[be] * MAX_WALL_S:,.0f} cycles): "
+                f"reduce {opt}" + ("; long records run on --backend model (with --recheck "
+                                   "for the cycle-accurate proof of its start)"
+                                   if be == "pysim" else ""))
+
+
+def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = None,
+              progress: bool = False) -> dict:
     """Run one scenario end to end; returns the result record (JSON-serialisable).
 
     ``signal`` (a :class:`cosim.tacan_signal.TacanSignal` of ``run.signal``) skips the
     generation (studies digitise one record with several ADCs). ``frontend_cache`` (a dict
     the caller keeps) reuses the front end's output between runs that differ only in the
-    DSP (:func:`frontend_key`), e.g. a sweep of DSP word lengths.
+    DSP (:func:`frontend_key`), e.g. a sweep of DSP word lengths. ``progress`` shows the
+    stages of the run on stderr (a tqdm bar; the cycle-accurate backends with their
+    estimated time).
     """
     sig = run.signal
     t0 = time.perf_counter()
     if signal is not None and signal.truth.config != sig:
         raise ValueError("signal was generated for another configuration than run.signal")
+    check_run_size(run)
+    bar = _Stages(run, progress)
+    bar.stage("signal")
     s = generate(sig) if signal is None else signal
     t1 = time.perf_counter()
+    bar.stage(f"front end ({run.backend})")
     key = frontend_key(run) if frontend_cache is not None and run.trace is None else None
     if key is not None and key in frontend_cache:
         fo = frontend_cache[key]
@@ -337,6 +381,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         if key is not None:
             frontend_cache[key] = fo
     t2 = time.perf_counter()
+    bar.stage(f"DSP ({run.dsp})")
     track = run_dsp(fo, run, sig.fs_hz)
     t3 = time.perf_counter()
     st = bearing_stats(track, s.truth.bearing_deg, run.settle)
@@ -357,8 +402,8 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         "rmse_deg": rmse,
         "mean_error_deg": float(st["mean_error_deg"][0]) if locked else None,
         "max_abs_error_deg": float(st["max_abs_error_deg"][0]) if locked else None,
-        "crb_deg": crb,
-        "rmse_over_crb": (rmse / crb if crb > 0 else math.inf) if locked else None,
+        "crb_deg": crb if math.isfinite(crb) else None,
+        "rmse_over_crb": (rmse / crb if 0 < crb < math.inf else None) if locked else None,
         "crb_window_s": run.kalman.memory_s,
         "n_updates": int(track.n_updates),
         "n_bearings": int(st["n"]),
@@ -389,9 +434,11 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         "elapsed_s": {"signal": t1 - t0, "frontend": t2 - t1, "dsp": t3 - t2},
     }
     if run.recheck is not None:
+        bar.stage(f"re-check ({run.recheck})")
         r["recheck"] = recheck_cycle_accurate(run, s.samples, run.recheck,
                                               run.recheck_samples)
     if run.compare == "golden":
+        bar.stage("golden chain")
         t4 = time.perf_counter()
         gfo = _golden(s.samples, run)
         gold = run_dsp(gfo, TacanRunConfig(**{**_fields(run), "backend": "golden",
@@ -403,7 +450,41 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         gst = bearing_stats(gold, s.truth.bearing_deg, run.settle)
         r["golden_rmse_deg"] = float(gst["rmse_deg"][0]) if gst["n"] else None
         r["elapsed_s"]["golden"] = time.perf_counter() - t4
+    bar.close()
     return r
+
+
+class _Stages:
+    """Progress of one run on stderr: a bar over its stages, and for a cycle-accurate
+    backend the estimated simulation time (:data:`CYCLES_PER_S`)."""
+
+    def __init__(self, run: TacanRunConfig, enabled: bool):
+        self.bar = None
+        import sys
+        if not enabled or not sys.stderr.isatty():     # a bar on a terminal, not in logs
+            return
+        import sys
+        from tqdm import tqdm
+        n = 3 + (run.recheck is not None) + (run.compare is not None)
+        self.bar = tqdm(total=n, desc="tacan", file=sys.stderr, leave=False,
+                        bar_format="{desc}: {n_fmt}/{total_fmt} stages [{elapsed}] {postfix}")
+        if run.backend in CYCLES_PER_S:
+            c = run.signal.duration_s * run.signal.fs_hz
+            print(f"{run.backend}: {c:,.0f} cycles, about {c / CYCLES_PER_S[run.backend]:.0f} s",
+                  file=sys.stderr)
+        self.started = False
+
+    def stage(self, name: str) -> None:
+        if self.bar is not None:
+            if self.started:
+                self.bar.update()
+            self.started = True
+            self.bar.set_postfix_str(name)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.update()
+            self.bar.close()
 
 
 def _ranges(fo: FrontendOutput, track: BearingTrack, adc_clipped: int) -> dict:

@@ -193,7 +193,8 @@ class TacanSignalConfig:
                 raise ValueError(f"{name} must be a finite number, not {v!r}")
             return float(v)
 
-        finite("bearing_deg")
+        if not -360 <= finite("bearing_deg") <= 360:
+            raise ValueError(f"bearing_deg must be in [-360, 360] deg, not {self.bearing_deg!r}")
         if self.mode not in ("X", "Y"):
             raise ValueError(f"mode must be 'X' or 'Y', not {self.mode!r}")
         a, b = finite("mod_15"), finite("mod_135")

@@ -107,6 +107,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.special import ndtr
 
+from cosim.validate import (MAX_LIST_VALUES, check_choice, check_float, check_int,
+                            check_memory, check_out_dir, dumps)
+
 #: Largest ADC word length accepted (as :class:`cosim.tacan_signal.TacanSignalConfig`).
 MAX_BITS = 24
 #: Quantiser conventions (see the module docstring).
@@ -127,31 +130,21 @@ _SQRT_2PI = math.sqrt(2.0 * math.pi)
 _BATCH_ELEMENTS = 1 << 19
 
 
-# -- argument checks ---------------------------------------------------------------------
+# -- argument checks (the shared rules of cosim.validate) ----------------------------------
 def _check_bits(bits) -> int:
-    if isinstance(bits, bool) or not isinstance(bits, (int, np.integer)) \
-            or not 1 <= int(bits) <= MAX_BITS:
-        raise ValueError(f"bits must be an integer in [1, {MAX_BITS}], not {bits!r}")
-    return int(bits)
+    return check_int("bits", bits, 1, MAX_BITS)
 
 
 def _check_quantizer(quantizer) -> str:
-    if quantizer not in QUANTIZERS:
-        raise ValueError(f"quantizer must be one of {QUANTIZERS}, not {quantizer!r}")
-    return quantizer
+    return check_choice("quantizer", quantizer, QUANTIZERS)
 
 
 def _check_positive(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(value) or not value > 0:
-        raise ValueError(f"{name} must be a finite number > 0, not {value!r}")
-    return float(value)
+    return check_float(name, value, 0, lo_open=True)
 
 
 def _check_count(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, not {value!r}")
-    return int(value)
+    return check_int(name, value, minimum)
 
 
 # -- theory ------------------------------------------------------------------------------
@@ -464,7 +457,7 @@ def _ideal_snr_and_ci(u: np.ndarray, energy: np.ndarray, amp: float
 def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int = 1000,
                    trials: int = 200_000, seed: int = 0, loading="optimal",
                    quantizer: str = "mid_rise", freq: float = DEFAULT_FREQ,
-                   reference: bool = True) -> list[dict]:
+                   reference: bool = True, progress: bool = False) -> list[dict]:
     """Monte Carlo matched-filter loss of b-bit ADCs on a weak tone in white Gaussian noise.
 
     Parameters
@@ -558,9 +551,13 @@ def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int =
     # sum_n r_n (sum_n (c + 1/2) r = sum_n c r + sum_n r / 2).
     sum_cos, sum_sin = float(cos_w.sum()), float(sin_w.sum())
     half = 0.5 if quantizer == "mid_rise" else 0.0
+    from tqdm import tqdm
+    bar = tqdm(total=m, desc="adc-loss trials", file=sys.stderr, leave=False,
+               disable=not progress or not sys.stderr.isatty())
     for t0 in range(0, m, batch):
         t1 = min(m, t0 + batch)
         nb = t1 - t0
+        bar.update(nb)
         phase = rng.uniform(0.0, 2.0 * math.pi, nb)
         cp, sp = np.cos(phase), np.sin(phase)
         xb, rb, tmp = x[:nb], r[:nb], buf[:nb]
@@ -580,6 +577,7 @@ def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int =
     for b in bits_list:
         c_q[b] *= steps[b]
 
+    bar.close()
     common = {"quantizer": quantizer,
               "loading": loading if isinstance(loading, str) else float(loading),
               "snr_db": float(snr_db), "n_samples": n, "trials": m, "seed": int(seed), "freq": f}
@@ -633,12 +631,6 @@ _CSV_FIELDS = ("bits", "quantizer", "loading", "step_over_sigma", "full_scale_ov
                "out_snr_db_ideal", "snr_db", "n_samples", "trials", "seed", "freq")
 
 
-def _json_safe(v):
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
 def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -> dict:
     """Write ``adc_loss.json``, ``adc_loss.csv``, ``adc_loss.md`` and ``adc_loss.png``.
 
@@ -682,8 +674,8 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
                            "measured_db": hit[0]["loss_db_measured"],
                            "error_db": err, "pass_0p1db": abs(err) <= 0.1})
     doc = {"meta": meta, "checks": checks,
-           "rows": [{k: _json_safe(v) for k, v in r.items()} for r in rows]}
-    paths["json"].write_text(json.dumps(doc, indent=2) + "\n")
+           "rows": rows}
+    paths["json"].write_text(dumps(doc, indent=2) + "\n")
 
     with paths["csv"].open("w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=_CSV_FIELDS, extrasaction="ignore")
@@ -781,35 +773,66 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
 
 
 def main(argv=None) -> int:
-    """CLI: run the sweep and write the report."""
-    p = argparse.ArgumentParser(prog="python -m cosim.studies.adc_loss",
-                                description=__doc__.split("\n")[0])
+    """CLI: run the sweep and write the report; exit 1 when a reference point FAILs."""
+    p = argparse.ArgumentParser(prog="python -m cosim adc-loss",
+                                description=__doc__.split("\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--out", default="build/adc_loss", help="output directory")
-    p.add_argument("--bits", default="1:14", help="a:b or a comma list (default 1:14)")
-    p.add_argument("--snr-db", type=float, default=-30.0)
-    p.add_argument("--n-samples", type=int, default=1000)
-    p.add_argument("--trials", type=int, default=200_000)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--loading", default="optimal", help="optimal, agc, or full scale/sigma")
-    p.add_argument("--quantizer", default="mid_rise", choices=QUANTIZERS)
+    p.add_argument("--bits", default="1:14", help="ADC word lengths: a:b or a comma list")
+    p.add_argument("--snr-db", type=float, default=-30.0, help="per-sample SNR of the tone (dB)")
+    p.add_argument("--n-samples", type=int, default=1000, help="samples per trial")
+    p.add_argument("--trials", type=int, default=200_000, help="Monte Carlo trials (>= 100)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
+    p.add_argument("--loading", default="optimal",
+                   help="ADC loading: optimal, agc, or full scale in noise sigmas")
+    p.add_argument("--quantizer", default="mid_rise", choices=QUANTIZERS,
+                   type=str.lower, help="quantiser characteristic")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an error")
     a = p.parse_args(argv)
     try:
-        if ":" in a.bits:
-            lo, hi = (int(v) for v in a.bits.split(":"))
-            bits = range(lo, hi + 1)
+        check_out_dir(a.out, "--out")
+        try:
+            if ":" in a.bits:
+                lo, hi = (int(v) for v in a.bits.split(":"))
+                bits = range(lo, hi + 1)
+            else:
+                bits = [int(v) for v in a.bits.split(",")]
+        except ValueError:
+            raise ValueError(f"--bits takes integers a:b or a comma list, not {a.bits!r}") \
+                from None
+        if len(bits) > MAX_LIST_VALUES:
+            raise ValueError(f"--bits gives {len(bits)} values, at most {MAX_LIST_VALUES}")
+        if a.loading in ("optimal", "agc"):
+            loading = a.loading
         else:
-            bits = [int(v) for v in a.bits.split(",")]
-        loading = a.loading if a.loading in ("optimal", "agc") else float(a.loading)
+            try:
+                loading = float(a.loading)
+            except ValueError:
+                raise ValueError(f"--loading must be optimal, agc or a number (full scale in "
+                                 f"noise sigmas), not {a.loading!r}") from None
+        if isinstance(a.trials, int) and a.trials > 0:
+            check_memory(8.0 * a.trials * (len(bits) + 3), f"--trials {a.trials:,} x "
+                         f"{len(bits)} word lengths", "--trials or --bits")
         t0 = time.perf_counter()
         rows = adc_loss_sweep(bits, snr_db=a.snr_db, n_samples=a.n_samples, trials=a.trials,
-                              seed=a.seed, loading=loading, quantizer=a.quantizer)
+                              seed=a.seed, loading=loading, quantizer=a.quantizer,
+                              progress=True)
         elapsed = time.perf_counter() - t0
-    except ValueError as exc:
+        paths = write_report(rows, a.out, elapsed_s=elapsed)
+    except (ValueError, OSError, OverflowError, MemoryError) as exc:
+        if a.debug:
+            raise
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    paths = write_report(rows, a.out, elapsed_s=elapsed)
     print(paths["md"].read_text())
     print(f"wrote {', '.join(str(v) for v in paths.values())}")
+    failed = [c for c in json.loads(paths["json"].read_text())["checks"] if not c["pass_0p1db"]]
+    if failed:
+        print("error: reference points FAIL (measured loss more than 0.1 dB from the "
+              "reference): " + ", ".join(f"{c['bits']} bit {c['measured_db']:.3f} dB vs "
+                                         f"{c['reference_db']:.3f} dB" for c in failed),
+              file=sys.stderr)
+        return 1
     return 0
 
 

@@ -48,6 +48,11 @@ TARGETS = ("adc", "fifo", "register", "dsp-state")
 def parse_ber(spec: str) -> tuple[float, ...]:
     """``"1e-6:1e-3"`` -> decades 1e-6, 1e-5, 1e-4, 1e-3; or a comma list."""
     spec = spec.strip()
+    try:
+        [float(p) for p in spec.replace(":", ",").split(",")]
+    except ValueError:
+        raise ValueError(f"BER must be lo:hi (decades) or a comma list of numbers, "
+                         f"not {spec!r}") from None
     if ":" in spec:
         parts = spec.split(":")
         if len(parts) != 2:
@@ -129,6 +134,44 @@ class FaultConfig:
                              "others use the bit-exact model")
         if not (math.isfinite(self.scrub_period_s) and self.scrub_period_s > 0):
             raise ValueError(f"scrub_period_s must be > 0, not {self.scrub_period_s}")
+        if self.fifo_parity and self.target != "fifo":
+            raise ValueError(f"fifo_parity protects the FIFO words: it changes nothing for "
+                             f"target {self.target!r} (use target 'fifo')")
+        if self.bits is not None:
+            w = self.word_width()
+            if not self.bits or any(isinstance(b, bool) or not isinstance(b, (int, np.integer))
+                                    or not 0 <= b < w for b in self.bits):
+                raise ValueError(f"bits must be positions 0..{w - 1} of the {self.target} "
+                                 f"words ({w} bits), not {list(self.bits)}")
+        # Every trial's record is built (and its front end validated) before the first point,
+        # and the study must fit the machine (memory of a record, total time).
+        from cosim.tacan import check_run_size
+        from cosim.studies.sweep import CPU_S_PER_RECORD_S, MAX_STUDY_H
+        from cosim.validate import cores
+        run = _run_cfg(self, 0)
+        run.hdl_params
+        check_run_size(replace(run, backend=self.backend if self.target == "register"
+                               else "model"))
+        n = self.trials * (len(set(self.ber) | {0.0}))
+        hours = n * self.duration_s * CPU_S_PER_RECORD_S / 3600
+        if hours > MAX_STUDY_H:
+            raise ValueError(f"{n:,} runs of {self.duration_s:g} s would take about "
+                             f"{hours:,.0f} h (limit {MAX_STUDY_H:g} h): reduce --trials, "
+                             f"--ber or --duration-s")
+
+    def word_width(self) -> int:
+        """Width (bits) of the words the target's flips hit (``dsp-state``: the widest of
+        ``x`` and ``P``)."""
+        run = _run_cfg(self, 0)
+        if self.target == "adc":
+            return int(run.signal.adc_bits)
+        p = run.hdl_params
+        if self.target == "fifo":
+            return int(p.fifo.word_width)
+        if self.target == "register":
+            return int(p.nco_phase_bits)
+        fx = run.receiver.kalman
+        return int(max(fx.x.width, fx.P.width))
 
 
 def _run_cfg(fc: FaultConfig, trial: int):
@@ -271,7 +314,7 @@ def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
     kf.schedule_upsets(steps, word_of_bit[sel], bit_in_word[sel])
     y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, fx.y)
     track = process_peaks(fo.ticks / run.signal.fs_hz, y, rc, ticks=fo.ticks,
-                          state=ReceiverState(kf=kf))
+                          tick_hz=run.signal.fs_hz, state=ReceiverState(kf=kf))
     return track, int(kf.upsets_applied)
 
 
@@ -352,7 +395,8 @@ def _max_of(recs, key):
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     stem = report_stem(fc)
-    (out / f"{stem}.json").write_text(json.dumps(s, indent=1, default=str))
+    from cosim.validate import dumps
+    (out / f"{stem}.json").write_text(dumps(s, indent=1, default=str))
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",
             "flagged_fraction", "misleading_fraction", "valid_rmse_deg",

@@ -36,7 +36,6 @@ import hashlib
 import itertools
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -44,19 +43,27 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.validate import check_jobs, dumps
+
 GOLDEN_ADC_BITS = 16
+#: CPU seconds one point costs per second of record (model front end, FIFO, fixed DSP and
+#: its share of the golden chain; measured ~1 s, with margin) and the longest study started.
+CPU_S_PER_RECORD_S = 1.5
+MAX_STUDY_H = 48.0
 FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
 
 
 # ---------------------------------------------------------------------------------------
 # Parameter specifications
 # ---------------------------------------------------------------------------------------
-def parse_values(spec: str) -> tuple:
+def parse_values(spec: str, option: str = "values") -> tuple:
     """``"4:14"`` -> 4..14, ``"0:20:5"`` -> 0, 5, ..., 20, ``"8,12,16"`` or ``"floor,half_up"``
-    -> the list (numbers where they parse)."""
+    -> the list (numbers where they parse); at most :data:`cosim.validate.MAX_LIST_VALUES`
+    values (counted before any list is built)."""
+    from cosim.validate import MAX_LIST_VALUES
     spec = spec.strip()
     if not spec:
-        raise ValueError("empty value list")
+        raise ValueError(f"{option}: empty value list")
     if ":" in spec:
         parts = spec.split(":")
         if len(parts) not in (2, 3):
@@ -69,16 +76,22 @@ def parse_values(spec: str) -> tuple:
         st = nums[2] if len(nums) == 3 else 1.0
         if not all(math.isfinite(v) for v in nums) or st <= 0 or b < a:
             raise ValueError(f"range {spec!r} must have finite a <= b and step > 0")
-        n = int(math.floor((b - a) / st + 1e-9)) + 1
+        n = math.floor((b - a) / st + 1e-9) + 1
+        if n > MAX_LIST_VALUES:
+            raise ValueError(f"{option} {spec!r} gives {n:,} values; at most "
+                             f"{MAX_LIST_VALUES} (use a larger step)")
         vals = [a + i * st for i in range(n)]
         if all(float(v).is_integer() for v in nums):
             return tuple(int(round(v)) for v in vals)
         return tuple(round(v, 12) for v in vals)
     out = []
-    for p in spec.split(","):
+    items = spec.split(",")
+    if len(items) > MAX_LIST_VALUES:
+        raise ValueError(f"{option} gives {len(items):,} values; at most {MAX_LIST_VALUES}")
+    for p in items:
         p = p.strip()
         if not p:
-            raise ValueError(f"empty item in {spec!r}")
+            raise ValueError(f"{option}: empty item in {spec!r}")
         try:
             v = float(p)
             out.append(int(v) if v.is_integer() and "." not in p else v)
@@ -94,7 +107,7 @@ def parse_param(text: str) -> tuple[str, tuple]:
     name, spec = text.split("=", 1)
     name = name.strip()
     check_param(name)
-    return name, parse_values(spec)
+    return name, parse_values(spec, f"--param {name}")
 
 
 def check_param(name: str) -> None:
@@ -245,19 +258,21 @@ def run_config(cfg: SweepConfig, combo: tuple, sig):
     from dsp.fixed import FixedFormat
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
     from cosim.tacan import TacanRunConfig
+    from cosim.validate import check_choice, check_int
     hdl, kal, fmts = {}, {"memory_s": cfg.memory_s}, {}
     base = KalmanFixedConfig()
     for name, v in combo:
         if name == "adc_bits":
-            sig = replace(sig, adc_bits=int(v))
+            sig = replace(sig, adc_bits=check_int("adc_bits", v, 1, 24))
         elif name.startswith("dsp."):
             parts = name.split(".")
             f = fmts.get(parts[1], getattr(base, parts[1]))
             if len(parts) == 2:
-                w = int(v)
+                w = check_int(name, v, 2, 62)
                 f = FixedFormat(w, f.frac + (w - f.width), f.signed, f.rounding, f.overflow)
             else:
-                f = FixedFormat(f.width, f.frac, f.signed, str(v), f.overflow)
+                check_choice(name, v, ("floor", "half_up"))
+                f = FixedFormat(f.width, f.frac, f.signed, v, f.overflow)
             fmts[parts[1]] = f
         elif name.startswith("kalman."):
             kal[name.split(".")[1]] = v
@@ -269,6 +284,31 @@ def run_config(cfg: SweepConfig, combo: tuple, sig):
                          hdl_changes=tuple(sorted(hdl.items())))
     run.hdl_params  # validates the word lengths (headroom, widths)
     return run
+
+
+def check_points(cfg: SweepConfig) -> None:
+    """Every point's configuration, built and validated before the first point runs: a
+    value the front end or the DSP core refuses (a 4.5-bit ADC, an unknown rounding, a
+    word too narrow for its signal) stops the study here, with the message, instead of
+    ending up as an "invalid" row of the report. Also refuses a study too big to start
+    (points x record length)."""
+    from cosim.validate import check_memory
+    sig = trial_signal(cfg, cfg.snr_db[0], 0)
+    for combo in cfg.combos:
+        try:
+            run_config(cfg, combo, sig)
+        except ValueError as e:
+            raise ValueError(f"sweep point {', '.join(f'{n}={v}' for n, v in combo)}: {e}") \
+                from None
+    # the summary holds every point (a few kB each with its range log)
+    check_memory(cfg.n_points * 20e3, f"{cfg.n_points:,} points", "the swept values, "
+                 "--snr-db or --trials")
+    from cosim.validate import cores
+    hours = cfg.n_points * cfg.duration_s * CPU_S_PER_RECORD_S / cores() / 3600
+    if hours > MAX_STUDY_H:
+        raise ValueError(f"{cfg.n_points:,} points of {cfg.duration_s:g} s would take about "
+                         f"{hours:,.0f} h on {cores()} cores (limit {MAX_STUDY_H:g} h): reduce "
+                         f"the swept values, --snr-db, --trials or --duration-s")
 
 
 def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:
@@ -325,16 +365,15 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
     for combo, key, f in todo:
         rec = {**base, "combo": [list(c) for c in combo], "kind": "point", "locked": False,
                "key": key}
-        try:
-            run = run_config(cfg, combo, sig)
-            run = replace(run, require_bearing=False)
-            s = signals[run.signal.adc_bits]
-            r = run_tacan(run, s, frontend_cache=fe_cache)
-            rec.update(_score(r), locked=r["n_bearings"] > 0)
-            if tuple(combo) in recheck_combos:
-                rec["recheck"] = recheck_point(cfg, run, s)
-        except ValueError as e:
-            rec["error"] = f"invalid: {e}"
+        # the configuration was validated before the study started (check_points); an
+        # error here stops the study with its message instead of becoming a row
+        run = run_config(cfg, combo, sig)
+        run = replace(run, require_bearing=False)
+        s = signals[run.signal.adc_bits]
+        r = run_tacan(run, s, frontend_cache=fe_cache)
+        rec.update(_score(r), locked=r["n_bearings"] > 0)
+        if tuple(combo) in recheck_combos:
+            rec["recheck"] = recheck_point(cfg, run, s)
         if f is not None:
             f.write_text(json.dumps(rec))
         out.append(rec)
@@ -400,7 +439,7 @@ def run_sweep(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
         for trial in range(cfg.trials):
             chk = rc if (si == 0 and trial == 0) else ()
             tasks.append((cfg, float(snr), trial, combos, str(cache), chk))
-    jobs = jobs or os.cpu_count() or 1
+    jobs = check_jobs(jobs, "jobs")
     bar = tqdm(total=len(tasks), desc=f"sweep ({cfg.n_points} points)", file=sys.stderr,
                disable=not progress)
     results = []
@@ -642,7 +681,7 @@ def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: f
                "elapsed_s": elapsed, "n_points": cfg.n_points, "rows": rows,
                "proposal": proposal, "target_rel": cfg.target_rel, "rechecks": rechecks,
                "ranges": ranges}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "summary.json").write_text(dumps(summary, indent=1))
     names = [n for n, _ in cfg.params]
     with open(out / "points.csv", "w", newline="") as f:
         w = csv.writer(f)
@@ -752,7 +791,7 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
     lines += ["## Every setting", "",
               "| " + " | ".join(names) + " | SNR dB | locked | RMSE deg | golden RMSE | ratio | "
               "ratio 95 % CI | mean err | CRB | ADC clipped | FIFO drops | DSP saturations |",
-              "|" + "---|" * (len(names) + 12)]
+              "|" + "---|" * (len(names) + 11)]
     for r in s["rows"]:
         sat = sum(v for k, v in r["dsp_events"].items() if k.startswith("sat_"))
         inv = f" ({r['invalid']})" if r["invalid"] else ""
@@ -836,7 +875,7 @@ def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
     if confirm_proposal:
         s["confirmation"] = confirm(cfg, s["proposal"], out, jobs=jobs, scheduler=scheduler,
                                     progress=progress)
-        (out / "summary.json").write_text(json.dumps(s, indent=1))
+        (out / "summary.json").write_text(dumps(s, indent=1))
         plots = sorted(p.name for p in out.glob("rmse_vs_*.png"))
         (out / "report.md").write_text(_report_md(cfg, s, plots))
     return s

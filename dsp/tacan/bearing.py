@@ -216,7 +216,7 @@ def phase_advance(dt_ticks, word: int, phase_bits: int = PHASE_BITS) -> np.ndarr
     return np.asarray(p & np.uint64((1 << b) - 1)).astype(np.int64)
 
 
-def reference_advances(dt_main_ticks, dt_ref_ticks, tick_hz: float = 20e6, *,
+def reference_advances(dt_main_ticks, dt_ref_ticks, tick_hz: float, *,
                        angle_bits: int = ANGLE_BITS, phase_bits: int = PHASE_BITS):
     """The 15 Hz advance since the main reference and the 135 Hz advance since the latest
     reference, as binary angles of ``angle_bits``.

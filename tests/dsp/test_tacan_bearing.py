@@ -327,13 +327,13 @@ def test_phase_words_match_the_kalman_core():
     dt = np.concatenate([rng.integers(-2 ** 62, 2 ** 62, 500), [0, 1, -1, 2 ** 63 - 1]])
     got = phase_advance(dt, fw135)
     np.testing.assert_array_equal(got, [(int(d) * fw135) % 2 ** 40 for d in dt])
-    a15, a135 = reference_advances(np.array([123456, 10 ** 7]), np.array([789, 2 ** 40 + 3]))
+    a15, a135 = reference_advances(np.array([123456, 10 ** 7]), np.array([789, 2 ** 40 + 3]), 20e6)
     np.testing.assert_array_equal(a15, [reduce_bangle((d * fw15) % 2 ** 40, 40, 32)
                                         for d in (123456, 10 ** 7)])
     np.testing.assert_array_equal(a135, [reduce_bangle((d * fw135) % 2 ** 40, 40, 32)
                                          for d in (789, 2 ** 40 + 3)])
     # 1/15 s after the main reference the 15 Hz phase is back at 0 (within the word's error)
-    a, _ = reference_advances(20_000_000 // 15 + 0, 0)
+    a, _ = reference_advances(20_000_000 // 15 + 0, 0, 20e6)
     assert min(int(a), 2 ** 32 - int(a)) < 2 ** 32 * 1e-6
     with pytest.raises(ValueError, match="need 0 <= f_hz < tick_hz"):
         freq_word(-1.0, 20e6)

@@ -15,12 +15,12 @@ def test_streaming_blocks_match_one_block(dsp):
     t, amps, _ = pulse_observations(cfg, [90.0, 250.0])
     ticks = np.round(t * 20e6).astype(np.int64)
     rc = ReceiverConfig(kalman=KalmanFixedConfig()) if dsp == "fixed" else ReceiverConfig()
-    whole = process_peaks(ticks / 20e6, amps, rc, ticks=ticks)
+    whole = process_peaks(ticks / 20e6, amps, rc, ticks=ticks, tick_hz=20e6)
     # split at a quiet point (gap >= 100 us, so no burst is cut) after 1.2 s
     gaps = np.flatnonzero((np.diff(t) > 100e-6) & (t[:-1] > 1.2))
     k = int(gaps[0]) + 1
-    a = process_peaks(ticks[:k] / 20e6, amps[:, :k], rc, ticks=ticks[:k])
-    b = process_peaks(ticks[k:] / 20e6, amps[:, k:], rc, ticks=ticks[k:], state=a.state)
+    a = process_peaks(ticks[:k] / 20e6, amps[:, :k], rc, ticks=ticks[:k], tick_hz=20e6)
+    b = process_peaks(ticks[k:] / 20e6, amps[:, k:], rc, ticks=ticks[k:], tick_hz=20e6, state=a.state)
     times = np.concatenate([a.times_s, b.times_s])
     np.testing.assert_array_equal(times, whole.times_s)
     bear = np.concatenate([a.bearing_deg, b.bearing_deg], axis=1)
@@ -68,8 +68,8 @@ def test_fixed_dsp_integer_bearing_matches_float_receiver():
     bears = [90.0, 270.0, 7.0, 199.0]
     t, amps, _ = pulse_observations(cfg, bears)
     ticks = np.round(t * 20e6).astype(np.int64)
-    ref = process_peaks(ticks / 20e6, amps, ticks=ticks)
-    fx = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=KalmanFixedConfig()), ticks=ticks)
+    ref = process_peaks(ticks / 20e6, amps, ticks=ticks, tick_hz=20e6)
+    fx = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=KalmanFixedConfig()), ticks=ticks, tick_hz=20e6)
     np.testing.assert_array_equal(fx.times_s, ref.times_s)
     keep = ref.times_s >= 0.5
     assert np.abs(wrap_deg(fx.bearing_deg[:, keep] - ref.bearing_deg[:, keep])).max() < 0.02
@@ -84,7 +84,7 @@ def _garbage_run(dsp, level):
     amps = amps.copy()
     amps[0, bad] = level                                   # a burst of garbage
     kc = KalmanConfig(input_limit=2.0) if dsp == "float" else KalmanFixedConfig()
-    tr = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=kc), ticks=ticks)
+    tr = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=kc), ticks=ticks, tick_hz=20e6)
     err = np.abs(wrap_deg(tr.bearing_deg[0] - 40.0))
     return tr, tr.valid[0], tr.times_s, err, int(bad.sum())
 
