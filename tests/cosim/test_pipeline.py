@@ -1,0 +1,188 @@
+"""Persistent front-end sessions and the closed-loop pipeline (issue 12).
+
+A toy DSP policy writes the NCO word as a function of the FIFO words it read; the loop runs
+on the bit-exact model, on the Amaranth simulation and on Verilator, the record fed in 1, 7
+and 50 blocks: the same words on the same cycles and the same writes everywhere. The writes
+the loop made, replayed into a one-shot run of the old harness, give the same words again:
+they reached the HDL at the modelled cycles.
+"""
+import numpy as np
+import pytest
+
+from cosim.link import DspServiceConfig, run_link
+from cosim.pipeline import Pipeline
+from cosim.session import TacanModelSession, open_frontend, ready_window
+from cosim.tacan import TacanRunConfig
+from cosim.tacan_signal import TacanSignalConfig, generate
+from cosim.verilator import verilator_available
+from dsp.tacan.kalman import KalmanConfig
+
+needs_verilator = pytest.mark.skipif(not verilator_available(),
+                                     reason="Verilator, make or a C++ compiler not on PATH")
+
+#: A fast DSP loop for short records: a 25 us timer, 8 reads 2 cycles apart.
+FAST_SVC = DspServiceConfig(period_cycles=500, latency_cycles=20, batch_words=8,
+                            cycles_per_word=2)
+N_SHORT = 6000      # cycles on the Amaranth simulation (~4 s): the first peaks come at ~4500
+
+
+def _run_config(duration_s, first_main_ref_s, **kw):
+    sig = TacanSignalConfig(duration_s=duration_s, snr_db=20.0, seed=3, bearing_deg=123.0,
+                            first_main_ref_s=first_main_ref_s)
+    return TacanRunConfig(signal=sig, backend="model", settle_s=0.0, require_bearing=False,
+                          kalman=KalmanConfig(memory_s=0.01), **kw)
+
+
+@pytest.fixture(scope="module")
+def short():
+    """2 ms with a main reference burst from 0.2 ms: ~7 FIFO words in the first 6000 cycles."""
+    run = _run_config(0.002, 0.2e-3)
+    return run.hdl_params, generate(run.signal).samples[:N_SHORT]
+
+
+@pytest.fixture(scope="module")
+def long_record():
+    """9.5 ms, a 12-word FIFO and a DSP stall: drops, gap markers, ~100 words."""
+    run = _run_config(0.0095, 1e-3, hdl_changes=(("fifo_depth", 12),))
+    return run.hdl_params, generate(run.signal).samples
+
+
+class ToyNcoPolicy:
+    """Retune the NCO from what was read: base word + (sum of the words mod 31 - 15) *
+    2**20 (+-70 kHz at 20 MHz), written whenever a service read something."""
+
+    def __init__(self, base: int):
+        self.base = base
+        self.calls = 0
+
+    def __call__(self, call):
+        self.calls += 1
+        if not call.words.size:
+            return []
+        return [("freq", self.base + (int(call.words.sum()) % 31 - 15) * (1 << 20))]
+
+
+def _closed_loop(backend, params, samples, n_blocks, service=FAST_SVC, flush=300):
+    with open_frontend(backend, params) as fe:
+        pipe = Pipeline(fe, service, ToyNcoPolicy(params.nco_freq_word), compute_cycles=30,
+                        control_latency_cycles=40, initial={"freq": params.nco_freq_word})
+        for block in np.array_split(samples, n_blocks):
+            pipe.feed(block)
+        pipe.idle(flush)
+        return pipe.result()
+
+
+def _same(a, b):
+    np.testing.assert_array_equal(a.words, b.words)
+    np.testing.assert_array_equal(a.cycles, b.cycles)
+    assert a.writes == b.writes
+    assert a.overflow_count == b.overflow_count
+    assert a.digest == b.digest
+
+
+@pytest.fixture(scope="module")
+def short_ref(short):
+    params, x = short
+    return _closed_loop("model", params, x, 1)
+
+
+def test_toy_loop_writes_and_the_writes_change_the_words(short, short_ref):
+    params, x = short
+    r = short_ref
+    assert r.n_words >= 5 and len(r.writes) >= 3
+    # Effect cycle = end of the read window + compute time + control latency.
+    for c, reg, v in r.writes:
+        assert reg == "freq" and (c - 20 - FAST_SVC.window_cycles - 30 - 40) % 500 == 0
+    with open_frontend("model", params) as fe:
+        open_loop = Pipeline(fe, FAST_SVC)
+        open_loop.feed(x)
+        open_loop.idle(300)
+        o = open_loop.result()
+    assert o.writes == [] and not np.array_equal(o.words, r.words)
+
+
+@pytest.mark.parametrize("backend", ["model", "pysim",
+                                     pytest.param("verilator", marks=needs_verilator)])
+@pytest.mark.parametrize("n_blocks", [1, 7, 50])
+def test_closed_loop_same_bits_on_every_backend_and_blocking(short, short_ref, backend,
+                                                             n_blocks):
+    params, x = short
+    _same(_closed_loop(backend, params, x, n_blocks), short_ref)
+
+
+@needs_verilator
+@pytest.mark.parametrize("n_blocks", [7, 50])
+def test_closed_loop_with_drops_model_and_verilator(long_record, n_blocks):
+    """190k cycles with FIFO overflows in a DSP stall, the default 1 ms service: model in one
+    block == model and Verilator in 7 and 50 blocks."""
+    params, x = long_record
+    svc = DspServiceConfig().with_stalls((60_000, 100_000))
+    ref = _closed_loop("model", params, x, 1, service=svc, flush=20_000)
+    assert ref.overflow_count > 0 and len(ref.writes) > 0
+    _same(_closed_loop("model", params, x, n_blocks, service=svc, flush=20_000), ref)
+    _same(_closed_loop("verilator", params, x, n_blocks, service=svc, flush=20_000), ref)
+
+
+@needs_verilator
+def test_loop_writes_replayed_in_a_one_shot_run_give_the_same_words(long_record):
+    """The writes the loop decided at run time, given up front to the old one-shot harness
+    (``VerilatorStreamSim.run(writes=...)``): the same words on the same cycles."""
+    from cosim.verilator import VerilatorStreamSim
+    from hdl.tacan_frontend import TacanFrontEnd
+    params, x = long_record
+    svc = DspServiceConfig().with_stalls((60_000, 100_000))
+    r = _closed_loop("verilator", params, x, 7, service=svc, flush=20_000)
+    n = x.size + 20_000
+    sim = VerilatorStreamSim(TacanFrontEnd(params), name="tacan_frontend")
+    one = sim.run(x, out_ready=svc.ready_mask(n), n_cycles=n,
+                  inputs={"freq": params.nco_freq_word}, writes=r.writes,
+                  final={"ovf": "overflow_count"})
+    np.testing.assert_array_equal(one.words, r.words)
+    np.testing.assert_array_equal(one.cycles, r.cycles)
+    assert one.final["ovf"] == r.overflow_count
+
+
+def test_model_session_in_blocks_equals_model_and_link_in_one_call(long_record):
+    """Open loop: the model session stepped in uneven blocks == the front-end model plus
+    :func:`run_link` on the whole record."""
+    from hdl.model.tacan_frontend import TacanFrontendModel
+    params, x = long_record
+    svc = DspServiceConfig().with_stalls((60_000, 100_000))
+    n = x.size + 1000
+    m = TacanFrontendModel(params)
+    pk, _ = m.run(x)
+    ref = run_link(m.peak_cycles(pk), m.words(pk), n, params.fifo, svc)
+    cuts = [0, 1, 3, 4000, 4001, 77_777, 150_000, x.size]
+    with TacanModelSession(params) as fe:
+        got = [fe.step(x[a:b], svc) for a, b in zip(cuts[:-1], cuts[1:])]
+        got.append(fe.step(None, svc, n_cycles=1000))
+        assert fe.read("overflow_count") == ref.dropped > 0
+    np.testing.assert_array_equal(np.concatenate([g.words for g in got]), ref.words)
+    np.testing.assert_array_equal(np.concatenate([g.cycles for g in got]), ref.read_cycles)
+
+
+def test_ready_window_matches_the_service_mask():
+    svc = DspServiceConfig().with_stalls((30_000, 45_000))
+    full = svc.ready_mask(100_000)
+    for a, n in [(0, 100_000), (12_345, 40_000), (44_999, 2)]:
+        np.testing.assert_array_equal(ready_window(svc, a, n), full[a:a + n])
+    np.testing.assert_array_equal(ready_window([True, False], 5, 4), [True, False, True, True])
+    assert ready_window(None, 0, 3) is None
+
+
+def test_session_errors(short):
+    params, _ = short
+    with open_frontend("model", params) as fe:
+        fe.step(np.zeros(10, np.int64))
+        with pytest.raises(ValueError, match="in the past"):
+            fe.write("freq", 1, cycle=5)
+        with pytest.raises(KeyError, match="freq"):
+            fe.write("gain", 1)
+        with pytest.raises(ValueError, match="integer"):
+            fe.write("freq", 1.5)
+    with pytest.raises(RuntimeError, match="closed"):
+        fe.step(np.zeros(1, np.int64))
+    with pytest.raises(ValueError, match="backend"):
+        open_frontend("golden", params)
+    with pytest.raises(TypeError, match="no front end registered"):
+        open_frontend("model", object())
