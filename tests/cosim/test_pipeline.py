@@ -186,3 +186,86 @@ def test_session_errors(short):
         open_frontend("golden", params)
     with pytest.raises(TypeError, match="no front end registered"):
         open_frontend("model", object())
+
+
+# -- dsp-hour on the pipeline -----------------------------------------------------------------
+def _old_chain(simulated_s, block_s, batch_s):
+    """The chain ``dsp-hour`` ran before the pipeline (bench_dsp at a2c3ba2), blocks and
+    batch length as parameters: front-end model, run_link and the FIFO receiver per block,
+    all with carried state, the DSP per batch."""
+    from cosim.bench_dsp import _if_block
+    from dsp.tacan.bearing import wrap_deg
+    from dsp.tacan.fifo_rx import receive_words
+    from dsp.tacan.frontend import FrontendConfig
+    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
+    from hdl.model.tacan_frontend import TacanFrontendModel, TacanFrontendParams
+    n_blocks = int(round(simulated_s / block_s))
+    bearing, snr = 90.0, 10.0
+    sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)
+    params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
+    fe = TacanFrontendModel(params)
+    svc = DspServiceConfig()
+    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig()))
+    fs, n_blk = sig0.fs_hz, sig0.n_samples
+    settle = 2 * rc.kalman.kalman.memory_s
+    fe_state = link_state = rx_state = dsp_state = None
+    carry_wc, carry_w = np.zeros(0, np.int64), np.zeros(0, np.int64)
+    acc_t, acc_a, rows, peaks, n_words = [], [], [], 0, 0
+    for k in range(n_blocks):
+        x = _if_block(k, block_s, bearing, snr)
+        pk, fe_state = fe.run(x, fe_state)
+        wc = np.r_[carry_wc, fe.peak_cycles(pk)]
+        w = np.r_[carry_w, fe.words(pk)]
+        c0, c1 = k * n_blk, (k + 1) * n_blk
+        now = wc < c1
+        carry_wc, carry_w = wc[~now], w[~now]
+        res = run_link(wc[now], w[now], c1 - c0, params.fifo, svc, state=link_state)
+        link_state = res.state
+        ts, amp, rx_state = receive_words(res.words, width=params.fifo.width,
+                                          amp_width=params.peak.amp_width,
+                                          ts_bits=params.peak.ts_bits, state=rx_state,
+                                          parity=params.fifo.parity)
+        acc_t.append(ts + np.int64(params.decimation - 1))
+        acc_a.append(amp)
+        peaks += pk.amplitudes.size
+        n_words += res.words.size
+        if round((k + 1) * block_s / batch_s, 9) % 1 == 0:
+            ticks = np.concatenate(acc_t)
+            y = amplitude_codes(np.concatenate(acc_a), params.scale_to_fs, rc.kalman.y)
+            acc_t, acc_a = [], []
+            tr = process_peaks(ticks / fs, y, rc, ticks=ticks, state=dsp_state)
+            dsp_state = tr.state
+            err = wrap_deg(tr.bearing_deg[0, tr.times_s >= settle] - bearing)
+            rows.append({"bearings": int(err.size),
+                         "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if err.size else None,
+                         "P_min_eig": float(np.linalg.eigvalsh(dsp_state.kf.P_float()[0]).min()),
+                         "events": {k2: int(v[0]) for k2, v in tr.events.items()}})
+    return {"rows": rows, "peaks": peaks, "fifo_words": n_words,
+            "updates": int(dsp_state.kf.n_updates), "rx": dict(rx_state.stats),
+            "fifo_dropped": int(link_state.overflow)}
+
+
+def test_dsp_hour_short_form_on_the_pipeline_matches_the_old_chain(tmp_path):
+    """``dsp-hour`` for 2 simulated seconds (1 s blocks, 1 s DSP batches): the same peaks,
+    FIFO words, receiver statistics, Kalman updates and per-batch bearing figures as the
+    block-by-block chain it replaced; results files written."""
+    from cosim.bench_dsp import dsp_hour
+    s = dsp_hour(tmp_path, simulated_s=2.0, block_s=1.0, batch_s=1.0)
+    ref = _old_chain(2.0, 1.0, 1.0)
+    assert (tmp_path / "dsp_hour.json").exists() and (tmp_path / "dsp_hour.md").exists()
+    assert s["totals"]["peaks"] == ref["peaks"] > 10_000
+    assert s["totals"]["fifo_words"] == ref["fifo_words"]
+    assert s["totals"]["rx"] == ref["rx"]
+    assert s["totals"]["fifo_dropped"] == ref["fifo_dropped"] == 0
+    assert s["updates"] == ref["updates"]
+    assert len(s["minutes"]) == len(ref["rows"]) == 2
+    cum = {}
+    for new, old in zip(s["minutes"], ref["rows"]):
+        assert new["bearings"] == old["bearings"]
+        assert new["rmse_deg"] == old["rmse_deg"]
+        assert new["P_min_eig"] == old["P_min_eig"] > 0
+        for k, v in new["events"].items():
+            cum[k] = cum.get(k, 0) + v
+        assert {k: v for k, v in old["events"].items() if v} == {k: v for k, v in cum.items() if v}
+    assert s["bearings"] > 100 and s["rmse_deg"] < 0.3 and not s["diverged"]
