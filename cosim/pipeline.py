@@ -132,6 +132,7 @@ class Pipeline:
         self.keep_words = bool(keep_words)
         self.overflow_port = overflow_port
         self._k = 0
+        self._scheduled: list[tuple[int, str, int]] = []
         self._buf_w: list[np.ndarray] = []
         self._buf_c: list[np.ndarray] = []
         self._all_w: list[np.ndarray] = []
@@ -173,11 +174,17 @@ class Pipeline:
                 self._call()
             if self.cycle >= end:
                 break
-            m = min(end, self.issue_cycle(self._k)) - self.cycle
+            # An open loop (no DSP callback) has nothing to decide: one step to the end.
+            stop = end if self.dsp is None else min(end, self.issue_cycle(self._k))
+            m = stop - self.cycle
             r = self.session.step(None if x is None else x[pos:pos + m], self.service,
                                   n_cycles=m)
             pos += m
             self._collect(r.words, r.cycles)
+            if self.dsp is None:    # count the loop periods passed (nothing to decide)
+                while self.issue_cycle(self._k) < self.cycle:
+                    self._k += 1
+                self._buf_w, self._buf_c = [], []
 
     def _collect(self, words, cycles) -> None:
         if not words.size:
@@ -216,11 +223,20 @@ class Pipeline:
             eff = self.control.write(issue, reg, int(value), read_cycle=last_read)
             self.session.write(reg, int(value), cycle=eff)
 
+    def schedule(self, writes) -> None:
+        """Register writes planned before the run (an open-loop control sequence),
+        ``(effect cycle, register, value)``, e.g. :meth:`ControlPath.writes`; they are
+        listed first in :attr:`writes`."""
+        for c, reg, value in writes:
+            self.session.write(reg, int(value), cycle=int(c))
+            self._scheduled.append((int(c), reg, int(value)))
+
     # -- result --------------------------------------------------------------------------
     @property
     def writes(self) -> list[tuple[int, str, int]]:
-        """Writes made so far, ``(effect cycle, register, value)`` in issue order."""
-        return self.control.writes()
+        """Writes made so far, ``(effect cycle, register, value)``: the scheduled ones,
+        then the DSP's in issue order."""
+        return self._scheduled + self.control.writes()
 
     def result(self) -> PipelineResult:
         hwr = hashlib.sha256()

@@ -62,10 +62,12 @@ class ToyNcoPolicy:
         return [("freq", self.base + (int(call.words.sum()) % 31 - 15) * (1 << 20))]
 
 
-def _closed_loop(backend, params, samples, n_blocks, service=FAST_SVC, flush=300):
+def _closed_loop(backend, params, samples, n_blocks, service=FAST_SVC, flush=300, *,
+                 compute_cycles=30, latency_cycles=40):
     with open_frontend(backend, params) as fe:
-        pipe = Pipeline(fe, service, ToyNcoPolicy(params.nco_freq_word), compute_cycles=30,
-                        control_latency_cycles=40, initial={"freq": params.nco_freq_word})
+        pipe = Pipeline(fe, service, ToyNcoPolicy(params.nco_freq_word),
+                        compute_cycles=compute_cycles, control_latency_cycles=latency_cycles,
+                        initial={"freq": params.nco_freq_word})
         for block in np.array_split(samples, n_blocks):
             pipe.feed(block)
         pipe.idle(flush)
@@ -108,6 +110,18 @@ def test_closed_loop_same_bits_on_every_backend_and_blocking(short, short_ref, b
                                                              n_blocks):
     params, x = short
     _same(_closed_loop(backend, params, x, n_blocks), short_ref)
+
+
+@pytest.mark.parametrize("backend,n_blocks", [
+    ("model", 50), ("pysim", 7), pytest.param("verilator", 50, marks=needs_verilator)])
+def test_zero_latency_write_lands_on_the_issue_cycle(short, backend, n_blocks):
+    """Writes issued the very cycle the words were read and applied at once (latency 0): the
+    write falls on a step boundary of the session, identically on every backend."""
+    params, x = short
+    ref = _closed_loop("model", params, x, 1, compute_cycles=0, latency_cycles=0)
+    assert ref.writes and all((c - 20 - FAST_SVC.window_cycles) % 500 == 0
+                              for c, _, _ in ref.writes)
+    _same(_closed_loop(backend, params, x, n_blocks, compute_cycles=0, latency_cycles=0), ref)
 
 
 @needs_verilator
