@@ -33,6 +33,7 @@ parameters (:data:`FRONTEND_TYPES` maps a parameter class to its component and m
 """
 from __future__ import annotations
 
+import bisect
 import contextlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,9 +167,8 @@ class FrontendSession:
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
             raise ValueError(f"value written to {port!r} must be an integer, not {value!r}")
         self._check_port(port)
-        self._pending.append((c, self._seq, port, int(value)))
+        bisect.insort(self._pending, (c, self._seq, port, int(value)))
         self._seq += 1
-        self._pending.sort()
         return c
 
     def read(self, port: str) -> int:
@@ -385,8 +385,9 @@ class TacanModelSession(FrontendSession):
         # Runs of samples offered on consecutive cycles: sample s0 + j at cycle c0 + j.
         self._run_s = np.zeros(0, np.int64)
         self._run_c = np.zeros(0, np.int64)
-        self._ch_idx = np.zeros(0, np.int64)   # freq changes by ADC sample index
-        self._ch_val = np.zeros(0, np.int64)
+        self._ch_idx: list[int] = []   # freq changes by ADC sample index
+        self._ch_val: list[int] = []
+        self._changes = None           # the same as int64 arrays, for the model
         self._freq = int(params.nco_freq_word)
         self.n_peaks = 0
 
@@ -411,11 +412,12 @@ class TacanModelSession(FrontendSession):
         return self._fifo_state
 
     def _add_change(self, idx: int, value: int) -> None:
-        if self._ch_idx.size and self._ch_idx[-1] == idx:
+        if self._ch_idx and self._ch_idx[-1] == idx:     # same sample: the later write wins
             self._ch_val[-1] = value
         else:
-            self._ch_idx = np.r_[self._ch_idx, np.int64(idx)]
-            self._ch_val = np.r_[self._ch_val, np.int64(value)]
+            self._ch_idx.append(idx)
+            self._ch_val.append(value)
+        self._changes = None
 
     def _step(self, queue, ready, n, writes):
         from .link import DspServiceConfig
@@ -432,7 +434,10 @@ class TacanModelSession(FrontendSession):
             if not (self._run_c.size and self._run_c[-1] - self._run_s[-1] == start - n0):
                 self._run_s = np.r_[self._run_s, np.int64(n0)]
                 self._run_c = np.r_[self._run_c, np.int64(start)]
-            changes = (self._ch_idx, self._ch_val) if self._ch_idx.size else None
+            if self._changes is None and self._ch_idx:
+                self._changes = (np.array(self._ch_idx, np.int64),
+                                 np.array(self._ch_val, np.int64))
+            changes = self._changes
             pk, self._fe_state = self.model.run(x, self._fe_state, freq_changes=changes)
             self._n_samples += x.size
             self.n_peaks += len(pk)
