@@ -139,9 +139,10 @@ class FrontendSession:
         """
         self._check_open()
         w = np.zeros(0, np.int64) if in_words is None else np.asarray(in_words)
-        if w.size and w.dtype.kind not in "iu":
+        if w.size and w.dtype.kind not in "iuO":
             raise ValueError(f"input words must be integers, not dtype {w.dtype}")
-        w = w.astype(np.int64).ravel()
+        # int64, or Python ints in an object array for payloads wider than 63 bits
+        w = (w if w.dtype == object else w.astype(np.int64)).ravel()
         n = w.size if n_cycles is None else _int("n_cycles", n_cycles, 0)
         queue = np.r_[self._queue, w] if self._queue.size else w
         start = self.cycle
@@ -152,8 +153,10 @@ class FrontendSession:
         words, cycles, accepted = self._step(queue, ready, n, writes)
         self._queue = queue[accepted:]
         self.cycle = start + n
-        return StepResult(np.asarray(words, np.int64), np.asarray(cycles, np.int64), start, n,
-                          int(accepted))
+        words = np.asarray(words)
+        if words.dtype != object:
+            words = words.astype(np.int64)
+        return StepResult(words, np.asarray(cycles, np.int64), start, n, int(accepted))
 
     def write(self, port: str, value: int, cycle: int | None = None) -> int:
         """Schedule ``port = value`` before the clock edge of ``cycle`` (default: the next
@@ -339,7 +342,9 @@ class PysimSession(FrontendSession):
         self._sim.run_until(self._edge_s(start + n - 1) + self._period / 8)
         if f["writes"]:
             raise RuntimeError("internal: writes left over after a pysim step")
-        return f["words"], f["cycles"], f["accepted"]
+        wide = len(self._o_payload) > 63
+        words = np.array(f["words"], dtype=object if wide else np.int64)
+        return words, f["cycles"], f["accepted"]
 
     def _read(self, port):
         if self._ctx is None:       # nothing simulated yet: the reset value
