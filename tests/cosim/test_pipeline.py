@@ -348,3 +348,16 @@ def test_stream_session_in_blocks_equals_one_run_stream(backend):
     np.testing.assert_array_equal(np.concatenate(out_w), ref.words)
     np.testing.assert_array_equal(np.concatenate(out_c), ref.cycles)
     assert acc == ref.in_accepted < words.size
+
+
+def test_pysim_session_waveform_covers_every_step(short, tmp_path):
+    """One waveform for the whole session (the simulator is the same across steps)."""
+    params, x = short
+    f = tmp_path / "session.vcd"
+    with open_frontend("pysim", params, vcd=f) as fe:
+        fe.step(x[:100], FAST_SVC)
+        fe.step(x[100:200], FAST_SVC)
+    text = f.read_text()
+    times = [int(line[1:]) for line in text.splitlines() if line.startswith("#")]
+    assert "$enddefinitions" in text and "o__valid" in text
+    assert max(times) >= 199 * 50_000_000     # into the last cycle of the second step (fs)
