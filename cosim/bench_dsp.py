@@ -317,18 +317,24 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     return summary
 
 
+def _f3(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
 def _hour_md(s: dict) -> str:
     m = s["machine"]
     ev = ", ".join(f"{k} {v}" for k, v in s["events_total"].items() if v) or "none"
     sec = s["seconds"]
-    return (f"One simulated hour through the bit-exact chain (`{m['command']}`, {m['date']}, "
+    sim_s = s["scenario"]["simulated_s"]
+    what = "One simulated hour" if sim_s == 3600 else f"{sim_s:g} simulated seconds"
+    return (f"{what} through the bit-exact chain (`{m['command']}`, {m['date']}, "
             f"{m['cpu']}, commit {m['commit']}, {s['elapsed_s']:.0f} s wall)\n\n"
             f"{s['scenario']['chain']}; SNR {s['scenario']['snr_db']:g} dB, bearing "
             f"{s['scenario']['bearing_deg']:g} deg.\n\n"
             f"{s['scenario']['simulated_s']:.0f} s simulated ({s['timestamp_wraps']} timestamp "
             f"wraps), {s['totals']['peaks']:,} peaks, {s['updates']:,} Kalman updates, "
-            f"{s['bearings']:,} bearings: RMSE {s['rmse_deg']:.3f} deg, worst "
-            f"{s['max_abs_error_deg']:.3f} deg; FIFO drops {s['totals']['fifo_dropped']}; "
+            f"{s['bearings']:,} bearings: RMSE {_f3(s['rmse_deg'])} deg, worst "
+            f"{_f3(s['max_abs_error_deg'])} deg; FIFO drops {s['totals']['fifo_dropped']}; "
             f"smallest eigenvalue of P over the run {s['P_min_eig_min']:.3g} (> 0: positive "
             f"definite), P symmetric: {s['P_always_symmetric']}; core events: {ev}; "
             f"diverged: {s['diverged']}. Time: front-end and FIFO models "
