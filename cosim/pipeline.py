@@ -25,7 +25,10 @@ Timing of the loop (cycles from reset). The DSP runs once per *loop period* of
   ``issue + control_latency_cycles`` (:class:`~cosim.link.ControlPath`), i.e. it is applied
   before that cycle's clock edge, never earlier -- whatever the block boundaries.
 
-The writes ``(cycle, register, value)`` (effect cycles) are part of the result and of its
+The DSP is called every loop period, also inside a stall of the FIFO service
+(:attr:`DspServiceConfig.stalls`: it then gets the words of the unstalled reads only, maybe
+none); a policy that must not act while stalled checks ``call.window_end`` against the
+stalls. The writes ``(cycle, register, value)`` (effect cycles) are part of the result and of its
 digest, so two backends or two blockings compare on them as on the words.
 """
 from __future__ import annotations
