@@ -4,10 +4,11 @@
                fixed point and in float: one stream, and Monte Carlo trials batched on one
                core and on all cores; plus the naive fxpmath approach (quantise every
                operation with ``Fxp`` objects) on a short run, for comparison.
-``dsp-hour``   one simulated hour through the whole bit-exact chain: IF records (3 s each, a
-               continuous rotation phase) -> HDL front-end model -> FIFO/link model -> DSP
-               FIFO receiver -> fixed-point DSP, all streaming with carried state: bearing
-               error per minute, core events, smallest eigenvalue of P, FIFO drops.
+``dsp-hour``   one simulated hour through the whole bit-exact chain on the streaming
+               pipeline (:mod:`cosim.pipeline`): IF records (3 s each, a continuous
+               rotation phase) -> HDL front-end model session -> FIFO model -> DSP FIFO
+               receiver -> fixed-point DSP, all with carried state: bearing error per
+               minute, core events, smallest eigenvalue of P, FIFO drops.
 
 Both write ``results/<name>.json`` and ``.md`` with the machine, date and command.
 """
@@ -163,139 +164,183 @@ def _if_block(k: int, block_s: float, bearing: float, snr_db: float) -> np.ndarr
     return generate(cfg).samples
 
 
-def dsp_hour(out: Path, quick: bool = False) -> dict:
-    """One simulated hour through the whole bit-exact chain (see module doc)."""
+class _TacanBatchDsp:
+    """The DSP side of ``dsp-hour`` as a pipeline callback: the FIFO receiver on the words of
+    every loop period (its state carried), the fixed-point DSP on each batch of
+    ``batch_cycles`` (its state carried), statistics per batch. Open loop: no writes."""
+
+    def __init__(self, params, rc, fs_hz: float, batch_cycles: int, loop_cycles: int,
+                 bearing: float, t_start: float):
+        self.params, self.rc, self.fs = params, rc, fs_hz
+        self.batch_cycles, self.loop_cycles = batch_cycles, loop_cycles
+        self.bearing, self.t_start = bearing, t_start
+        self.settle = 2 * rc.kalman.kalman.memory_s
+        self.rx_state = self.dsp_state = self.prev_ev = None
+        self.acc_t, self.acc_a, self.rows, self.all_err = [], [], [], []
+        self.t_rx = self.t_dsp = 0.0
+
+    def __call__(self, call):
+        from dsp.tacan.fifo_rx import receive_words
+        p = self.params
+        t0 = time.perf_counter()
+        ts, amp, self.rx_state = receive_words(call.words, width=p.fifo.width,
+                                               amp_width=p.peak.amp_width,
+                                               ts_bits=p.peak.ts_bits, state=self.rx_state,
+                                               parity=p.fifo.parity)
+        self.acc_t.append(ts + np.int64(p.decimation - 1))
+        self.acc_a.append(amp)
+        self.t_rx += time.perf_counter() - t0
+        if ((call.index + 1) * self.loop_cycles) % self.batch_cycles == 0:
+            self._batch(call.session)
+        return ()
+
+    def _batch(self, session):
+        from dsp.tacan.bearing import wrap_deg
+        from dsp.tacan.receiver import amplitude_codes, process_peaks
+        p, rc = self.params, self.rc
+        t3 = time.perf_counter()
+        ticks = np.concatenate(self.acc_t)
+        y = amplitude_codes(np.concatenate(self.acc_a), p.scale_to_fs, rc.kalman.y)
+        self.acc_t, self.acc_a = [], []
+        tr = process_peaks(ticks / self.fs, y, rc, ticks=ticks, tick_hz=self.fs,
+                           state=self.dsp_state)
+        self.dsp_state = tr.state
+        self.t_dsp += time.perf_counter() - t3
+        keep = tr.times_s >= self.settle
+        err = wrap_deg(tr.bearing_deg[0, keep] - self.bearing)
+        self.all_err.append(err)
+        kf = self.dsp_state.kf
+        P = kf.P_float()[0]
+        ev = {k2: int(v[0]) for k2, v in tr.events.items()}
+        prev = self.prev_ev
+        new_ev = ev if prev is None else {k2: ev[k2] - prev[k2] for k2 in ev}
+        self.prev_ev = ev
+        self.rows.append({"minute": len(self.rows) + 1, "bearings": int(err.size),
+                          "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if err.size else None,
+                          "max_abs_error_deg": float(np.abs(err).max()) if err.size else None,
+                          "P_min_eig": float(np.linalg.eigvalsh(P).min()),
+                          "P_symmetric": bool((kf.P[0] == kf.P[0].T).all()),
+                          "fifo_dropped": int(session.read("overflow_count")),
+                          "events": {k2: v for k2, v in new_ev.items() if v}})
+        r = self.rows[-1]
+        rmse = "-" if r["rmse_deg"] is None else f"{r['rmse_deg']:.3f}"
+        print(f"batch {len(self.rows)}: {r['bearings']} bearings, RMSE {rmse} deg, P min eig "
+              f"{r['P_min_eig']:.3g}, {time.perf_counter() - self.t_start:.0f} s", flush=True)
+
+
+def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None = None,
+             block_s: float = 3.0, batch_s: float = 60.0, loop_s: float = 0.1) -> dict:
+    """One simulated hour through the whole bit-exact chain, on the streaming pipeline
+    (:class:`cosim.pipeline.Pipeline` with the front-end model session): IF blocks of
+    ``block_s`` -> front end + FIFO (default DSP service) -> the FIFO receiver every
+    ``loop_s`` -> the fixed-point DSP every ``batch_s`` (a "minute" row each).
+
+    ``quick``: one minute. ``simulated_s`` overrides the length (a whole number of blocks
+    and of batches; the tests run a few seconds). ``out=None`` writes no files.
+    """
     from concurrent.futures import ProcessPoolExecutor
-    from dsp.tacan.bearing import wrap_deg
-    from dsp.tacan.fifo_rx import receive_words
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
-    from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
-    from hdl.model.tacan_frontend import TacanFrontendModel, TacanFrontendParams
-    from .link import DspServiceConfig, run_link
+    from dsp.tacan.receiver import ReceiverConfig
+    from hdl.model.tacan_frontend import TacanFrontendParams
+    from .link import DspServiceConfig
+    from .pipeline import Pipeline
+    from .session import open_frontend
     from .tacan_signal import TacanSignalConfig
     from dsp.tacan.frontend import FrontendConfig
 
     t_start = time.perf_counter()
-    block_s, minute_s = 3.0, 60.0
-    minutes = 1 if quick else 60
-    n_blocks = int(minutes * minute_s / block_s)
+    simulated_s = (60.0 if quick else 3600.0) if simulated_s is None else float(simulated_s)
+    n_blocks = int(round(simulated_s / block_s))
     bearing, snr = 90.0, 10.0
     sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)
     params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
-    fe = TacanFrontendModel(params)
     svc = DspServiceConfig()
     rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(), tick_hz=sig0.fs_hz))
     fs, n_blk = sig0.fs_hz, sig0.n_samples
-    settle = 2 * rc.kalman.kalman.memory_s
-    fe_state, link_state, rx_state, dsp_state = None, None, None, None
-    carry_wc = np.zeros(0, np.int64)
-    carry_w = np.zeros(0, np.int64)
-    acc_t, acc_a = [], []
-    rows, all_err, prev_ev = [], [], None
-    totals = {"peaks": 0, "fifo_words": 0, "fifo_dropped": 0, "rx": {}}
-    t_fe = t_link = t_dsp = 0.0
-    with ProcessPoolExecutor(max_workers=1) as pool:
+    batch_cycles = int(round(batch_s * fs))
+    spc = int(round(loop_s * fs)) // svc.period_cycles
+    loop_cycles = spc * svc.period_cycles
+    if (n_blocks < 1 or abs(n_blocks * block_s - simulated_s) > 1e-9 or spc < 1
+            or batch_cycles % loop_cycles or (n_blocks * n_blk) % batch_cycles):
+        raise ValueError(f"dsp-hour needs a whole number of {block_s} s blocks, of "
+                         f"{batch_s} s batches and of {loop_s} s loop periods (whole DSP "
+                         f"services) in {simulated_s} s")
+    dsp = _TacanBatchDsp(params, rc, fs, batch_cycles, loop_cycles, bearing, t_start)
+    t_feed = 0.0
+    with open_frontend("model", params) as fe, ProcessPoolExecutor(max_workers=1) as pool:
+        pipe = Pipeline(fe, svc, dsp, services_per_call=spc, keep_words=False)
         fut = pool.submit(_if_block, 0, block_s, bearing, snr)
         for k in range(n_blocks):
             x = fut.result()
             if k + 1 < n_blocks:     # generate the next block while this one is processed
                 fut = pool.submit(_if_block, k + 1, block_s, bearing, snr)
             t0 = time.perf_counter()
-            pk, fe_state = fe.run(x, fe_state)
+            pipe.feed(x)
+            t_feed += time.perf_counter() - t0
             del x
-            t1 = time.perf_counter()
-            wc = np.r_[carry_wc, fe.peak_cycles(pk)]
-            w = np.r_[carry_w, fe.words(pk)]
-            c0, c1 = k * n_blk, (k + 1) * n_blk
-            now = wc < c1                   # written to the FIFO within this block's cycles
-            carry_wc, carry_w = wc[~now], w[~now]
-            res = run_link(wc[now], w[now], c1 - c0, params.fifo, svc, state=link_state)
-            link_state = res.state
-            ts, amp, rx_state = receive_words(res.words, width=params.fifo.width,
-                                              amp_width=params.peak.amp_width,
-                                              ts_bits=params.peak.ts_bits, state=rx_state,
-                                              parity=params.fifo.parity)
-            t2 = time.perf_counter()
-            acc_t.append(ts + np.int64(params.decimation - 1))
-            acc_a.append(amp)
-            totals["peaks"] += int(pk.amplitudes.size)
-            totals["fifo_words"] += int(res.words.size)
-            t_fe += t1 - t0
-            t_link += t2 - t1
-            if (k + 1) * block_s % minute_s == 0:
-                t3 = time.perf_counter()
-                ticks = np.concatenate(acc_t)
-                y = amplitude_codes(np.concatenate(acc_a), params.scale_to_fs, rc.kalman.y)
-                acc_t, acc_a = [], []
-                tr = process_peaks(ticks / fs, y, rc, ticks=ticks, tick_hz=fs, state=dsp_state)
-                dsp_state = tr.state
-                t_dsp += time.perf_counter() - t3
-                keep = tr.times_s >= settle
-                err = wrap_deg(tr.bearing_deg[0, keep] - bearing)
-                all_err.append(err)
-                kf = dsp_state.kf
-                P = kf.P_float()[0]
-                ev = {k2: int(v[0]) for k2, v in tr.events.items()}
-                new_ev = ev if prev_ev is None else {k2: ev[k2] - prev_ev[k2] for k2 in ev}
-                prev_ev = ev
-                rows.append({"minute": len(rows) + 1, "bearings": int(err.size),
-                             "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if err.size else None,
-                             "max_abs_error_deg": float(np.abs(err).max()) if err.size else None,
-                             "P_min_eig": float(np.linalg.eigvalsh(P).min()),
-                             "P_symmetric": bool((kf.P[0] == kf.P[0].T).all()),
-                             "fifo_dropped": int(link_state.overflow),
-                             "events": {k2: v for k2, v in new_ev.items() if v}})
-                print(f"minute {len(rows)}: {rows[-1]['bearings']} bearings, RMSE "
-                      f"{rows[-1]['rmse_deg']:.3f} deg, P min eig {rows[-1]['P_min_eig']:.3g}, "
-                      f"{time.perf_counter() - t_start:.0f} s", flush=True)
-    err = np.concatenate(all_err)
-    ev_total = prev_ev or {}
-    totals["fifo_dropped"] = int(link_state.overflow)
-    totals["rx"] = dict(rx_state.stats)
+        res = pipe.result()
+        n_peaks = fe.n_peaks
+    err = np.concatenate(dsp.all_err)
+    ev_total = dsp.prev_ev or {}
+    rows, dsp_state = dsp.rows, dsp.dsp_state
+    totals = {"peaks": int(n_peaks), "fifo_words": int(res.n_words),
+              "fifo_dropped": int(res.overflow_count), "rx": dict(dsp.rx_state.stats)}
     simulated = n_blocks * block_s
     elapsed = time.perf_counter() - t_start
     summary = {
         "benchmark": "dsp-hour", "machine": machine_info(), "quick": quick,
         "elapsed_s": elapsed,
-        "scenario": {"simulated_s": simulated, "block_s": block_s, "snr_db": snr,
+        "scenario": {"simulated_s": simulated, "block_s": block_s, "batch_s": batch_s,
+                     "loop_s": loop_s, "snr_db": snr,
                      "bearing_deg": bearing, "mode": "X", "dsp": "fixed",
-                     "chain": "IF signal (3 s records played back to back) -> bit-exact HDL "
-                              "front-end model -> FIFO/link model (default DSP service) -> "
-                              "DSP FIFO receiver (32-bit timestamps unwrapped) -> fixed-point "
-                              "DSP (1-minute batches)"},
+                     "chain": f"IF signal ({block_s:g} s records played back to back) -> "
+                              f"streaming pipeline: bit-exact HDL front-end model session -> "
+                              f"FIFO model (default DSP service) -> DSP FIFO receiver every "
+                              f"{loop_s:g} s (32-bit timestamps unwrapped) -> fixed-point "
+                              f"DSP ({batch_s:g} s batches)"},
         "updates": int(dsp_state.kf.n_updates),
         "bearings": int(err.size),
-        "rmse_deg": float(np.sqrt(np.mean(err ** 2))),
-        "max_abs_error_deg": float(np.abs(err).max()),
+        "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if err.size else None,
+        "max_abs_error_deg": float(np.abs(err).max()) if err.size else None,
         "P_min_eig_min": min(r["P_min_eig"] for r in rows),
         "P_always_symmetric": all(r["P_symmetric"] for r in rows),
         "events_total": ev_total,
         "totals": totals,
+        "digest": res.digest,
         "timestamp_wraps": int(simulated * fs / 2 ** params.peak.ts_bits),
-        "seconds": {"frontend_model": t_fe, "link_and_rx": t_link, "dsp": t_dsp},
+        "seconds": {"frontend_model": t_feed - dsp.t_rx - dsp.t_dsp, "link_and_rx": dsp.t_rx,
+                    "dsp": dsp.t_dsp},
         "diverged": bool(ev_total.get("reinit", 0) or ev_total.get("p_neg", 0)),
         "minutes": rows,
     }
-    _write(out, "dsp_hour", summary, _hour_md(summary))
+    if out is not None:
+        _write(out, "dsp_hour", summary, _hour_md(summary))
     return summary
+
+
+def _f3(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
 
 
 def _hour_md(s: dict) -> str:
     m = s["machine"]
     ev = ", ".join(f"{k} {v}" for k, v in s["events_total"].items() if v) or "none"
     sec = s["seconds"]
-    return (f"One simulated hour through the bit-exact chain (`{m['command']}`, {m['date']}, "
+    sim_s = s["scenario"]["simulated_s"]
+    what = "One simulated hour" if sim_s == 3600 else f"{sim_s:g} simulated seconds"
+    return (f"{what} through the bit-exact chain (`{m['command']}`, {m['date']}, "
             f"{m['cpu']}, commit {m['commit']}, {s['elapsed_s']:.0f} s wall)\n\n"
             f"{s['scenario']['chain']}; SNR {s['scenario']['snr_db']:g} dB, bearing "
             f"{s['scenario']['bearing_deg']:g} deg.\n\n"
             f"{s['scenario']['simulated_s']:.0f} s simulated ({s['timestamp_wraps']} timestamp "
             f"wraps), {s['totals']['peaks']:,} peaks, {s['updates']:,} Kalman updates, "
-            f"{s['bearings']:,} bearings: RMSE {s['rmse_deg']:.3f} deg, worst "
-            f"{s['max_abs_error_deg']:.3f} deg; FIFO drops {s['totals']['fifo_dropped']}; "
+            f"{s['bearings']:,} bearings: RMSE {_f3(s['rmse_deg'])} deg, worst "
+            f"{_f3(s['max_abs_error_deg'])} deg; FIFO drops {s['totals']['fifo_dropped']}; "
             f"smallest eigenvalue of P over the run {s['P_min_eig_min']:.3g} (> 0: positive "
             f"definite), P symmetric: {s['P_always_symmetric']}; core events: {ev}; "
-            f"diverged: {s['diverged']}. Time: front-end model {sec['frontend_model']:.0f} s, "
-            f"link + FIFO receiver {sec['link_and_rx']:.0f} s, DSP {sec['dsp']:.0f} s (the IF "
+            f"diverged: {s['diverged']}. Time: front-end and FIFO models "
+            f"{sec['frontend_model']:.0f} s, "
+            f"FIFO receiver {sec['link_and_rx']:.0f} s, DSP {sec['dsp']:.0f} s (the IF "
             f"generation runs in a second process).\n")
 
 

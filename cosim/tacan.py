@@ -33,7 +33,7 @@ from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, b
                                 crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.fifo_rx import receive_words
-from .link import ControlPath, DspServiceConfig, run_link
+from .link import ControlPath, DspServiceConfig
 from .tacan_signal import TacanSignalConfig, generate
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
@@ -244,43 +244,53 @@ def _dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
                           extra={"rx": dict(rx.stats)})
 
 
-def _model(samples, run: TacanRunConfig) -> FrontendOutput:
-    from hdl.model.tacan_frontend import TacanFrontendModel
+def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOutput:
+    """An HDL backend's output for one record, on the streaming pipeline: a front-end
+    session (:func:`cosim.session.open_frontend`) fed the record and ``_n_cycles - len``
+    idle cycles to flush the last peak, the DSP reading with ``run.service``, the
+    ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after)."""
+    from .pipeline import Pipeline
+    from .session import open_frontend
     p = run.hdl_params
     n_cycles = _n_cycles(samples, p)
     ctl = _freq_segments(run, p, n_cycles)
-    # The ADC delivers one sample per cycle from reset, so a write taking effect at cycle c
-    # changes the NCO word from ADC sample c on.
-    changes = sorted(dict((c, v) for c, _, v in ctl.writes()).items())   # last write wins
-    m = TacanFrontendModel(p, log_ranges=True)
-    peaks, _ = m.run(samples, freq_changes=changes or None)
-    res = run_link(m.peak_cycles(peaks), m.words(peaks), n_cycles, p.fifo, run.service)
-    fo = _dsp_receive(res.words, res.read_cycles, p, n_cycles, res.dropped)
-    fo.extra["ranges"] = m.ranges()
-    fo.extra["fifo_max_level"] = int(res.max_level)
+    # One ADC sample per cycle from reset: a write taking effect at cycle c changes the NCO
+    # word from ADC sample c on, on every backend.
+    writes = [(c, "freq", v) for c, _, v in ctl.writes()]
+    with open_frontend(backend, p, log_ranges=backend == "model",
+                       vcd=run.trace if backend == "pysim" else None) as fe:
+        pipe = Pipeline(fe, run.service)
+        pipe.schedule(writes)
+        pipe.feed(samples)
+        pipe.idle(n_cycles - len(samples))
+        res = pipe.result()
+        fo = _dsp_receive(res.words, res.cycles, p, n_cycles, res.overflow_count)
+        if backend == "model":
+            fo.extra["ranges"] = fe.ranges()
+            fo.extra["fifo_max_level"] = int(fe.fifo_state.max_level)
     return fo
 
 
+def _model(samples, run: TacanRunConfig) -> FrontendOutput:
+    return _session_frontend(samples, run, "model")
+
+
 def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
+    if kind == "pysim" or run.trace is None:
+        return _session_frontend(samples, run, kind)
+    # A Verilator waveform needs the one-shot run (a session's time base is per step).
     from hdl.tacan_frontend import TacanFrontEnd
+    from .verilator import VerilatorStreamSim
     p = run.hdl_params
     n_cycles = _n_cycles(samples, p)
     ctl = _freq_segments(run, p, n_cycles)
     ready = run.service.ready_mask(n_cycles)
-    dut = TacanFrontEnd(p)
     writes = [(c, "freq", v) for c, _, v in ctl.writes()]
-    final = {"overflow_count": "overflow_count"}
-    if kind == "pysim":
-        from .pysim import run_stream
-        res = run_stream(dut, samples, out_ready=ready, n_cycles=n_cycles,
-                         inputs={"freq": p.nco_freq_word}, writes=writes, final=final,
-                         vcd=run.trace)
-    else:
-        from .verilator import VerilatorStreamSim
-        sim = VerilatorStreamSim(dut, name="tacan_frontend")
-        res = sim.run(samples, out_ready=ready, n_cycles=n_cycles,
-                      inputs={"freq": p.nco_freq_word}, writes=writes, final=final,
-                      trace=run.trace, trace_window=run.trace_window)
+    sim = VerilatorStreamSim(TacanFrontEnd(p), name="tacan_frontend")
+    res = sim.run(samples, out_ready=ready, n_cycles=n_cycles,
+                  inputs={"freq": p.nco_freq_word}, writes=writes,
+                  final={"overflow_count": "overflow_count"},
+                  trace=run.trace, trace_window=run.trace_window)
     return _dsp_receive(res.words, res.cycles, p, n_cycles, res.final["overflow_count"])
 
 

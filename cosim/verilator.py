@@ -856,3 +856,108 @@ class VerilatorStreamSim:
                                                p.signed).astype(np.int64)
         return StreamResult(words=words, cycles=cycles, n_cycles=int(a.cyc),
                             in_accepted=int(a.accepted), probes=probes, final=final_vals)
+
+    def open(self, inputs: dict | None = None) -> VerilatorSession:
+        """A :class:`VerilatorSession` of this build: the Verilated model created once, reset,
+        ``inputs`` set (as in :meth:`run`), and kept alive between steps."""
+        return VerilatorSession(self, inputs=inputs)
+
+
+# -- persistent sessions ---------------------------------------------------------------------
+# Imported here, not at the top: cosim.session imports nothing from this module at load time.
+from .session import FrontendSession, ready_window  # noqa: E402
+
+__all__ += ["VerilatorSession"]
+
+
+class VerilatorSession(FrontendSession):
+    """The compiled model of a :class:`VerilatorStreamSim` kept alive across steps.
+
+    The harness's ``sim_run`` is called once per step (and at each write inside it) with the
+    step's words and ``ready`` pattern, counting that call's cycles from 0; the model, its
+    registers and the payload it was last offered persist between calls, so N steps give the
+    bits of one :meth:`VerilatorStreamSim.run` (same per-cycle protocol). Implements
+    :class:`cosim.session.FrontendSession`. No waveform (a trace's time base is per call:
+    use :meth:`VerilatorStreamSim.run` with ``trace=``).
+    """
+
+    backend = "verilator"
+
+    def __init__(self, sim: VerilatorStreamSim, inputs: dict | None = None):
+        super().__init__()
+        self.sim = sim
+        self._lib = sim._libs[""]
+        self._handle = None
+        self._has_in = "i__valid" in sim._by_name
+        self._pin = sim.ports[sim._by_name["i__payload"]] if "i__payload" in sim._by_name \
+            else None
+        self._pout = sim.ports[sim._by_name["o__payload"]]
+        const = [(sim._input_index(p), int(v)) for p, v in _items(inputs)]
+        self._handle = self._lib.sim_new(None)
+        for idx, v in const:
+            self._lib.sim_set(self._handle, idx, v & 0xFFFF_FFFF_FFFF_FFFF)
+
+    def _check_port(self, port) -> None:
+        self.sim._input_index(port)
+
+    def _read(self, port):
+        idx = self.sim.port_index(port)
+        p = self.sim.ports[idx]
+        raw = np.array([self._lib.sim_get(self._handle, idx)], dtype=np.uint64)
+        return int(self.sim._from_u64(raw, p.width, p.signed)[0])
+
+    def _step(self, queue, ready, n, writes):
+        sim, lib = self.sim, self._lib
+        start = self.cycle
+        if not self._has_in:
+            words_u64 = np.zeros(0, dtype=np.uint64)
+        elif self._pin is not None:
+            words_u64 = sim._to_u64(queue, self._pin.width)
+        else:       # zero-width payload: only the number of words matters
+            words_u64 = np.zeros(len(queue), dtype=np.uint64)
+        r = ready_window(ready, start, n)
+        ready_u8 = np.zeros(0, np.uint8) if r is None else np.ascontiguousarray(r.astype(np.uint8))
+        valid_u8 = np.zeros(0, np.uint8)
+        wl = [(c - start, sim._input_index(p), v) for c, p, v in writes]
+        a = _RunArgs()
+        a.in_words, a.n_in, a.has_in = words_u64.ctypes.data, len(words_u64), int(self._has_in)
+        a.in_valid, a.n_valid = valid_u8.ctypes.data, 0
+        a.out_ready, a.n_ready = ready_u8.ctypes.data, len(ready_u8)
+        a.n_cycles = n
+        a.cyc, a.accepted, a.flush_left = 0, 0, 0
+        a.trace_start, a.trace_stop = 0, 0
+        probe_idx = np.zeros(1, np.int32)
+        probe_buf = np.zeros((1, 1), np.uint64)
+        a.probe_idx, a.n_probe, a.probe_buf = probe_idx.ctypes.data, 0, probe_buf.ctypes.data
+        cap = max(1, min(_OUT_CHUNK, n))
+        chunks: list[tuple[np.ndarray, np.ndarray]] = []
+
+        def new_out():
+            ow, oc = np.empty(cap, np.uint64), np.empty(cap, np.int64)
+            chunks.append((ow, oc))
+            a.out_words, a.out_cycles, a.out_cap, a.n_out = ow.ctypes.data, oc.ctypes.data, cap, 0
+        new_out()
+        w = 0
+        while True:
+            while w < len(wl) and wl[w][0] <= a.cyc:
+                lib.sim_set(self._handle, wl[w][1], wl[w][2] & 0xFFFF_FFFF_FFFF_FFFF)
+                w += 1
+            a.stop_cycle = a.cyc + _CHUNK_CYCLES
+            if w < len(wl):
+                a.stop_cycle = min(a.stop_cycle, wl[w][0])
+            status = lib.sim_run(self._handle, ctypes.byref(a))
+            if status == _STATUS_DONE:
+                break
+            if status == _STATUS_FULL:
+                chunks[-1] = (chunks[-1][0][:a.n_out], chunks[-1][1][:a.n_out])
+                new_out()
+        chunks[-1] = (chunks[-1][0][:a.n_out], chunks[-1][1][:a.n_out])
+        raw = np.concatenate([ow for ow, _ in chunks])
+        cycles = np.concatenate([oc for _, oc in chunks]) + np.int64(start)
+        words = sim._from_u64(raw, self._pout.width, self._pout.signed)
+        return words, cycles, int(a.accepted) if self._has_in else 0
+
+    def _close(self):
+        if self._handle is not None:
+            self._lib.sim_free(self._handle)
+            self._handle = None
