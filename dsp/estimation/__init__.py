@@ -1,0 +1,8 @@
+"""Estimation library: linear Kalman, unscented Kalman and alpha-beta(-gamma) filters, each
+one source that runs float64 (golden), float32 or fixed point by configuration."""
+from .events import EventRegistry
+from .kalman import KalmanFilter, KalmanFormats, KalmanRun
+from .models import LinearGaussianModel, white_acceleration, white_jerk
+
+__all__ = ["EventRegistry", "KalmanFilter", "KalmanFormats", "KalmanRun", "LinearGaussianModel",
+           "white_acceleration", "white_jerk"]
