@@ -108,7 +108,7 @@ class KalmanFormats(FormatTable):
     A: FixedFormat = fmt(24, 20)
     M: FixedFormat = fmt(32, 26)
     PH: FixedFormat = fmt(32, 26)
-    G: FixedFormat = fmt(24, 16)
+    G: FixedFormat = fmt(32, 28)
 
     def __post_init__(self):
         self.validate()
