@@ -462,12 +462,13 @@ class KalmanFilter:
     def _inputs(self, z, u, T):
         m, p = self.model.m, self.model.p
         z = np.asarray(z, dtype=np.float64)
+        shape = z.shape
         if z.ndim == 1 and m == 1:
             z = z[:, None]
         if z.ndim == 2:
             z = np.broadcast_to(z, (self.trials,) + z.shape)
         if z.ndim != 3 or z.shape[0] != self.trials or z.shape[2] != m:
-            raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {np.shape(z)}")
+            raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
         T = z.shape[1]
         ok = np.all(np.isfinite(z), axis=2)
         lim = self.z_limit
