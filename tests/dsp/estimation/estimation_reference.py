@@ -215,3 +215,48 @@ def kf_step(ar, x, P, z, u, F, B, H, Q, R):
                 v = ar.zero
             Pn[i][j] = Pn[j][i] = v
     return xn, Pn
+
+
+class AlphaBetaRef:
+    """The alpha-beta(-gamma) tracker of :mod:`dsp.estimation.alphabeta` step by step
+    (per-sample units); ``ar`` an :class:`IntArith` or :class:`F32Arith`."""
+
+    def __init__(self, ar, x, c, consts, window, adaptive):
+        self.ar, self.x, self.c = ar, list(x), list(c)
+        self.rv, self.amin, self.amax, self.one, self.nw = consts
+        self.ring, self.pos, self.cnt = [ar.zero] * window, 0, 0
+        self.adaptive = adaptive
+
+    def step(self, z):
+        ar, x, n = self.ar, self.x, len(self.x)
+        if n == 3:
+            xp = [ar.store(x[0] + x[1] + x[2], 0, "x"), ar.store(x[1] + x[2] + x[2], 0, "x"), x[2]]
+        else:
+            xp = [ar.store(x[0] + x[1], 0, "x"), x[1]]
+        if z is None:
+            self.x = xp
+            return
+        fr = ar.fr
+        e = ar.store(ar.align(z, fr("x") - fr("z")) - xp[0], fr("x") - fr("e"), "e")
+        if self.adaptive:
+            self.ring[self.pos] = ar.store(e * e, 2 * fr("e") - fr("s"), "s")
+            self.pos = (self.pos + 1) % len(self.ring)
+            self.cnt += 1
+            if self.cnt >= len(self.ring):
+                acc = ar.zero
+                for v in self.ring:
+                    acc += v
+                Sm = ar.div(acc * (1 << 0) if isinstance(acc, int) else acc, self.nw, "s")
+                if Sm > 0:
+                    ratio = ar.div(self.rv << fr("c") if isinstance(self.rv, int) else self.rv, Sm, "c")
+                    al = min(max(self.one - ratio, self.amin), self.amax)
+                else:
+                    al = self.amin
+                v = self.one - al
+                rr = ar.sqrt(v << fr("c") if isinstance(v, int) else v, "c")
+                d = self.one - rr
+                self.c[0] = al
+                self.c[1] = ar.store(d * d + d * d, fr("c"), "c")
+        a = fr("c") + fr("e")
+        self.x = [ar.store(ar.align(xp[i], a - fr("x")) + self.c[i] * e, a - fr("x"), "x")
+                  for i in range(n)]
