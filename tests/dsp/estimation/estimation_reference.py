@@ -260,3 +260,109 @@ class AlphaBetaRef:
         a = fr("c") + fr("e")
         self.x = [ar.store(ar.align(xp[i], a - fr("x")) + self.c[i] * e, a - fr("x"), "x")
                   for i in range(n)]
+
+
+def ukf_step_f32(x, P, z, F, H, Q, R, wm, wc, c):
+    """One additive-noise UKF step (sigma points redrawn for h) on a linear model, numpy
+    float32 scalars in the kernel's order (lists in, lists out)."""
+    n, m = len(x), len(H)
+    z0 = np.float32(0)
+
+    def chol(A):
+        k = len(A)
+        L = [[z0] * k for _ in range(k)]
+        for j in range(k):
+            acc = A[j][j]
+            for l in range(j):
+                acc -= L[j][l] * L[j][l]
+            L[j][j] = np.sqrt(acc)
+            for i in range(j + 1, k):
+                acc = A[i][j]
+                for l in range(j):
+                    acc -= L[i][l] * L[j][l]
+                L[i][j] = acc / L[j][j]
+        return L
+
+    def points(mean, cov):
+        L = chol([[c * cov[i][j] for j in range(n)] for i in range(n)])
+        X = [list(mean)]
+        X += [[mean[j] + L[j][i] for j in range(n)] for i in range(n)]
+        X += [[mean[j] - L[j][i] for j in range(n)] for i in range(n)]
+        return X
+
+    def lin(M, v, noise):
+        out = []
+        for i in range(len(M)):
+            acc = noise
+            for j in range(len(v)):
+                acc += M[i][j] * v[j]
+            out.append(acc)
+        return out
+
+    ns = 2 * n + 1
+    Xf = [lin(F, s, z0) for s in points(x, P)]
+    xm = []
+    for i in range(n):
+        acc = z0
+        for s in range(ns):
+            acc += wm[s] * Xf[s][i]
+        xm.append(acc)
+    Pp = [[None] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            acc = z0
+            for s in range(ns):
+                acc += wc[s] * (Xf[s][i] - xm[i]) * (Xf[s][j] - xm[j])
+            Pp[i][j] = Pp[j][i] = acc + Q[i][j]
+    Xf = points(xm, Pp)
+    Zs = [lin(H, s, z0) for s in Xf]
+    zp = []
+    for r in range(m):
+        acc = z0
+        for s in range(ns):
+            acc += wm[s] * Zs[s][r]
+        zp.append(acc)
+    S = [[None] * m for _ in range(m)]
+    for r in range(m):
+        for q in range(r, m):
+            acc = z0
+            for s in range(ns):
+                acc += wc[s] * (Zs[s][r] - zp[r]) * (Zs[s][q] - zp[q])
+            S[r][q] = S[q][r] = acc + R[r][q]
+    Pxz = [[None] * m for _ in range(n)]
+    for i in range(n):
+        for r in range(m):
+            acc = z0
+            for s in range(ns):
+                acc += wc[s] * (Xf[s][i] - xm[i]) * (Zs[s][r] - zp[r])
+            Pxz[i][r] = acc
+    Ls = chol(S)
+    W = [[None] * n for _ in range(m)]
+    for r in range(m):
+        for j in range(n):
+            acc = Pxz[j][r]
+            for l in range(r):
+                acc -= Ls[r][l] * W[l][j]
+            W[r][j] = acc / Ls[r][r]
+    K = [[None] * m for _ in range(n)]
+    for r in range(m - 1, -1, -1):
+        for j in range(n):
+            acc = W[r][j]
+            for l in range(r + 1, m):
+                acc -= Ls[l][r] * K[j][l]
+            K[j][r] = acc / Ls[r][r]
+    xn = []
+    for i in range(n):
+        acc = xm[i]
+        for r in range(m):
+            acc += K[i][r] * (z[r] - zp[r])
+        xn.append(acc)
+    Pn = [[None] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            acc = Pp[i][j]
+            for r in range(m):
+                for q in range(m):
+                    acc -= K[i][r] * S[r][q] * K[j][q]
+            Pn[i][j] = Pn[j][i] = acc
+    return xn, Pn
