@@ -276,7 +276,7 @@ class AlphaBetaFilter:
             zz = np.zeros(len(SIGNALS), np.int64)
             self.fr, self.lo, self.hi, self.hf = zz, zz, zz, zz
             self.x = x0.astype(dt)
-            self.c = np.broadcast_to(coef, (self.trials, 3)).astype(dt)
+            self.c = np.array(np.broadcast_to(coef, (self.trials, 3)), dtype=dt, order="C")
             self.consts = consts.astype(dt)
         self.ring = np.zeros((self.trials, window), dt)
         self.rpos = np.zeros(self.trials, np.int64)

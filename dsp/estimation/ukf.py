@@ -412,8 +412,8 @@ class UnscentedKalmanFilter:
         if P0.shape not in ((n, n), (self.trials, n, n)):
             raise ValueError(f"P0 must have shape ({n}, {n}) or ({self.trials}, {n}, {n}), not {P0.shape}")
         check_psd("P0", np.broadcast_to(P0, (self.trials, n, n)))
-        self.x = np.broadcast_to(x0, (self.trials, n)).astype(dt)
-        self.P = np.broadcast_to(P0, (self.trials, n, n)).astype(dt)
+        self.x = np.array(np.broadcast_to(x0, (self.trials, n)), dtype=dt, order="C")
+        self.P = np.array(np.broadcast_to(P0, (self.trials, n, n)), dtype=dt, order="C")
         self._w = (wm.astype(dt), wc.astype(dt), np.array([c], dt), np.array([p_floor], dt))
         Lq, Lr = (np.sqrt(c) * psd_sqrt(a) for a in (model.Q, model.R))
         self._mats = tuple(np.ascontiguousarray(a, dtype=dt) for a in
