@@ -85,6 +85,8 @@ def test_fixed_bit_exact_against_unbounded_integers(seed, n, m, p, tv):
     np.testing.assert_array_equal(kf.P[0], P)
     assert run.events["implausible"] == 1
     assert {s: run.events[f"sat_{s}"] for s in SIGNALS} == ar.sat
+    lo, hi = EVENTS.ranges(kf.ev, fm.fracs())["x"]      # the range log saw every stored x
+    assert lo <= run.x.min() and hi >= run.x.max()
 
 
 def test_fixed_saturation_counted_like_the_reference():
