@@ -57,7 +57,8 @@ from .events import EventRegistry
 from .formats import (FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift,
                       sum_bits, to_fixed)
 from .models import LinearGaussianModel, MAX_STATES, check_psd
-from .ops import align, div_q, flip, sqrt_q, store
+from .linalg import chol_q, matmul_q, solve_lower_q, solve_upper_t_q
+from .ops import align, flip, store
 
 
 @dataclass(frozen=True)
@@ -230,12 +231,7 @@ def _kf_kernel(x, P, z, zok, u, uok, F, B, H, Q, R, k0, fr, lo, hi, hf, wd, one,
                         acc2 += B[kB, i, l] * u[b, k, l]
                 acc = align(acc, c - fr[_F] - fr[_X]) + align(acc2, c - fr[_B] - fr[_U])
                 xp[i] = store(acc, c - fr[_X], hf[_X], lo[_X], hi[_X], eb, _X, _BASE)
-            for i in range(n):
-                for j in range(n):
-                    acc = z0
-                    for l in range(n):
-                        acc += F[kF, i, l] * P[b, l, j]
-                    Mt[i, j] = store(acc, fr[_F] + fr[_P] - fr[_M], hf[_M], lo[_M], hi[_M], eb, _M, _BASE)
+            matmul_q(F[kF], P[b], Mt, False, fr[_F] + fr[_P] - fr[_M], hf[_M], lo[_M], hi[_M], eb, _M, _BASE)
             a = fr[_M] + fr[_F]
             for i in range(n):
                 for j in range(i, n):
@@ -260,12 +256,7 @@ def _kf_kernel(x, P, z, zok, u, uok, F, B, H, Q, R, k0, fr, lo, hi, hf, wd, one,
                     for j in range(n):
                         acc -= H[kH, r, j] * xp[j]
                     e[r] = store(acc, a - fr[_E], hf[_E], lo[_E], hi[_E], eb, _E, _BASE)
-                for i in range(n):
-                    for r in range(m):
-                        acc = z0
-                        for j in range(n):
-                            acc += Pp[i, j] * H[kH, r, j]
-                        PH[i, r] = store(acc, fr[_P] + fr[_H] - fr[_PH], hf[_PH], lo[_PH], hi[_PH], eb, _PH, _BASE)
+                matmul_q(Pp, H[kH], PH, True, fr[_P] + fr[_H] - fr[_PH], hf[_PH], lo[_PH], hi[_PH], eb, _PH, _BASE)
                 a = fr[_H] + fr[_PH]
                 for r in range(m):
                     for c2 in range(r, m):
@@ -276,22 +267,7 @@ def _kf_kernel(x, P, z, zok, u, uok, F, B, H, Q, R, k0, fr, lo, hi, hf, wd, one,
                         v = store(acc, a - fr[_S], hf[_S], lo[_S], hi[_S], eb, _S, _BASE)
                         S[r, c2] = v
                         S[c2, r] = v
-                # -- Cholesky of S
-                ok = True
-                a = 2 * fr[_L]
-                for j in range(m):
-                    acc = align(S[j, j], a - fr[_S])
-                    for l in range(j):
-                        acc -= L[j, l] * L[j, l]
-                    if not acc > z0:
-                        ok = False
-                        break
-                    L[j, j] = sqrt_q(acc, 0, hf[_L], hi[_L], eb, _L, _EV_SNPD, _BASE)
-                    for i in range(j + 1, m):
-                        acc = align(S[i, j], a - fr[_S])
-                        for l in range(j):
-                            acc -= L[i, l] * L[j, l]
-                        L[i, j] = div_q(acc, L[j, j], 0, hf[_L], lo[_L], hi[_L], eb, _L, _EV_SNPD, _BASE)
+                ok = chol_q(S, L, 2 * fr[_L] - fr[_S], hf[_L], lo[_L], hi[_L], eb, _L, _EV_SNPD, _BASE)
                 if not ok:
                     eb[_EV_SNPD] += 1
                     for i in range(n):
@@ -300,20 +276,10 @@ def _kf_kernel(x, P, z, zok, u, uok, F, B, H, Q, R, k0, fr, lo, hi, hf, wd, one,
                             P[b, i, j] = Pp[i, j]
                 else:
                     # -- gain: W = L^-1 PH^T, K^T = L^-T W
-                    a = fr[_L] + fr[_W]
-                    for r in range(m):
-                        for j in range(n):
-                            acc = align(PH[j, r], a - fr[_PH])
-                            for l in range(r):
-                                acc -= L[r, l] * W[l, j]
-                            W[r, j] = div_q(acc, L[r, r], 0, hf[_W], lo[_W], hi[_W], eb, _W, _EV_SNPD, _BASE)
-                    a = fr[_L] + fr[_K]
-                    for r in range(m - 1, -1, -1):
-                        for j in range(n):
-                            acc = align(W[r, j], a - fr[_W])
-                            for l in range(r + 1, m):
-                                acc -= L[l, r] * K[j, l]
-                            K[j, r] = div_q(acc, L[r, r], 0, hf[_K], lo[_K], hi[_K], eb, _K, _EV_SNPD, _BASE)
+                    solve_lower_q(L, PH, W, fr[_L] + fr[_W] - fr[_PH], hf[_W], lo[_W], hi[_W], eb, _W,
+                                  _EV_SNPD, _BASE)
+                    solve_upper_t_q(L, W, K, fr[_L] + fr[_K] - fr[_W], hf[_K], lo[_K], hi[_K], eb, _K,
+                                    _EV_SNPD, _BASE)
                     # -- state
                     a = fr[_K] + fr[_E]
                     for i in range(n):
@@ -329,18 +295,8 @@ def _kf_kernel(x, P, z, zok, u, uok, F, B, H, Q, R, k0, fr, lo, hi, hf, wd, one,
                             for r in range(m):
                                 acc -= K[i, r] * H[kH, r, j]
                             A[i, j] = store(acc, a - fr[_A], hf[_A], lo[_A], hi[_A], eb, _A, _BASE)
-                    for i in range(n):
-                        for j in range(n):
-                            acc = z0
-                            for l in range(n):
-                                acc += A[i, l] * Pp[l, j]
-                            Mt[i, j] = store(acc, fr[_A] + fr[_P] - fr[_M], hf[_M], lo[_M], hi[_M], eb, _M, _BASE)
-                    for i in range(n):
-                        for c2 in range(m):
-                            acc = z0
-                            for r in range(m):
-                                acc += K[i, r] * R[kR, r, c2]
-                            G[i, c2] = store(acc, fr[_K] + fr[_R] - fr[_G], hf[_G], lo[_G], hi[_G], eb, _G, _BASE)
+                    matmul_q(A, Pp, Mt, False, fr[_A] + fr[_P] - fr[_M], hf[_M], lo[_M], hi[_M], eb, _M, _BASE)
+                    matmul_q(K, R[kR], G, False, fr[_K] + fr[_R] - fr[_G], hf[_G], lo[_G], hi[_G], eb, _G, _BASE)
                     c = max(fr[_M] + fr[_A], fr[_G] + fr[_K])
                     for i in range(n):
                         for j in range(i, n):
