@@ -39,7 +39,7 @@ from ..fixed import FixedFormat
 from .events import EventRegistry
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
 from .models import white_acceleration, white_jerk
-from .ops import align, div_q, sqrt_q, store
+from .ops import align, div_q, flip, sqrt_q, store
 
 
 def tracking_index(T_s: float, sigma_w: float, sigma_v: float) -> float:
@@ -120,16 +120,17 @@ class AlphaBetaFormats(FormatTable):
 
 
 SIGNALS = AlphaBetaFormats.signals()
-EVENTS = EventRegistry(SIGNALS, ("implausible", "s_zero", "neg_sqrt"))
+EVENTS = EventRegistry(SIGNALS, ("implausible", "s_zero", "neg_sqrt", "upsets"))
 _Z, _X, _E, _C, _S = (SIGNALS.index(s) for s in ("z", "x", "e", "c", "s"))
 _EV_IMPL = EVENTS.index("implausible")
 _EV_SZ = EVENTS.index("s_zero")
 _EV_NSQ = EVENTS.index("neg_sqrt")
+_EV_UPS = EVENTS.index("upsets")
 _BASE = EVENTS.base
 
 
 @njit(cache=True)
-def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, ev, xs, cs):
+def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd, k0, ups, ev, xs, cs):
     """consts = [sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a number)]."""
     nb, n = x.shape
     T = z.shape[1]
@@ -140,6 +141,10 @@ def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, ev
     for b in range(nb):
         eb = ev[b]
         for k in range(T):
+            for r in range(ups.shape[0]):
+                if ups[r, 0] == k0 + k and ups[r, 1] == b:
+                    eb[_EV_UPS] += 1
+                    x[b, ups[r, 2]] = flip(x[b, ups[r, 2]], ups[r, 3], wd[_X])
             if n == 3:
                 xp[0] = store(x[b, 0] + x[b, 1] + x[b, 2], 0, 0, lo[_X], hi[_X], eb, _X, _BASE)
                 xp[1] = store(x[b, 1] + x[b, 2] + x[b, 2], 0, 0, lo[_X], hi[_X], eb, _X, _BASE)
@@ -264,7 +269,7 @@ class AlphaBetaFilter:
             fits("x0 (per-sample units)", x0, fm.x)
             fits("coefficients", coef, fm.c)
             fits("sigma_v^2", consts[:1], fm.s)
-            self.fr, self.lo, self.hi, self.hf, _ = fm.arrays()
+            self.fr, self.lo, self.hi, self.hf, self.wd = fm.arrays()
             self.x = to_fixed(x0, fm.x)
             self.c = np.broadcast_to(to_fixed(coef, fm.c), (self.trials, 3)).copy()
             self.consts = np.array([to_fixed(consts[0], fm.s), to_fixed(alpha_min, fm.c),
@@ -274,7 +279,7 @@ class AlphaBetaFilter:
             dt = np.float64 if self.kind == "float64" else np.float32
             self.formats = None
             zz = np.zeros(len(SIGNALS), np.int64)
-            self.fr, self.lo, self.hi, self.hf = zz, zz, zz, zz
+            self.fr, self.lo, self.hi, self.hf, self.wd = zz, zz, zz, zz, zz
             self.x = x0.astype(dt)
             self.c = np.array(np.broadcast_to(coef, (self.trials, 3)), dtype=dt, order="C")
             self.consts = consts.astype(dt)
@@ -282,12 +287,17 @@ class AlphaBetaFilter:
         self.rpos = np.zeros(self.trials, np.int64)
         self.rcnt = np.zeros(self.trials, np.int64)
         self.ev = EVENTS.new((self.trials,))
+        self.k = 0
 
     def counts(self) -> dict:
         return EVENTS.counts(self.ev)
 
-    def run(self, z) -> AlphaBetaRun:
-        """Track ``T`` measurements ``z`` (``(T,)`` or ``(B, T)``)."""
+    def run(self, z, *, upsets=None) -> AlphaBetaRun:
+        """Track ``T`` measurements ``z`` (``(T,)`` or ``(B, T)``).
+
+        ``upsets`` (fixed point only): ``(U, 4)`` rows ``(step, trial, element, bit)``, a bit
+        flip of the per-sample state word ``x[element]`` before step ``step`` (global count).
+        """
         z = np.asarray(z, dtype=np.float64)
         shape = z.shape
         if z.ndim == 1:
@@ -305,10 +315,21 @@ class AlphaBetaFilter:
         zc = np.where(ok, z, 0.0)
         zc = to_fixed(zc, self.formats.z) if self.kind == "fixed" else zc.astype(self.x.dtype)
         T = z.shape[1]
+        if upsets is None:
+            ups = np.zeros((0, 4), np.int64)
+        else:
+            if self.kind != "fixed":
+                raise ValueError("upsets flip bits of fixed-point state words; use an AlphaBetaFormats arithmetic")
+            ups = np.asarray(upsets, dtype=np.int64).reshape(-1, 4)
+            for row in ups:
+                if not (0 <= row[1] < self.trials and 0 <= row[2] < self.n and 0 <= row[3] < self.formats.x.width):
+                    raise ValueError(f"upset (step, trial, element, bit) out of range: {row.tolist()}")
         xs = np.empty((self.trials, T, self.n), self.x.dtype)
         cs = np.empty((self.trials, T, 2), self.x.dtype)
         _ab_kernel(self.x, self.c, np.ascontiguousarray(zc), ok, self.adaptive, self.ring, self.rpos,
-                   self.rcnt, self.consts, self.fr, self.lo, self.hi, self.hf, self.ev, xs, cs)
+                   self.rcnt, self.consts, self.fr, self.lo, self.hi, self.hf, self.wd, self.k, ups,
+                   self.ev, xs, cs)
+        self.k += T
         unit = np.array([1.0, 1.0 / self.T_s, 2.0 / self.T_s ** 2][:self.n])
         if self.kind == "fixed":
             xs_f = xs * (2.0 ** -self.formats.x.frac) * unit

@@ -152,3 +152,22 @@ def test_bad_configuration_errors(kwargs, msg):
         AlphaBetaFilter(**args)
     with pytest.raises(ValueError, match=re.escape("the tracking index must be a finite number > 0, not -1")):
         kalata(-1)
+
+
+def test_fixed_state_upset_injected_counted_and_forgotten():
+    T_s = 0.01
+    z = _track(400, T_s, 8)
+    clean = AlphaBetaFilter(T_s, 0.3, 0.05, arithmetic=AlphaBetaFormats()).run(z)
+    f = AlphaBetaFilter(T_s, 0.3, 0.05, arithmetic=AlphaBetaFormats())
+    hit = f.run(z[:100])
+    hit2 = f.run(z[100:], upsets=[[150, 0, 0, 31]])      # position word bit 31 (+-8) at step 150
+    x = np.concatenate([hit.x, hit2.x], axis=1)
+    assert hit2.events["upsets"] == 1
+    np.testing.assert_array_equal(x[0, :150], clean.x[0, :150])
+    jump = abs(x[0, 150, 0] - clean.x[0, 150, 0])
+    assert jump > 1.0
+    assert abs(x[0, -1, 0] - clean.x[0, -1, 0]) < 1e-3 * jump
+    with pytest.raises(ValueError, match=re.escape("upset (step, trial, element, bit) out of range: [0, 0, 2, 1]")):
+        f.run(z[:2], upsets=[[0, 0, 2, 1]])
+    with pytest.raises(ValueError, match="upsets flip bits of fixed-point state words"):
+        AlphaBetaFilter(T_s, 0.3, 0.05).run(z[:2], upsets=[[0, 0, 0, 1]])
