@@ -38,7 +38,6 @@ from numba import njit
 from ..fixed import FixedFormat
 from .events import EventRegistry
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
-from .models import white_acceleration, white_jerk
 from .ops import align, div_q, flip, sqrt_q, store
 
 
@@ -341,4 +340,4 @@ class AlphaBetaFilter:
 
 
 __all__ = ["AlphaBetaFilter", "AlphaBetaFormats", "AlphaBetaRun", "check_coefficients", "kalata",
-           "steady_state_gains", "tracking_index", "white_acceleration", "white_jerk"]
+           "steady_state_gains", "tracking_index"]

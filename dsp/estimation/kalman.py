@@ -46,7 +46,6 @@ format: the step only predicts), ``bad_u`` (NaN control input: taken as 0), ``s_
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,7 +55,7 @@ from ..fixed import FixedFormat
 from .events import EventRegistry
 from .formats import (FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift,
                       sum_bits, to_fixed)
-from .models import LinearGaussianModel, MAX_STATES, check_psd
+from .models import LinearGaussianModel, check_psd
 from .linalg import chol_q, matmul_q, solve_lower_q, solve_upper_t_q
 from .ops import align, flip, store
 
@@ -415,7 +414,7 @@ class KalmanFilter:
     def counts(self) -> dict:
         return EVENTS.counts(self.ev)
 
-    def _inputs(self, z, u, T):
+    def _inputs(self, z, u):
         m, p = self.model.m, self.model.p
         z = np.asarray(z, dtype=np.float64)
         shape = z.shape
@@ -479,7 +478,7 @@ class KalmanFilter:
         keep_P : bool
             Also return the covariance after every step.
         """
-        zc, zok, uc, uok, T = self._inputs(z, u, None)
+        zc, zok, uc, uok, T = self._inputs(z, u)
         steps = self.model.steps
         if steps is not None and self.k + T > steps:
             raise ValueError(f"the time-varying model covers {steps} steps, not {self.k + T}")

@@ -33,7 +33,6 @@ cores use the linear filter (:mod:`dsp.estimation.kalman`).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dsp.estimation import (AlphaBetaFilter, AlphaBetaFormats, KalmanFilter, kalata,
-                            steady_state_gains, tracking_index, white_acceleration, white_jerk)
+                            steady_state_gains, tracking_index, white_acceleration)
 from dsp.estimation.formats import to_fixed
 
 from estimation_reference import AlphaBetaRef, F32Arith, IntArith
