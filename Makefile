@@ -43,6 +43,7 @@ test-all: setup  ## run every test, slow ones included
 bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in README.md)
 	$(PY) -m cosim bench dsp-speed
 	$(PY) -m cosim bench sim-speed
+	$(PY) -m cosim bench estimation
 	$(PY) -m cosim bench dsp-hour
 	$(PY) -m cosim bench tacan-accuracy
 

@@ -254,8 +254,13 @@ def _sim_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     return sim_speed(out, quick=quick)
 
 
+def _estimation(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_estimation import estimation_speed
+    return estimation_speed(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
-              "sim-speed": _sim_speed}
+              "sim-speed": _sim_speed, "estimation": _estimation}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

@@ -1,0 +1,343 @@
+"""Alpha-beta and alpha-beta-gamma trackers, fixed or adaptive (Kalata's tracking index),
+one source for float64, float32 and fixed point.
+
+The filter runs in *per-sample units*, as a DSP implementation would: the state is
+``[x, T v, T^2 a / 2]`` (position, velocity times the sample time, half the acceleration
+times its square), so the transition is the integer matrix ``[[1, 1, 1], [0, 1, 2], [0, 0,
+1]]`` (adds only) and the gains are the dimensionless ``[alpha, beta, gamma / 4]``
+(physical gains ``alpha, beta / T, gamma / (2 T^2)``, the steady-state Kalman gain of the
+white-acceleration (jerk) model when the coefficients come from :func:`kalata`
+(:func:`steady_state_gains`)). :class:`AlphaBetaRun` returns physical units.
+
+Kalata (1984): tracking index ``lambda = sigma_w T^2 / sigma_v``, ``r = (4 + lambda -
+sqrt(lambda^2 + 8 lambda)) / 4``, ``alpha = 1 - r^2``, ``beta = 2 (2 - alpha) - 4 sqrt(1 -
+alpha) = 2 (1 - r)^2``.
+
+Adaptive mode (alpha-beta only): the innovation variance ``S`` is estimated as the mean of
+the last ``window`` squared innovations (the seed's 3-5); in the Kalman steady state
+``alpha = 1 - sigma_v^2 / S``, so ``alpha = clip(1 - sigma_v^2 / S_hat, alpha_min,
+alpha_max)`` and ``beta = 2 (1 - sqrt(1 - alpha))^2`` (the Kalata pair of the tracking index
+``lambda = beta / sqrt(1 - alpha)`` that this innovation level implies). Fixed point, per
+step: ``e^2`` -> s; mean (one division) -> s; ``sigma_v^2 / S`` (one division) -> c; clip;
+``sqrt`` -> c; ``2 d^2`` -> c. A zero innovation power (noise-free input) is counted
+(``s_zero``) and gives ``alpha_min``; a ratio beyond the c range saturates (counted) and
+also ends at ``alpha_min``.
+
+Formats (:class:`AlphaBetaFormats`): z measurement, x state (all three per-sample
+components), e innovation, c coefficients (alpha, beta, gamma/4 and the adaptive
+intermediates), s squared innovations, their mean and sigma_v^2.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..fixed import FixedFormat
+from .events import EventRegistry
+from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
+from .ops import align, div_q, flip, sqrt_q, store
+
+
+def tracking_index(T_s: float, sigma_w: float, sigma_v: float) -> float:
+    """Kalata's tracking index ``sigma_w T^2 / sigma_v`` (``sigma_w``: acceleration noise
+    standard deviation, ``sigma_v``: position measurement noise standard deviation)."""
+    for name, v in (("T_s", T_s), ("sigma_w", sigma_w), ("sigma_v", sigma_v)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a finite number > 0, not {v!r}")
+    return sigma_w * T_s * T_s / sigma_v
+
+
+def kalata(lam: float) -> tuple[float, float]:
+    """``(alpha, beta)`` of Kalata's tracking index ``lam > 0``."""
+    if not (isinstance(lam, (int, float)) and math.isfinite(lam) and lam > 0):
+        raise ValueError(f"the tracking index must be a finite number > 0, not {lam!r}")
+    r = (4.0 + lam - math.sqrt(lam * lam + 8.0 * lam)) / 4.0
+    alpha = 1.0 - r * r
+    return alpha, 2.0 * (2.0 - alpha) - 4.0 * math.sqrt(1.0 - alpha)
+
+
+def steady_state_gains(model, iters: int = 100_000, tol: float = 1e-15) -> np.ndarray:
+    """Steady-state Kalman gain of a constant scalar-measurement model, by iterating the
+    Riccati recursion (predicted covariance) to a fixed point."""
+    F, H, Q, R, _ = model.at(0)
+    P = np.eye(model.n)
+    for _ in range(iters):
+        S = H @ P @ H.T + R
+        K = P @ H.T / S[0, 0]
+        Pn = F @ ((np.eye(model.n) - K @ H) @ P) @ F.T + Q
+        Pn = (Pn + Pn.T) / 2
+        if np.max(np.abs(Pn - P)) <= tol * np.max(np.abs(P)):
+            P = Pn
+            break
+        P = Pn
+    S = H @ P @ H.T + R
+    return (P @ H.T / S[0, 0])[:, 0]
+
+
+def check_coefficients(alpha: float, beta: float, gamma: float | None = None) -> None:
+    """The stability region of the alpha-beta(-gamma) tracker."""
+    if not (isinstance(alpha, (int, float)) and 0.0 < alpha < 1.0):
+        raise ValueError(f"alpha must be in (0, 1), not {alpha!r}")
+    if not (isinstance(beta, (int, float)) and 0.0 < beta < 4.0 - 2.0 * alpha):
+        raise ValueError(f"beta must be in (0, 4 - 2 alpha) = (0, {4 - 2 * alpha:g}), not {beta!r}")
+    if gamma is not None:
+        g_hi = 4.0 * alpha * beta / (2.0 - alpha)
+        if not (isinstance(gamma, (int, float)) and 0.0 < gamma < g_hi):
+            raise ValueError(f"gamma must be in (0, 4 alpha beta / (2 - alpha)) = (0, {g_hi:g}), "
+                             f"not {gamma!r}")
+
+
+@dataclass(frozen=True)
+class AlphaBetaFormats(FormatTable):
+    """Fixed-point formats of the alpha-beta(-gamma) tracker (per-sample units)."""
+
+    z: FixedFormat = fmt(32, 20)
+    x: FixedFormat = fmt(40, 28)
+    e: FixedFormat = fmt(32, 20)
+    c: FixedFormat = fmt(24, 22)
+    s: FixedFormat = fmt(40, 24)
+
+    def __post_init__(self):
+        self.validate()
+
+    def check(self, window: int) -> None:
+        r = self.fracs()
+        w = {s: getattr(self, s).width for s in self.signals()}
+        need_shift("z - xp", r["x"] - r["z"], "z")
+        need_shift("z - xp", r["x"] - r["e"], "e")
+        a = r["c"] + r["e"]
+        need_bits("xp + c e", max(w["c"] + w["e"] - 1, w["x"] + need_shift("xp + c e", a - r["x"], "x")) + 1)
+        need_bits("e^2", 2 * w["e"] - 1)
+        need_shift("e^2", 2 * r["e"] - r["s"], "s")
+        need_bits("sum of e^2", w["s"] + math.ceil(math.log2(window)))
+        need_bits("sigma_v^2 / S", w["s"] + r["c"])
+        need_bits("sqrt(1 - alpha)", w["c"] + r["c"])
+        need_bits("2 (1 - r)^2", 2 * w["c"] + 1)
+
+
+SIGNALS = AlphaBetaFormats.signals()
+EVENTS = EventRegistry(SIGNALS, ("implausible", "s_zero", "neg_sqrt", "upsets"))
+_Z, _X, _E, _C, _S = (SIGNALS.index(s) for s in ("z", "x", "e", "c", "s"))
+_EV_IMPL = EVENTS.index("implausible")
+_EV_SZ = EVENTS.index("s_zero")
+_EV_NSQ = EVENTS.index("neg_sqrt")
+_EV_UPS = EVENTS.index("upsets")
+_BASE = EVENTS.base
+
+
+@njit(cache=True)
+def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd, k0, ups, ev, xs, cs):
+    """consts = [sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a number)]."""
+    nb, n = x.shape
+    T = z.shape[1]
+    N = ring.shape[1]
+    z0 = x[0, 0] - x[0, 0]
+    rv, amin, amax, one, nw = consts[0], consts[1], consts[2], consts[3], consts[4]
+    xp = np.empty(n, x.dtype)
+    for b in range(nb):
+        eb = ev[b]
+        for k in range(T):
+            for r in range(ups.shape[0]):
+                if ups[r, 0] == k0 + k and ups[r, 1] == b:
+                    eb[_EV_UPS] += 1
+                    x[b, ups[r, 2]] = flip(x[b, ups[r, 2]], ups[r, 3], wd[_X])
+            if n == 3:
+                xp[0] = store(x[b, 0] + x[b, 1] + x[b, 2], 0, 0, lo[_X], hi[_X], eb, _X, _BASE)
+                xp[1] = store(x[b, 1] + x[b, 2] + x[b, 2], 0, 0, lo[_X], hi[_X], eb, _X, _BASE)
+                xp[2] = x[b, 2]
+            else:
+                xp[0] = store(x[b, 0] + x[b, 1], 0, 0, lo[_X], hi[_X], eb, _X, _BASE)
+                xp[1] = x[b, 1]
+            if not zok[b, k]:
+                eb[_EV_IMPL] += 1
+                for i in range(n):
+                    x[b, i] = xp[i]
+            else:
+                e = store(align(z[b, k], fr[_X] - fr[_Z]) - xp[0], fr[_X] - fr[_E], hf[_E],
+                          lo[_E], hi[_E], eb, _E, _BASE)
+                if adapt:
+                    ring[b, rpos[b]] = store(e * e, 2 * fr[_E] - fr[_S], hf[_S], lo[_S], hi[_S], eb, _S, _BASE)
+                    rpos[b] = (rpos[b] + 1) % N
+                    rcnt[b] += 1
+                    if rcnt[b] >= N:
+                        acc = z0
+                        for j in range(N):
+                            acc += ring[b, j]
+                        Sm = div_q(acc, nw, 0, hf[_S], lo[_S], hi[_S], eb, _S, _EV_SZ, _BASE)
+                        if Sm > z0:
+                            ratio = div_q(rv, Sm, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _EV_SZ, _BASE)
+                            al = one - ratio
+                        else:  # no innovation power: no manoeuvre
+                            eb[_EV_SZ] += 1
+                            al = amin
+                        if al < amin:
+                            al = amin
+                        if al > amax:
+                            al = amax
+                        rr = sqrt_q(one - al, fr[_C], hf[_C], hi[_C], eb, _C, _EV_NSQ, _BASE)
+                        d = one - rr
+                        c[b, 0] = al
+                        c[b, 1] = store(d * d + d * d, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _BASE)
+                a = fr[_C] + fr[_E]
+                for i in range(n):
+                    x[b, i] = store(align(xp[i], a - fr[_X]) + c[b, i] * e, a - fr[_X], hf[_X],
+                                    lo[_X], hi[_X], eb, _X, _BASE)
+            for i in range(n):
+                xs[b, k, i] = x[b, i]
+            cs[b, k, 0] = c[b, 0]
+            cs[b, k, 1] = c[b, 1]
+
+
+@dataclass
+class AlphaBetaRun:
+    """States after each step in physical units ``(B, T, n)`` (position, velocity[,
+    acceleration]), the alpha and beta in use after each step ``(B, T, 2)``, events."""
+
+    x: np.ndarray
+    coefficients: np.ndarray
+    events: dict
+
+
+class AlphaBetaFilter:
+    """Alpha-beta (``gamma=None``) or alpha-beta-gamma tracker, batched over trials.
+
+    Parameters
+    ----------
+    T_s : float
+        Sample time (s).
+    alpha, beta : float
+        Coefficients (stability region checked; :func:`kalata` gives the Kalman pair).
+    gamma : float, optional
+        Third coefficient: an alpha-beta-gamma tracker (3 states).
+    adaptive : bool
+        Re-derive alpha and beta from the innovation level (alpha-beta only).
+    sigma_v : float
+        Measurement noise standard deviation (adaptive mode).
+    window : int
+        Innovations averaged by the adaptive mode (2..64).
+    alpha_min, alpha_max : float
+        Limits of the adaptive alpha.
+    arithmetic : {"float64", "float32"} or AlphaBetaFormats
+    trials : int
+    x0 : (n,) or (B, n) array, optional
+        Initial state in physical units (default zeros).
+    z_limit : float, optional
+        Largest plausible ``|z|`` (NaN or beyond: predict only, counted ``implausible``).
+    """
+
+    def __init__(self, T_s: float, alpha: float, beta: float, gamma: float | None = None, *,
+                 adaptive: bool = False, sigma_v: float | None = None, window: int = 4,
+                 alpha_min: float = 0.05, alpha_max: float = 0.95, arithmetic="float64",
+                 trials: int = 1, x0=None, z_limit: float | None = None):
+        if not (isinstance(T_s, (int, float)) and math.isfinite(T_s) and T_s > 0):
+            raise ValueError(f"T_s must be a finite number > 0, not {T_s!r}")
+        check_coefficients(alpha, beta, gamma)
+        if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
+            raise ValueError(f"trials must be an integer >= 1, not {trials!r}")
+        if adaptive:
+            if gamma is not None:
+                raise ValueError("the adaptive mode is for the alpha-beta tracker (gamma=None)")
+            if not (isinstance(sigma_v, (int, float)) and math.isfinite(sigma_v) and sigma_v > 0):
+                raise ValueError(f"sigma_v must be a finite number > 0 in adaptive mode, not {sigma_v!r}")
+            if isinstance(window, bool) or not isinstance(window, int) or not 2 <= window <= 64:
+                raise ValueError(f"window must be an integer in [2, 64], not {window!r}")
+            if not 0.0 < alpha_min < alpha_max < 1.0:
+                raise ValueError(f"alpha limits must satisfy 0 < alpha_min < alpha_max < 1, not "
+                                 f"{alpha_min!r}, {alpha_max!r}")
+        if z_limit is not None and not (np.isfinite(z_limit) and z_limit > 0):
+            raise ValueError(f"z_limit must be a finite number > 0 or None, not {z_limit!r}")
+        self.T_s, self.trials, self.adaptive, self.z_limit = float(T_s), int(trials), bool(adaptive), z_limit
+        self.n = 2 if gamma is None else 3
+        self.kind = arithmetic_name(arithmetic)
+        n = self.n
+        x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=np.float64)
+        if x0.shape not in ((n,), (self.trials, n)):
+            raise ValueError(f"x0 must have shape ({n},) or ({self.trials}, {n}), not {x0.shape}")
+        x0 = np.broadcast_to(x0, (self.trials, n)) * np.array([1.0, T_s, T_s * T_s / 2][:n])
+        coef = np.array([alpha, beta, 0.0 if gamma is None else gamma / 4.0])
+        consts = np.array([0.0 if sigma_v is None else sigma_v ** 2, alpha_min, alpha_max, 1.0, window])
+        window = window if adaptive else 1
+        self.events = EVENTS
+        if self.kind == "fixed":
+            fm = arithmetic
+            fm.check(window)
+            self.formats = fm
+            fits("x0 (per-sample units)", x0, fm.x)
+            fits("coefficients", coef, fm.c)
+            fits("sigma_v^2", consts[:1], fm.s)
+            self.fr, self.lo, self.hi, self.hf, self.wd = fm.arrays()
+            self.x = to_fixed(x0, fm.x)
+            self.c = np.broadcast_to(to_fixed(coef, fm.c), (self.trials, 3)).copy()
+            self.consts = np.array([to_fixed(consts[0], fm.s), to_fixed(alpha_min, fm.c),
+                                    to_fixed(alpha_max, fm.c), 1 << fm.c.frac, window], np.int64)
+            dt = np.int64
+        else:
+            dt = np.float64 if self.kind == "float64" else np.float32
+            self.formats = None
+            zz = np.zeros(len(SIGNALS), np.int64)
+            self.fr, self.lo, self.hi, self.hf, self.wd = zz, zz, zz, zz, zz
+            self.x = x0.astype(dt)
+            self.c = np.array(np.broadcast_to(coef, (self.trials, 3)), dtype=dt, order="C")
+            self.consts = consts.astype(dt)
+        self.ring = np.zeros((self.trials, window), dt)
+        self.rpos = np.zeros(self.trials, np.int64)
+        self.rcnt = np.zeros(self.trials, np.int64)
+        self.ev = EVENTS.new((self.trials,))
+        self.k = 0
+
+    def counts(self) -> dict:
+        return EVENTS.counts(self.ev)
+
+    def run(self, z, *, upsets=None) -> AlphaBetaRun:
+        """Track ``T`` measurements ``z`` (``(T,)`` or ``(B, T)``).
+
+        ``upsets`` (fixed point only): ``(U, 4)`` rows ``(step, trial, element, bit)``, a bit
+        flip of the per-sample state word ``x[element]`` before step ``step`` (global count).
+        """
+        z = np.asarray(z, dtype=np.float64)
+        shape = z.shape
+        if z.ndim == 1:
+            z = np.broadcast_to(z, (self.trials,) + z.shape)
+        if z.ndim != 2 or z.shape[0] != self.trials:
+            raise ValueError(f"z must have shape (T,) or ({self.trials}, T), not {shape}")
+        ok = np.isfinite(z)
+        lim = self.z_limit
+        if self.kind == "fixed":
+            f = self.formats.z
+            flim = min(f.max_value, -f.min_value)
+            lim = flim if lim is None else min(lim, flim)
+        if lim is not None:
+            ok &= np.abs(np.where(ok, z, 0.0)) <= lim
+        zc = np.where(ok, z, 0.0)
+        zc = to_fixed(zc, self.formats.z) if self.kind == "fixed" else zc.astype(self.x.dtype)
+        T = z.shape[1]
+        if upsets is None:
+            ups = np.zeros((0, 4), np.int64)
+        else:
+            if self.kind != "fixed":
+                raise ValueError("upsets flip bits of fixed-point state words; use an AlphaBetaFormats arithmetic")
+            ups = np.asarray(upsets, dtype=np.int64).reshape(-1, 4)
+            for row in ups:
+                if not (0 <= row[1] < self.trials and 0 <= row[2] < self.n and 0 <= row[3] < self.formats.x.width):
+                    raise ValueError(f"upset (step, trial, element, bit) out of range: {row.tolist()}")
+        xs = np.empty((self.trials, T, self.n), self.x.dtype)
+        cs = np.empty((self.trials, T, 2), self.x.dtype)
+        _ab_kernel(self.x, self.c, np.ascontiguousarray(zc), ok, self.adaptive, self.ring, self.rpos,
+                   self.rcnt, self.consts, self.fr, self.lo, self.hi, self.hf, self.wd, self.k, ups,
+                   self.ev, xs, cs)
+        self.k += T
+        unit = np.array([1.0, 1.0 / self.T_s, 2.0 / self.T_s ** 2][:self.n])
+        if self.kind == "fixed":
+            xs_f = xs * (2.0 ** -self.formats.x.frac) * unit
+            cs_f = cs * 2.0 ** -self.formats.c.frac
+        else:
+            xs_f = xs.astype(np.float64) * unit
+            cs_f = cs.astype(np.float64)
+        return AlphaBetaRun(xs_f, cs_f, self.counts())
+
+
+__all__ = ["AlphaBetaFilter", "AlphaBetaFormats", "AlphaBetaRun", "check_coefficients", "kalata",
+           "steady_state_gains", "tracking_index"]
