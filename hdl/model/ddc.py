@@ -96,7 +96,6 @@ class DdcModel:
         i, q : ndarray of int64
         state : NcoState
         """
-        p = self.params.mixer
         x = check_int_range("DDC input x", x, self.params.adc_width)
         a, st = self.nco.addresses(len(x), freq_word, state)
         # Same arithmetic as MixerModel.run, written out to avoid temporaries on the hot path.
@@ -104,8 +103,38 @@ class DdcModel:
         pi *= x
         pq = self.nco.sin_table[a]
         pq *= x
+        i, q = self._requantize(pi, pq)
+        return i, q, st
+
+    def mix(self, x, cos, sin) -> tuple[np.ndarray, np.ndarray]:
+        """Down-convert ``x`` with an outside LO: the model of ``Ddc(external_lo=True)``.
+
+        Parameters
+        ----------
+        x : array of int
+            ADC samples (signed ``adc_width`` integers).
+        cos, sin : array of int, shape (len(x),)
+            The LO of each sample, e.g. ``NcoModel(params.nco).run(len(x), freq_word)``
+            shared by the channels (signed ``nco.amp_bits`` integers).
+
+        Returns
+        -------
+        i, q : ndarray of int64
+            The same bits as :meth:`run` when ``cos, sin`` come from ``NcoModel(params.nco)``.
+        """
+        x = check_int_range("DDC input x", x, self.params.adc_width)
+        cos = check_int_range("DDC LO cos", cos, self.params.nco.amp_bits)
+        sin = check_int_range("DDC LO sin", sin, self.params.nco.amp_bits)
+        if not (cos.shape == sin.shape == x.shape):
+            raise ValueError(f"DDC LO cos/sin must have the shape of x {x.shape}, "
+                             f"not {cos.shape}/{sin.shape}")
+        return self._requantize(cos * x, sin * x)
+
+    def _requantize(self, pi: np.ndarray, pq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(x cos, x sin)`` products -> the mixer's ``(i, q)`` (``q`` negated); in place."""
+        p = self.params.mixer
         np.negative(pq, out=pq)
         fmt = p.out_format
         i = fmt.fit(shift_right(pi, p.drop_bits, p.rounding))[0]
         q = fmt.fit(shift_right(pq, p.drop_bits, p.rounding))[0]
-        return i, q, st
+        return i, q
