@@ -51,9 +51,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, replace
 
-import numba
 import numpy as np
 from scipy import signal as sps
+
+from dsp.jit import njit_cached
 
 F15 = 15.0
 F135 = 135.0
@@ -421,7 +422,7 @@ def pulse_schedule(cfg: TacanSignalConfig, rng: np.random.Generator | None = Non
 _CHUNK = 1 << 20  # fixed: the noise stream is drawn in chunks of this size (determinism)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _adc_codes(x, full, out) -> int:
     """The ADC: ``clip(rint(x * full), -full, full - 1)`` into ``out`` (round half to even,
     as ``np.rint``), returning how many samples clipped; one pass, no temporaries."""

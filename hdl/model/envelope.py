@@ -28,10 +28,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from dsp.fixed import check_width, shift_right
+from dsp.jit import njit_cached
 
 ENVELOPE_ROUNDINGS = ("floor", "half_up")
 
@@ -166,7 +166,7 @@ class EnvelopeParams:
         return cordic + angle + prod + rnd
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _cordic_kernel(i, q, out, guard, iterations, mult, total_shift, bias, max_out):
     """The arithmetic of :func:`envelope_model_numpy` in int64, on blocks of samples (the
     loops over a block vectorise): the CORDIC, ``x * mult`` (the compensation constant, or

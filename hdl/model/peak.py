@@ -37,10 +37,10 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from dsp.fixed import check_width
+from dsp.jit import njit_cached
 
 #: Threshold standing for "infinity" in the integer model (above any envelope value).
 _INF_INT = np.int64(1) << np.int64(62)
@@ -233,7 +233,7 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
 
 
 # -- implementation ------------------------------------------------------------------------
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
                    block_log2, clip_log2, smooth_log2, thr_mult, thr_frac, thr_min, hold, max_len,
                    thr, amp, imax, iend):

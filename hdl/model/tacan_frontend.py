@@ -60,6 +60,7 @@ import numba
 import numpy as np
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
+from dsp.jit import njit_cached
 from dsp.tacan.frontend import FrontendConfig, Peaks
 
 from .cic import CicParams, CicState, cic_model
@@ -402,7 +403,7 @@ def _rnd(v, rc):
     return (v + c0 + ((v >> rs) & em) + ((v >> 63) & za)) >> rs
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
                     rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng):
     """NCO + mixer + CIC on whole decimation groups, sample by sample as the hardware.
@@ -531,7 +532,7 @@ def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
     return -1 if bad else ph
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _fir_kernel(z, hist, h, sym, down, rc, out):
     """FIR ``sum_t h[t] z[k - t]`` at ``k = down-1, 2 down-1, ...`` of the chunk, preceded
     by ``hist`` (the last ``L-1`` inputs, updated in place), rounded (``rc``: see
