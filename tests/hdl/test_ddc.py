@@ -322,3 +322,40 @@ def test_shared_lo_verilator_matches_pysim():
     got = verilator_sim(dut, "ddc_shared_lo").run(words, **kw)
     assert_same_stream(got, want, "verilator vs pysim")
     assert len(got.words) == n
+
+
+# -- compiled DDC -> CIC fast path (the TACAN front end's) ---------------------------------
+
+def test_ddc_cic_kernel_equals_models():
+    """DdcCicKernel == DdcModel then cic_model, with frequency writes and two chunks."""
+    from hdl.model.cic import CicParams, cic_model
+    from hdl.model.ddc import DdcCicKernel
+    p = DdcParams()
+    cp = CicParams(stages=3, rate=4, diff_delay=1, in_width=p.out_width, channels=2,
+                   out_width=17, rounding="half_even", overflow="saturate")
+    assert DdcCicKernel.exact(p, cp)
+    rng = np.random.default_rng(51)
+    n = 4000
+    x = rng.integers(-2048, 2048, n)
+    idx = np.array([0, 5, 1001, 2002, 3999], np.int64)
+    val = rng.integers(0, 1 << 32, idx.size).astype(np.int64)
+    fw = np.zeros(n, np.int64)
+    for k, v in zip(idx, val):
+        fw[k:] = v
+    i, q, _ = DdcModel(p).run(x, fw)
+    want, _ = cic_model(cp, np.stack([i, q], axis=-1))
+    k = DdcCicKernel(p, cp)
+    integ, combs = np.zeros((2, 3), np.int64), np.zeros((2, 3, 1), np.int64)
+    big = np.iinfo(np.int64).max
+    mrng = np.array([big, -big, big, -big], np.int64)
+    ph, fw0, got = 0, 0, []
+    for a, b in ((0, 2000), (2000, n)):
+        sel = (idx >= a) & (idx < b)
+        ci, cq, ph = k.run(x[a:b].astype(np.int64), ph, fw0, integ, combs, idx[sel] - a,
+                           val[sel], mrng)
+        fw0 = int(fw[b - 1])
+        got.append(np.stack([ci, cq], axis=-1))
+    np.testing.assert_array_equal(np.concatenate(got), want)
+    assert list(mrng) == [i.min(), i.max(), q.min(), q.max()]
+    with pytest.raises(ValueError, match=r"ADC codes must be signed 12-bit integers"):
+        k.run(np.array([0, 0, 0, 2048]), 0, 0, integ, combs, idx[:0], val[:0], mrng)
