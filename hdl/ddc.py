@@ -13,9 +13,10 @@ from amaranth.hdl import Module, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from .mixer import Mixer, iq_layout
+from .common import check_bool, check_params, iq_layout, lo_layout
+from .mixer import Mixer
 from .model.ddc import DdcParams
-from .nco import Nco, lo_layout
+from .nco import Nco
 
 
 class Ddc(wiring.Component):
@@ -46,14 +47,8 @@ class Ddc(wiring.Component):
     """
 
     def __init__(self, params: DdcParams, *, external_lo: bool = False):
-        if not isinstance(params, DdcParams):
-            self._MustUse__silence = True  # never elaborated: no 'created but never used'
-            raise ValueError(f"Ddc needs a DdcParams, not {params!r}")
-        if not isinstance(external_lo, bool):
-            self._MustUse__silence = True
-            raise ValueError(f"Ddc external_lo must be True or False, not {external_lo!r}")
-        self.params = params
-        self.external_lo = external_lo
+        self.params = params = check_params(self, params, DdcParams)
+        self.external_lo = check_bool(self, "external_lo", external_lo)
         members = {"i": In(stream.Signature(signed(params.adc_width), always_ready=True))}
         if external_lo:
             members["lo"] = In(stream.Signature(lo_layout(params.nco.amp_bits), always_ready=True))

@@ -12,7 +12,7 @@ from amaranth.lib.wiring import In, Out
 
 from cosim.pysim import run_stream, unpack_fields
 from hdl.ddc import Ddc
-from hdl.mixer import iq_layout
+from hdl.common import iq_layout
 from hdl.model.ddc import DdcModel, DdcParams
 from hdl.model.mixer import MixerParams
 from hdl.model.nco import NcoModel, NcoParams, nco_freq_word

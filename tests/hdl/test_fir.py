@@ -328,7 +328,7 @@ def test_bad_model_inputs():
         fir_model(TACAN, np.zeros(4, dtype=np.int64))
     with pytest.raises(ValueError, match=r"FIR input must be integers"):
         fir_model(TACAN, np.zeros((4, 2)))
-    with pytest.raises(TypeError, match=r"Fir takes a FirParams"):
+    with pytest.raises(ValueError, match=r"Fir needs a FirParams, not "):
         Fir(dict(decimation=2))
     assert fir_init_state(TACAN).hist.shape == (32, 2)
 
