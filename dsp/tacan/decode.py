@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dsp.jit import njit_cached
-from cosim.tacan_signal import burst_offsets, pair_spacing_s
+from .standard import burst_offsets, pair_spacing_s
 
 REF_MAIN, REF_AUX = 1, 2
 

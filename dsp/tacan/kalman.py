@@ -102,8 +102,8 @@ from ..jit import njit_cached
 from ..qops import (PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm,
                     div_square, ewma, floor_one, mac2, mulw, new_event_array, rate_dt, rs, sat,
                     scale_sat, sincos_dt, snorm)
+from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
 
-F15, F135 = 15.0, 135.0
 #: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
 GATE_FRAC = 8
 Q_EXTRA = 16
