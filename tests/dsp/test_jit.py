@@ -95,3 +95,26 @@ def test_cache_option_refused():
     with pytest.raises(ValueError, match=r"njit_cached always caches \(keyed on the sources\): "
                                          r"drop cache=True"):
         njit_cached(cache=True)
+
+
+def test_concurrent_first_compiles_share_one_cache(tmp_path):
+    """Two processes compiling the same kernel into an empty cache at once (pytest-xdist
+    workers after a source edit) both succeed, and a third loads the kernel from the cache
+    (numba writes index and data files under temporary names and renames them)."""
+    pkg = tmp_path / "src" / "tpkg"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "caller.py").write_text(CALLER)
+    (pkg / "callee.py").write_text(_callee(5))
+    cache = tmp_path / "cache"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache),
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, str(tmp_path / "src")], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        assert json.loads(out.strip().splitlines()[-1])["value"] == 6
+    third = _run(tmp_path / "src", cache)
+    assert (third["value"], third["hits"]) == (6, 1)
