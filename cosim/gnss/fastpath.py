@@ -17,6 +17,9 @@ correlator's convention, ``dsp.gnss.correlator``), where
   rectangular chips), or the one seen through an ideal two-sided brick-wall filter of
   ``bandwidth_hz``: ``R_B(tau) = int_{-b/2}^{b/2} sinc^2(u) cos(2 pi u tau) du``,
   ``b = B / 1.023 MHz`` (the spectrum of a long Gold code taken as the chip's ``sinc^2``);
+  or, given ``prn``, that PRN's own autocorrelation with rectangular chips (the triangle
+  plus ``|tau| R[1]``, ``R[1]`` the code's one-chip autocorrelation: -1/1023, -65/1023 or
+  +63/1023 for the Gold codes), which is what the IF path actually correlates with;
 * ``d`` is the navigation bit (+1/-1);
 * ``sigma`` is the rms of each real noise component (1 by default); the noise is complex
   Gaussian, I and Q independent and identically distributed, and across E, P, L each
@@ -34,12 +37,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dsp.gnss.ca_code import CHIP_RATE_HZ
+from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, ca_code_levels, check_prn
 
 
-def code_correlation(tau_chips, bandwidth_hz: float | None = None) -> np.ndarray:
-    """``R(tau)``: the triangle, or through an ideal filter of two-sided ``bandwidth_hz``."""
+def _code_acf(prn: int) -> np.ndarray:
+    """The periodic autocorrelation ``R[k] = (1/1023) sum c_i c_{i+k}``, k = 0..1022."""
+    c = ca_code_levels(check_prn(prn)).astype(np.float64)
+    f = np.fft.fft(c)
+    return np.fft.ifft(f * np.conj(f)).real / CODE_LENGTH
+
+
+def code_correlation(tau_chips, bandwidth_hz: float | None = None, prn: int | None = None) -> np.ndarray:
+    """``R(tau)``: the triangle, or through an ideal filter of two-sided ``bandwidth_hz``;
+    with ``prn`` (infinite bandwidth only) the PRN's own rectangular-chip autocorrelation,
+    linear between its integer-lag values (e.g. ``1 - tau (1 - R[1])``, ``R[1] = 63/1023``
+    for PRN 7, instead of ``1 - tau``)."""
     tau = np.asarray(tau_chips, dtype=np.float64)
+    if prn is not None:
+        if bandwidth_hz is not None:
+            raise ValueError("code_correlation: a PRN's own autocorrelation is for infinite "
+                             f"bandwidth only, not bandwidth_hz={bandwidth_hz!r}")
+        R = _code_acf(prn)
+        u = np.mod(tau, CODE_LENGTH)
+        k = np.floor(u).astype(np.int64)
+        f = u - k
+        return (1 - f) * R[k % CODE_LENGTH] + f * R[(k + 1) % CODE_LENGTH]
     if bandwidth_hz is None:
         return np.clip(1.0 - np.abs(tau), 0.0, None)
     B = float(bandwidth_hz)
@@ -56,12 +78,13 @@ def code_correlation(tau_chips, bandwidth_hz: float | None = None) -> np.ndarray
     return 2.0 * (np.cos(2 * np.pi * np.multiply.outer(tau, u)) @ g)
 
 
-def noise_correlation(spacing_chips: float = 0.5, bandwidth_hz: float | None = None) -> np.ndarray:
+def noise_correlation(spacing_chips: float = 0.5, bandwidth_hz: float | None = None,
+                      prn: int | None = None) -> np.ndarray:
     """The 3x3 correlation of the E, P, L noise (either arm), model above."""
     h = spacing_chips / 2
     off = np.array([h, 0.0, -h])
-    return code_correlation(off[:, None] - off[None, :], bandwidth_hz) / \
-        code_correlation(0.0, bandwidth_hz)
+    return code_correlation(off[:, None] - off[None, :], bandwidth_hz, prn) / \
+        code_correlation(0.0, bandwidth_hz, prn)
 
 
 @dataclass
@@ -80,7 +103,8 @@ class FastCorrelations:
 def correlate_fast(cn0_dbhz, phase_err_cycles=0.0, freq_err_hz=0.0, code_err_chips=0.0,
                    nav_bit=1.0, T_s: float = 1e-3, spacing_chips: float = 0.5,
                    bandwidth_hz: float | None = None, sigma: float = 1.0,
-                   rng: np.random.Generator | None = None, shape=None) -> FastCorrelations:
+                   rng: np.random.Generator | None = None, shape=None,
+                   prn: int | None = None) -> FastCorrelations:
     """Draw E/P/L for every interval; inputs broadcast together (and with ``shape``).
 
     ``cn0_dbhz=None`` gives the noise-free correlations.
@@ -97,17 +121,17 @@ def correlate_fast(cn0_dbhz, phase_err_cycles=0.0, freq_err_hz=0.0, code_err_chi
                                   freq_err_hz, code_err_chips, nav_bit)))
     full = np.broadcast_shapes(arrs[0].shape, () if shape is None else tuple(shape))
     cn0, dphi, df, tau, bit = (np.broadcast_to(a, full) for a in arrs)
-    r0 = code_correlation(0.0, bandwidth_hz)
+    r0 = float(code_correlation(0.0, bandwidth_hz, prn))
     if cn0_dbhz is None:
         amp = np.ones(full)
     else:
         amp = sigma * np.sqrt(2 * 10 ** (cn0 / 10) * T_s)
     common = amp * bit * np.sinc(df * T_s) * np.exp(2j * np.pi * dphi) / math.sqrt(r0)
     h = d / 2
-    sig = [common * code_correlation(tau - o, bandwidth_hz) for o in (h, 0.0, -h)]
+    sig = [common * code_correlation(tau - o, bandwidth_hz, prn) for o in (h, 0.0, -h)]
     if cn0_dbhz is not None:
         rng = np.random.default_rng() if rng is None else rng
-        w, V = np.linalg.eigh(noise_correlation(d, bandwidth_hz))
+        w, V = np.linalg.eigh(noise_correlation(d, bandwidth_hz, prn))
         L = V * np.sqrt(np.clip(w, 0.0, None))
         z = rng.standard_normal(full + (2, 3)) @ L.T
         n = sigma * (z[..., 0, :] + 1j * z[..., 1, :])

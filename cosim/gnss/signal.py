@@ -77,7 +77,7 @@ MAX_STEP_SIGMA = {2: 0.9957, 3: 0.5860, 4: 0.3352, 5: 0.1881}
 
 @numba.njit(cache=True, nogil=True)
 def _if_kernel(n0, f_ratio, sign, phase0, chip0, chips_per_sample, motion, phi, code, bits,
-               bit0, sigma, noise, out):
+               bit0, sigma, noise, amp, out):
     """One pass over a block: code x data x carrier (+ noise), the model of the docstring.
 
     ``motion`` is the motion's carrier phase (cycles, for the code), ``phi`` the carrier
@@ -90,7 +90,7 @@ def _if_kernel(n0, f_ratio, sign, phase0, chip0, chips_per_sample, motion, phi, 
         b = bits[np.int64(np.floor(chi / 20460.0)) - bit0]
         f = n * f_ratio
         ph = (f - np.floor(f)) + sign * (phase0 + phi[i])
-        v = c * b * np.cos(2.0 * np.pi * ph)
+        v = amp * c * b * np.cos(2.0 * np.pi * ph)
         if sigma > 0:
             v += sigma * noise[i]
         out[i] = v
@@ -148,6 +148,9 @@ class GnssSignalConfig:
         Grid of the oscillator phase (s).
     agc_full_scale_sigma : float or None
         ADC full scale in input rms; None = the default AGC rule (module docstring).
+    signal_present : bool
+        False: noise only (the same noise, ``N0`` still referred to ``A = 1``), for an
+        absent-satellite case or to measure the correlator's noise alone.
     seed : int
     """
 
@@ -165,6 +168,7 @@ class GnssSignalConfig:
     oscillator: object = None
     osc_step_s: float = 1e-3
     agc_full_scale_sigma: float | None = None
+    signal_present: bool = True
     seed: int = 1
 
     def __post_init__(self):
@@ -204,6 +208,8 @@ class GnssSignalConfig:
         if not isinstance(self.dynamics, (PolynomialProfile, JerkProcess, CsvProfile)):
             raise ValueError(f"dynamics must be a PolynomialProfile, JerkProcess or CsvProfile, "
                              f"not {type(self.dynamics).__name__}")
+        if not isinstance(self.signal_present, bool):
+            raise ValueError(f"signal_present must be True or False, not {self.signal_present!r}")
         if not isinstance(self.nav_data, bool):
             raise ValueError(f"nav_data must be True or False, not {self.nav_data!r}")
         cp = _num("code_phase_chips", self.code_phase_chips)
@@ -248,7 +254,7 @@ class GnssSignalConfig:
     @property
     def adc_step(self) -> float:
         """The AGC's quantiser step ``Delta`` (same units as the analog input)."""
-        sig_in = math.sqrt(self.noise_sigma ** 2 + 0.5)
+        sig_in = math.sqrt(self.noise_sigma ** 2 + (0.5 if self.signal_present else 0.0))
         b = self.adc_bits
         if self.agc_full_scale_sigma is not None:
             return self.agc_full_scale_sigma * sig_in / 2 ** (b - 1)
@@ -378,7 +384,8 @@ class GnssSignalGenerator:
         x = np.empty(n)
         _if_kernel(n0, self.f_ratio, self.sign, self.cfg.carrier_phase_cycles,
                    self.cfg.code_phase_chips, CHIP_RATE_HZ / self.cfg.fs_hz, m, phi,
-                   self.code, self.bits, self.bit0, self.sigma, noise, x)
+                   self.code, self.bits, self.bit0, self.sigma, noise,
+                   1.0 if self.cfg.signal_present else 0.0, x)
         return x
 
     def quantise(self, x: np.ndarray) -> tuple[np.ndarray, int]:
