@@ -415,20 +415,25 @@ class GnssSignalGenerator:
 class SampleStream:
     """Sequential reads ``stream(n0, n)`` of a generator's samples (analog or ADC codes),
     generated ``block_samples`` at a time: what a correlator consuming epoch after epoch
-    uses, without regenerating a noise chunk per epoch."""
+    uses, without regenerating a noise chunk per epoch. Reads stop at the record's end
+    (a short or empty array)."""
 
     def __init__(self, gen: GnssSignalGenerator, adc: bool = True, block_samples: int = 1 << 18):
         self.gen, self.adc, self.block = gen, bool(adc), int(block_samples)
-        self.n_clipped = 0
+        self.n_clipped = 0      # clipped samples among those generated, each counted once
         self._n0, self._buf = 0, np.zeros(0)
+        self._counted_to = 0
 
     def __call__(self, n0: int, n: int) -> np.ndarray:
+        n = max(0, min(n, self.gen.cfg.n_samples - n0))   # the record ends where it ends
         if not (self._n0 <= n0 and n0 + n <= self._n0 + self._buf.size):
-            m = max(n, self.block)
+            m = max(n, min(self.block, self.gen.cfg.n_samples - n0))
             x = self.gen.analog(n0, m)
             if self.adc:
-                x, c = self.gen.quantise(x)
-                self.n_clipped += c
+                new = min(m, max(0, self._counted_to - n0))   # already counted before
+                self.n_clipped += self.gen.quantise(x[new:])[1]
+                self._counted_to = max(self._counted_to, n0 + m)
+                x = self.gen.quantise(x)[0]
             self._n0, self._buf = n0, x
         return self._buf[n0 - self._n0:n0 - self._n0 + n]
 

@@ -104,3 +104,13 @@ def test_if_noise_correlation_matches_the_model(agree):
     # ... and it tells the PRN's own correlation (0.765 / 0.531) from the triangle's (0.75 / 0.5).
     tri = np.asarray(noise_correlation(0.5))
     assert np.max(np.abs(np.asarray(agree["noise_corr_if"]) - tri)) > 0.02
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cn0,spacing,tau,dphi", [(35.0, 0.5, 0.0625, 0.1), (45.0, 1.0, 0.25, 0.02)])
+def test_if_vs_fast_other_points(cn0, spacing, tau, dphi):
+    r = agreement.compare(cn0, 4.0, tau_chips=tau, dphi_cycles=dphi, spacing_chips=spacing, seed=21)
+    assert abs(r["cn0_diff_db"]) < 0.5
+    assert abs(r["dll_var_ratio"] - 1) < 0.10, r["dll_var_ratio"]
+    assert abs(r["atan_var_ratio"] - 1) < 0.10, r["atan_var_ratio"]
+    assert r["noise_corr_max_abs_diff_if"] < 0.04

@@ -174,3 +174,34 @@ def test_truth_per_epoch_layout():
     assert np.all((tr.code_phase_chips >= 0) & (tr.code_phase_chips < CODE_LENGTH))
     assert tr.code_phase_chips[0] == 100.0
     assert tr.doppler_hz[0] == pytest.approx(5251.40, abs=0.01)
+
+
+def test_inverted_spectrum_after_bandpass_sampling_correlates_with_the_mirrored_replica():
+    # 12.276 MHz at 16.368 MS/s lands at 4.092 MHz inverted: Doppler and phase change sign.
+    D = 2000.0
+    cfg = GnssSignalConfig(prn=4, if_hz=12.276e6, bandpass=True, cn0_dbhz=None, duration_s=0.05,
+                           dynamics=dy.from_doppler(D), nav_data=False, adc_bits=16,
+                           carrier_phase_cycles=0.2)
+    g = GnssSignalGenerator(cfg)
+    kw = dict(n_epochs=49)
+    good = correlate(SampleStream(g, adc=False), cfg.fs_hz, 4, cfg.digital_if_hz - D,
+                     CHIP_RATE_HZ + D / 1540, carrier_phase_cycles=-0.2, **kw)
+    p = (good.ip + 1j * good.qp) / (good.n_samples / 2)
+    assert np.min(np.abs(p)) > 0.995 and np.max(np.abs(np.angle(p))) < 2e-3
+    wrong = correlate(SampleStream(g, adc=False), cfg.fs_hz, 4, cfg.digital_if_hz + D,
+                      CHIP_RATE_HZ + D / 1540, carrier_phase_cycles=0.2, **kw)
+    assert np.max(np.abs(wrong.ip + 1j * wrong.qp) / (wrong.n_samples / 2)) < 0.05
+
+
+def test_sample_stream_serves_the_record_and_counts_each_clip_once():
+    cfg = GnssSignalConfig(cn0_dbhz=40.0, duration_s=0.03, adc_bits=2, seed=2)
+    g = GnssSignalGenerator(cfg)
+    codes, clip = g.samples(0, cfg.n_samples)
+    s = SampleStream(g, block_samples=50_000)
+    parts, n = [], 0
+    for m in [16368] * 29 + [cfg.n_samples - 29 * 16368]:
+        parts.append(s(n, m).copy())
+        n += m
+    np.testing.assert_array_equal(np.concatenate(parts), codes)
+    assert s.n_clipped == clip
+    assert GnssSignalConfig(signal_present=False).adc_step < GnssSignalConfig().adc_step
