@@ -17,10 +17,11 @@ Between grid points the phase is interpolated linearly. The Allan variances thes
 ``sigma_y^2(tau) = h0 / (2 tau) + 2 ln 2 h_1 + (2 pi^2 / 3) h_2 tau`` (for ``tau`` well
 above the grid step for flicker FM), are what the tests check.
 
-Tables (h0, h-1, h-2), the commonly reproduced "typical" values of Brown & Hwang,
-*Introduction to Random Signals and Applied Kalman Filtering*, 4th ed. (Wiley 2012),
-Table 9.2 (also 3rd ed. Table 9.1, and used by O'Driscoll & Lachapelle 2011 via their
-Table 1 of oscillator classes):
+Tables (h0, h-1, h-2): the "typical" crystal-oscillator values of Brown & Hwang,
+*Introduction to Random Signals and Applied Kalman Filtering* (Wiley; the clock-model
+table of the GPS chapter, Table 9.2 in the 4th ed., 2012), as widely reproduced in GNSS
+receiver literature. (Seed 003 cites O'Driscoll & Lachapelle 2011 for its oscillator
+table, which is empty in the seed's text; we have not checked that paper's values.)
 
 =========  ========  ========  ========
 class      h0        h-1       h-2
@@ -29,8 +30,8 @@ TCXO       2e-19     7e-21     2e-20
 OCXO       2e-25     7e-25     6e-25
 =========  ========  ========  ========
 
-(These were taken from that table as widely reproduced; re-check against the book before
-quoting them in a publication.)
+(Entered from that table as it is commonly quoted, not re-read from the book in this
+work: check against the book before quoting them in a publication.)
 """
 from __future__ import annotations
 
