@@ -1,0 +1,1 @@
+"""GPS L1 C/A: signal generator, line-of-sight dynamics, oscillator, correlation fast path."""
