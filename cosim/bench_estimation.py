@@ -22,7 +22,7 @@ TARGET_UPS = 1000.0 * 12
 
 
 @njit(cache=True)
-def _f_jerk(x, w, prm, out):
+def _f_jerk(x, w, prm, q, out):
     """Carrier phase / frequency / rate / jerk model of the GNSS UKF (seed 002): prm[0] = [T,
     T^2/2, T^3/6]."""
     T, T2, T3 = prm[0, 0], prm[0, 1], prm[0, 2]
@@ -33,7 +33,7 @@ def _f_jerk(x, w, prm, out):
 
 
 @njit(cache=True)
-def _h_iq(x, v, prm, out):
+def _h_iq(x, v, prm, q, out):
     out[0] = prm[0, 0] * np.cos(x[0]) + v[0]
     out[1] = prm[0, 0] * np.sin(x[0]) + v[1]
 

@@ -30,7 +30,7 @@ class IntArith:
 
     def store(self, acc, s, sig):
         _, lo, hi, half = self.f[sig]
-        v = ((acc + (1 << (s - 1) if half else acc)) >> s) if s > 0 else acc << (-s)
+        v = ((acc + (1 << (s - 1)) if half else acc) >> s) if s > 0 else acc << (-s)
         if v < lo or v > hi:
             self.sat[sig] += 1
             return lo if v < lo else hi
@@ -362,7 +362,6 @@ def ukf_step_f32(x, P, z, F, H, Q, R, wm, wc, c):
         for j in range(i, n):
             acc = Pp[i][j]
             for r in range(m):
-                for q in range(m):
-                    acc -= K[i][r] * S[r][q] * K[j][q]
+                acc -= W[r][i] * W[r][j]
             Pn[i][j] = Pn[j][i] = acc
     return xn, Pn
