@@ -223,7 +223,7 @@ class AlphaBetaRef:
 
     def __init__(self, ar, x, c, consts, window, adaptive):
         self.ar, self.x, self.c = ar, list(x), list(c)
-        self.rv, self.amin, self.amax, self.one, self.nw = consts
+        self.floor, self.amin, self.amax, self.one, self.nw, self.svl, self.four = consts
         self.ring, self.pos, self.cnt = [ar.zero] * window, 0, 0
         self.adaptive = adaptive
 
@@ -246,10 +246,25 @@ class AlphaBetaRef:
                 acc = ar.zero
                 for v in self.ring:
                     acc += v
-                Sm = ar.div(acc * (1 << 0) if isinstance(acc, int) else acc, self.nw, "s")
-                if Sm > 0:
-                    ratio = ar.div(self.rv << fr("c") if isinstance(self.rv, int) else self.rv, Sm, "c")
-                    al = min(max(self.one - ratio, self.amin), self.amax)
+                Sm = ar.div(acc, self.nw, "s")
+                dm = Sm - self.floor
+                if dm > 0:
+                    if isinstance(dm, int):
+                        g = ar.sqrt(dm << (2 * fr("l") - fr("s")), "l")
+                        lam = ar.div(g << fr("l"), self.svl, "l")
+                        sq = ar.sqrt(lam * lam + ((8 * lam) << fr("l")), "l")
+                        rk = ar.div(self.four << fr("c"), self.four + lam + sq, "c")
+                        al = ar.store((self.one << fr("c")) - rk * rk, fr("c"), "c")
+                    else:
+                        g = ar.sqrt(dm, "l")
+                        lam = ar.div(g, self.svl, "l")
+                        l8 = lam + lam
+                        l8 = l8 + l8
+                        l8 = l8 + l8
+                        sq = ar.sqrt(lam * lam + l8, "l")
+                        rk = ar.div(self.four, self.four + lam + sq, "c")
+                        al = self.one - rk * rk
+                    al = min(max(al, self.amin), self.amax)
                 else:
                     al = self.amin
                 v = self.one - al
