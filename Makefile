@@ -34,11 +34,15 @@ tools:  ## install Verilator when missing (apt-get, as root)
 run: setup  ## default TACAN scenario: HDL front-end model -> FIFO link -> fixed-point DSP, vs golden; start re-checked on the RTL
 	$(PY) -m cosim tacan --backend model --dsp fixed --compare golden --recheck auto
 
-test: setup  ## run the whole test suite (slow tests excluded: see test-all)
-	$(PY) -m pytest -q -m "not slow"
+# pytest-xdist workers: one per core, at most 4 (the Verilator builds and the numba caches are
+# shared between workers under file locks). `make test JOBS=0` runs in one process.
+JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 2); [ $$n -gt 4 ] && n=4; echo $$n)
 
-test-all: setup  ## run every test, slow ones included
-	$(PY) -m pytest -q
+test: setup  ## run the whole test suite on JOBS cores (slow tests excluded: see test-all)
+	$(PY) -m pytest -q -n $(JOBS) -m "not slow"
+
+test-all: setup  ## run every test on JOBS cores, slow ones included
+	$(PY) -m pytest -q -n $(JOBS)
 
 bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in README.md)
 	$(PY) -m cosim bench dsp-speed

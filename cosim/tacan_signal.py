@@ -18,14 +18,8 @@ Conventions (written down once, used by the generator, the receivers and the tes
   ``theta = 90`` deg both components are at their minimum at every reference: the seed
   paper's worst case (references in the envelope trough).
 
-Pulse codes (MIL-STD-291C)
---------------------------
-=========  =======================================  ========================================
-mode       main reference (15 Hz)                   auxiliary reference (135 Hz)
-=========  =======================================  ========================================
-X          12 pulse pairs (12 us), pairs 30 us apart  6 pulse pairs (12 us), pairs 24 us apart
-Y          13 single pulses, 30 us apart            13 single pulses, 15 us apart
-=========  =======================================  ========================================
+Pulse codes (MIL-STD-291C): :mod:`dsp.tacan.standard` (burst offsets, pair spacing, the
+modulation frequencies and the pulse width live there, with the DSP that decodes them).
 
 Random replies/squitter are pulse pairs (12 us in X, 30 us in Y) placed uniformly at random
 with a minimum spacing (dead time) in the time left free by the reference groups and their
@@ -51,44 +45,18 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, replace
 
-import numba
 import numpy as np
 from scipy import signal as sps
 
-F15 = 15.0
-F135 = 135.0
-#: Pulse half-amplitude width (s), MIL-STD-291C 3.5 +- 0.5 us.
-PULSE_WIDTH_S = 3.5e-6
+from dsp.jit import njit_cached
+# The standard (frequencies, pulse width, burst codes) is the DSP's: imported, not restated.
+from dsp.tacan.standard import F15, F135, PULSE_WIDTH_S, burst_offsets, pair_spacing_s  # noqa: F401
+
 FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 
 KIND_RANDOM, KIND_MAIN, KIND_AUX, KIND_IDENT, KIND_ECHO = 0, 1, 2, 3, 4
 KIND_NAMES = {KIND_RANDOM: "random", KIND_MAIN: "main", KIND_AUX: "aux",
               KIND_IDENT: "identity", KIND_ECHO: "echo"}
-
-#: Burst codes: offsets (s) of every pulse from the burst's first pulse.
-_US = 1e-6
-
-
-def burst_offsets(mode: str, kind: str) -> np.ndarray:
-    """Pulse offsets (s) from the first pulse of a reference burst (MIL-STD-291C)."""
-    if mode == "X":
-        if kind == "main":
-            starts = np.arange(12) * 30 * _US
-            return np.sort(np.concatenate([starts, starts + 12 * _US]))
-        if kind == "aux":
-            starts = np.arange(6) * 24 * _US
-            return np.sort(np.concatenate([starts, starts + 12 * _US]))
-    elif mode == "Y":
-        if kind == "main":
-            return np.arange(13) * 30 * _US
-        if kind == "aux":
-            return np.arange(13) * 15 * _US
-    raise ValueError(f"mode must be 'X' or 'Y' and kind 'main' or 'aux', not {mode!r}/{kind!r}")
-
-
-def pair_spacing_s(mode: str) -> float:
-    """Spacing of the two pulses of a pair: 12 us (X) or 30 us (Y)."""
-    return {"X": 12 * _US, "Y": 30 * _US}[mode]
 
 
 def fold_frequency(f_hz: float, fs_hz: float) -> tuple[float, bool]:
@@ -422,7 +390,7 @@ def pulse_schedule(cfg: TacanSignalConfig, rng: np.random.Generator | None = Non
 _CHUNK = 1 << 20  # fixed: the noise stream is drawn in chunks of this size (determinism)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _adc_codes(x, full, out) -> int:
     """The ADC: ``clip(rint(x * full), -full, full - 1)`` into ``out`` (round half to even,
     as ``np.rint``), returning how many samples clipped; one pass, no temporaries."""

@@ -37,6 +37,7 @@ Speed (what is compiled is equivalent to the exported Verilog, bit for bit; see
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import hashlib
 import os
 import re
@@ -518,9 +519,15 @@ class VerilatorStreamSim:
         out = self._build_dir / self._cache_key(trace_kind)
         lib_path = out / "libsim.so"
         if not lib_path.exists():
-            self._compile(out, trace_kind)
-            if trace_kind is None:
-                self.built = True
+            # One build per key at a time (pytest-xdist workers, parallel sweeps): the others
+            # wait on the lock and then load the finished library instead of compiling it too.
+            out.parent.mkdir(parents=True, exist_ok=True)
+            with open(out.parent / f"{out.name}.lock", "w") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+                if not lib_path.exists():
+                    self._compile(out, trace_kind)
+                    if trace_kind is None:
+                        self.built = True
         lib = ctypes.CDLL(str(lib_path))
         lib.sim_args_size.restype = ctypes.c_int64
         lib.sim_traced.restype = ctypes.c_int64

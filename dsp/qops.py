@@ -37,6 +37,8 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
+from dsp.jit import njit_cached
+
 _OPTS = {"cache": True}
 #: Bits of the normalised divisor (see :func:`snorm`).
 S_BITS = 28
@@ -154,7 +156,7 @@ def _ol_floor_one(v, ev, i):
 
 
 # -- products --------------------------------------------------------------------------------
-@njit(cache=True)
+@njit_cached
 def _split(a, b, s, k):
     """``(Q, low)`` with ``a b = Q 2**s + low`` exactly (``k <= s``)."""
     ah = a >> k
@@ -208,7 +210,7 @@ def _ol_mulw(a, b, s, k, half):
 
 
 # -- division --------------------------------------------------------------------------------
-@njit(cache=True)
+@njit_cached
 def _fdiv(n, d):
     """``n // d`` (floor) for int64 ``n`` and ``0 < d < 2**53``, exactly, via one float
     division and a remainder correction (a hardware integer divide is ~4x slower here)."""
@@ -223,7 +225,7 @@ def _fdiv(n, d):
     return q
 
 
-@njit(cache=True)
+@njit_cached
 def _bitlen(v):
     """Bits of ``v > 0`` (``int.bit_length``)."""
     m, e = math.frexp(float(v))

@@ -29,8 +29,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-import numba
 import numpy as np
+
+from dsp.jit import njit_cached
 
 from dsp.fixed import check_width, parity_bit
 
@@ -72,7 +73,7 @@ class RecordBatch(NamedTuple):
     state: RecordRxState
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _rx_records(words, odd, width, n, max_marker, part, st, out, out_first, out_gap, stats):
     """``part``: the open record's words so far; ``st`` = [words in ``part``, gap]."""
     pmask = (np.int64(1) << width) - 1

@@ -4,59 +4,14 @@ The parameters, widths, pruning and the bit-exact model are in :mod:`hdl.model.c
 """
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, signed, unsigned
-from amaranth.lib import data, stream, wiring
+from amaranth.hdl import Module, Mux, Signal, signed
+from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from hdl.common import channel_values, check_params, fit_width, round_shift, sample_shape
 from hdl.model.cic import CicParams
 
-__all__ = ["Cic", "sample_shape", "channel_values", "round_shift", "fit_width"]
-
-
-def sample_shape(width: int, channels: int):
-    """``signed(width)`` for real samples, ``StructLayout({"i", "q"})`` for complex ones."""
-    if channels == 1:
-        return signed(width)
-    return data.StructLayout({"i": signed(width), "q": signed(width)})
-
-
-def channel_values(payload, channels: int) -> list:
-    """The per-channel signed values of a stream payload (real: [x]; complex: [i, q])."""
-    if channels == 1:
-        return [payload]
-    return [payload.i, payload.q]
-
-
-def round_shift(value, shift: int, rounding: str):
-    """``value`` (signed) shifted right by ``shift`` bits with ``dsp.fixed`` rounding.
-
-    One adder (floor: none); the result is one bit wider than ``value >> shift`` so a
-    rounding carry is never lost (the caller applies the overflow mode).
-    """
-    if shift <= 0:
-        return value << -shift if shift < 0 else value
-    if rounding == "floor":
-        return value >> shift
-    if rounding == "half_up":
-        return (value + Const(1 << (shift - 1), unsigned(shift))) >> shift
-    if rounding == "zero":
-        bias = Mux(value[-1], Const((1 << shift) - 1, unsigned(shift)), 0)
-        return (value + bias) >> shift
-    if rounding == "half_even":
-        # q = value >> shift; adding half - 1 + lsb(q) rounds ties to even.
-        return (value + Const((1 << (shift - 1)) - 1, unsigned(shift)) + value[shift]) >> shift
-    raise ValueError(f"rounding must be one of floor, half_up, half_even, zero, not {rounding!r}")
-
-
-def fit_width(value, width: int, overflow: str):
-    """``value`` (signed) brought into ``width`` signed bits by saturation or wraparound."""
-    if len(value) <= width:
-        return value
-    if overflow == "wrap":
-        return value[:width].as_signed()
-    hi, lo = (1 << (width - 1)) - 1, -(1 << (width - 1))
-    return Mux(value > hi, Const(hi, signed(width)),
-               Mux(value < lo, Const(lo, signed(width)), value[:width].as_signed()))
+__all__ = ["Cic"]
 
 
 class Cic(wiring.Component):
@@ -85,10 +40,7 @@ class Cic(wiring.Component):
     """
 
     def __init__(self, params: CicParams):
-        if not isinstance(params, CicParams):
-            self._MustUse__silence = True   # a half-built component is not an "unused" one
-            raise TypeError(f"Cic takes a CicParams, not {type(params).__name__}")
-        self.params = params
+        self.params = check_params(self, params, CicParams)
         super().__init__({
             "i": In(stream.Signature(sample_shape(params.in_width, params.channels),
                                      always_ready=True)),

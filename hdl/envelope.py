@@ -8,6 +8,7 @@ from amaranth.hdl import Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from hdl.common import check_params, iq_layout, round_shift
 from hdl.model.envelope import EnvelopeParams
 
 __all__ = ["Envelope", "EnvelopeParams"]
@@ -35,9 +36,10 @@ class Envelope(wiring.Component):
     """
 
     def __init__(self, params: EnvelopeParams | None = None):
-        self.params = params if params is not None else EnvelopeParams()
+        self.params = check_params(self, EnvelopeParams() if params is None else params,
+                                   EnvelopeParams)
         p = self.params
-        layout = data.StructLayout({"i": signed(p.in_width), "q": signed(p.in_width)})
+        layout = iq_layout(p.in_width)
         super().__init__({
             "i": In(stream.Signature(layout, always_ready=True)),
             "o": Out(stream.Signature(unsigned(p.out_width), always_ready=True)),
@@ -84,11 +86,8 @@ class Envelope(wiring.Component):
             m.d.sync += [prod.eq(a * Const(p.comp_const, unsigned(p.comp_bits))), vp.eq(va)]
             mag, v = prod, vp
 
-        s = p.total_shift
-        if s > 0 and p.rounding == "half_up":
-            mag = mag + (1 << (s - 1))
         q = Signal(unsigned(len(mag) + 1))
-        m.d.comb += q.eq(mag >> s)
+        m.d.comb += q.eq(round_shift(mag, p.total_shift, p.rounding))
         out = Signal(unsigned(p.out_width), name="mag")
         ov = Signal()
         m.d.sync += [

@@ -12,7 +12,7 @@ from amaranth.hdl import Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from hdl.cic import channel_values, fit_width, round_shift, sample_shape
+from hdl.common import channel_values, check_params, fit_width, round_shift, sample_shape
 from hdl.model.fir import FirParams
 
 __all__ = ["Fir"]
@@ -56,10 +56,7 @@ class Fir(wiring.Component):
     """
 
     def __init__(self, params: FirParams):
-        if not isinstance(params, FirParams):
-            self._MustUse__silence = True   # a half-built component is not an "unused" one
-            raise TypeError(f"Fir takes a FirParams, not {type(params).__name__}")
-        self.params = params
+        self.params = check_params(self, params, FirParams)
         super().__init__({
             "i": In(stream.Signature(sample_shape(params.in_width, params.channels),
                                      always_ready=True)),

@@ -12,50 +12,18 @@ maps onto an ECP5 MULT18X18D):
 """
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Module, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from .common import check_params, fit_width, iq_layout, lo_layout, round_shift
 from .model.mixer import MixerParams
-from .nco import lo_layout
-
-
-def iq_layout(width: int) -> data.StructLayout:
-    """Complex sample ``{"i", "q"}``, signed ``width`` each, ``i`` at the LSB."""
-    return data.StructLayout({"i": signed(width), "q": signed(width)})
 
 
 def mixer_in_layout(params: MixerParams) -> data.StructLayout:
     """Mixer input payload: ``{"x": sample, "lo": {"cos", "sin"}}``, ``x`` at the LSB."""
     x = iq_layout(params.in_width) if params.complex_input else signed(params.in_width)
     return data.StructLayout({"x": x, "lo": lo_layout(params.lo_width)})
-
-
-def _round_shift(v, drop: int, rounding: str):
-    """``v >> drop`` with the rounding of :func:`dsp.fixed.shift_right`.
-
-    Every mode is ``floor(v / 2**drop) + up`` with a one-bit ``up`` taken from the dropped
-    bits, i.e. one adder. It is written ``q - (up ? -1 : 0)`` with ``-1`` as ``up`` replicated
-    to ``q``'s width, so the exported Verilog has no operand width mismatch (``q + up`` is
-    emitted as a 29-bit plus a 2-bit ``{1'h0, up}`` operand, which Verilator flags; a bare
-    bit slice would likewise be emitted as a 1-bit ``$signed(v[k])``).
-    """
-    if drop <= 0:
-        return v << -drop
-    q = v >> drop
-    if rounding == "floor":
-        return q
-    if rounding == "half_up":
-        up = v[drop - 1:drop].any()  # a reduction, not a bare slice (docstring)
-    elif rounding == "half_even":
-        # Above half, or exactly half with an odd kept LSB.
-        up = v[drop - 1] & (v[:drop - 1].any() | v[drop])
-    elif rounding == "zero":
-        # Negative and inexact: floor went one too far down.
-        up = v[-1] & v[:drop].any()
-    else:
-        raise ValueError(f"mixer rounding {rounding!r} is not implemented in the HDL")
-    return q - up.replicate(len(q)).as_signed()
 
 
 class Mixer(wiring.Component):
@@ -75,10 +43,7 @@ class Mixer(wiring.Component):
     """
 
     def __init__(self, params: MixerParams):
-        if not isinstance(params, MixerParams):
-            self._MustUse__silence = True  # never elaborated: no 'created but never used'
-            raise ValueError(f"Mixer needs a MixerParams, not {params!r}")
-        self.params = params
+        self.params = check_params(self, params, MixerParams)
         super().__init__({
             "i": In(stream.Signature(mixer_in_layout(params), always_ready=True)),
             "o": Out(stream.Signature(iq_layout(params.out_width), always_ready=True)),
@@ -124,20 +89,16 @@ class Mixer(wiring.Component):
             m.d.sync += [yi.eq(x * c), yq.eq(x * sn)]
 
         stage()
-        ri_val = _round_shift(yi, p.drop_bits, p.rounding)
-        rq_val = _round_shift(yq, p.drop_bits, p.rounding)
+        ri_val = round_shift(yi, p.drop_bits, p.rounding)
+        rq_val = round_shift(yq, p.drop_bits, p.rounding)
         ri, rq = Signal(signed(len(ri_val))), Signal(signed(len(rq_val)))
         m.d.sync += [ri.eq(ri_val), rq.eq(rq_val)]
 
         ow = p.out_width
 
         def fit(r):
-            if p.overflow == "saturate" and len(r) > ow:
-                # In range iff the bits from the output sign up are all equal.
-                top = r[ow - 1:]
-                sign = r[-1]
-                return Mux(top.all() | ~top.any(), r[:ow], Cat((~sign).replicate(ow - 1), sign))
-            return r  # wrap: assignment keeps the low bits (or sign-extends a narrow r)
+            # wrap: the assignment keeps the low bits (or sign-extends a narrow r)
+            return fit_width(r, ow, "saturate") if p.overflow == "saturate" else r
 
         m.d.sync += [
             self.o.valid.eq(stages[-1]),

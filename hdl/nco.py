@@ -19,12 +19,8 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
+from .common import check_params, lo_layout
 from .model.nco import LFSR_BITS, NcoParams, nco_quarter_table
-
-
-def lo_layout(width: int) -> data.StructLayout:
-    """LO sample ``exp(j*phi)`` as ``{"cos", "sin"}``, signed ``width`` each, cos at the LSB."""
-    return data.StructLayout({"cos": signed(width), "sin": signed(width)})
 
 
 class Nco(wiring.Component):
@@ -49,10 +45,7 @@ class Nco(wiring.Component):
     """
 
     def __init__(self, params: NcoParams):
-        if not isinstance(params, NcoParams):
-            self._MustUse__silence = True  # never elaborated: no 'created but never used'
-            raise ValueError(f"Nco needs an NcoParams, not {params!r}")
-        self.params = params
+        self.params = params = check_params(self, params, NcoParams, article="an")
         members = {
             "i": In(stream.Signature(unsigned(0), always_ready=True)),
             "freq": In(unsigned(params.phase_bits)),

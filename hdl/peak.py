@@ -27,6 +27,7 @@ from amaranth.hdl import Const, Module, Mux, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from hdl.common import check_params
 from hdl.model.peak import PeakParams
 
 __all__ = ["PeakSearch", "PeakParams"]
@@ -50,7 +51,7 @@ class PeakSearch(wiring.Component):
     """
 
     def __init__(self, params: PeakParams | None = None):
-        self.params = params if params is not None else PeakParams()
+        self.params = check_params(self, PeakParams() if params is None else params, PeakParams)
         p = self.params
         self.out_layout = data.StructLayout({"amplitude": unsigned(p.amp_width),
                                              "timestamp": unsigned(p.ts_bits)})

@@ -9,6 +9,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from .cic import Cic
+from .common import check_params
 from .ddc import Ddc
 from .envelope import Envelope
 from .fifo import DspFifo
@@ -50,11 +51,7 @@ class TacanFrontEnd(wiring.Component):
 
     def __init__(self, params: TacanFrontendParams | None = None):
         params = params if params is not None else TacanFrontendParams()
-        if not isinstance(params, TacanFrontendParams):
-            self._MustUse__silence = True
-            raise TypeError(f"TacanFrontEnd takes a TacanFrontendParams, not "
-                            f"{type(params).__name__}")
-        self.params = params
+        self.params = params = check_params(self, params, TacanFrontendParams)
         self._fifo = DspFifo(params.fifo)   # its output layout is the top's
         super().__init__({
             "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),

@@ -7,7 +7,8 @@ that handed an operator an event array without its range-log slots once corrupte
 and crashed the run minutes later, in unrelated code or at interpreter exit.) The checked
 kernels compute the same bits; benchmarks and ``make run`` use the unchecked ones. Their
 compile cache lives in its own directory so that checked and unchecked builds never mix.
-Set ``NUMBA_BOUNDSCHECK=0`` to run the suite on the unchecked kernels.
+Set ``NUMBA_BOUNDSCHECK=0`` to run the suite on the unchecked kernels. Every kernel is cached
+with :func:`dsp.jit.njit_cached`, under ``NUMBA_CACHE_DIR/kfnav-<hash of the sources>/``.
 """
 import os
 from pathlib import Path

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..cordic import CordicConfig
 from ..fixed import FixedFormat
+from .standard import F15, F135
 
 TWO_PI = 2 * np.pi
 
@@ -96,8 +97,8 @@ ANGLE_BITS = 32
 #: Bits per turn of the Kalman core's phase accumulator (the same as ``dsp.qops.PHASE_BITS``;
 #: repeated here so that this module does not import numba -- a test checks they agree).
 PHASE_BITS = 40
-#: TACAN modulation frequencies (Hz) of the coarse and fine components.
-F15_HZ, F135_HZ = 15.0, 135.0
+#: TACAN modulation frequencies (Hz) of the coarse and fine components (dsp.tacan.standard).
+F15_HZ, F135_HZ = F15, F135
 #: Magnitudes are normalised (common right shift) so that ``max(m1, 9 m2) < 2**MAG_BITS``
 #: before squaring: the weights then fit 61 bits.
 MAG_BITS = 30

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from cosim.tacan_signal import burst_offsets, pair_spacing_s
+from dsp.jit import njit_cached
+from .standard import burst_offsets, pair_spacing_s
 
 REF_MAIN, REF_AUX = 1, 2
 
@@ -76,7 +76,7 @@ def _match(t: np.ndarray, targets: np.ndarray, tol: float):
     return best, np.minimum(d0, d1) <= tol
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _score_kernel(t, starts, offs, tol, score):
     """``score[i]`` = how many ``starts[i] + offs[c]`` have a peak within ``tol``: for each
     template pulse, :func:`_match` (nearest of the two neighbours found by a left

@@ -28,10 +28,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from dsp.records import receive_records
+from dsp.jit import njit_cached
 
 STAT_NAMES = ("words", "data", "markers", "dropped_reported", "bad_tags", "ts_rejected",
               "ts_resyncs", "bad_markers", "parity_errors")
@@ -48,7 +48,7 @@ class RxState:
     stats: dict = field(default_factory=lambda: dict.fromkeys(STAT_NAMES, 0))
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _rx(data, amp_width, ts_bits, max_gap, resync_after, final, st, out_t, out_a, stats):
     """``data``: the payloads of the data words, in order (parity, tags and markers already
     handled); ``st`` = [last wrapped ts (-1: none), last tick, consecutive rejects, pending

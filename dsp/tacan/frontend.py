@@ -8,7 +8,7 @@ differ only where the hardware rounds:
 
 The CIC runs here as its equivalent FIR (a boxcar of R*M convolved N times, DC gain 1), the
 FIR with the float taps of :func:`dsp.design.design_pulse_fir`, the envelope is the exact
-magnitude and the peak search is :func:`hdl.model.peak.peak_search_float` (the integer
+magnitude and the peak search is :func:`dsp.peak.peak_search_float` (the integer
 model's twin). Amplitudes come out in units of ADC full scale (carrier peak amplitude);
 timestamps in ADC sample ticks, delayed by :attr:`FrontendConfig.group_delay_samples`.
 
@@ -25,9 +25,10 @@ import numpy as np
 from scipy import signal as sps
 
 from dsp.design import cic_taps, design_pulse_fir
-from hdl.model.peak import PeakParams, PeakState, peak_search_float
+from dsp.peak import PeakParams, PeakState, peak_search_float
+from dsp.tacan.standard import PULSE_WIDTH_S
 
-PULSE_SIGMA_S = 3.5e-6 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+PULSE_SIGMA_S = PULSE_WIDTH_S / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 
 
 @dataclass(frozen=True)

@@ -98,11 +98,12 @@ import numba
 import numpy as np
 
 from ..fixed import FixedFormat
+from ..jit import njit_cached
 from ..qops import (PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm,
                     div_square, ewma, floor_one, mac2, mulw, new_event_array, rate_dt, rs, sat,
                     scale_sat, sincos_dt, snorm)
+from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
 
-F15, F135 = 15.0, 135.0
 #: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
 GATE_FRAC = 8
 Q_EXTRA = 16
@@ -294,7 +295,7 @@ def _float_consts(k: KalmanConfig) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # The filter (one source; numba compiles it for float64 and for int64 state)
 # ---------------------------------------------------------------------------------------
-_jit = numba.njit(cache=True, nogil=True)
+_jit = njit_cached(nogil=True)
 # Index of each format's (frac, min, max, half) in the integer constants.
 _Y, _X, _P, _K, _CS, _IV, _R = 5, 9, 13, 17, 21, 25, 29
 
@@ -475,7 +476,7 @@ def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv):
             _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv)
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@njit_cached(nogil=True, parallel=True)
 def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])

@@ -14,10 +14,9 @@ import numpy as np
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       reference_advances, wrap_deg)
-from cosim.tacan_signal import burst_offsets
-
 from .decode import REF_MAIN, DecoderConfig, decode
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from .standard import burst_offsets
 
 
 @dataclass

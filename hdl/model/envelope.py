@@ -28,10 +28,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from dsp.fixed import check_width, shift_right
+from dsp.jit import njit_cached
+
+from .rounding import round_consts
 
 ENVELOPE_ROUNDINGS = ("floor", "half_up")
 
@@ -166,7 +168,7 @@ class EnvelopeParams:
         return cordic + angle + prod + rnd
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _cordic_kernel(i, q, out, guard, iterations, mult, total_shift, bias, max_out):
     """The arithmetic of :func:`envelope_model_numpy` in int64, on blocks of samples (the
     loops over a block vectorise): the CORDIC, ``x * mult`` (the compensation constant, or
@@ -224,7 +226,7 @@ def envelope_model(i, q, params: EnvelopeParams, *, check: bool = True) -> np.nd
     q = np.ascontiguousarray(q.ravel(), dtype=np.int64)
     out = np.empty(i.size, dtype=np.int64)
     ts = p.total_shift   # >= 0 (shift >= -guard_bits)
-    bias = (1 << (ts - 1)) if p.rounding == "half_up" and ts > 0 else 0
+    bias = round_consts(ts, p.rounding)[2]   # floor: 0, half_up: half an output LSB
     _cordic_kernel(i, q, out, p.guard_bits, p.iterations, p.comp_const if p.compensate else 1,
                    ts, bias, p.max_out)
     return out.reshape(shape)

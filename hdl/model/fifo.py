@@ -62,10 +62,10 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from dsp.fixed import check_int as _check_int, check_width, parity_bit
+from dsp.jit import njit_cached
 
 TAG_DATA = 0
 TAG_START = 1     # first word of a record (record_words > 1 only)
@@ -373,7 +373,7 @@ class FifoResult:
 _OUT_FULL, _OUT_REG, _HOLD_V, _PENDING, _OVF, _HEAD, _CNT, _MAXLVL = range(8)
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _next_ready(c, lim, rmode, rmask, rbase, period, offset, count, stride):
     """First cycle in ``[c, lim)`` with ``ready`` high, else ``lim``."""
     if rmode == 0:
@@ -395,7 +395,7 @@ def _next_ready(c, lim, rmode, rmask, rbase, period, offset, count, stride):
     return c if c < lim else lim
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count, stride,
                  depth, wmask, marker_tag, count_max, st, ring, out_w, out_c, dropped,
                  hold, tagw):

@@ -26,6 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, check_width, shift_right
+from dsp.jit import njit_cached
+
+from .rounding import rnd, round_consts
 
 __all__ = ["FirParams", "FirState", "fir_init_state", "fir_model", "fir_float_reference",
            "default_fir_taps", "dsp_limbs"]
@@ -428,3 +431,113 @@ def fir_float_reference(params: FirParams, x, *, quantised_taps: bool = True) ->
     if x.ndim == 1:
         y = y[:, 0]
     return p.float_gain * y[p.decimation - 1::p.decimation]
+
+
+# -- compiled fast path ---------------------------------------------------------------------
+
+class FirKernel:
+    """Compiled FIR of one channel (:func:`fir_kernel`): the same bits as :func:`fir_model`
+    when its output cannot saturate (the caller's headroom check) and the accumulator fits
+    float64's exact integers (:meth:`exact`). The history (last ``L-1`` inputs) is the
+    caller's int64 array, updated in place."""
+
+    def __init__(self, params: FirParams):
+        self.params = params
+        self.h = np.array(params.taps_int, dtype=np.float64)
+        self.sym = bool(np.array_equal(self.h, self.h[::-1]))
+        self.rc = round_consts(params.out_shift, params.rounding)
+
+    @staticmethod
+    def exact(params: FirParams) -> bool:
+        """Every product and partial sum an integer below ``2**53`` (with margin)."""
+        return params.acc_width <= 50
+
+    def run(self, z, hist) -> np.ndarray:
+        """Outputs of the input chunk ``z`` (int64) after ``hist``."""
+        out = np.empty(len(z) // self.params.decimation, np.int64)
+        fir_kernel(z, hist, self.h, self.sym, self.params.decimation, self.rc, out)
+        return out
+
+
+@njit_cached(nogil=True)
+def fir_kernel(z, hist, h, sym, down, rc, out):
+    """FIR ``sum_t h[t] z[k - t]`` at ``k = down-1, 2 down-1, ...`` of the chunk, preceded
+    by ``hist`` (the last ``L-1`` inputs, updated in place), rounded (``rc``: see
+    :func:`hdl.model.rounding.round_consts`); ``sym``: the taps are symmetric (one product per pair).
+    Accumulates in float64: every product and partial sum is an integer below 2**53, so
+    the sums are exact in any order. Blocks of outputs stay in L1; the tap loop is outer
+    so the inner loop vectorises."""
+    L = h.shape[0]
+    K = z.shape[0]
+    buf = np.empty(L - 1 + K, dtype=np.float64)
+    for t in range(L - 1):
+        buf[t] = hist[t]
+    for k in range(K):
+        buf[L - 1 + k] = z[k]
+    count = K // down
+    blk = 512
+    acc = np.empty(blk, dtype=np.float64)
+    for j0 in range(0, count, blk):
+        nb = min(blk, count - j0)
+        sp = (nb - 1) * down + 1   # input span of nb outputs
+        for j in range(nb):
+            acc[j] = 0.0
+        # Slices: indices from range() are known non-negative, so numba's negative-index
+        # wraparound folds away and the loops vectorise; several taps per pass over acc.
+        top = j0 * down + down - 1 + L - 1
+        if sym:
+            # h[t] == h[L-1-t]: one product per tap pair (as the hardware's pre-adder)
+            t = 0
+            while t + 2 <= L // 2:
+                h0, h1 = h[t], h[t + 1]
+                s0 = buf[top - t:top - t + sp]
+                s1 = buf[top - t - 1:top - t - 1 + sp]
+                r0 = buf[top - (L - 1 - t):top - (L - 1 - t) + sp]
+                r1 = buf[top - (L - 2 - t):top - (L - 2 - t) + sp]
+                if down == 1:
+                    for j in range(nb):
+                        acc[j] += h0 * (s0[j] + r0[j]) + h1 * (s1[j] + r1[j])
+                else:
+                    for j in range(nb):
+                        jj = j * down
+                        acc[j] += h0 * (s0[jj] + r0[jj]) + h1 * (s1[jj] + r1[jj])
+                t += 2
+            while t < L // 2:
+                h0 = h[t]
+                s0 = buf[top - t:top - t + sp]
+                r0 = buf[top - (L - 1 - t):top - (L - 1 - t) + sp]
+                for j in range(nb):
+                    acc[j] += h0 * (s0[j * down] + r0[j * down])
+                t += 1
+            t = L  # the middle tap of an odd length remains
+            if L % 2:
+                h0 = h[L // 2]
+                s0 = buf[top - L // 2:top - L // 2 + sp]
+                for j in range(nb):
+                    acc[j] += h0 * s0[j * down]
+        else:
+            t = 0
+        while t + 4 <= L:
+            h0, h1, h2, h3 = h[t], h[t + 1], h[t + 2], h[t + 3]
+            s0 = buf[top - t:top - t + sp]
+            s1 = buf[top - t - 1:top - t - 1 + sp]
+            s2 = buf[top - t - 2:top - t - 2 + sp]
+            s3 = buf[top - t - 3:top - t - 3 + sp]
+            if down == 1:
+                for j in range(nb):
+                    acc[j] += (h0 * s0[j] + h1 * s1[j]) + (h2 * s2[j] + h3 * s3[j])
+            else:
+                for j in range(nb):
+                    jj = j * down
+                    acc[j] += (h0 * s0[jj] + h1 * s1[jj]) + (h2 * s2[jj] + h3 * s3[jj])
+            t += 4
+        while t < L:
+            ht = h[t]
+            s0 = buf[top - t:top - t + sp]
+            for j in range(nb):
+                acc[j] += ht * s0[j * down]
+            t += 1
+        for j in range(nb):
+            out[j0 + j] = rnd(np.int64(acc[j]), rc)
+    for t in range(L - 1):
+        hist[t] = np.int64(buf[K + t])

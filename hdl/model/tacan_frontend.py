@@ -46,8 +46,10 @@ the carrier amplitude in FS (its mixer multiplies by ``2 exp(-jwn)``).
 Model
 -----
 :class:`TacanFrontendModel` chains the block models (vectorised, chunkable with a
-:class:`TacanFrontendState`), or runs the same arithmetic as compiled single-threaded
-kernels (:meth:`TacanFrontendModel.envelope`, the default when the word lengths allow);
+:class:`TacanFrontendState`), or composes the blocks' compiled single-threaded kernels
+(:class:`hdl.model.ddc.DdcCicKernel`, :class:`hdl.model.fir.FirKernel`,
+:func:`hdl.model.envelope.envelope_model`; :meth:`TacanFrontendModel.envelope`, the default
+when the word lengths allow);
 :meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle model for a given DSP ``ready``
 pattern.
 """
@@ -56,20 +58,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
+from dsp.jit import njit_cached
 from dsp.tacan.frontend import FrontendConfig, Peaks
 
 from .cic import CicParams, CicState, cic_model
-from .ddc import DdcModel, DdcParams
+from .ddc import DdcCicKernel, DdcModel, DdcParams
 from .envelope import EnvelopeParams, envelope_model
 from .fifo import FifoParams, fifo_model
-from .fir import FirParams, FirState, fir_model
+from .fir import FirKernel, FirParams, FirState, fir_model
+from .fir import fir_kernel as _fir_kernel  # noqa: F401 (tests use it with _round_consts)
 from .mixer import MixerParams
 from .nco import NcoParams, NcoState, nco_freq_word
 from .peak import PeakParams, PeakState, peak_search
+from .rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
 
 __all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",
            "FifoRun"]
@@ -376,245 +380,6 @@ def amp_error_terms(p: TacanFrontendParams) -> dict[str, float]:
 
 # -- model ------------------------------------------------------------------------------------
 
-def _round_consts(shift: int, rounding: str) -> tuple[int, int, int, int, int]:
-    """Constants that make :func:`_rnd` equal ``dsp.fixed.shift_right(v, shift, rounding)``:
-    ``(left shift, right shift, bias, even mask, negative bias)``."""
-    if rounding not in ROUNDINGS:
-        raise ValueError(f"rounding must be one of {ROUNDINGS}, not {rounding!r}")
-    if shift <= 0:
-        return -shift, 0, 0, 0, 0
-    half = 1 << (shift - 1)
-    return {"floor": (0, shift, 0, 0, 0),
-            "half_up": (0, shift, half, 0, 0),
-            # half to even: carry out of rem + half - 1 + (q & 1)
-            "half_even": (0, shift, half - 1, 1, 0),
-            # toward zero: floor(v + 2**s - 1) = ceil for v < 0
-            "zero": (0, shift, 0, 0, (1 << shift) - 1)}[rounding]
-
-
-# Kept here rather than shared with hdl.model.envelope: numba's cache does not see edits
-# to a jitted function in another module, and a stale kernel would lose bits.
-@numba.njit(inline="always")
-def _rnd(v, rc):
-    """``shift_right`` of one int64, branch-free; ``rc`` from :func:`_round_consts`."""
-    ls, rs, c0, em, za = rc
-    v <<= ls
-    return (v + c0 + ((v >> rs) & em) + ((v >> 63) & za)) >> rs
-
-
-@numba.njit(cache=True, nogil=True)
-def _ddc_cic_kernel(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
-                    rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng):
-    """NCO + mixer + CIC on whole decimation groups, sample by sample as the hardware.
-
-    ``ph``: phase of the first sample; ``fw``: NCO word at the first sample, replaced by
-    ``ch_val[j]`` from sample ``ch_idx[j]`` on (strictly increasing; register writes);
-    ``msin_t = -sin``; ``integ`` (2, N) and ``combs``
-    (2, N, M) are the CIC registers (updated in place; ``combs[c, s, 0]`` is the newest
-    delayed value). The integrators wrap mod 2**64, which is exact mod 2**B_max: the
-    combed value fits ``B_max`` bits (no pruning). ``yi``/``yq`` get the rounded CIC
-    outputs. Returns the phase after the last sample, or -1 if an input is out of
-    ``[lo, hi]`` (the outputs are then invalid).
-    """
-    n_st = integ.shape[1]
-    m_dl = combs.shape[2]
-    if n_st == 3 and m_dl == 1 and mix_rc[0] == 0 and mix_rc[4] == 0:
-        return _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
-                         rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng)
-    count = x.shape[0] // rate
-    ii = integ[0].copy()
-    iq = integ[1].copy()
-    bad = False
-    nch = ch_idx.shape[0]
-    j = 0
-    nxt = ch_idx[0] if nch > 0 else -1
-    for k in range(count):
-        xs = x[k * rate:(k + 1) * rate]
-        for r in range(rate):
-            if k * rate + r == nxt:
-                fw = ch_val[j] & pmask
-                j += 1
-                nxt = ch_idx[j] if j < nch else -1
-            xv = np.int64(xs[r])
-            bad |= (xv < lo) | (xv > hi)
-            a = ph >> trunc
-            vi = _rnd(xv * cos_t[a], mix_rc)
-            vq = _rnd(xv * msin_t[a], mix_rc)
-            mrng[0] = min(mrng[0], vi)
-            mrng[1] = max(mrng[1], vi)
-            mrng[2] = min(mrng[2], vq)
-            mrng[3] = max(mrng[3], vq)
-            ph = (ph + fw) & pmask
-            for s in range(n_st):
-                vi += ii[s]
-                ii[s] = vi
-                vq += iq[s]
-                iq[s] = vq
-        # decimated sample: the combs
-        vi = ii[n_st - 1]
-        vq = iq[n_st - 1]
-        for s in range(n_st):
-            oi = combs[0, s, m_dl - 1]
-            oq = combs[1, s, m_dl - 1]
-            for d in range(m_dl - 1, 0, -1):
-                combs[0, s, d] = combs[0, s, d - 1]
-                combs[1, s, d] = combs[1, s, d - 1]
-            combs[0, s, 0] = vi
-            combs[1, s, 0] = vq
-            vi -= oi
-            vq -= oq
-        yi[k] = _rnd(vi, cic_rc)
-        yq[k] = _rnd(vq, cic_rc)
-    integ[0] = ii
-    integ[1] = iq
-    return -1 if bad else ph
-
-
-@numba.njit(inline="always")
-def _ddc_cic3(x, ph, fw, pmask, trunc, cos_t, msin_t, mix_rc, lo, hi,
-              rate, integ, combs, cic_rc, yi, yq, ch_idx, ch_val, mrng):
-    """:func:`_ddc_cic_kernel` for N = 3, M = 1 (the default), registers in locals, and a
-    mixer rounding without left shift or toward-zero bias (the fewer terms matter here)."""
-    _, rs, c0, em, _ = mix_rc
-    count = x.shape[0] // rate
-    i1, i2, i3 = integ[0, 0], integ[0, 1], integ[0, 2]
-    q1, q2, q3 = integ[1, 0], integ[1, 1], integ[1, 2]
-    ci1, ci2, ci3 = combs[0, 0, 0], combs[0, 1, 0], combs[0, 2, 0]
-    cq1, cq2, cq3 = combs[1, 0, 0], combs[1, 1, 0], combs[1, 2, 0]
-    bad = False
-    nch = ch_idx.shape[0]
-    j = 0
-    nxt = ch_idx[0] if nch > 0 else -1
-    mn_i, mx_i, mn_q, mx_q = mrng[0], mrng[1], mrng[2], mrng[3]
-    for k in range(count):
-        xs = x[k * rate:(k + 1) * rate]
-        for r in range(rate):
-            if k * rate + r == nxt:
-                fw = ch_val[j] & pmask
-                j += 1
-                nxt = ch_idx[j] if j < nch else -1
-            xv = np.int64(xs[r])
-            bad |= (xv < lo) | (xv > hi)
-            a = ph >> trunc
-            pi = xv * cos_t[a]
-            pq = xv * msin_t[a]
-            vi = (pi + c0 + ((pi >> rs) & em)) >> rs
-            vq = (pq + c0 + ((pq >> rs) & em)) >> rs
-            mn_i = min(mn_i, vi)
-            mx_i = max(mx_i, vi)
-            mn_q = min(mn_q, vq)
-            mx_q = max(mx_q, vq)
-            ph = (ph + fw) & pmask
-            i1 += vi
-            i2 += i1
-            i3 += i2
-            q1 += vq
-            q2 += q1
-            q3 += q2
-        d1 = i3 - ci1
-        ci1 = i3
-        d2 = d1 - ci2
-        ci2 = d1
-        yi[k] = _rnd(d2 - ci3, cic_rc)
-        ci3 = d2
-        d1 = q3 - cq1
-        cq1 = q3
-        d2 = d1 - cq2
-        cq2 = d1
-        yq[k] = _rnd(d2 - cq3, cic_rc)
-        cq3 = d2
-    integ[0, 0], integ[0, 1], integ[0, 2] = i1, i2, i3
-    integ[1, 0], integ[1, 1], integ[1, 2] = q1, q2, q3
-    combs[0, 0, 0], combs[0, 1, 0], combs[0, 2, 0] = ci1, ci2, ci3
-    combs[1, 0, 0], combs[1, 1, 0], combs[1, 2, 0] = cq1, cq2, cq3
-    mrng[0], mrng[1], mrng[2], mrng[3] = mn_i, mx_i, mn_q, mx_q
-    return -1 if bad else ph
-
-
-@numba.njit(cache=True, nogil=True)
-def _fir_kernel(z, hist, h, sym, down, rc, out):
-    """FIR ``sum_t h[t] z[k - t]`` at ``k = down-1, 2 down-1, ...`` of the chunk, preceded
-    by ``hist`` (the last ``L-1`` inputs, updated in place), rounded (``rc``: see
-    :func:`_round_consts`); ``sym``: the taps are symmetric (one product per pair).
-    Accumulates in float64: every product and partial sum is an integer below 2**53, so
-    the sums are exact in any order. Blocks of outputs stay in L1; the tap loop is outer
-    so the inner loop vectorises."""
-    L = h.shape[0]
-    K = z.shape[0]
-    buf = np.empty(L - 1 + K, dtype=np.float64)
-    for t in range(L - 1):
-        buf[t] = hist[t]
-    for k in range(K):
-        buf[L - 1 + k] = z[k]
-    count = K // down
-    blk = 512
-    acc = np.empty(blk, dtype=np.float64)
-    for j0 in range(0, count, blk):
-        nb = min(blk, count - j0)
-        sp = (nb - 1) * down + 1   # input span of nb outputs
-        for j in range(nb):
-            acc[j] = 0.0
-        # Slices: indices from range() are known non-negative, so numba's negative-index
-        # wraparound folds away and the loops vectorise; several taps per pass over acc.
-        top = j0 * down + down - 1 + L - 1
-        if sym:
-            # h[t] == h[L-1-t]: one product per tap pair (as the hardware's pre-adder)
-            t = 0
-            while t + 2 <= L // 2:
-                h0, h1 = h[t], h[t + 1]
-                s0 = buf[top - t:top - t + sp]
-                s1 = buf[top - t - 1:top - t - 1 + sp]
-                r0 = buf[top - (L - 1 - t):top - (L - 1 - t) + sp]
-                r1 = buf[top - (L - 2 - t):top - (L - 2 - t) + sp]
-                if down == 1:
-                    for j in range(nb):
-                        acc[j] += h0 * (s0[j] + r0[j]) + h1 * (s1[j] + r1[j])
-                else:
-                    for j in range(nb):
-                        jj = j * down
-                        acc[j] += h0 * (s0[jj] + r0[jj]) + h1 * (s1[jj] + r1[jj])
-                t += 2
-            while t < L // 2:
-                h0 = h[t]
-                s0 = buf[top - t:top - t + sp]
-                r0 = buf[top - (L - 1 - t):top - (L - 1 - t) + sp]
-                for j in range(nb):
-                    acc[j] += h0 * (s0[j * down] + r0[j * down])
-                t += 1
-            t = L  # the middle tap of an odd length remains
-            if L % 2:
-                h0 = h[L // 2]
-                s0 = buf[top - L // 2:top - L // 2 + sp]
-                for j in range(nb):
-                    acc[j] += h0 * s0[j * down]
-        else:
-            t = 0
-        while t + 4 <= L:
-            h0, h1, h2, h3 = h[t], h[t + 1], h[t + 2], h[t + 3]
-            s0 = buf[top - t:top - t + sp]
-            s1 = buf[top - t - 1:top - t - 1 + sp]
-            s2 = buf[top - t - 2:top - t - 2 + sp]
-            s3 = buf[top - t - 3:top - t - 3 + sp]
-            if down == 1:
-                for j in range(nb):
-                    acc[j] += (h0 * s0[j] + h1 * s1[j]) + (h2 * s2[j] + h3 * s3[j])
-            else:
-                for j in range(nb):
-                    jj = j * down
-                    acc[j] += (h0 * s0[jj] + h1 * s1[jj]) + (h2 * s2[jj] + h3 * s3[jj])
-            t += 4
-        while t < L:
-            ht = h[t]
-            s0 = buf[top - t:top - t + sp]
-            for j in range(nb):
-                acc[j] += ht * s0[j * down]
-            t += 1
-        for j in range(nb):
-            out[j0 + j] = _rnd(np.int64(acc[j]), rc)
-    for t in range(L - 1):
-        hist[t] = np.int64(buf[K + t])
-
-
 def _check_changes(freq_changes, phase_bits: int):
     """Validated ``freq`` writes as (index, word) int64 arrays (None: no writes)."""
     if freq_changes is None or isinstance(freq_changes, tuple) and len(freq_changes) == 2 \
@@ -711,13 +476,9 @@ class TacanFrontendModel:
         self.ddc = DdcModel(self.params.ddc)
         self._fast = self._fast_ok() if fast is None else bool(fast and self._fast_ok())
         p = self.params
-        self._cos = np.ascontiguousarray(self.ddc.nco.cos_table, dtype=np.int64)
-        self._msin = np.ascontiguousarray(-self.ddc.nco.sin_table, dtype=np.int64)
-        self._h_fir = np.array(p.fir.taps_int, dtype=np.float64)
-        self._fir_sym = bool(np.array_equal(self._h_fir, self._h_fir[::-1]))
-        self._rc = {"mixer": _round_consts(p.ddc.mixer.drop_bits, p.ddc.mixer.rounding),
-                    "cic": _round_consts(p.cic.out_shift, p.cic.rounding),
-                    "fir": _round_consts(p.fir.out_shift, p.fir.rounding)}
+        if self._fast:
+            self._ddc_cic = DdcCicKernel(p.ddc, p.cic)
+            self._fir = FirKernel(p.fir)
 
     @property
     def fast(self) -> bool:
@@ -728,9 +489,8 @@ class TacanFrontendModel:
         p = self.params
         # Exact when nothing saturates (check_headroom) or wraps (no pruning: the CIC sum is
         # exact) and the FIR's float64 accumulation holds integers below 2**53.
-        return (p.check_headroom and not p.cic_prune and p.nco_dither_bits == 0
-                and p.fir.acc_width <= 50 and p.cic.full_width <= 50
-                and p.ddc.mixer.product_width <= 50)
+        return (p.check_headroom and DdcCicKernel.exact(p.ddc, p.cic)
+                and FirKernel.exact(p.fir))
 
     def envelope(self, adc_codes, state: TacanFrontendState | None = None, *,
                  freq_changes=None) -> tuple[np.ndarray, TacanFrontendState]:
@@ -820,7 +580,7 @@ class TacanFrontendModel:
         (float64 accumulation, exact), the envelope CORDIC; states are copied, not
         modified."""
         p = self.params
-        nco_p, mx, cic = p.ddc.nco, p.ddc.mixer, p.cic
+        nco_p, cic = p.ddc.nco, p.cic
         if x.dtype.kind == "u" and x.size and int(x.max()) >= 1 << (p.adc_bits - 1):
             raise ValueError(f"ADC codes must be signed {p.adc_bits}-bit integers")
         x = np.ascontiguousarray(x, dtype=np.int64)   # one kernel signature
@@ -832,26 +592,16 @@ class TacanFrontendModel:
             combs = np.zeros((2, cic.stages, cic.diff_delay), np.int64)
         else:
             integ, combs = (a.copy() for a in st.cic)
-        L = len(self._h_fir)
+        L = len(p.fir.taps_int)
         hist = np.zeros((2, L - 1), np.int64) if st.fir is None else st.fir.copy()
-        count = len(x) // cic.rate
-        ci = np.empty(count, np.int64)
-        cq = np.empty(count, np.int64)
-        lo = p.adc_bits - 1
         big = np.iinfo(np.int64).max
         mrng = np.array([big, -big, big, -big], np.int64)
-        ph = _ddc_cic_kernel(x, acc0, fw, pmask, nco_p.trunc_bits, self._cos, self._msin,
-                             self._rc["mixer"], -(1 << lo), (1 << lo) - 1, cic.rate, integ,
-                             combs, self._rc["cic"], ci, cq, ch_idx, ch_val, mrng)
-        if ph < 0:
-            raise ValueError(f"ADC codes must be signed {p.adc_bits}-bit integers")
-        nco = NcoState(acc=int(ph), lfsr=int(nco_p.dither_seed) if st.nco is None else st.nco.lfsr)
-        f = p.fir
-        nf = count // f.decimation
-        fi = np.empty(nf, np.int64)
-        fq = np.empty(nf, np.int64)
-        _fir_kernel(ci, hist[0], self._h_fir, self._fir_sym, f.decimation, self._rc["fir"], fi)
-        _fir_kernel(cq, hist[1], self._h_fir, self._fir_sym, f.decimation, self._rc["fir"], fq)
+        ci, cq, ph = self._ddc_cic.run(x, acc0, fw, integ, combs, ch_idx, ch_val, mrng)
+        count = len(ci)
+        nco = NcoState(acc=ph, lfsr=int(nco_p.dither_seed) if st.nco is None else st.nco.lfsr)
+        nf = count // p.fir.decimation
+        fi = self._fir.run(ci, hist[0])
+        fq = self._fir.run(cq, hist[1])
         if self.log_ranges and count:
             self._note("mixer", mrng)
             self._note("cic", np.r_[ci.min(), ci.max(), cq.min(), cq.max()])

@@ -335,6 +335,22 @@ def test_build_is_cached_and_rebuilt_on_change(tmp_path):
     np.testing.assert_array_equal(other.run(words).words, (words ^ 0x4321) + 1)
 
 
+@needs_verilator
+def test_concurrent_builds_of_one_design_compile_once(tmp_path):
+    """Two builders of the same design into one cache (pytest-xdist workers do this): the
+    build lock lets one compile and the other load its library."""
+    from concurrent.futures import ThreadPoolExecutor
+    _seed_runtime(tmp_path)
+    with ThreadPoolExecutor(2) as ex:
+        sims = list(ex.map(lambda _: VerilatorStreamSim(FifoDemo(depth=4, xor=0x5a5a), "lock_demo",
+                                                        build_dir=tmp_path), range(2)))
+    assert sorted(s.built for s in sims) == [False, True]
+    assert sims[0].lib_path == sims[1].lib_path
+    words = np.arange(50)
+    for s in sims:
+        np.testing.assert_array_equal(s.run(words).words, (words ^ 0x5a5a) + 1)
+
+
 def test_missing_verilator_message(monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(RuntimeError, match=r"Verilator not found on PATH: install it with "
@@ -358,14 +374,10 @@ def test_trace_window(acc, tmp_path, suffix):
 
 
 @needs_verilator
-def test_speed_smoke(acc):
-    """Not a benchmark: only checks the compiled loop is in the right league (>= 1e6/s even
-    on a loaded machine); the measured figure is printed with -s."""
-    import time
+def test_long_run(acc):
+    """A 2M-cycle run (many C++ batches) completes with every cycle accounted for; the
+    speed figures are in ``cosim bench sim-speed``, not asserted here."""
     dut, sim = acc
     n = 2_000_000
-    t0 = time.process_time()
     res = sim.run(n_cycles=n, inputs={"shift": 1})
-    dt = time.process_time() - t0
-    print(f"\nVerilator acc_demo: {n / dt / 1e6:.1f} M cycles/s (CPU time)")
-    assert res.n_cycles == n and n / dt > 1e6
+    assert res.n_cycles == n

@@ -290,8 +290,7 @@ def test_events_validate_inputs():
 @pytest.mark.slow
 def test_fast_model_long_tacan_like():
     """20M cycles (1 s at 20 MHz), ~15k peak words, DSP reading 256 words every 1 ms:
-    compiled model == reference on the first 2M cycles, and the full run is quick."""
-    import time
+    compiled model == reference on the first 2M cycles (speed: ``cosim bench sim-speed``)."""
     rng = np.random.default_rng(311)
     n = 20_000_000
     first = np.sort(rng.choice(n - 300, 7500, replace=False))
@@ -299,10 +298,7 @@ def test_fast_model_long_tacan_like():
     words = rng.integers(0, 1 << 51, wc.size)
     p = FifoParams()
     sch = ReadySchedule(period=20_000, offset=200, count=256, stride=4)
-    fifo_model_events(wc[:1], words[:1], int(wc[0]) + 1, sch, p)   # compile outside timing
-    t0 = time.perf_counter()
     res = fifo_model_events(wc, words, n, sch, p)
-    assert time.perf_counter() - t0 < 2.0
     assert not res.dropped.any() and res.words.size > 14_000
     m = 2_000_000
     k = int(np.searchsorted(wc, m))

@@ -1,0 +1,388 @@
+"""Pulse-peak search: the algorithm, its parameters and the numpy implementation (integer and float64).
+
+The golden DSP runs the float64 variant (:func:`peak_search_float`); the HDL block
+(:class:`hdl.peak.PeakSearch`) and its bit-exact compiled model
+(:func:`hdl.model.peak.peak_search`) implement the integer one, which
+:func:`peak_search_numpy` is the reference of. The DSP owns the algorithm; the HDL model
+imports it from here (the golden DSP imports nothing from ``hdl``).
+
+Algorithm (the HDL, this model and the lead's float golden receiver share it)
+-----------------------------------------------------------------------------
+Input: unsigned envelope samples ``e[n]``; ``n`` counts valid samples since reset.
+
+Noise floor, in blocks of ``L = 2**block_log2`` samples (block ``b`` is
+``n in [b*L, (b+1)*L)``):
+
+* block 0: no detection (threshold = infinity); ``nu_1 = sum(e) >> block_log2``;
+* block ``b >= 1``: ``clip_b = nu_b << clip_log2``,
+  ``m_b = sum(min(e, clip_b)) >> block_log2``,
+  ``nu_{b+1} = nu_b + ((m_b - nu_b) >> smooth_log2)`` (arithmetic shift = floor);
+* threshold of block ``b >= 1``: ``T_b = max(thr_min, (nu_b * thr_mult) >> thr_frac)``.
+
+Float variant: sums times ``2**-block_log2``, ``nu + (m - nu) * 2**-smooth_log2``,
+``T = max(thr_min, nu * thr_mult * 2**-thr_frac)``, no rounding anywhere.
+
+Pulses (``T`` is the threshold of the sample's own block):
+
+* closed: a sample with ``e >= T`` opens a pulse (max = e, below = 0, len = 1);
+* open, for each further sample: ``e > max`` (strictly; the first occurrence wins ties)
+  updates max and its ``n``; ``e >= T`` resets the below-counter, ``e < T`` increments it;
+  len += 1. When below reaches ``hold``, or len reaches ``max_len``, the pulse is emitted
+  (amplitude = max, timestamp = ``(n_max * ts_step) mod 2**ts_bits``) and closed *at that
+  sample*: the closing sample never opens a new pulse (it matters only for a ``max_len`` cut,
+  a ``hold`` close is below threshold anyway).
+
+The integer model (:func:`hdl.model.peak.peak_search`) is a compiled (numba) per-sample loop
+that follows the steps above as written; :func:`peak_search_numpy` is an independent vectorised
+implementation (a loop over blocks for the thresholds and over the sub-pulses of groups
+longer than ``max_len``), kept as its reference and shared with the float variant. Both run
+in chunks with a :class:`PeakState` and give the same bits as one long run.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dsp.fixed import check_width
+
+__all__ = ["PeakParams", "PeakState", "PeakResult", "peak_search_numpy", "peak_search_float"]
+
+#: Threshold standing for "infinity" in the integer model (above any envelope value).
+_INF_INT = np.int64(1) << np.int64(62)
+
+
+@dataclass(frozen=True)
+class PeakParams:
+    """Parameters of the peak search (those of :class:`hdl.peak.PeakSearch`: the word widths
+    and the pipeline's latency are part of the block's specification, the golden model
+    reads the algorithm's fields only).
+
+    Parameters
+    ----------
+    amp_width : int
+        Width of the unsigned envelope input and of the output amplitude (bits).
+        Default 19 = ``EnvelopeParams().out_width``.
+    ts_bits : int
+        Width of the output timestamp (bits); it wraps modulo ``2**ts_bits``.
+    ts_step : int
+        Input-clock ticks per envelope sample (timestamp increment per sample), >= 1.
+    block_log2 : int
+        log2 of the noise-floor block length in samples (1..20).
+    clip_log2 : int
+        Samples are clipped at ``nu << clip_log2`` before averaging (0..8).
+    smooth_log2 : int
+        Noise-floor smoothing ``nu += (m - nu) >> smooth_log2`` (0..16).
+    thr_mult, thr_frac : int
+        Threshold factor ``thr_mult * 2**-thr_frac`` times the noise floor (default 3.0).
+    thr_min : int
+        Lowest threshold (envelope LSBs), >= 0.
+    hold : int
+        Consecutive below-threshold samples that close a pulse, >= 1.
+    max_len : int
+        Samples after which an open pulse is emitted anyway, > hold.
+    """
+
+    amp_width: int = 19
+    ts_bits: int = 32
+    ts_step: int = 4
+    block_log2: int = 10
+    clip_log2: int = 1
+    smooth_log2: int = 2
+    thr_mult: int = 48
+    thr_frac: int = 4
+    thr_min: int = 16
+    hold: int = 5
+    max_len: int = 128
+
+    def __post_init__(self):
+        check_width("peak amp_width", self.amp_width, minimum=1, maximum=40)
+        check_width("peak ts_bits", self.ts_bits, minimum=1, maximum=62)
+        _check_int("peak ts_step", self.ts_step, 1, (1 << self.ts_bits) - 1)
+        _check_int("peak block_log2", self.block_log2, 1, 20)
+        _check_int("peak clip_log2", self.clip_log2, 0, 8)
+        _check_int("peak smooth_log2", self.smooth_log2, 0, 16)
+        _check_int("peak thr_frac", self.thr_frac, 0, 16)
+        _check_int("peak thr_mult", self.thr_mult, 1, (1 << 20) - 1)
+        _check_int("peak thr_min", self.thr_min, 0, (1 << self.amp_width) - 1)
+        _check_int("peak hold", self.hold, 1, 1 << 16)
+        if isinstance(self.max_len, bool) or not isinstance(self.max_len, int) \
+                or self.max_len <= self.hold or self.max_len > 1 << 20:
+            raise ValueError(f"peak max_len must be an integer > hold ({self.hold}) and "
+                             f"<= 2**20, not {self.max_len!r}")
+
+    # -- derived ---------------------------------------------------------------------------
+    @property
+    def block_len(self) -> int:
+        return 1 << self.block_log2
+
+    @property
+    def thr_factor(self) -> float:
+        return self.thr_mult * 2.0 ** -self.thr_frac
+
+    @property
+    def acc_width(self) -> int:
+        """Noise accumulator: ``nu*(2**s - 1)*L + sum(min(e, clip)) < 2**(amp + log2 L + s)``."""
+        return self.amp_width + self.block_log2 + self.smooth_log2
+
+    @property
+    def thr_width(self) -> int:
+        """Unsigned width of a threshold ``max(thr_min, nu*thr_mult >> thr_frac)``."""
+        return max(self.amp_width + self.thr_mult.bit_length() - self.thr_frac, self.amp_width, 1)
+
+    @property
+    def det_delay(self) -> int:
+        """Cycles the detector runs behind the noise-floor path (threshold pipeline: new
+        ``nu`` 1 cycle after the block sum, product +1, floor +1, registered compare +1)."""
+        return 4
+
+    @property
+    def latency(self) -> int:
+        """Cycles from the input transfer of a pulse's closing sample to the output transfer."""
+        return 1 + self.det_delay + 1
+
+    @property
+    def in_layout(self) -> list[tuple[str, int, bool]]:
+        return [("e", self.amp_width, False)]
+
+    @property
+    def out_layout(self) -> list[tuple[str, int, bool]]:
+        """Packed output payload, LSB first (for ``cosim.pysim.unpack_fields``)."""
+        return [("amplitude", self.amp_width, False), ("timestamp", self.ts_bits, False)]
+
+    def threshold(self, nu: int) -> int:
+        """Integer threshold of a block whose noise floor is ``nu``."""
+        return max(self.thr_min, (int(nu) * self.thr_mult) >> self.thr_frac)
+
+
+def _check_int(name, value, lo, hi):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+            or not lo <= int(value) <= hi:
+        raise ValueError(f"{name} must be an integer in [{lo}, {hi}], not {value!r}")
+
+
+@dataclass
+class PeakState:
+    """Everything the search carries from one chunk to the next (initial value = reset).
+
+    ``n`` samples seen; ``nu`` current noise floor (meaningful once ``n >= L``);
+    ``bsum`` partial sum of the current block; an open pulse has ``start`` (its first
+    ``n``), ``pmax``/``nmax`` (max so far and its ``n``), ``below`` and ``length``.
+    Values are Python ints in the integer model and floats in the float model.
+    """
+
+    n: int = 0
+    nu: float = 0
+    bsum: float = 0
+    open: bool = False
+    start: int = 0
+    pmax: float = 0
+    nmax: int = 0
+    below: int = 0
+    length: int = 0
+
+
+@dataclass
+class PeakResult:
+    """Emitted pulses in order. ``index``: ``n`` of the peak; ``end_index``: ``n`` of the
+    closing sample (the HDL emits ``params.latency`` cycles after that sample's transfer)."""
+
+    amplitude: np.ndarray
+    timestamp: np.ndarray
+    index: np.ndarray
+    end_index: np.ndarray
+    thresholds: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def peak_search_numpy(env, params: PeakParams, state: PeakState | None = None
+                      ) -> tuple[PeakResult, PeakState]:
+    """The vectorised numpy implementation of :func:`peak_search` (same results; the
+    reference the compiled per-sample loop is tested against)."""
+    env = np.asarray(env)
+    if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
+        raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
+    return _search(env.astype(np.int64), params, state, False, params.thr_min)
+
+
+def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *,
+                      thr_min: float | None = None) -> tuple[PeakResult, PeakState]:
+    """The same steps as :func:`peak_search` in float64, without any rounding.
+
+    ``thr_min`` (float, same unit as ``env``) defaults to ``params.thr_min``. Amplitudes and
+    thresholds come back as float64; timestamps as int64 as in the integer model.
+    """
+    env = np.asarray(env, dtype=np.float64)
+    if np.isnan(env).any():
+        raise ValueError("peak search input must not contain NaN")
+    tm = float(params.thr_min if thr_min is None else thr_min)
+    return _search(env, params, state, True, tm)
+
+
+# -- numpy implementation (integer and float) -------------------------------------------------
+def _thresholds(e, p: PeakParams, st: PeakState, is_float: bool, thr_min):
+    """Per-sample threshold; updates ``st.nu``/``st.bsum`` (loop over blocks)."""
+    N = e.size
+    L = p.block_len
+    inf = np.inf if is_float else _INF_INT
+    T = np.empty(N, dtype=np.float64 if is_float else np.int64)
+    pos = 0
+    n = st.n
+    while pos < N:
+        b = n >> p.block_log2
+        take = min(L - (n - b * L), N - pos)
+        seg = e[pos:pos + take]
+        if b == 0:
+            T[pos:pos + take] = inf
+            st.bsum = st.bsum + (float(seg.sum()) if is_float else int(seg.sum()))
+        else:
+            if is_float:
+                clip = st.nu * 2.0 ** p.clip_log2
+                T[pos:pos + take] = max(thr_min, st.nu * p.thr_factor)
+                st.bsum = st.bsum + float(np.minimum(seg, clip).sum())
+            else:
+                clip = np.int64(st.nu << p.clip_log2)
+                T[pos:pos + take] = p.threshold(st.nu)
+                st.bsum = st.bsum + int(np.minimum(seg, clip).sum())
+        pos += take
+        n += take
+        if (n & (L - 1)) == 0:  # block complete
+            if is_float:
+                m = st.bsum * 2.0 ** -p.block_log2
+                st.nu = m if b == 0 else st.nu + (m - st.nu) * 2.0 ** -p.smooth_log2
+            else:
+                m = int(st.bsum) >> p.block_log2
+                st.nu = m if b == 0 else st.nu + ((m - st.nu) >> p.smooth_log2)
+            st.bsum = 0.0 if is_float else 0
+    return T
+
+
+def _segment_max(e, s, t):
+    """Max over each inclusive segment ``[s_k, t_k]`` and its first index (ties: first)."""
+    lengths = t - s + 1
+    total = int(lengths.sum())
+    offs = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+    idx = np.arange(total, dtype=np.int64) - np.repeat(offs, lengths) + np.repeat(s, lengths)
+    vals = e[idx]
+    smax = np.maximum.reduceat(vals, offs)
+    match = vals == np.repeat(smax, lengths)
+    first = np.minimum.reduceat(np.where(match, idx, np.int64(1) << 62), offs)
+    return smax, first
+
+
+def _search(e, p: PeakParams, state, is_float: bool, thr_min):
+    st = copy.copy(state) if state is not None else PeakState()
+    if state is None and is_float:
+        st.nu, st.bsum, st.pmax = 0.0, 0.0, 0.0
+    n0 = st.n
+    N = e.size
+    T = _thresholds(e, p, st, is_float, thr_min)
+    above = e >= T
+    idx = np.arange(N, dtype=np.int64)
+
+    carry = st.below if st.open else 0
+    last_above = np.maximum.accumulate(np.where(above, idx, np.int64(-1 - carry))) if N else idx
+    streak = idx - last_above
+    H = np.flatnonzero(streak == p.hold)  # candidate hold-closes
+    A = np.flatnonzero(above)
+
+    starts: list[np.ndarray] = []
+    ends: list[np.ndarray] = []
+    carried = None  # (end, or -1 if still open)
+    p0 = 0
+    if st.open:
+        j_cut = p.max_len - st.length - 1
+        h = np.searchsorted(H, 0)
+        j_hold = int(H[h]) if h < H.size else N
+        end = min(j_cut, j_hold)
+        carried = end
+        p0 = end + 1 if end < N else N
+
+    # Groups of above samples (gaps < hold) from p0 on: each group is one pulse unless cut.
+    Ag = A[A >= p0]
+    if Ag.size:
+        gstart = np.concatenate(([True], np.diff(Ag) - 1 >= p.hold))
+        gs = Ag[gstart]
+        ge = np.append(H, N)[np.searchsorted(H, gs, side="right")].astype(np.int64)
+        long = np.flatnonzero(ge - gs + 1 > p.max_len)
+        if long.size == 0:
+            starts.append(gs)
+            ends.append(ge)
+        else:
+            # Split groups longer than max_len (sequential by nature; rare).
+            keep = np.ones(gs.size, dtype=bool)
+            keep[long] = False
+            extra_s, extra_e = [], []
+            for k in long:
+                s, g_end = int(gs[k]), int(ge[k])
+                while True:
+                    cut = s + p.max_len - 1
+                    if cut >= g_end:
+                        extra_s.append(s)
+                        extra_e.append(g_end)
+                        break
+                    extra_s.append(s)
+                    extra_e.append(cut)
+                    a = np.searchsorted(A, cut, side="right")
+                    if a >= A.size or A[a] > g_end:
+                        break
+                    s = int(A[a])
+            s_all = np.concatenate((gs[keep], np.array(extra_s, dtype=np.int64)))
+            e_all = np.concatenate((ge[keep], np.array(extra_e, dtype=np.int64)))
+            order = np.argsort(s_all, kind="stable")
+            starts.append(s_all[order])
+            ends.append(e_all[order])
+    s_arr = np.concatenate(starts) if starts else np.zeros(0, dtype=np.int64)
+    t_arr = np.concatenate(ends) if ends else np.zeros(0, dtype=np.int64)
+
+    amp_list, nmax_list, end_list = [], [], []
+    # The pulse carried in from the previous chunk.
+    if carried is not None:
+        t = min(carried, N - 1)
+        pmax, nmax = st.pmax, st.nmax
+        if t >= 0:
+            seg = e[:t + 1]
+            j = int(np.argmax(seg))
+            if seg[j] > pmax:
+                pmax, nmax = seg[j], n0 + j
+        if carried < N:
+            amp_list.append(np.array([pmax]))
+            nmax_list.append(np.array([nmax], dtype=np.int64))
+            end_list.append(np.array([n0 + carried], dtype=np.int64))
+            st.open = False
+        else:
+            st.pmax, st.nmax = pmax, nmax
+            st.length += N
+            st.below = int(streak[-1]) if N else st.below
+
+    # Pulses starting in this chunk; the last may stay open.
+    if s_arr.size:
+        closed = t_arr < N
+        tt = np.minimum(t_arr, N - 1)
+        smax, first = _segment_max(e, s_arr, tt)
+        amp_list.append(smax[closed])
+        nmax_list.append(n0 + first[closed])
+        end_list.append(n0 + t_arr[closed])
+        if not closed[-1]:
+            st.open = True
+            st.start = n0 + int(s_arr[-1])
+            st.pmax = smax[-1].item()
+            st.nmax = n0 + int(first[-1])
+            st.length = N - int(s_arr[-1])
+            st.below = int(streak[-1])
+        else:
+            st.open = False
+
+    dt = np.float64 if is_float else np.int64
+    amp = np.concatenate(amp_list).astype(dt) if amp_list else np.zeros(0, dtype=dt)
+    nmax = np.concatenate(nmax_list) if nmax_list else np.zeros(0, dtype=np.int64)
+    endi = np.concatenate(end_list) if end_list else np.zeros(0, dtype=np.int64)
+    mask = np.int64((1 << p.ts_bits) - 1)
+    ts = (nmax * np.int64(p.ts_step)) & mask
+    st.n = n0 + N
+    if not st.open:  # canonical closed state, so equal histories give equal states
+        st.start = st.nmax = st.below = st.length = 0
+        st.pmax = 0.0 if is_float else 0
+    if not is_float:
+        st.pmax = int(st.pmax)
+    return PeakResult(amplitude=amp, timestamp=ts, index=nmax, end_index=endi, thresholds=T), st
