@@ -40,9 +40,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..fixed import FixedFormat
+from ..jit import njit_cached
 from .events import EventRegistry
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
 from .ops import align, div_q, flip, sqrt_q, store
@@ -141,7 +141,7 @@ _EV_UPS = EVENTS.index("upsets")
 _BASE = EVENTS.base
 
 
-@njit(cache=True)
+@njit_cached
 def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd, k0, ups, ev, xs, cs):
     """consts = [noise floor tau sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a
     number), sigma_v / k (l), 4 (l)]."""

@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
+from ..jit import njit_cached
 from ..qops import _fdiv, align  # noqa: F401  (align re-exported: exact left shift)
 
 _OPTS = {"cache": True}
@@ -107,7 +108,7 @@ def _ol_store(acc, s, half, lo, hi, ev, i, base):
         return lambda acc, s, half, lo, hi, ev, i, base: acc
 
 
-@njit(cache=True)
+@njit_cached
 def isqrt(w):
     """``floor(sqrt(w))`` for ``0 <= w < 2**62``, exactly."""
     r = np.int64(math.sqrt(float(w)))

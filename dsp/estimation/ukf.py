@@ -42,12 +42,16 @@ parameters (alpha = 1.027, beta = 2, kappa = 0, L = 10: Wm0 = 0.0519, Wc0 = 1.99
 """
 from __future__ import annotations
 
+import hashlib
+import inspect
+import types
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from numba import njit
 
 from ..fixed import FixedFormat
+from ..jit import njit_cached
 from .events import EventRegistry
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, sum_bits, to_fixed
 from .linalg import chol_q, solve_lower_q, solve_upper_t_q
@@ -216,7 +220,7 @@ _EV_DIV = EVENTS.index("div_zero")
 _BASE = EVENTS.base
 
 
-@njit(cache=True)
+@njit_cached
 def _f_linear(x, w, prm, q, out):
     """``F x + w`` (fixed point: ``q = [frac x, frac w, frac prm, frac out, half]``)."""
     n = x.shape[0]
@@ -227,7 +231,7 @@ def _f_linear(x, w, prm, q, out):
         out[i] = rnd(acc, q[0] + q[2] - q[3], q[4])
 
 
-@njit(cache=True)
+@njit_cached
 def _h_linear(x, v, prm, q, out):
     """``H x + v``."""
     for r in range(out.shape[0]):
@@ -237,7 +241,7 @@ def _h_linear(x, v, prm, q, out):
         out[r] = rnd(acc, q[0] + q[2] - q[3], q[4])
 
 
-@njit(cache=True)
+@njit_cached
 def _h_iq(x, v, prm, q, out):
     """``A [cos x0, sin x0] + v`` (``A = prm[0, 0]``): the I/Q of a carrier phase."""
     acc = prm[0, 0] * cos_q(x[0], q[0], q[3], q[4]) + align(v[0], q[2] + q[3] - q[1])
@@ -336,8 +340,10 @@ def psd_sqrt(A) -> np.ndarray:
         return S * np.where(np.diag(S) < 0, -1.0, 1.0)
 
 
-@njit(cache=True)
-def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, qf, qh, wm, wc, c, pfloor, fr, lo, hi, hf,
+_model_f = _model_h = None   # the model functions of one kernel instance (see _kernel_for)
+
+
+def _ukf_template(x, P, z, zok, Q, R, Lq, Lr, pf, ph, qf, qh, wm, wc, c, pfloor, fr, lo, hi, hf,
                 aug, redraw, ev, xs, Ps, keep_P):
     """One source: float64, float32 or int64 (fixed point, formats ``fr, lo, hi, hf`` in the
     order of :class:`UkfFormats`) by the dtype of ``x``."""
@@ -417,9 +423,9 @@ def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, qf, qh, wm, wc, c, pfl
                         X[1 + L + i, j] = -u
             for s in range(ns):
                 if aug:
-                    f(X[s, :n], X[s, n:2 * n], pf, qf, Xf[s])
+                    _model_f(X[s, :n], X[s, n:2 * n], pf, qf, Xf[s])
                 else:
-                    f(X[s, :n], wz, pf, qf, Xf[s])
+                    _model_f(X[s, :n], wz, pf, qf, Xf[s])
                 for i in range(n):
                     Xf[s, i] = store(Xf[s, i], 0, 0, lo[_XS], hi[_XS], eb, _XS, B)
             for i in range(n):
@@ -477,9 +483,9 @@ def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, qf, qh, wm, wc, c, pfl
             else:
                 for s in range(ns):
                     if aug:
-                        h(Xf[s], X[s, 2 * n:], ph, qh, Zs[s])
+                        _model_h(Xf[s], X[s, 2 * n:], ph, qh, Zs[s])
                     else:
-                        h(Xf[s], vz, ph, qh, Zs[s])
+                        _model_h(Xf[s], vz, ph, qh, Zs[s])
                     for r in range(m):
                         Zs[s, r] = store(Zs[s, r], 0, 0, lo[_Y], hi[_Y], eb, _Y, B)
                 for r in range(m):
@@ -543,6 +549,40 @@ def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, qf, qh, wm, wc, c, pfl
                 for i in range(n):
                     for j in range(n):
                         Ps[b, k, i, j] = P[b, i, j]
+
+
+_KERNELS: dict = {}
+
+
+def _kernel_for(f, h):
+    """The UKF kernel with the model functions ``f`` and ``h`` bound in (one instance per
+    model, kept in :data:`_KERNELS`). A kernel that takes the model functions as arguments
+    is not cached by numba (it recompiled ~13 s in every process); this one is a copy of
+    :func:`_ukf_template` whose globals hold ``f`` and ``h`` and whose name carries a hash
+    of their definitions (module, name and the source file of each), cached with
+    :func:`dsp.jit.njit_cached` (which keys on the project's sources as well)."""
+    key = (f, h)
+    k = _KERNELS.get(key)
+    if k is None:
+        tag = hashlib.sha256()
+        for fn in (f, h):
+            py = getattr(fn, "py_func", None)
+            if py is None:
+                raise ValueError(f"model functions must be numba @njit functions, not {fn!r}")
+            tag.update(f"{py.__module__}.{py.__qualname__}\0".encode())
+            try:
+                tag.update(Path(inspect.getfile(py)).read_bytes())
+            except (OSError, TypeError):
+                tag.update(repr(id(py)).encode())
+        g = dict(_ukf_template.__globals__)
+        g["_model_f"], g["_model_h"] = f, h
+        name = f"_ukf_kernel_{tag.hexdigest()[:16]}"
+        fn = types.FunctionType(_ukf_template.__code__, g, name, _ukf_template.__defaults__)
+        fn.__qualname__ = name
+        fn.__module__ = __name__
+        fn.__doc__ = _ukf_template.__doc__
+        k = _KERNELS[key] = njit_cached(fn)
+    return k
 
 
 @dataclass
@@ -685,7 +725,7 @@ class UnscentedKalmanFilter:
         Q, R, Lq, Lr, pf, ph = self._mats
         wm, wc, c, pfl = self._w
         fr, lo, hi, hf = self._fmt
-        _ukf_kernel(self.model.f, self.model.h, self.x, self.P, zc, ok, Q, R, Lq, Lr, pf, ph, self._q[0],
+        _kernel_for(self.model.f, self.model.h)(self.x, self.P, zc, ok, Q, R, Lq, Lr, pf, ph, self._q[0],
                     self._q[1], wm, wc, c, pfl, fr, lo, hi, hf, self.aug, self.redraw, self.ev, xs, Ps, keep_P)
         if self.kind == "fixed":
             xs_f = xs * 2.0 ** -self.formats.x.frac
