@@ -209,8 +209,8 @@ def test_adaptive_alpha_rises_in_a_manoeuvre_and_beats_the_best_fixed_gain():
     alpha rises during the manoeuvre and falls after it, and the adaptive tracker's RMSE
     over the whole track is below the best of 40 fixed Kalata trackers on the same noise.
     Measured: adaptive 0.756 sigma_v, best fixed (lambda 0.74, alpha 0.70) 0.817; mean alpha
-    0.13 before, 0.75 during, 0.21 after (``python build/ab_mc.py`` for windows 3-5 and the
-    decision's floor 1, which loses: 0.94)."""
+    0.13 before, 0.75 during, 0.21 after. Windows 4 / 3 give 0.788 / 0.855 (3 loses) and the
+    decision's floor 1 loses (0.94): ``manoeuvre_mc(window=..., noise_floor=...)``."""
     r = manoeuvre_mc()
     assert r["alpha_during"] > 4 * r["alpha_before"]
     assert r["alpha_after"] < r["alpha_during"] / 2
