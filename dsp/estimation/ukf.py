@@ -1,8 +1,9 @@
-"""Unscented Kalman filter (scaled unscented transform), one source for float64 and float32,
-batched over trials.
+"""Unscented Kalman filter (scaled unscented transform), one source for float64, float32 and
+fixed point, batched over trials.
 
 The model says ``f`` and ``h`` (:class:`NonlinearModel`: numba functions
-``f(x, w, prm, out)`` and ``h(x, v, prm, out)`` with their parameter arrays, plus Q and R);
+``f(x, w, prm, q, out)`` and ``h(x, v, prm, q, out)`` with their parameter arrays, plus Q
+and R);
 the filter says how they are combined; the arithmetic is a configuration. The sigma points
 are van der Merwe's scaled set (as filterpy's ``MerweScaledSigmaPoints``)::
 
@@ -17,8 +18,8 @@ by :func:`psd_sqrt`, so a rank-deficient Q is fine). With additive noise the sig
 ``h`` (``redraw=True``, the default, as filterpy 2.0 does); ``redraw=False`` passes the
 propagated points to ``h`` (cheaper, but the innovation covariance then misses ``H Q H^T``, so
 it is not the KF on a linear model). Augmented noise propagates the augmented points through both (exact on a
-linear model). Update ``K = Pxz S^-1`` (Cholesky solves), ``P = Pp - K S K^T``
-mirrored to the upper triangle.
+linear model). Update ``K = Pxz S^-1`` (Cholesky solves), ``P = Pp - V^T V`` (``V = Ls^-1
+Pxz^T``, i.e. ``Pp - K S K^T``) mirrored to the upper triangle.
 
 A Cholesky of ``(L + lambda) P`` that fails (a non-positive pivot: P lost definiteness) is
 counted (``chol_fail``) and recovered by replacing P with its diagonal, each entry raised to
@@ -39,6 +40,10 @@ centre weight is ~-1e6 against positive weights of ~+1e5 and the rounding errors
 badly, so such parameters are refused, naming the alpha that would do; the seed-002
 parameters (alpha = 1.027, beta = 2, kappa = 0, L = 10: Wm0 = 0.0519, Wc0 = 1.997, Wi =
 0.0474) are bounded and held to 2^-15 relative.
+
+Compilation: a numba kernel that takes the model functions as arguments is not cached, so
+:func:`_kernel_for` makes one kernel per model with ``f`` and ``h`` bound in and caches it
+(:func:`dsp.jit.njit_cached`): a new process loads it instead of compiling for ~15 s.
 """
 from __future__ import annotations
 
