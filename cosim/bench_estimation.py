@@ -13,7 +13,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from numba import njit
+
+from dsp.jit import njit_cached
 
 from .bench import machine_info
 from .bench_dsp import _write
@@ -21,8 +22,8 @@ from .bench_dsp import _write
 TARGET_UPS = 1000.0 * 12
 
 
-@njit(cache=True)
-def _f_jerk(x, w, prm, out):
+@njit_cached
+def _f_jerk(x, w, prm, q, out):
     """Carrier phase / frequency / rate / jerk model of the GNSS UKF (seed 002): prm[0] = [T,
     T^2/2, T^3/6]."""
     T, T2, T3 = prm[0, 0], prm[0, 1], prm[0, 2]
@@ -32,8 +33,8 @@ def _f_jerk(x, w, prm, out):
     out[3] = x[3] + w[3]
 
 
-@njit(cache=True)
-def _h_iq(x, v, prm, out):
+@njit_cached
+def _h_iq(x, v, prm, q, out):
     out[0] = prm[0, 0] * np.cos(x[0]) + v[0]
     out[1] = prm[0, 0] * np.sin(x[0]) + v[1]
 
@@ -53,7 +54,7 @@ def _rate(make, z, warm, n_updates: int, reps: int) -> float:
 
 def estimation_speed(out: Path, quick: bool = False) -> dict:
     from dsp.estimation import (AlphaBetaFilter, AlphaBetaFormats, KalmanFilter, KalmanFormats,
-                                NonlinearModel, UnscentedKalmanFilter, kalata, tracking_index,
+                                NonlinearModel, UkfFormats, UnscentedKalmanFilter, kalata, tracking_index,
                                 white_jerk)
     t_start = time.perf_counter()
     steps = 20_000 if quick else 200_000
@@ -96,6 +97,22 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
         mkb = lambda k=kind: UnscentedKalmanFilter(ukf_model, np.zeros(4), np.eye(4) * 0.01, alpha=1.0,
                                                    beta=2.0, kappa=0.0, arithmetic=k, trials=trials)
         add("UKF n=4", kind, f"{trials} trials", mkb, zb, trials * ub, zb[:, :16])
+    # 4-state UKF on I/Q with augmented noise (L = 10) and the seed-002 UT (alpha 1.027, beta 2,
+    # kappa 0): float and fixed point (the phase model of tests/dsp/estimation/test_ukf_fixed.py)
+    Fp = np.array([[0.98, 0.1, 0.005, 0.0], [0, 0.95, 0.1, 0.005], [0, 0, 0.95, 0.1], [0, 0, 0, 0.95]])
+    aug_model = NonlinearModel.phase_iq(Fp, np.diag([1e-3, 1e-4, 1e-5, 1e-6]), np.eye(2) * 0.05)
+    for kind, arith in (("float64", "float64"), ("float32", "float32"), ("fixed", UkfFormats())):
+        usteps = steps // 8
+        z1 = np.stack([np.ones(usteps), np.zeros(usteps)], 1) + rng.normal(0, 0.22, (usteps, 2))
+        mk = lambda a=arith: UnscentedKalmanFilter(aug_model, np.zeros(4), np.eye(4) * 0.01, alpha=1.027,
+                                                   beta=2.0, kappa=0.0, noise="augmented", arithmetic=a)
+        add("UKF n=4 aug", kind, "1 stream", mk, z1, usteps, z1[:16])
+        ub = max(bsteps // 8, 100)
+        zb = np.stack([np.ones((trials, ub)), np.zeros((trials, ub))], 2) + rng.normal(0, 0.22, (trials, ub, 2))
+        mkb = lambda a=arith: UnscentedKalmanFilter(aug_model, np.zeros(4), np.eye(4) * 0.01, alpha=1.027,
+                                                    beta=2.0, kappa=0.0, noise="augmented", arithmetic=a,
+                                                    trials=trials)
+        add("UKF n=4 aug", kind, f"{trials} trials", mkb, zb, trials * ub, zb[:, :16])
     # alpha-beta (Kalata), fixed gains and adaptive
     a, b = kalata(tracking_index(T_s, 50.0, 0.01))
     for kind, arith in (("float64", "float64"), ("float32", "float32"), ("fixed", AlphaBetaFormats())):
@@ -113,7 +130,9 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
                "target": "1 kHz loop x 12 channels", "cores_used": 1,
                "scenario": {"T_s": T_s, "kf": "white-jerk 3-state, scalar measurement, Joseph update",
                             "ukf": "4-state phase/frequency/rate/jerk, I/Q measurement, additive noise",
-                            "alpha_beta": "Kalata gains, fixed and adaptive (window 4)",
+                            "ukf_aug": "4-state damped phase model, I/Q, augmented noise L = 10, seed-002 UT "
+                                       "(alpha 1.027, beta 2, kappa 0); float and fixed (UkfFormats)",
+                            "alpha_beta": "Kalata gains, fixed and adaptive (window 4, manoeuvre estimate)",
                             "single_stream_steps": steps, "batch_trials": trials},
                "rows": rows}
     _write(out, "estimation_speed", summary, _md(summary))

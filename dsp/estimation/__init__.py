@@ -4,10 +4,10 @@ from .alphabeta import (AlphaBetaFilter, AlphaBetaFormats, AlphaBetaRun, kalata,
                         steady_state_gains, tracking_index)
 from .events import EventRegistry
 from .kalman import KalmanFilter, KalmanFormats, KalmanRun
-from .ukf import NonlinearModel, UKFRun, UnscentedKalmanFilter, sigma_weights
+from .ukf import NonlinearModel, UKFRun, UkfFormats, UnscentedKalmanFilter, sigma_weights, weight_problem
 from .models import LinearGaussianModel, white_acceleration, white_jerk
 
 __all__ = ["AlphaBetaFilter", "AlphaBetaFormats", "AlphaBetaRun", "kalata", "steady_state_gains",
            "tracking_index", "EventRegistry", "KalmanFilter", "KalmanFormats", "KalmanRun", "LinearGaussianModel",
            "white_acceleration", "white_jerk", "NonlinearModel", "UKFRun",
-           "UnscentedKalmanFilter", "sigma_weights"]
+           "UnscentedKalmanFilter", "UkfFormats", "sigma_weights", "weight_problem"]

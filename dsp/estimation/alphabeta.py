@@ -13,19 +13,26 @@ Kalata (1984): tracking index ``lambda = sigma_w T^2 / sigma_v``, ``r = (4 + lam
 sqrt(lambda^2 + 8 lambda)) / 4``, ``alpha = 1 - r^2``, ``beta = 2 (2 - alpha) - 4 sqrt(1 -
 alpha) = 2 (1 - r)^2``.
 
-Adaptive mode (alpha-beta only): the innovation variance ``S`` is estimated as the mean of
-the last ``window`` squared innovations (the seed's 3-5); in the Kalman steady state
-``alpha = 1 - sigma_v^2 / S``, so ``alpha = clip(1 - sigma_v^2 / S_hat, alpha_min,
-alpha_max)`` and ``beta = 2 (1 - sqrt(1 - alpha))^2`` (the Kalata pair of the tracking index
-``lambda = beta / sqrt(1 - alpha)`` that this innovation level implies). Fixed point, per
-step: ``e^2`` -> s; mean (one division) -> s; ``sigma_v^2 / S`` (one division) -> c; clip;
-``sqrt`` -> c; ``2 d^2`` -> c. A zero innovation power (noise-free input) is counted
-(``s_zero``) and gives ``alpha_min``; a ratio beyond the c range saturates (counted) and
-also ends at ``alpha_min``.
+Adaptive mode (alpha-beta only; seed 004 with RECEIVERS.md's decision): the manoeuvre
+(acceleration) standard deviation is estimated from the last ``window`` innovations (the
+seed's 3-5) as ``sigma_a T^2 = k sqrt(max(mean e^2 - tau sigma_v^2, 0))`` (``k =
+manoeuvre_gain``, the decision's 2; ``tau = noise_floor``), the tracking index is ``lambda =
+sigma_a T^2 / sigma_v`` and alpha, beta are Kalata's: ``r = 4 / (4 + lambda + sqrt(lambda^2
++ 8 lambda))`` (the same r as above, without the cancellation), ``alpha = clip(1 - r^2,
+alpha_min, alpha_max)``, ``beta = 2 (1 - sqrt(1 - alpha))^2`` (= ``2 (2 - alpha) - 4 sqrt(1 -
+alpha)`` of the clipped alpha). No power beyond the floor: ``alpha_min``. Why ``tau = 4``
+by default and not the decision's 1: the mean of 3-5 squared innovations is a chi-square
+with 3-5 degrees of freedom (relative spread 0.6-0.8), so with ``tau = 1`` half of the quiet
+windows read a "manoeuvre" of ``lambda ~ 1`` and alpha sits at 0.6-0.8 without one
+(measured in ``tests/dsp/estimation/test_alphabeta.py``). Fixed point, per step: ``e^2`` ->
+s; mean (one division) -> s; minus the floor (exact); ``sqrt`` -> l; ``/ (sigma_v / k)`` ->
+l; ``sqrt(l^2 + 8 l)`` -> l; ``4 / (4 + l + sqrt)`` -> c; ``1 - r^2`` -> c; clip; ``sqrt(1 -
+alpha)`` -> c; ``2 d^2`` -> c.
 
 Formats (:class:`AlphaBetaFormats`): z measurement, x state (all three per-sample
 components), e innovation, c coefficients (alpha, beta, gamma/4 and the adaptive
-intermediates), s squared innovations, their mean and sigma_v^2.
+intermediates), s squared innovations, their mean and the noise floor, l the tracking
+index and its intermediates.
 """
 from __future__ import annotations
 
@@ -33,9 +40,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..fixed import FixedFormat
+from ..jit import njit_cached
 from .events import EventRegistry
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
 from .ops import align, div_q, flip, sqrt_q, store
@@ -99,6 +106,7 @@ class AlphaBetaFormats(FormatTable):
     e: FixedFormat = fmt(32, 20)
     c: FixedFormat = fmt(24, 22)
     s: FixedFormat = fmt(40, 24)
+    l: FixedFormat = fmt(28, 16)
 
     def __post_init__(self):
         self.validate()
@@ -113,14 +121,19 @@ class AlphaBetaFormats(FormatTable):
         need_bits("e^2", 2 * w["e"] - 1)
         need_shift("e^2", 2 * r["e"] - r["s"], "s")
         need_bits("sum of e^2", w["s"] + math.ceil(math.log2(window)))
-        need_bits("sigma_v^2 / S", w["s"] + r["c"])
+        need_shift("sqrt(S - floor)", 2 * r["l"] - r["s"], "s")
+        need_bits("sqrt(S - floor)", w["s"] + 2 * r["l"] - r["s"])
+        need_bits("sqrt(S - floor) / (sigma_v / k)", w["l"] + r["l"])
+        need_bits("lambda^2 + 8 lambda", max(2 * w["l"] - 1, w["l"] + 3 + r["l"]) + 1)
+        need_bits("4 / (4 + lambda + sqrt)", r["l"] + 4 + r["c"])
+        need_bits("1 - r^2", 2 * w["c"] + 1)
         need_bits("sqrt(1 - alpha)", w["c"] + r["c"])
         need_bits("2 (1 - r)^2", 2 * w["c"] + 1)
 
 
 SIGNALS = AlphaBetaFormats.signals()
 EVENTS = EventRegistry(SIGNALS, ("implausible", "s_zero", "neg_sqrt", "upsets"))
-_Z, _X, _E, _C, _S = (SIGNALS.index(s) for s in ("z", "x", "e", "c", "s"))
+_Z, _X, _E, _C, _S, _L = (SIGNALS.index(s) for s in ("z", "x", "e", "c", "s", "l"))
 _EV_IMPL = EVENTS.index("implausible")
 _EV_SZ = EVENTS.index("s_zero")
 _EV_NSQ = EVENTS.index("neg_sqrt")
@@ -128,14 +141,15 @@ _EV_UPS = EVENTS.index("upsets")
 _BASE = EVENTS.base
 
 
-@njit(cache=True)
+@njit_cached
 def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd, k0, ups, ev, xs, cs):
-    """consts = [sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a number)]."""
+    """consts = [noise floor tau sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a
+    number), sigma_v / k (l), 4 (l)]."""
     nb, n = x.shape
     T = z.shape[1]
     N = ring.shape[1]
     z0 = x[0, 0] - x[0, 0]
-    rv, amin, amax, one, nw = consts[0], consts[1], consts[2], consts[3], consts[4]
+    floor, amin, amax, one, nw, svl, four = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5], consts[6]
     xp = np.empty(n, x.dtype)
     for b in range(nb):
         eb = ev[b]
@@ -167,11 +181,18 @@ def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd
                         for j in range(N):
                             acc += ring[b, j]
                         Sm = div_q(acc, nw, 0, hf[_S], lo[_S], hi[_S], eb, _S, _EV_SZ, _BASE)
-                        if Sm > z0:
-                            ratio = div_q(rv, Sm, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _EV_SZ, _BASE)
-                            al = one - ratio
-                        else:  # no innovation power: no manoeuvre
-                            eb[_EV_SZ] += 1
+                        dm = Sm - floor     # innovation power beyond the noise floor
+                        if dm > z0:
+                            g = sqrt_q(dm, 2 * fr[_L] - fr[_S], hf[_L], hi[_L], eb, _L, _EV_NSQ, _BASE)
+                            lam = div_q(g, svl, fr[_L], hf[_L], lo[_L], hi[_L], eb, _L, _EV_SZ, _BASE)
+                            l8 = lam + lam
+                            l8 = l8 + l8
+                            l8 = l8 + l8
+                            sq = sqrt_q(lam * lam + align(l8, fr[_L]), 0, hf[_L], hi[_L], eb, _L, _EV_NSQ, _BASE)
+                            # Kalata r = (4 + l - sqrt(l^2 + 8 l)) / 4 = 4 / (4 + l + sqrt(l^2 + 8 l))
+                            rk = div_q(four, four + lam + sq, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _EV_SZ, _BASE)
+                            al = store(align(one, fr[_C]) - rk * rk, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _BASE)
+                        else:  # no manoeuvre
                             al = amin
                         if al < amin:
                             al = amin
@@ -217,7 +238,11 @@ class AlphaBetaFilter:
     sigma_v : float
         Measurement noise standard deviation (adaptive mode).
     window : int
-        Innovations averaged by the adaptive mode (2..64).
+        Innovations averaged by the adaptive mode (2..64; the seed's 3-5).
+    noise_floor : float
+        ``tau``: innovation power ``tau sigma_v^2`` taken as noise, not manoeuvre.
+    manoeuvre_gain : float
+        ``k`` of ``sigma_a T^2 = k sqrt(mean e^2 - tau sigma_v^2)``.
     alpha_min, alpha_max : float
         Limits of the adaptive alpha.
     arithmetic : {"float64", "float32"} or AlphaBetaFormats
@@ -230,8 +255,9 @@ class AlphaBetaFilter:
 
     def __init__(self, T_s: float, alpha: float, beta: float, gamma: float | None = None, *,
                  adaptive: bool = False, sigma_v: float | None = None, window: int = 4,
-                 alpha_min: float = 0.05, alpha_max: float = 0.95, arithmetic="float64",
-                 trials: int = 1, x0=None, z_limit: float | None = None):
+                 alpha_min: float = 0.05, alpha_max: float = 0.95, noise_floor: float = 4.0,
+                 manoeuvre_gain: float = 2.0, arithmetic="float64", trials: int = 1, x0=None,
+                 z_limit: float | None = None):
         if not (isinstance(T_s, (int, float)) and math.isfinite(T_s) and T_s > 0):
             raise ValueError(f"T_s must be a finite number > 0, not {T_s!r}")
         check_coefficients(alpha, beta, gamma)
@@ -244,6 +270,9 @@ class AlphaBetaFilter:
                 raise ValueError(f"sigma_v must be a finite number > 0 in adaptive mode, not {sigma_v!r}")
             if isinstance(window, bool) or not isinstance(window, int) or not 2 <= window <= 64:
                 raise ValueError(f"window must be an integer in [2, 64], not {window!r}")
+            for name, v in (("noise_floor", noise_floor), ("manoeuvre_gain", manoeuvre_gain)):
+                if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                    raise ValueError(f"{name} must be a finite number > 0, not {v!r}")
             if not 0.0 < alpha_min < alpha_max < 1.0:
                 raise ValueError(f"alpha limits must satisfy 0 < alpha_min < alpha_max < 1, not "
                                  f"{alpha_min!r}, {alpha_max!r}")
@@ -258,7 +287,8 @@ class AlphaBetaFilter:
             raise ValueError(f"x0 must have shape ({n},) or ({self.trials}, {n}), not {x0.shape}")
         x0 = np.broadcast_to(x0, (self.trials, n)) * np.array([1.0, T_s, T_s * T_s / 2][:n])
         coef = np.array([alpha, beta, 0.0 if gamma is None else gamma / 4.0])
-        consts = np.array([0.0 if sigma_v is None else sigma_v ** 2, alpha_min, alpha_max, 1.0, window])
+        sv = 1.0 if sigma_v is None else float(sigma_v)
+        consts = np.array([noise_floor * sv ** 2, alpha_min, alpha_max, 1.0, window, sv / manoeuvre_gain, 4.0])
         window = window if adaptive else 1
         self.events = EVENTS
         if self.kind == "fixed":
@@ -267,12 +297,17 @@ class AlphaBetaFilter:
             self.formats = fm
             fits("x0 (per-sample units)", x0, fm.x)
             fits("coefficients", coef, fm.c)
-            fits("sigma_v^2", consts[:1], fm.s)
+            fits("noise_floor sigma_v^2", consts[:1], fm.s)
+            fits("sigma_v / manoeuvre_gain", consts[5:6], fm.l)
+            if adaptive and to_fixed(consts[5], fm.l) < 1:
+                raise ValueError(f"format too narrow for sigma_v / manoeuvre_gain = {consts[5]:g}: "
+                                 f"below one LSB of {fm.l}")
             self.fr, self.lo, self.hi, self.hf, self.wd = fm.arrays()
             self.x = to_fixed(x0, fm.x)
             self.c = np.broadcast_to(to_fixed(coef, fm.c), (self.trials, 3)).copy()
             self.consts = np.array([to_fixed(consts[0], fm.s), to_fixed(alpha_min, fm.c),
-                                    to_fixed(alpha_max, fm.c), 1 << fm.c.frac, window], np.int64)
+                                    to_fixed(alpha_max, fm.c), 1 << fm.c.frac, window,
+                                    to_fixed(consts[5], fm.l), 4 << fm.l.frac], np.int64)
             dt = np.int64
         else:
             dt = np.float64 if self.kind == "float64" else np.float32

@@ -49,9 +49,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..fixed import FixedFormat
+from ..jit import njit_cached
 from .events import EventRegistry
 from .formats import (FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift,
                       sum_bits, to_fixed)
@@ -178,7 +178,7 @@ _BASE = EVENTS.base
 UPSET_TARGETS = ("x", "P")
 
 
-@njit(cache=True)
+@njit_cached
 def _kf_kernel(x, P, z, zok, u, uok, F, B, H, Q, R, k0, fr, lo, hi, hf, wd, one, ev, ups,
                xs, Ps, keep_P):
     nb, n = x.shape

@@ -25,12 +25,12 @@ failed square root or division, and the registry ``base`` (:mod:`dsp.estimation.
 """
 from __future__ import annotations
 
-from numba import njit
+from ..jit import njit_cached
 
 from .ops import align, div_q, sqrt_q, store
 
 
-@njit(cache=True)
+@njit_cached
 def matmul_q(A, B, out, trans_b, s, half, lo, hi, ev, i, base):
     """``out = A B`` (``trans_b``: ``A B^T``), one rounding per element."""
     n, k = A.shape
@@ -44,7 +44,7 @@ def matmul_q(A, B, out, trans_b, s, half, lo, hi, ev, i, base):
             out[r, c] = store(acc, s, half, lo, hi, ev, i, base)
 
 
-@njit(cache=True)
+@njit_cached
 def chol_q(S, L, a, half, lo, hi, ev, i, ineg, base):
     """Lower Cholesky factor of ``S`` into ``L``; False at a non-positive pivot."""
     m = S.shape[0]
@@ -64,7 +64,7 @@ def chol_q(S, L, a, half, lo, hi, ev, i, ineg, base):
     return True
 
 
-@njit(cache=True)
+@njit_cached
 def solve_lower_q(L, B, X, a, half, lo, hi, ev, i, ineg, base):
     """``X = L^-1 B^T`` by forward substitution (``B`` n x m, ``X`` m x n)."""
     m = L.shape[0]
@@ -77,7 +77,7 @@ def solve_lower_q(L, B, X, a, half, lo, hi, ev, i, ineg, base):
             X[r, j] = div_q(acc, L[r, r], 0, half, lo, hi, ev, i, ineg, base)
 
 
-@njit(cache=True)
+@njit_cached
 def solve_upper_t_q(L, W, X, a, half, lo, hi, ev, i, ineg, base):
     """``X = (L^-T W)^T`` by back substitution (``W`` m x n, ``X`` n x m)."""
     m = L.shape[0]

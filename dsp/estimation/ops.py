@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
+from ..jit import njit_cached
 from ..qops import _fdiv, align  # noqa: F401  (align re-exported: exact left shift)
 
 _OPTS = {"cache": True}
@@ -107,7 +108,7 @@ def _ol_store(acc, s, half, lo, hi, ev, i, base):
         return lambda acc, s, half, lo, hi, ev, i, base: acc
 
 
-@njit(cache=True)
+@njit_cached
 def isqrt(w):
     """``floor(sqrt(w))`` for ``0 <= w < 2**62``, exactly."""
     r = np.int64(math.sqrt(float(w)))
@@ -207,3 +208,54 @@ def _ol_flip(v, bit, width):
         return impl
     if _is_float(v):
         return lambda v, bit, width: v
+
+
+# --- operators for model functions (the f and h of a fixed-point capable NonlinearModel) ---
+# They round but do not saturate: the filter saturates (and counts) what a model returns.
+
+def rnd(acc, s, half):
+    """``acc`` with ``s`` fewer fraction bits: shift right with floor (``half=0``) or half-up
+    rounding (``s < 0``: exact left shift); the identity for floats."""
+    _jit_only()
+
+
+@overload(rnd, jit_options=_OPTS)
+def _ol_rnd(acc, s, half):
+    if _is_int(acc):
+        def impl(acc, s, half):
+            if s > 0:
+                if half:
+                    return (acc + (np.int64(1) << (s - 1))) >> s
+                return acc >> s
+            return acc << (-s)
+        return impl
+    if _is_float(acc):
+        return lambda acc, s, half: acc
+
+
+def sin_q(v, fin, fout, half):
+    """``sin`` of ``v`` (``fin`` fraction bits) into ``fout`` fraction bits, one rounding of
+    the float64 value (a table/CORDIC of a real core must match it to the last bit; here the
+    float64 libm value is the definition). Floats: ``np.sin``."""
+    _jit_only()
+
+
+def cos_q(v, fin, fout, half):
+    """``cos``, as :func:`sin_q`."""
+    _jit_only()
+
+
+def _trig_overload(fn):
+    def ol(v, fin, fout, half):
+        if _is_int(v):
+            def impl(v, fin, fout, half):
+                t = fn(float(v) * 2.0 ** -float(fin)) * 2.0 ** float(fout)
+                return np.int64(math.floor(t + 0.5)) if half else np.int64(math.floor(t))
+            return impl
+        if _is_float(v):
+            return lambda v, fin, fout, half: fn(v)
+    return ol
+
+
+overload(sin_q, jit_options=_OPTS)(_trig_overload(np.sin))
+overload(cos_q, jit_options=_OPTS)(_trig_overload(np.cos))

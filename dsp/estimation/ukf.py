@@ -1,8 +1,9 @@
-"""Unscented Kalman filter (scaled unscented transform), one source for float64 and float32,
-batched over trials.
+"""Unscented Kalman filter (scaled unscented transform), one source for float64, float32 and
+fixed point, batched over trials.
 
 The model says ``f`` and ``h`` (:class:`NonlinearModel`: numba functions
-``f(x, w, prm, out)`` and ``h(x, v, prm, out)`` with their parameter arrays, plus Q and R);
+``f(x, w, prm, q, out)`` and ``h(x, v, prm, q, out)`` with their parameter arrays, plus Q
+and R);
 the filter says how they are combined; the arithmetic is a configuration. The sigma points
 are van der Merwe's scaled set (as filterpy's ``MerweScaledSigmaPoints``)::
 
@@ -17,8 +18,8 @@ by :func:`psd_sqrt`, so a rank-deficient Q is fine). With additive noise the sig
 ``h`` (``redraw=True``, the default, as filterpy 2.0 does); ``redraw=False`` passes the
 propagated points to ``h`` (cheaper, but the innovation covariance then misses ``H Q H^T``, so
 it is not the KF on a linear model). Augmented noise propagates the augmented points through both (exact on a
-linear model). Update ``K = Pxz S^-1`` (Cholesky solves), ``P = Pp - K S K^T``
-mirrored to the upper triangle.
+linear model). Update ``K = Pxz S^-1`` (Cholesky solves), ``P = Pp - V^T V`` (``V = Ls^-1
+Pxz^T``, i.e. ``Pp - K S K^T``) mirrored to the upper triangle.
 
 A Cholesky of ``(L + lambda) P`` that fails (a non-positive pivot: P lost definiteness) is
 counted (``chol_fail``) and recovered by replacing P with its diagonal, each entry raised to
@@ -26,45 +27,232 @@ at least ``p_floor``, and factoring again (a diagonal with positive entries alwa
 An innovation covariance that does not factor skips the update (``s_not_pd``). NaN,
 infinite or implausible (``z_limit``) measurements only predict (``implausible``).
 
-Fixed point is not offered for the UKF: with the usual ``alpha`` of 1e-3..1 the centre
-weight ``Wm_0`` ranges over 1..1e6 in magnitude with alternating signs, which no single
-format of a fixed-point core holds without the cancellation dominating; the fixed-point
-cores use the linear filter (:mod:`dsp.estimation.kalman`).
+Fixed point (a :class:`UkfFormats` table, the same kernel compiled for int64): every step
+above is one rounding into the format of its signal (``c P -> Pc``, its Cholesky by
+:func:`~dsp.estimation.linalg.chol_q` ``-> U``, ``x +- U -> X``, ``f -> X``, ``sum Wm X ->
+xm``, ``X - xm -> D``, ``Wc D -> D``, ``sum (Wc D) D (+ Q) -> Pp``, ``h -> Y``, ``sum Wm Y ->
+Y``, ... ``Pyy``, ``Pxy``, ``chol -> Ls``, ``Ls^-1 Pxy^T -> V``, ``Ls^-T V -> K``, ``z - zp
+-> e``, ``xm + K e -> x``, ``Pp - V^T V -> P``), checked bit for bit against Python integers
+(``tests/dsp/estimation``). The covariance update is ``P = Pp - V^T V`` with ``V = Ls^-1
+Pxy^T`` (equal to ``Pp - K S K^T``; one exact accumulation) in every arithmetic. The UT
+weights must suit the ``W`` format (:func:`weight_problem`): with small alpha (1e-3) the
+centre weight is ~-1e6 against positive weights of ~+1e5 and the rounding errors cancel
+badly, so such parameters are refused, naming the alpha that would do; the seed-002
+parameters (alpha = 1.027, beta = 2, kappa = 0, L = 10: Wm0 = 0.0519, Wc0 = 1.997, Wi =
+0.0474) are bounded and held to 2^-15 relative.
+
+Compilation: a numba kernel that takes the model functions as arguments is not cached, so
+:func:`_kernel_for` makes one kernel per model with ``f`` and ``h`` bound in and caches it
+(:func:`dsp.jit.njit_cached`): a new process loads it instead of compiling for ~15 s.
 """
 from __future__ import annotations
 
+import hashlib
+import inspect
+import types
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from numba import njit
 
+from ..fixed import FixedFormat
+from ..jit import njit_cached
 from .events import EventRegistry
-from .formats import arithmetic_name
+from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, sum_bits, to_fixed
+from .linalg import chol_q, solve_lower_q, solve_upper_t_q
 from .models import MAX_STATES, check_psd
+from .ops import align, cos_q, rnd, sin_q, store
 
-EVENTS = EventRegistry((), ("implausible", "chol_fail", "s_not_pd"))
+@dataclass(frozen=True)
+class UkfFormats(FormatTable):
+    """Fixed-point formats of the unscented filter, one per signal.
+
+    The defaults suit states of order 1 (``x`` +-32) with covariances below 8 and
+    measurements of order 1 (an I/Q pair); scale the model or change the table otherwise.
+
+    ======  ==============================================================
+    signal  what
+    ======  ==============================================================
+    z       measurement
+    x       state; also the sigma points ``X`` are in ``X``
+    P       covariance
+    Pc      ``(L + lambda) P`` (and ``(L + lambda) Pp``), factored for the sigma points
+    U       its Cholesky factor and the constant noise factors ``sqrt(c) Lq, sqrt(c) Lr``
+    X       sigma points (state and noise parts) and the points propagated by ``f``
+    W       weights ``Wm``, ``Wc`` and ``c = L + lambda``
+    xm      predicted mean
+    Pp      predicted covariance (incl. ``Q``, additive noise)
+    Y       measurement sigma points ``h(X)`` and the predicted measurement
+    D       deviations ``X - xm``, ``Y - zp`` and the weighted deviations ``Wc D``
+    Pyy     innovation covariance (incl. ``R``, additive noise)
+    Pxy     cross covariance
+    Ls      Cholesky factor of ``Pyy``
+    V       ``Ls^-1 Pxy^T`` (also gives ``P = Pp - V^T V``)
+    K       gain
+    e       innovation ``z - zp``
+    prm     model parameters ``prm_f``, ``prm_h``
+    ======  ==============================================================
+    """
+
+    z: FixedFormat = fmt(24, 20)
+    x: FixedFormat = fmt(32, 26)
+    P: FixedFormat = fmt(32, 28)
+    Pc: FixedFormat = fmt(32, 26)
+    U: FixedFormat = fmt(30, 24)
+    X: FixedFormat = fmt(32, 26)
+    W: FixedFormat = fmt(24, 18)
+    xm: FixedFormat = fmt(32, 26)
+    Pp: FixedFormat = fmt(32, 28)
+    Y: FixedFormat = fmt(28, 24)
+    D: FixedFormat = fmt(28, 24)
+    Pyy: FixedFormat = fmt(32, 28)
+    Pxy: FixedFormat = fmt(32, 28)
+    Ls: FixedFormat = fmt(30, 24)
+    V: FixedFormat = fmt(30, 24)
+    K: FixedFormat = fmt(24, 20)
+    e: FixedFormat = fmt(24, 20)
+    prm: FixedFormat = fmt(24, 20)
+
+    def __post_init__(self):
+        self.validate()
+
+    def check(self, n: int, m: int, L: int) -> None:
+        """Every exact intermediate fits int64 and every alignment is a left shift."""
+        w = {s: getattr(self, s).width for s in self.signals()}
+        r = self.fracs()
+        ns = 2 * L + 1
+        need_shift("c P", r["W"] + r["P"] - r["Pc"], "Pc")
+        need_shift("c Pp", r["W"] + r["Pp"] - r["Pc"], "Pc")
+        need_bits("c P", w["W"] + max(w["P"], w["Pp"]) - 1)
+        a = 2 * r["U"]
+        need_bits("Cholesky of c P", max(sum_bits(w["U"], w["U"], n),
+                                         w["Pc"] + need_shift("Cholesky of c P", a - r["Pc"], "Pc")) + 1)
+        for what, f1, f2 in (("x + U", "x", "U"), ("xm + U", "xm", "U")):
+            a = max(r[f1], r[f2])
+            need_bits(what, max(w[f1] + a - r[f1], w[f2] + a - r[f2]) + 1)
+            need_shift(what, a - r["X"], "X")
+        need_bits("sum Wm X", sum_bits(w["W"], w["X"], ns))
+        need_shift("sum Wm X", r["W"] + r["X"] - r["xm"], "xm")
+        need_bits("sum Wm Y", sum_bits(w["W"], w["Y"], ns))
+        a = max(r["X"], r["xm"])
+        need_bits("X - xm", max(w["X"] + a - r["X"], w["xm"] + a - r["xm"]) + 1)
+        need_shift("X - xm", a - r["D"], "D")
+        need_shift("Y - zp", r["Y"] - r["D"], "D")
+        need_bits("Wc D", w["W"] + w["D"] - 1)
+        need_bits("sum (Wc D) D", sum_bits(w["D"], w["D"], ns) + 1)
+        for sig, noise in (("Pp", "Q"), ("Pyy", "R"), ("Pxy", None)):
+            need_shift("sum (Wc D) D", 2 * r["D"] - r[sig], sig)
+            need_bits("sum (Wc D) D + noise", w[sig] + 2 * r["D"] - r[sig] + 1)
+        a = 2 * r["Ls"]
+        need_bits("Cholesky of Pyy", max(sum_bits(w["Ls"], w["Ls"], m),
+                                         w["Pyy"] + need_shift("Cholesky of Pyy", a - r["Pyy"], "Pyy")) + 1)
+        a = r["Ls"] + r["V"]
+        need_bits("Ls^-1 Pxy^T", max(sum_bits(w["Ls"], w["V"], m),
+                                     w["Pxy"] + need_shift("Ls^-1 Pxy^T", a - r["Pxy"], "Pxy")) + 1)
+        a = r["Ls"] + r["K"]
+        need_bits("Ls^-T V", max(sum_bits(w["Ls"], w["K"], m),
+                                 w["V"] + need_shift("Ls^-T V", a - r["V"], "V")) + 1)
+        a = max(r["z"], r["Y"])
+        need_bits("z - zp", max(w["z"] + a - r["z"], w["Y"] + a - r["Y"]) + 1)
+        need_shift("z - zp", a - r["e"], "e")
+        a = r["K"] + r["e"]
+        need_bits("xm + K e", max(sum_bits(w["K"], w["e"], m), w["xm"] + need_shift("xm + K e", a - r["xm"], "xm")) + 1)
+        need_shift("xm + K e", a - r["x"], "x")
+        a = 2 * r["V"]
+        need_bits("Pp - V^T V", max(sum_bits(w["V"], w["V"], m), w["Pp"] + need_shift("Pp - V^T V", a - r["Pp"], "Pp")) + 1)
+        need_shift("Pp - V^T V", a - r["P"], "P")
+        a = max(r["P"], r["Pp"])
+        need_bits("P = Pp (no update)", w["Pp"] + a - r["Pp"])
+
+    def check_weights(self, L: int, alpha: float, beta: float, kappa: float) -> None:
+        """Refuse UT parameters whose weights this table cannot hold (see
+        :func:`weight_problem`), naming the smallest alpha that would do."""
+        bad = weight_problem(self.W, L, alpha, beta, kappa)
+        if bad is None:
+            return
+        need = None
+        for a in np.geomspace(max(alpha, 1e-4), 10.0, 2000):
+            if weight_problem(self.W, L, float(a), beta, kappa) is None:
+                need = float(a)
+                break
+        hint = (f"alpha >= {need:.4g} would do (L = {L}, beta = {beta:g}, kappa = {kappa:g})"
+                if need is not None else "no alpha in (0, 10] would do; widen the W format")
+        raise ValueError(f"UT weights not representable in fixed point: {bad}; {hint}")
+
+
+#: Largest ``sum |W|`` of a fixed-point UT: the rounding errors of the sigma points are
+#: amplified by it in the mean and covariance (small alpha: a large negative centre weight
+#: cancelling large positive ones).
+WEIGHT_GAIN_MAX = 8.0
+#: Largest relative quantisation error of a weight in the W format (2**-12).
+WEIGHT_REL_ERR = 2.0 ** -12
+
+
+def weight_problem(fw: FixedFormat, L: int, alpha: float, beta: float, kappa: float):
+    """``None`` if the weights of ``(L, alpha, beta, kappa)`` suit the format ``fw``, else the
+    rule broken, with the bad value: (1) every ``|Wm|``, ``|Wc|`` and ``c = L + lambda`` within
+    the format's range; (2) ``sum |Wm|`` and ``sum |Wc|`` at most :data:`WEIGHT_GAIN_MAX`;
+    (3) each weight quantised to a relative error of at most :data:`WEIGHT_REL_ERR` and
+    ``|sum Wm_q - 1|`` at most that as well."""
+    wm, wc, c = sigma_weights(L, alpha, beta, kappa)
+    for name, v in (("Wm0", wm[0]), ("Wc0", wc[0]), ("Wi", wm[1]), ("c = L + lambda", c)):
+        if not fw.min_value <= v <= fw.max_value:
+            return (f"|{name}| = {abs(v):.6g} beyond the range of the W format {fw} "
+                    f"([{fw.min_value:g}, {fw.max_value:g}])")
+    for name, ws in (("Wm", wm), ("Wc", wc)):
+        g = float(np.sum(np.abs(ws)))
+        if g > WEIGHT_GAIN_MAX:
+            return f"sum |{name}| = {g:.6g} > {WEIGHT_GAIN_MAX:g} (rounding errors amplified by it)"
+    lsb = 2.0 ** -fw.frac
+    for name, v in (("Wm0", wm[0]), ("Wc0", wc[0]), ("Wi", wm[1])):
+        q = np.floor(v / lsb + 0.5) * lsb
+        if v != 0 and abs(q - v) > WEIGHT_REL_ERR * abs(v):
+            return (f"{name} = {v:.6g} quantised to {q:.6g} in {fw}: relative error "
+                    f"{abs(q - v) / abs(v):.3g} > 2^-12")
+    s = float(np.sum(np.floor(wm / lsb + 0.5))) * lsb
+    if abs(s - 1.0) > WEIGHT_REL_ERR:
+        return f"sum of the quantised Wm = {s:.9g}, off 1 by {abs(s - 1):.3g} > 2^-12"
+    return None
+
+
+SIGNALS = UkfFormats.signals()
+EVENTS = EventRegistry(SIGNALS, ("implausible", "chol_fail", "s_not_pd", "div_zero"))
+(_Z, _X, _P, _PC, _U, _XS, _W, _XM, _PP, _Y, _D, _PYY, _PXY, _LS, _V, _K, _E, _PRM) = range(len(SIGNALS))
 _EV_IMPL = EVENTS.index("implausible")
 _EV_CHOL = EVENTS.index("chol_fail")
 _EV_SNPD = EVENTS.index("s_not_pd")
+_EV_DIV = EVENTS.index("div_zero")
+_BASE = EVENTS.base
 
 
-@njit(cache=True)
-def _f_linear(x, w, prm, out):
+@njit_cached
+def _f_linear(x, w, prm, q, out):
+    """``F x + w`` (fixed point: ``q = [frac x, frac w, frac prm, frac out, half]``)."""
     n = x.shape[0]
     for i in range(n):
-        acc = w[i]
+        acc = align(w[i], q[0] + q[2] - q[1])
         for j in range(n):
             acc += prm[i, j] * x[j]
-        out[i] = acc
+        out[i] = rnd(acc, q[0] + q[2] - q[3], q[4])
 
 
-@njit(cache=True)
-def _h_linear(x, v, prm, out):
+@njit_cached
+def _h_linear(x, v, prm, q, out):
+    """``H x + v``."""
     for r in range(out.shape[0]):
-        acc = v[r]
+        acc = align(v[r], q[0] + q[2] - q[1])
         for j in range(x.shape[0]):
             acc += prm[r, j] * x[j]
-        out[r] = acc
+        out[r] = rnd(acc, q[0] + q[2] - q[3], q[4])
+
+
+@njit_cached
+def _h_iq(x, v, prm, q, out):
+    """``A [cos x0, sin x0] + v`` (``A = prm[0, 0]``): the I/Q of a carrier phase."""
+    acc = prm[0, 0] * cos_q(x[0], q[0], q[3], q[4]) + align(v[0], q[2] + q[3] - q[1])
+    out[0] = rnd(acc, q[2], q[4])
+    acc = prm[0, 0] * sin_q(x[0], q[0], q[3], q[4]) + align(v[1], q[2] + q[3] - q[1])
+    out[1] = rnd(acc, q[2], q[4])
 
 
 class NonlinearModel:
@@ -73,10 +261,15 @@ class NonlinearModel:
     Parameters
     ----------
     f, h : numba ``@njit`` functions
-        ``f(x, w, prm_f, out)`` writes the next state (``n``) into ``out``; ``h(x, v, prm_h,
-        out)`` the measurement (``m``). With additive noise ``w`` and ``v`` are zero and the
-        noise is added by the filter; augmented, they are the noise sigma points. Write them
-        with the dtype of ``x`` (no float64 literals) to keep a float32 run in float32.
+        ``f(x, w, prm_f, q, out)`` writes the next state (``n``) into ``out``; ``h(x, v,
+        prm_h, q, out)`` the measurement (``m``). With additive noise ``w`` and ``v`` are zero
+        and the noise is added by the filter; augmented, they are the noise sigma points.
+        Write them once with the operators of :mod:`dsp.estimation.ops` (``align``, ``rnd``,
+        ``sin_q``, ``cos_q``) and the dtype of ``x`` (no float64 literals): they then run in
+        float64, float32 and fixed point. ``q`` is an int64 array ``[frac x, frac w (or v),
+        frac prm, frac out, half]`` (all 0 for floats): in fixed point ``x``, ``w`` and ``v``
+        are in the ``X`` format, ``out`` in ``X`` (``f``) or ``Y`` (``h``), ``prm`` in
+        ``prm``; the model rounds (``rnd``), the filter saturates and counts.
     Q, R : arrays
         Noise covariances (``n x n`` PSD, ``m x m`` positive definite).
     prm_f, prm_h : 2-D float arrays
@@ -115,6 +308,16 @@ class NonlinearModel:
             raise ValueError(f"F must be square (n x n), not {F.shape}")
         return cls(_f_linear, _h_linear, Q, R, F, H)
 
+    @classmethod
+    def phase_iq(cls, F, Q, R, amplitude: float = 1.0) -> "NonlinearModel":
+        """A carrier-phase model (seed 002 shape): linear dynamics ``x[k+1] = F x + w`` of a
+        state whose first element is the phase (rad), measured as the I/Q pair ``A [cos
+        x0, sin x0] + v``. Runs in every arithmetic."""
+        F = np.asarray(F, np.float64)
+        if F.ndim != 2 or F.shape[0] != F.shape[1]:
+            raise ValueError(f"F must be square (n x n), not {F.shape}")
+        return cls(_f_linear, _h_iq, Q, R, F, [[amplitude]])
+
 
 def sigma_weights(L: int, alpha: float, beta: float, kappa: float):
     """``(Wm, Wc, c)`` of the scaled unscented transform, ``c = L + lambda``."""
@@ -142,31 +345,13 @@ def psd_sqrt(A) -> np.ndarray:
         return S * np.where(np.diag(S) < 0, -1.0, 1.0)
 
 
-@njit(cache=True)
-def _chol(A, L):
-    """Lower Cholesky factor of A into L; False if a pivot is not positive."""
-    n = A.shape[0]
-    z0 = A[0, 0] - A[0, 0]
-    for i in range(n):
-        for j in range(n):
-            L[i, j] = z0
-    for j in range(n):
-        acc = A[j, j]
-        for l in range(j):
-            acc -= L[j, l] * L[j, l]
-        if not acc > z0:
-            return False
-        L[j, j] = np.sqrt(acc)
-        for i in range(j + 1, n):
-            acc = A[i, j]
-            for l in range(j):
-                acc -= L[i, l] * L[j, l]
-            L[i, j] = acc / L[j, j]
-    return True
+_model_f = _model_h = None   # the model functions of one kernel instance (see _kernel_for)
 
 
-@njit(cache=True)
-def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, wm, wc, c, pfloor, aug, redraw, ev, xs, Ps, keep_P):
+def _ukf_template(x, P, z, zok, Q, R, Lq, Lr, pf, ph, qf, qh, wm, wc, c, pfloor, fr, lo, hi, hf,
+                aug, redraw, ev, xs, Ps, keep_P):
+    """One source: float64, float32 or int64 (fixed point, formats ``fr, lo, hi, hf`` in the
+    order of :class:`UkfFormats`) by the dtype of ``x``."""
     nb, n = x.shape
     T, m = z.shape[1], z.shape[2]
     L = n + (n + m if aug else 0)
@@ -178,23 +363,34 @@ def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, wm, wc, c, pfloor, aug
     X = np.empty((ns, L), x.dtype)
     Xf = np.empty((ns, n), x.dtype)
     Zs = np.empty((ns, m), x.dtype)
+    Dx = np.empty((ns, n), x.dtype)
+    Dwx = np.empty((ns, n), x.dtype)
+    Dz = np.empty((ns, m), x.dtype)
+    Dwz = np.empty((ns, m), x.dtype)
     wz = np.zeros(n, x.dtype)
     vz = np.zeros(m, x.dtype)
     xm = np.empty(n, x.dtype)
     Pp = np.empty((n, n), x.dtype)
     zp = np.empty(m, x.dtype)
+    e = np.empty(m, x.dtype)
     S = np.empty((m, m), x.dtype)
-    Ls = np.empty((m, m), x.dtype)
+    Ls = np.zeros((m, m), x.dtype)
     Pxz = np.empty((n, m), x.dtype)
     W = np.empty((m, n), x.dtype)
     K = np.empty((n, m), x.dtype)
+    B = _BASE
+    aX = max(fr[_X], fr[_U])            # x + U, exact
+    aXm = max(fr[_XS], fr[_XM])          # Xf - xm, exact
+    aZ = max(fr[_Y], fr[_Z])            # z - zp, exact
+    aS = max(fr[_X], fr[_XM])           # x = xm (no update)
     for b in range(nb):
         eb = ev[b]
         for k in range(T):
             for i in range(n):
                 for j in range(n):
-                    Pa[i, j] = c[0] * P[b, i, j]
-            if not _chol(Pa, Ln):
+                    Pa[i, j] = store(c[0] * P[b, i, j], fr[_W] + fr[_P] - fr[_PC], hf[_PC], lo[_PC], hi[_PC],
+                                     eb, _PC, B)
+            if not chol_q(Pa, Ln, 2 * fr[_U] - fr[_PC], hf[_U], lo[_U], hi[_U], eb, _U, _EV_DIV, B):
                 eb[_EV_CHOL] += 1
                 for i in range(n):
                     d = P[b, i, i]
@@ -204,16 +400,13 @@ def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, wm, wc, c, pfloor, aug
                         P[b, i, j] = z0
                     P[b, i, i] = d
                     for j in range(n):
-                        Pa[i, j] = c[0] * P[b, i, j]
-                _chol(Pa, Ln)
+                        Pa[i, j] = store(c[0] * P[b, i, j], fr[_W] + fr[_P] - fr[_PC], hf[_PC], lo[_PC],
+                                         hi[_PC], eb, _PC, B)
+                chol_q(Pa, Ln, 2 * fr[_U] - fr[_PC], hf[_U], lo[_U], hi[_U], eb, _U, _EV_DIV, B)
             for i in range(n):
-                for j in range(n):
+                for j in range(i + 1):
                     La[i, j] = Ln[i, j]
             if aug:  # the noise blocks of the augmented factor are constant: sqrt(c) Lq, sqrt(c) Lr
-                for i in range(L):
-                    for j in range(L):
-                        if i >= n or j >= n:
-                            La[i, j] = z0
                 for i in range(n):
                     for j in range(n):
                         La[n + i, n + j] = Lq[i, j]
@@ -224,117 +417,177 @@ def _ukf_kernel(f, h, x, P, z, zok, Q, R, Lq, Lr, pf, ph, wm, wc, c, pfloor, aug
                 X[0, j] = x[b, j] if j < n else z0
             for i in range(L):
                 for j in range(L):
-                    base = x[b, j] if j < n else z0
-                    X[1 + i, j] = base + La[j, i]
-                    X[1 + L + i, j] = base - La[j, i]
+                    if j < n:
+                        base = align(x[b, j], aX - fr[_X])
+                        u = align(La[j, i], aX - fr[_U])
+                        X[1 + i, j] = store(base + u, aX - fr[_XS], hf[_XS], lo[_XS], hi[_XS], eb, _XS, B)
+                        X[1 + L + i, j] = store(base - u, aX - fr[_XS], hf[_XS], lo[_XS], hi[_XS], eb, _XS, B)
+                    else:  # noise sigma points, in the X format
+                        u = store(align(La[j, i], aX - fr[_U]), aX - fr[_XS], hf[_XS], lo[_XS], hi[_XS], eb, _XS, B)
+                        X[1 + i, j] = u
+                        X[1 + L + i, j] = -u
             for s in range(ns):
                 if aug:
-                    f(X[s, :n], X[s, n:2 * n], pf, Xf[s])
+                    _model_f(X[s, :n], X[s, n:2 * n], pf, qf, Xf[s])
                 else:
-                    f(X[s, :n], wz, pf, Xf[s])
+                    _model_f(X[s, :n], wz, pf, qf, Xf[s])
+                for i in range(n):
+                    Xf[s, i] = store(Xf[s, i], 0, 0, lo[_XS], hi[_XS], eb, _XS, B)
             for i in range(n):
                 acc = z0
                 for s in range(ns):
                     acc += wm[s] * Xf[s, i]
-                xm[i] = acc
+                xm[i] = store(acc, fr[_W] + fr[_XS] - fr[_XM], hf[_XM], lo[_XM], hi[_XM], eb, _XM, B)
+            for s in range(ns):
+                for i in range(n):
+                    Dx[s, i] = store(align(Xf[s, i], aXm - fr[_XS]) - align(xm[i], aXm - fr[_XM]), aXm - fr[_D],
+                                     hf[_D], lo[_D], hi[_D], eb, _D, B)
+                    Dwx[s, i] = store(wc[s] * Dx[s, i], fr[_W], hf[_D], lo[_D], hi[_D], eb, _D, B)
             for i in range(n):
                 for j in range(i, n):
                     acc = z0
                     for s in range(ns):
-                        acc += wc[s] * (Xf[s, i] - xm[i]) * (Xf[s, j] - xm[j])
+                        acc += Dwx[s, i] * Dx[s, j]
                     if not aug:
-                        acc += Q[i, j]
-                    Pp[i, j] = acc
-                    Pp[j, i] = acc
+                        acc += align(Q[i, j], 2 * fr[_D] - fr[_PP])
+                    Pp[i, j] = store(acc, 2 * fr[_D] - fr[_PP], hf[_PP], lo[_PP], hi[_PP], eb, _PP, B)
+                    Pp[j, i] = Pp[i, j]
             if redraw and not aug:  # sigma points of the prediction (xm, Pp) for h
                 for i in range(n):
                     for j in range(n):
-                        Pa[i, j] = c[0] * Pp[i, j]
-                if not _chol(Pa, Ln):
+                        Pa[i, j] = store(c[0] * Pp[i, j], fr[_W] + fr[_PP] - fr[_PC], hf[_PC], lo[_PC],
+                                         hi[_PC], eb, _PC, B)
+                if not chol_q(Pa, Ln, 2 * fr[_U] - fr[_PC], hf[_U], lo[_U], hi[_U], eb, _U, _EV_DIV, B):
                     eb[_EV_CHOL] += 1
                     for i in range(n):
                         d = Pp[i, i]
-                        if not d > pfloor[0]:
-                            d = pfloor[0]
+                        if not d > pfloor[1]:
+                            d = pfloor[1]
                         for j in range(n):
                             Pa[i, j] = z0
-                        Pa[i, i] = c[0] * d
-                    _chol(Pa, Ln)
+                        Pa[i, i] = store(c[0] * d, fr[_W] + fr[_PP] - fr[_PC], hf[_PC], lo[_PC], hi[_PC],
+                                         eb, _PC, B)
+                    chol_q(Pa, Ln, 2 * fr[_U] - fr[_PC], hf[_U], lo[_U], hi[_U], eb, _U, _EV_DIV, B)
+                aR = max(fr[_XM], fr[_U])
                 for j in range(n):
-                    Xf[0, j] = xm[j]
+                    Xf[0, j] = store(align(xm[j], aR - fr[_XM]), aR - fr[_XS], hf[_XS], lo[_XS], hi[_XS], eb, _XS, B)
                 for i in range(n):
                     for j in range(n):
-                        Xf[1 + i, j] = xm[j] + Ln[j, i]
-                        Xf[1 + n + i, j] = xm[j] - Ln[j, i]
+                        base = align(xm[j], aR - fr[_XM])
+                        u = align(Ln[j, i] if i <= j else z0, aR - fr[_U])
+                        Xf[1 + i, j] = store(base + u, aR - fr[_XS], hf[_XS], lo[_XS], hi[_XS], eb, _XS, B)
+                        Xf[1 + n + i, j] = store(base - u, aR - fr[_XS], hf[_XS], lo[_XS], hi[_XS], eb, _XS, B)
+                for s in range(ns):
+                    for i in range(n):
+                        Dx[s, i] = store(align(Xf[s, i], aXm - fr[_XS]) - align(xm[i], aXm - fr[_XM]),
+                                         aXm - fr[_D], hf[_D], lo[_D], hi[_D], eb, _D, B)
+                        Dwx[s, i] = store(wc[s] * Dx[s, i], fr[_W], hf[_D], lo[_D], hi[_D], eb, _D, B)
             done = False
             if not zok[b, k]:
                 eb[_EV_IMPL] += 1
             else:
                 for s in range(ns):
                     if aug:
-                        h(Xf[s], X[s, 2 * n:], ph, Zs[s])
+                        _model_h(Xf[s], X[s, 2 * n:], ph, qh, Zs[s])
                     else:
-                        h(Xf[s], vz, ph, Zs[s])
+                        _model_h(Xf[s], vz, ph, qh, Zs[s])
+                    for r in range(m):
+                        Zs[s, r] = store(Zs[s, r], 0, 0, lo[_Y], hi[_Y], eb, _Y, B)
                 for r in range(m):
                     acc = z0
                     for s in range(ns):
                         acc += wm[s] * Zs[s, r]
-                    zp[r] = acc
+                    zp[r] = store(acc, fr[_W], hf[_Y], lo[_Y], hi[_Y], eb, _Y, B)
+                for s in range(ns):
+                    for r in range(m):
+                        Dz[s, r] = store(Zs[s, r] - zp[r], fr[_Y] - fr[_D], hf[_D], lo[_D], hi[_D], eb, _D, B)
+                        Dwz[s, r] = store(wc[s] * Dz[s, r], fr[_W], hf[_D], lo[_D], hi[_D], eb, _D, B)
                 for r in range(m):
                     for q in range(r, m):
                         acc = z0
                         for s in range(ns):
-                            acc += wc[s] * (Zs[s, r] - zp[r]) * (Zs[s, q] - zp[q])
+                            acc += Dwz[s, r] * Dz[s, q]
                         if not aug:
-                            acc += R[r, q]
-                        S[r, q] = acc
-                        S[q, r] = acc
+                            acc += align(R[r, q], 2 * fr[_D] - fr[_PYY])
+                        S[r, q] = store(acc, 2 * fr[_D] - fr[_PYY], hf[_PYY], lo[_PYY], hi[_PYY], eb, _PYY, B)
+                        S[q, r] = S[r, q]
                 for i in range(n):
                     for r in range(m):
                         acc = z0
                         for s in range(ns):
-                            acc += wc[s] * (Xf[s, i] - xm[i]) * (Zs[s, r] - zp[r])
-                        Pxz[i, r] = acc
-                if not _chol(S, Ls):
+                            acc += Dwx[s, i] * Dz[s, r]
+                        Pxz[i, r] = store(acc, 2 * fr[_D] - fr[_PXY], hf[_PXY], lo[_PXY], hi[_PXY], eb, _PXY, B)
+                if not chol_q(S, Ls, 2 * fr[_LS] - fr[_PYY], hf[_LS], lo[_LS], hi[_LS], eb, _LS, _EV_DIV, B):
                     eb[_EV_SNPD] += 1
                 else:
-                    for r in range(m):           # W = Ls^-1 Pxz^T
-                        for j in range(n):
-                            acc = Pxz[j, r]
-                            for l in range(r):
-                                acc -= Ls[r, l] * W[l, j]
-                            W[r, j] = acc / Ls[r, r]
-                    for r in range(m - 1, -1, -1):   # K^T = Ls^-T W
-                        for j in range(n):
-                            acc = W[r, j]
-                            for l in range(r + 1, m):
-                                acc -= Ls[l, r] * K[j, l]
-                            K[j, r] = acc / Ls[r, r]
+                    solve_lower_q(Ls, Pxz, W, fr[_LS] + fr[_V] - fr[_PXY], hf[_V], lo[_V], hi[_V], eb, _V,
+                                  _EV_DIV, B)                         # W = Ls^-1 Pxz^T
+                    solve_upper_t_q(Ls, W, K, fr[_LS] + fr[_K] - fr[_V], hf[_K], lo[_K], hi[_K], eb, _K,
+                                    _EV_DIV, B)                       # K^T = Ls^-T W
+                    for r in range(m):
+                        e[r] = store(align(z[b, k, r], aZ - fr[_Z]) - align(zp[r], aZ - fr[_Y]), aZ - fr[_E],
+                                     hf[_E], lo[_E], hi[_E], eb, _E, B)
+                    a = fr[_K] + fr[_E]
                     for i in range(n):
-                        acc = xm[i]
+                        acc = align(xm[i], a - fr[_XM])
                         for r in range(m):
-                            acc += K[i, r] * (z[b, k, r] - zp[r])
-                        x[b, i] = acc
-                    for i in range(n):
+                            acc += K[i, r] * e[r]
+                        x[b, i] = store(acc, a - fr[_X], hf[_X], lo[_X], hi[_X], eb, _X, B)
+                    a = 2 * fr[_V]
+                    for i in range(n):                # P = Pp - W^T W  (= Pp - K S K^T)
                         for j in range(i, n):
-                            acc = Pp[i, j]
+                            acc = align(Pp[i, j], a - fr[_PP])
                             for r in range(m):
-                                for q in range(m):
-                                    acc -= K[i, r] * S[r, q] * K[j, q]
-                            P[b, i, j] = acc
-                            P[b, j, i] = acc
+                                acc -= W[r, i] * W[r, j]
+                            P[b, i, j] = store(acc, a - fr[_P], hf[_P], lo[_P], hi[_P], eb, _P, B)
+                            P[b, j, i] = P[b, i, j]
                     done = True
             if not done:
                 for i in range(n):
-                    x[b, i] = xm[i]
+                    x[b, i] = store(align(xm[i], aS - fr[_XM]), aS - fr[_X], hf[_X], lo[_X], hi[_X], eb, _X, B)
                     for j in range(n):
-                        P[b, i, j] = Pp[i, j]
+                        P[b, i, j] = store(align(Pp[i, j], max(fr[_P], fr[_PP]) - fr[_PP]),
+                                           max(fr[_P], fr[_PP]) - fr[_P], hf[_P], lo[_P], hi[_P], eb, _P, B)
             for i in range(n):
                 xs[b, k, i] = x[b, i]
             if keep_P:
                 for i in range(n):
                     for j in range(n):
                         Ps[b, k, i, j] = P[b, i, j]
+
+
+_KERNELS: dict = {}
+
+
+def _kernel_for(f, h):
+    """The UKF kernel with the model functions ``f`` and ``h`` bound in (one instance per
+    model, kept in :data:`_KERNELS`). A kernel that takes the model functions as arguments
+    is not cached by numba (it recompiled ~13 s in every process); this one is a copy of
+    :func:`_ukf_template` whose globals hold ``f`` and ``h`` and whose name carries a hash
+    of their definitions (module, name and the source file of each), cached with
+    :func:`dsp.jit.njit_cached` (which keys on the project's sources as well)."""
+    key = (f, h)
+    k = _KERNELS.get(key)
+    if k is None:
+        tag = hashlib.sha256()
+        for fn in (f, h):
+            py = getattr(fn, "py_func", None)
+            if py is None:
+                raise ValueError(f"model functions must be numba @njit functions, not {fn!r}")
+            tag.update(f"{py.__module__}.{py.__qualname__}\0".encode())
+            try:
+                tag.update(Path(inspect.getfile(py)).read_bytes())
+            except (OSError, TypeError):
+                tag.update(repr(id(py)).encode())
+        g = dict(_ukf_template.__globals__)
+        g["_model_f"], g["_model_h"] = f, h
+        name = f"_ukf_kernel_{tag.hexdigest()[:16]}"
+        fn = types.FunctionType(_ukf_template.__code__, g, name, _ukf_template.__defaults__)
+        fn.__qualname__ = name
+        fn.__module__ = __name__
+        fn.__doc__ = _ukf_template.__doc__
+        k = _KERNELS[key] = njit_cached(fn)
+    return k
 
 
 @dataclass
@@ -362,7 +615,9 @@ class UnscentedKalmanFilter:
     kappa : float
         Secondary scaling; ``L + kappa`` must be > 0.
     noise : {"additive", "augmented"}
-    arithmetic : {"float64", "float32"}
+    arithmetic : {"float64", "float32"} or UkfFormats
+        Fixed point: the UT weights must suit the ``W`` format (:func:`weight_problem`);
+        otherwise a ValueError names the rule, the bad value and the alpha that would do.
     trials : int
     p_floor : float
         Smallest diagonal kept by the Cholesky recovery.
@@ -380,9 +635,8 @@ class UnscentedKalmanFilter:
         if not isinstance(model, NonlinearModel):
             raise ValueError(f"model must be a NonlinearModel, not {model!r}")
         kind = arithmetic_name(arithmetic)
-        if kind == "fixed":
-            raise ValueError("the unscented filter runs in 'float64' or 'float32' (see the module "
-                             "docstring for why no fixed-point form)")
+        if kind == "fixed" and not isinstance(arithmetic, UkfFormats):
+            raise ValueError(f"the fixed-point unscented filter takes a UkfFormats table, not {arithmetic!r}")
         if noise not in ("additive", "augmented"):
             raise ValueError(f"noise must be 'additive' or 'augmented', not {noise!r}")
         if not (isinstance(alpha, (int, float)) and 0 < alpha <= 10):
@@ -403,7 +657,11 @@ class UnscentedKalmanFilter:
         self.model, self.trials, self.kind, self.z_limit = model, int(trials), kind, z_limit
         self.aug = noise == "augmented"
         self.redraw = bool(redraw)
-        dt = np.float64 if kind == "float64" else np.float32
+        self.formats = arithmetic if kind == "fixed" else None
+        if kind == "fixed":
+            arithmetic.check(n, m, L)
+            arithmetic.check_weights(L, float(alpha), float(beta), float(kappa))
+        dt = {"float64": np.float64, "float32": np.float32, "fixed": np.int64}[kind]
         x0 = np.asarray(x0, np.float64)
         P0 = np.asarray(P0, np.float64)
         if x0.shape not in ((n,), (self.trials, n)):
@@ -411,12 +669,35 @@ class UnscentedKalmanFilter:
         if P0.shape not in ((n, n), (self.trials, n, n)):
             raise ValueError(f"P0 must have shape ({n}, {n}) or ({self.trials}, {n}, {n}), not {P0.shape}")
         check_psd("P0", np.broadcast_to(P0, (self.trials, n, n)))
-        self.x = np.array(np.broadcast_to(x0, (self.trials, n)), dtype=dt, order="C")
-        self.P = np.array(np.broadcast_to(P0, (self.trials, n, n)), dtype=dt, order="C")
-        self._w = (wm.astype(dt), wc.astype(dt), np.array([c], dt), np.array([p_floor], dt))
+        x0 = np.broadcast_to(x0, (self.trials, n))
+        P0 = np.broadcast_to(P0, (self.trials, n, n))
         Lq, Lr = (np.sqrt(c) * psd_sqrt(a) for a in (model.Q, model.R))
-        self._mats = tuple(np.ascontiguousarray(a, dtype=dt) for a in
-                           (model.Q, model.R, Lq, Lr, model.prm_f, model.prm_h))
+        if kind == "fixed":
+            fm = arithmetic
+            for what, v, f in (("x0", x0, fm.x), ("P0", P0, fm.P), ("Q", model.Q, fm.Pp), ("R", model.R, fm.Pyy),
+                               ("sqrt(c) chol(Q)", Lq, fm.U), ("sqrt(c) chol(R)", Lr, fm.U),
+                               ("prm_f", model.prm_f, fm.prm), ("prm_h", model.prm_h, fm.prm)):
+                fits(what, v, f)
+            self.x, self.P = to_fixed(x0, fm.x), to_fixed(P0, fm.P)
+            self._w = (to_fixed(wm, fm.W), to_fixed(wc, fm.W), to_fixed([c], fm.W),
+                       np.array([max(1, to_fixed(p_floor, fm.P)), max(1, to_fixed(p_floor, fm.Pp))], np.int64))
+            self._mats = tuple(np.ascontiguousarray(to_fixed(a, f)) for a, f in
+                               ((model.Q, fm.Pp), (model.R, fm.Pyy), (Lq, fm.U), (Lr, fm.U),
+                                (model.prm_f, fm.prm), (model.prm_h, fm.prm)))
+            r = fm.fracs()
+            self._q = (np.array([r["X"], r["X"], r["prm"], r["X"], int(fm.X.rounding == "half_up")], np.int64),
+                       np.array([r["X"], r["X"], r["prm"], r["Y"], int(fm.Y.rounding == "half_up")], np.int64))
+            self._fmt = fm.arrays()[:4]
+        else:
+            self.x = np.array(x0, dtype=dt, order="C")
+            self.P = np.array(P0, dtype=dt, order="C")
+            self._w = (wm.astype(dt), wc.astype(dt), np.array([c], dt), np.array([p_floor, p_floor], dt))
+            self._mats = tuple(np.ascontiguousarray(a, dtype=dt) for a in
+                               (model.Q, model.R, Lq, Lr, model.prm_f, model.prm_h))
+            zz = np.zeros(len(SIGNALS), np.int64)
+            self._q = (np.zeros(5, np.int64), np.zeros(5, np.int64))
+            self._fmt = (zz, zz, zz, zz)
+        self.events = EVENTS
         self.ev = EVENTS.new((self.trials,))
 
     def counts(self) -> dict:
@@ -434,14 +715,32 @@ class UnscentedKalmanFilter:
         if z.ndim != 3 or z.shape[0] != self.trials or z.shape[2] != m:
             raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
         ok = np.all(np.isfinite(z), axis=2)
-        if self.z_limit is not None:
-            ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= self.z_limit, axis=2)
-        zc = np.ascontiguousarray(np.where(ok[..., None], z, 0.0).astype(self.x.dtype))
+        lim = self.z_limit
+        if self.kind == "fixed":
+            f = self.formats.z
+            flim = min(f.max_value, -f.min_value)
+            lim = flim if lim is None else min(lim, flim)
+        if lim is not None:
+            ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
+        zc = np.where(ok[..., None], z, 0.0)
+        zc = np.ascontiguousarray(to_fixed(zc, self.formats.z) if self.kind == "fixed" else zc.astype(self.x.dtype))
         T = z.shape[1]
         xs = np.empty((self.trials, T, n), self.x.dtype)
         Ps = np.empty((self.trials, T if keep_P else 0, n, n), self.x.dtype)
         Q, R, Lq, Lr, pf, ph = self._mats
         wm, wc, c, pfl = self._w
-        _ukf_kernel(self.model.f, self.model.h, self.x, self.P, zc, ok, Q, R, Lq, Lr, pf, ph, wm, wc, c, pfl,
-                    self.aug, self.redraw, self.ev, xs, Ps, keep_P)
-        return UKFRun(xs.astype(np.float64), Ps.astype(np.float64) if keep_P else None, self.counts())
+        fr, lo, hi, hf = self._fmt
+        _kernel_for(self.model.f, self.model.h)(self.x, self.P, zc, ok, Q, R, Lq, Lr, pf, ph, self._q[0],
+                    self._q[1], wm, wc, c, pfl, fr, lo, hi, hf, self.aug, self.redraw, self.ev, xs, Ps, keep_P)
+        if self.kind == "fixed":
+            xs_f = xs * 2.0 ** -self.formats.x.frac
+            Ps_f = Ps * 2.0 ** -self.formats.P.frac if keep_P else None
+        else:
+            xs_f, Ps_f = xs.astype(np.float64), (Ps.astype(np.float64) if keep_P else None)
+        return UKFRun(xs_f, Ps_f, self.counts())
+
+    def state(self):
+        """Current ``(x, P)`` in physical units (float64)."""
+        if self.kind == "fixed":
+            return self.x * 2.0 ** -self.formats.x.frac, self.P * 2.0 ** -self.formats.P.frac
+        return self.x.astype(np.float64), self.P.astype(np.float64)

@@ -30,7 +30,7 @@ class IntArith:
 
     def store(self, acc, s, sig):
         _, lo, hi, half = self.f[sig]
-        v = ((acc + (1 << (s - 1) if half else acc)) >> s) if s > 0 else acc << (-s)
+        v = ((acc + (1 << (s - 1)) if half else acc) >> s) if s > 0 else acc << (-s)
         if v < lo or v > hi:
             self.sat[sig] += 1
             return lo if v < lo else hi
@@ -223,7 +223,7 @@ class AlphaBetaRef:
 
     def __init__(self, ar, x, c, consts, window, adaptive):
         self.ar, self.x, self.c = ar, list(x), list(c)
-        self.rv, self.amin, self.amax, self.one, self.nw = consts
+        self.floor, self.amin, self.amax, self.one, self.nw, self.svl, self.four = consts
         self.ring, self.pos, self.cnt = [ar.zero] * window, 0, 0
         self.adaptive = adaptive
 
@@ -246,10 +246,25 @@ class AlphaBetaRef:
                 acc = ar.zero
                 for v in self.ring:
                     acc += v
-                Sm = ar.div(acc * (1 << 0) if isinstance(acc, int) else acc, self.nw, "s")
-                if Sm > 0:
-                    ratio = ar.div(self.rv << fr("c") if isinstance(self.rv, int) else self.rv, Sm, "c")
-                    al = min(max(self.one - ratio, self.amin), self.amax)
+                Sm = ar.div(acc, self.nw, "s")
+                dm = Sm - self.floor
+                if dm > 0:
+                    if isinstance(dm, int):
+                        g = ar.sqrt(dm << (2 * fr("l") - fr("s")), "l")
+                        lam = ar.div(g << fr("l"), self.svl, "l")
+                        sq = ar.sqrt(lam * lam + ((8 * lam) << fr("l")), "l")
+                        rk = ar.div(self.four << fr("c"), self.four + lam + sq, "c")
+                        al = ar.store((self.one << fr("c")) - rk * rk, fr("c"), "c")
+                    else:
+                        g = ar.sqrt(dm, "l")
+                        lam = ar.div(g, self.svl, "l")
+                        l8 = lam + lam
+                        l8 = l8 + l8
+                        l8 = l8 + l8
+                        sq = ar.sqrt(lam * lam + l8, "l")
+                        rk = ar.div(self.four, self.four + lam + sq, "c")
+                        al = self.one - rk * rk
+                    al = min(max(al, self.amin), self.amax)
                 else:
                     al = self.amin
                 v = self.one - al
@@ -362,7 +377,178 @@ def ukf_step_f32(x, P, z, F, H, Q, R, wm, wc, c):
         for j in range(i, n):
             acc = Pp[i][j]
             for r in range(m):
-                for q in range(m):
-                    acc -= K[i][r] * S[r][q] * K[j][q]
+                acc -= W[r][i] * W[r][j]
             Pn[i][j] = Pn[j][i] = acc
     return xn, Pn
+
+
+def ukf_step_int(A, x, P, z, model_f, model_h, Qq, Rq, Lq, Lr, wm, wc, c, pfloor, n, m, aug, redraw,
+                 events):
+    """One fixed-point UKF step with Python integers (:class:`IntArith` ``A`` of a
+    ``UkfFormats`` table), in the kernel's order. ``model_f(x, w) / model_h(x, v)`` return
+    lists of integers (in X / Y), ``z`` is the quantised measurement or None (predict only).
+    Lists in, lists out; ``events`` counts chol_fail / s_not_pd."""
+    fr = A.fr
+    L = n + (n + m if aug else 0)
+    ns = 2 * L + 1
+
+    def chol(S_, fS, fL, sig):
+        k = len(S_)
+        Lm = [[0] * k for _ in range(k)]
+        a = 2 * fr(fL) - fr(fS)
+        for j in range(k):
+            acc = S_[j][j] << a
+            for l in range(j):
+                acc -= Lm[j][l] * Lm[j][l]
+            if not acc > 0:
+                return None
+            Lm[j][j] = A.sqrt(acc, sig)
+            for i in range(j + 1, k):
+                acc = S_[i][j] << a
+                for l in range(j):
+                    acc -= Lm[i][l] * Lm[j][l]
+                Lm[i][j] = A.div(acc, Lm[j][j], sig)
+        return Lm
+
+    def factor(M, fM, floor):
+        Pa = [[A.store(c * M[i][j], fr("W") + fr(fM) - fr("Pc"), "Pc") for j in range(n)] for i in range(n)]
+        Ln = chol(Pa, "Pc", "U", "U")
+        if Ln is None:
+            events["chol_fail"] += 1
+            d = [M[i][i] if M[i][i] > floor else floor for i in range(n)]
+            if fM == "P":
+                for i in range(n):
+                    for j in range(n):
+                        M[i][j] = 0
+                    M[i][i] = d[i]
+            Pa = [[A.store(c * (d[i] if i == j else 0), fr("W") + fr(fM) - fr("Pc"), "Pc") for j in range(n)]
+                  for i in range(n)]
+            Ln = chol(Pa, "Pc", "U", "U")
+        return Ln
+
+    def devs(pts, mean, fp, fmn):
+        a = max(fr(fp), fr(fmn))
+        D = [[A.store((pts[s][i] << (a - fr(fp))) - (mean[i] << (a - fr(fmn))), a - fr("D"), "D")
+              for i in range(len(mean))] for s in range(ns)]
+        Dw = [[A.store(wc[s] * D[s][i], fr("W"), "D") for i in range(len(mean))] for s in range(ns)]
+        return D, Dw
+
+    Ln = factor(P, "P", pfloor[0])
+    La = [[0] * L for _ in range(L)]
+    for i in range(n):
+        for j in range(i + 1):
+            La[i][j] = Ln[i][j]
+    if aug:
+        for i in range(n):
+            for j in range(n):
+                La[n + i][n + j] = Lq[i][j]
+        for i in range(m):
+            for j in range(m):
+                La[2 * n + i][2 * n + j] = Lr[i][j]
+    aX = max(fr("x"), fr("U"))
+    X = [[x[j] if j < n else 0 for j in range(L)]] + [[0] * L for _ in range(2 * L)]
+    for i in range(L):
+        for j in range(L):
+            if j < n:
+                base, u = x[j] << (aX - fr("x")), La[j][i] << (aX - fr("U"))
+                X[1 + i][j] = A.store(base + u, aX - fr("X"), "X")
+                X[1 + L + i][j] = A.store(base - u, aX - fr("X"), "X")
+            else:
+                u = A.store(La[j][i] << (aX - fr("U")), aX - fr("X"), "X")
+                X[1 + i][j], X[1 + L + i][j] = u, -u
+    Xf = [[A.store(v, 0, "X") for v in model_f(X[s][:n], X[s][n:2 * n] if aug else [0] * n)] for s in range(ns)]
+    xm = [A.store(sum(wm[s] * Xf[s][i] for s in range(ns)), fr("W") + fr("X") - fr("xm"), "xm") for i in range(n)]
+    Dx, Dwx = devs(Xf, xm, "X", "xm")
+    Pp = [[0] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            acc = 0
+            for s in range(ns):
+                acc += Dwx[s][i] * Dx[s][j]
+            if not aug:
+                acc += Qq[i][j] << (2 * fr("D") - fr("Pp"))
+            Pp[i][j] = Pp[j][i] = A.store(acc, 2 * fr("D") - fr("Pp"), "Pp")
+    if redraw and not aug:
+        Ln = factor(Pp, "Pp", pfloor[1])
+        aR = max(fr("xm"), fr("U"))
+        Xf = [[A.store(xm[j] << (aR - fr("xm")), aR - fr("X"), "X") for j in range(n)]]
+        Xf += [[A.store((xm[j] << (aR - fr("xm"))) + ((Ln[j][i] if i <= j else 0) << (aR - fr("U"))), aR - fr("X"), "X")
+                for j in range(n)] for i in range(n)]
+        Xf += [[A.store((xm[j] << (aR - fr("xm"))) - ((Ln[j][i] if i <= j else 0) << (aR - fr("U"))), aR - fr("X"), "X")
+                for j in range(n)] for i in range(n)]
+        Dx, Dwx = devs(Xf, xm, "X", "xm")
+    aS = max(fr("x"), fr("xm"))
+    if z is None:
+        events["implausible"] += 1
+        return ([A.store(v << (aS - fr("xm")), aS - fr("x"), "x") for v in xm],
+                [[A.store(v << (max(fr("P"), fr("Pp")) - fr("Pp")), max(fr("P"), fr("Pp")) - fr("P"), "P") for v in row]
+                 for row in Pp])
+    Zs = [[A.store(v, 0, "Y") for v in model_h(Xf[s], X[s][2 * n:] if aug else [0] * m)] for s in range(ns)]
+    zp = [A.store(sum(wm[s] * Zs[s][r] for s in range(ns)), fr("W"), "Y") for r in range(m)]
+    Dz = [[A.store(Zs[s][r] - zp[r], fr("Y") - fr("D"), "D") for r in range(m)] for s in range(ns)]
+    Dwz = [[A.store(wc[s] * Dz[s][r], fr("W"), "D") for r in range(m)] for s in range(ns)]
+    S = [[0] * m for _ in range(m)]
+    for r in range(m):
+        for q in range(r, m):
+            acc = 0
+            for s in range(ns):
+                acc += Dwz[s][r] * Dz[s][q]
+            if not aug:
+                acc += Rq[r][q] << (2 * fr("D") - fr("Pyy"))
+            S[r][q] = S[q][r] = A.store(acc, 2 * fr("D") - fr("Pyy"), "Pyy")
+    Pxz = [[0] * m for _ in range(n)]
+    for i in range(n):
+        for r in range(m):
+            acc = 0
+            for s in range(ns):
+                acc += Dwx[s][i] * Dz[s][r]
+            Pxz[i][r] = A.store(acc, 2 * fr("D") - fr("Pxy"), "Pxy")
+    Ls = chol(S, "Pyy", "Ls", "Ls")
+    if Ls is None:
+        events["s_not_pd"] += 1
+        return ([A.store(v << (aS - fr("xm")), aS - fr("x"), "x") for v in xm],
+                [[A.store(v << (max(fr("P"), fr("Pp")) - fr("Pp")), max(fr("P"), fr("Pp")) - fr("P"), "P") for v in row]
+                 for row in Pp])
+    W = [[0] * n for _ in range(m)]
+    a = fr("Ls") + fr("V") - fr("Pxy")
+    for r in range(m):
+        for j in range(n):
+            acc = Pxz[j][r] << a
+            for l in range(r):
+                acc -= Ls[r][l] * W[l][j]
+            W[r][j] = A.div(acc, Ls[r][r], "V")
+    K = [[0] * m for _ in range(n)]
+    a = fr("Ls") + fr("K") - fr("V")
+    for r in range(m - 1, -1, -1):
+        for j in range(n):
+            acc = W[r][j] << a
+            for l in range(r + 1, m):
+                acc -= Ls[l][r] * K[j][l]
+            K[j][r] = A.div(acc, Ls[r][r], "K")
+    aZ = max(fr("Y"), fr("z"))
+    e = [A.store((z[r] << (aZ - fr("z"))) - (zp[r] << (aZ - fr("Y"))), aZ - fr("e"), "e") for r in range(m)]
+    a = fr("K") + fr("e")
+    xn = [A.store((xm[i] << (a - fr("xm"))) + sum(K[i][r] * e[r] for r in range(m)), a - fr("x"), "x")
+          for i in range(n)]
+    a = 2 * fr("V")
+    Pn = [[0] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            acc = Pp[i][j] << (a - fr("Pp"))
+            for r in range(m):
+                acc -= W[r][i] * W[r][j]
+            Pn[i][j] = Pn[j][i] = A.store(acc, a - fr("P"), "P")
+    return xn, Pn
+
+
+def rnd_int(acc, s, half):
+    """The model operator ``rnd`` on Python integers."""
+    if s > 0:
+        return (acc + (1 << (s - 1))) >> s if half else acc >> s
+    return acc << (-s)
+
+
+def trig_int(fn, v, fin, fout, half):
+    """``sin_q`` / ``cos_q`` on Python integers (one rounding of the float64 libm value)."""
+    t = fn(float(v) * 2.0 ** -fin) * 2.0 ** fout
+    return math.floor(t + 0.5) if half else math.floor(t)

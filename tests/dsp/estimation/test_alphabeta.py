@@ -78,8 +78,8 @@ def test_fixed_bit_exact_against_unbounded_integers(gamma, adaptive):
     ar = IntArith(fm)
     q = lambda v, s: int(to_fixed(v, getattr(fm, s)))
     c = [q(0.3, "c"), q(0.05, "c"), q((gamma or 0.0) / 4, "c")]
-    ref = AlphaBetaRef(ar, [0] * f.n, c, (q(sv ** 2, "s"), q(0.05, "c"), q(0.95, "c"), 1 << fm.c.frac, 4),
-                       4, adaptive)
+    ref = AlphaBetaRef(ar, [0] * f.n, c, (q(4 * sv ** 2, "s"), q(0.05, "c"), q(0.95, "c"), 1 << fm.c.frac, 4,
+                                          q(sv / 2, "l"), 4 << fm.l.frac), 4, adaptive)
     for k in range(len(z)):
         ref.step(None if np.isnan(z[k]) else q(z[k], "z"))
         assert f.x.shape == (1, f.n)
@@ -97,7 +97,7 @@ def test_float32_bit_exact_against_numpy_float32(adaptive):
     run = f.run(z)
     f32 = np.float32
     ref = AlphaBetaRef(F32Arith(), [f32(0), f32(0)], [f32(0.3), f32(0.05), f32(0)],
-                       (f32(sv ** 2), f32(0.05), f32(0.95), f32(1), f32(4)), 4, adaptive)
+                       (f32(4 * sv ** 2), f32(0.05), f32(0.95), f32(1), f32(4), f32(sv / 2), f32(4)), 4, adaptive)
     unit = np.array([1.0, 1.0 / T_s])
     for k in range(len(z)):
         ref.step(f32(z[k]))
@@ -107,14 +107,13 @@ def test_float32_bit_exact_against_numpy_float32(adaptive):
 @pytest.mark.parametrize("arith", ["float64", "float32", AlphaBetaFormats()])
 def test_adaptive_alpha_follows_the_innovation_level(arith):
     """Directed: innovations far above sigma_v drive alpha to alpha_max (beta its Kalata
-    pair); a noise-free straight track (innovations 0) drives it to alpha_min, the zero
-    innovation power counted (``s_zero``), never a NaN."""
+    pair); a noise-free straight track (innovations 0, no power above the noise floor)
+    drives it to alpha_min, never a NaN."""
     T_s, sv = 0.01, 0.1
     z = np.concatenate([np.zeros(50), np.full(8, 5.0), 5.0 + 0.0 * np.arange(200)])
     f = AlphaBetaFilter(T_s, 0.2, 0.02, adaptive=True, sigma_v=sv, window=4, arithmetic=arith)
     run = f.run(np.zeros(50))
     assert run.coefficients[0, -1, 0] == pytest.approx(0.05, abs=1e-6)
-    assert run.events["s_zero"] > 0
     run = f.run(np.full(4, 5.0))
     a, b = run.coefficients[0, -1]
     assert a == pytest.approx(0.95, abs=1e-6)
@@ -171,3 +170,83 @@ def test_fixed_state_upset_injected_counted_and_forgotten():
         f.run(z[:2], upsets=[[0, 0, 2, 1]])
     with pytest.raises(ValueError, match="upsets flip bits of fixed-point state words"):
         AlphaBetaFilter(T_s, 0.3, 0.05).run(z[:2], upsets=[[0, 0, 0, 1]])
+
+
+def manoeuvre_mc(trials=200, window=5, noise_floor=4.0, accel=1.0, arithmetic="float64", seed=2026,
+                 scale=1.0, runs=False):
+    """Seeded Monte Carlo in per-sample units (T_s = 1, sigma_v = 1): a constant-velocity
+    track (1 per sample), a manoeuvre of ``accel`` per sample^2 over samples 100-129, then
+    constant velocity again, 300 samples. The adaptive tracker against the best of 40 fixed
+    Kalata trackers (lambda 1e-3..30) on the same noise; RMSE of position after sample 10.
+    ``scale`` multiplies positions and noise (sigma_v = scale; lambda does not change)."""
+    T, seg = 300, (100, 130)
+    a = np.zeros(T)
+    a[seg[0]:seg[1]] = accel
+    v = 1.0 + np.cumsum(a)
+    x = np.cumsum(v) - v[0]
+    x = x * scale
+    z = x + scale * np.random.default_rng(seed).standard_normal((trials, T))
+    x0 = [0.0, scale]
+    rmse = lambda run: float(np.sqrt(np.mean((run.x[:, 10:, 0] - x[10:]) ** 2))) / scale
+    fixed = {}
+    for lam in (np.geomspace(1e-3, 30, 40) if not runs else [0.741]):
+        al, be = kalata(float(lam))
+        fixed[float(lam)] = rmse(AlphaBetaFilter(1.0, al, be, trials=trials, x0=x0, arithmetic=arithmetic).run(z))
+    best = min(fixed, key=fixed.get)
+    ad = AlphaBetaFilter(1.0, 0.1, 2 * (1 - np.sqrt(0.9)) ** 2, adaptive=True, sigma_v=scale, window=window,
+                         noise_floor=noise_floor, alpha_min=0.1, alpha_max=0.95, trials=trials, x0=x0,
+                         arithmetic=arithmetic)
+    run = ad.run(z)
+    al = run.coefficients[:, :, 0]
+    return {"rmse_adaptive": rmse(run), "rmse_fixed": fixed[best], "best_lambda": best,
+            "best_alpha": kalata(best)[0], "alpha_before": float(al[:, 50:100].mean()),
+            "alpha_during": float(al[:, 100:130].mean()), "alpha_after": float(al[:, 200:].mean()),
+            "events": run.events, "z": z, "run": run, "filter": ad}
+
+
+def test_adaptive_alpha_rises_in_a_manoeuvre_and_beats_the_best_fixed_gain():
+    """200 seeded trials (see :func:`manoeuvre_mc`; window 5, noise floor 4 sigma_v^2):
+    alpha rises during the manoeuvre and falls after it, and the adaptive tracker's RMSE
+    over the whole track is below the best of 40 fixed Kalata trackers on the same noise.
+    Measured: adaptive 0.756 sigma_v, best fixed (lambda 0.74, alpha 0.70) 0.817; mean alpha
+    0.13 before, 0.75 during, 0.21 after. Windows 4 / 3 give 0.788 / 0.855 (3 loses) and the
+    decision's floor 1 loses (0.94): ``manoeuvre_mc(window=..., noise_floor=...)``."""
+    r = manoeuvre_mc()
+    assert r["alpha_during"] > 4 * r["alpha_before"]
+    assert r["alpha_after"] < r["alpha_during"] / 2
+    assert r["rmse_adaptive"] < 0.95 * r["rmse_fixed"], (r["rmse_adaptive"], r["rmse_fixed"])
+    assert not any(r["events"].values())
+
+
+def test_seed_noise_floor_1_keeps_alpha_high_without_a_manoeuvre():
+    """The decision's floor (tau = 1) with 5 innovations: chi-square spread alone gives
+    alpha ~0.8 in quiet segments and the tracker loses to the best fixed gain (documented
+    in the module; the default floor is 4)."""
+    r = manoeuvre_mc(noise_floor=1.0)
+    assert r["alpha_before"] > 0.7
+    assert r["rmse_adaptive"] > r["rmse_fixed"]
+
+
+def test_adaptive_fixed_point_on_the_manoeuvre_bit_exact_and_close_to_float():
+    """The same Monte Carlo in fixed point (positions scaled by 0.01 to fit the z format):
+    4 trials bit for bit against Python integers, and the RMSE over 200 trials within 1 %
+    of float64 with the same alpha profile."""
+    fm = AlphaBetaFormats()
+    r = manoeuvre_mc(arithmetic=fm, scale=0.01, runs=True)
+    rf = manoeuvre_mc(scale=0.01, runs=True)
+    assert abs(r["rmse_adaptive"] - rf["rmse_adaptive"]) < 0.01 * rf["rmse_adaptive"]
+    assert abs(r["alpha_during"] - rf["alpha_during"]) < 0.01
+    assert not any(r["events"].values()), {k: v for k, v in r["events"].items() if v}
+    q = lambda v, s: int(to_fixed(v, getattr(fm, s)))
+    z, run = r["z"], r["run"]
+    for b in range(4):
+        ar = IntArith(fm)
+        c = [q(0.1, "c"), q(2 * (1 - np.sqrt(0.9)) ** 2, "c"), 0]
+        ref = AlphaBetaRef(ar, [0, q(0.01, "x")], c, (q(4 * 0.01 ** 2, "s"), q(0.1, "c"), q(0.95, "c"),
+                                                      1 << fm.c.frac, 5, q(0.01 / 2, "l"), 4 << fm.l.frac),
+                           5, True)
+        for k in range(z.shape[1]):
+            ref.step(q(z[b, k], "z"))
+            got = np.round(run.x[b, k] * np.array([1.0, 1.0]) * 2.0 ** fm.x.frac).astype(np.int64)
+            assert got.tolist() == ref.x, (b, k)
+            assert int(round(run.coefficients[b, k, 0] * 2.0 ** fm.c.frac)) == ref.c[0]

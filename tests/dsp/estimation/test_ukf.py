@@ -18,13 +18,13 @@ from estimation_reference import ukf_step_f32
 
 
 @njit(cache=True)
-def f_pendulum(x, w, prm, out):
+def f_pendulum(x, w, prm, q, out):
     out[0] = x[0] + prm[0, 0] * x[1] + w[0]
     out[1] = x[1] - prm[0, 0] * np.sin(x[0]) + w[1]
 
 
 @njit(cache=True)
-def h_pendulum(x, v, prm, out):
+def h_pendulum(x, v, prm, q, out):
     out[0] = np.sin(x[0]) + v[0]
     out[1] = x[0] * x[1] + v[1]
 
