@@ -145,13 +145,13 @@ def _add_tacan(sub):
 
 
 def tacan_run_config(a):
-    """The :class:`cosim.tacan.TacanRunConfig` of ``tacan`` arguments, every option checked
+    """The :class:`cosim.tacan.run.TacanRunConfig` of ``tacan`` arguments, every option checked
     against the others before any work starts (an option that cannot affect the run is
     refused, not ignored)."""
     from dsp.tacan.kalman import KalmanConfig
     from .link import DSP_PRESETS, DspServiceConfig
-    from .tacan import TacanRunConfig
-    from .tacan_signal import TacanSignalConfig
+    from .tacan.run import TacanRunConfig
+    from .tacan.signal import TacanSignalConfig
 
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
@@ -228,7 +228,7 @@ def _num(v, fmt: str, none: str = "-") -> str:
 
 
 def _cmd_tacan(a) -> int:
-    from .tacan import check_run_size, run_tacan
+    from .tacan.run import check_run_size, run_tacan
     run = tacan_run_config(a)
     check_run_size(run)
     r = run_tacan(run, progress=not a.json)
@@ -555,10 +555,10 @@ def hdl_blocks() -> dict:
     from hdl.fifo import DspFifo
     from hdl.fir import Fir
     from hdl.mixer import Mixer
-    from hdl.model.tacan_frontend import TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendParams
     from hdl.nco import Nco
     from hdl.peak import PeakSearch
-    from hdl.tacan_frontend import TacanFrontEnd
+    from hdl.tacan.frontend import TacanFrontEnd
     p = TacanFrontendParams()
     return {
         "nco": lambda: Nco(p.ddc.nco),
@@ -599,7 +599,7 @@ def _cmd_verilog(a) -> int:
 
 
 def _cmd_synth(a) -> int:
-    from hdl.tacan_frontend import TacanFrontEnd
+    from hdl.tacan.frontend import TacanFrontEnd
     from .synth import synth
     check_out_dir(a.out, "--out")
     if a.results is not None:
