@@ -95,22 +95,37 @@ class TacanRunConfig:
     """
 
     signal: TacanSignalConfig = field(default_factory=TacanSignalConfig)
-    backend: str = "golden"
-    dsp: str = "float"
+    backend: str = field(default="golden", metadata={
+        "help": "front end: float golden model (no FIFO), bit-exact HDL model, Amaranth "
+                "simulation (~3k cycles/s: records of a few 0.01 s) or Verilator",
+        "choices": BACKENDS, "case": "lower"})
+    dsp: str = field(default="float", metadata={"help": "arithmetic of the bearing DSP core",
+                                                "choices": DSP_MODES, "case": "lower"})
     kalman: KalmanConfig = field(default_factory=KalmanConfig)
     fixed: KalmanFixedConfig | None = None
-    settle_s: float | None = None
+    settle_s: float | None = field(default=None, metadata={
+        "help": "bearings before this time (s) are not scored (default 2 x --memory-s)"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
     service: DspServiceConfig = field(default_factory=DspServiceConfig)
     control_writes: tuple = ()
     control_latency_cycles: int = 0
-    compare: str | None = None
+    compare: str | None = field(default=None, metadata={
+        "help": "also run the golden chain and report vs_golden_rms_deg",
+        "choices": ("golden",), "case": "lower"})
     require_bearing: bool = True
-    trace: str | None = None
+    trace: str | None = field(default=None, metadata={
+        "help": "waveform of the cycle-accurate front end, format from the suffix: .vcd "
+                "(pysim, verilator) or .fst (verilator); put it under build/",
+        "metavar": "FILE"})
     trace_window: tuple | None = None
-    recheck: str | None = None
-    recheck_samples: int | None = None
+    recheck: str | None = field(default=None, metadata={
+        "help": "with --backend model: re-run the start of the record cycle-accurately "
+                "(auto = Verilator when installed) and compare the FIFO words",
+        "choices": ("auto", "pysim", "verilator"), "case": "lower"})
+    recheck_samples: int | None = field(default=None, metadata={
+        "help": "ADC samples re-checked with --recheck (default 1e6 with Verilator, 4e4 "
+                "with pysim)"})
 
     def __post_init__(self):
         if self.backend not in BACKENDS:

@@ -72,7 +72,7 @@ def test_fixed_core_runs_on_the_signal_clock():
 
 def test_dsp_service_presets_keep_their_times_at_any_clock():
     """The presets are times in cycles of 20 MHz: the 1 ms timer stays 1 ms at 40 MS/s."""
-    from cosim.cli import tacan_run_config
+    from cosim.tacan.receiver import tacan_run_config
     p = build_parser()
     at = lambda *x: tacan_run_config(p.parse_args(["tacan", "--backend", "model", *x])).service
     d20, d40 = at(), at("--fs-hz", "40e6")
