@@ -195,6 +195,13 @@ def cmd_tacan(a) -> int:
     return rc
 
 
+def _record_options(cfg) -> tuple:
+    """The record and filter options both studies take from their config."""
+    return (Option(cfg, "duration_s", help="record length (s)"),
+            Option(cfg, "memory_s", help="Kalman filter memory (s)"),
+            Option(cfg, "seed", help="base seed (>= 0)"))
+
+
 # -- sweep tacan ---------------------------------------------------------------------------
 _SW = SweepConfig
 
@@ -209,9 +216,7 @@ SWEEP_OPTIONS = (
            help="grid: every combination; oat: one parameter at a time (the others at their "
                 "largest value)"),
     Option(_SW, "trials", help="Monte Carlo records per SNR"),
-    Option(_SW, "duration_s", help="record length (s)"),
-    Option(_SW, "memory_s", help="Kalman filter memory (s)"),
-    Option(_SW, "seed", help="base seed (>= 0)"),
+    *_record_options(_SW),
     Option(_SW, "recheck", help="points re-checked on the cycle-accurate backend (0: none)"),
     Option(_SW, "recheck_backend", default=None, choices=("auto", "pysim", "verilator"),
            case="lower", help="auto: Verilator when installed, else the Amaranth simulation "
@@ -296,9 +301,7 @@ FAULT_OPTIONS = (
              "bit of the target's words)"),
     Option(_FC, "snr_db", help="SNR (dB)"),
     Option(_FC, "trials", help="records per BER"),
-    Option(_FC, "duration_s", help="record length (s)"),
-    Option(_FC, "memory_s", help="Kalman filter memory (s)"),
-    Option(_FC, "seed", help="base seed (>= 0)"),
+    *_record_options(_FC),
     Option(_FC, "backend", default=None, choices=("model", "pysim", "verilator"), case="lower",
            help="front end of the register target (the others use the model; default model)"),
     Option(_FC, "scrub_period_s", default=None,
