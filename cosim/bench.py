@@ -74,8 +74,8 @@ def machine_info() -> dict:
 
 
 def _one_run(kw: dict) -> dict:
-    from .tacan import TacanRunConfig, run_tacan
-    from .tacan_signal import TacanSignalConfig
+    from .tacan.run import TacanRunConfig, run_tacan
+    from .tacan.signal import TacanSignalConfig
     sig = TacanSignalConfig(**kw)
     try:
         r = run_tacan(TacanRunConfig(signal=sig, backend="golden"))
@@ -100,7 +100,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     from dsp.tacan.bearing import wrap_deg
     from dsp.tacan.kalman import KalmanConfig
     from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
-    from .tacan_signal import TacanSignalConfig, pulse_observations
+    from .tacan.signal import TacanSignalConfig, pulse_observations
 
     t_start = time.perf_counter()
     snrs = [0, 10, 20] if quick else list(range(0, 21, 2))

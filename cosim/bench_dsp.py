@@ -28,7 +28,7 @@ TICK_HZ = 20e6
 
 
 def _pulses(duration_s: float, bearings, seed: int = 1, snr_db: float = 10.0):
-    from .tacan_signal import TacanSignalConfig, pulse_observations
+    from .tacan.signal import TacanSignalConfig, pulse_observations
     cfg = TacanSignalConfig(duration_s=duration_s, snr_db=snr_db, seed=seed)
     t, amps, _ = pulse_observations(cfg, np.asarray(bearings, dtype=float))
     ticks = np.round(t * TICK_HZ).astype(np.int64)
@@ -158,7 +158,7 @@ def _if_block(k: int, block_s: float, bearing: float, snr_db: float) -> np.ndarr
     """ADC codes of block ``k`` (worker process): an independent 3 s record whose main
     references continue the rotation of the blocks before it (an integer number of 15 Hz
     periods per block), so the blocks play back as one continuous beacon."""
-    from .tacan_signal import TacanSignalConfig, generate
+    from .tacan.signal import TacanSignalConfig, generate
     cfg = TacanSignalConfig(duration_s=block_s, snr_db=snr_db, seed=10_000 + k,
                             bearing_deg=bearing)
     return generate(cfg).samples
@@ -241,11 +241,11 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     from concurrent.futures import ProcessPoolExecutor
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig
-    from hdl.model.tacan_frontend import TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendParams
     from .link import DspServiceConfig
     from .pipeline import Pipeline
     from .session import open_frontend
-    from .tacan_signal import TacanSignalConfig
+    from .tacan.signal import TacanSignalConfig
     from dsp.tacan.frontend import FrontendConfig
 
     t_start = time.perf_counter()

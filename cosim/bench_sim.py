@@ -32,12 +32,12 @@ def _best(fn, reps: int) -> float:
 
 
 def sim_speed(out: Path, quick: bool = False) -> dict:
-    from hdl.model.tacan_frontend import TacanFrontendModel
-    from hdl.tacan_frontend import TacanFrontEnd
+    from hdl.tacan.model import TacanFrontendModel
+    from hdl.tacan.frontend import TacanFrontEnd
     from .link import DspServiceConfig
     from .pysim import run_stream
-    from .tacan import TacanRunConfig
-    from .tacan_signal import TacanSignalConfig, generate
+    from .tacan.run import TacanRunConfig
+    from .tacan.signal import TacanSignalConfig, generate
     from .verilator import VerilatorStreamSim, verilator_available, verilator_version
 
     t_start = time.perf_counter()
@@ -80,7 +80,7 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
               "build_or_load_s": t_build, "built": bool(sim.built),
               "version": verilator_version()}
     # -- agreement on the common part (pysim's cycles) ---------------------------------------
-    from .tacan import FRONTENDS
+    from .tacan.run import FRONTENDS
     short = FRONTENDS["model"](x[:n_pysim], run)
     words_model = short.words
     same_pysim = bool(np.array_equal(ps.words, words_model[:len(ps.words)])
@@ -98,7 +98,7 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
     fs = sig.fs_hz
     summary = {
         "benchmark": "sim-speed", "machine": machine_info(), "quick": quick,
-        "design": "TACAN front end (hdl.tacan_frontend.TacanFrontEnd, default parameters)",
+        "design": "TACAN front end (hdl.tacan.frontend.TacanFrontEnd, default parameters)",
         "workload": {"pysim_cycles": n_pysim, "verilator_cycles": n_vl,
                      "model_samples": n_model, "fs_hz": fs},
         "speed": rows,

@@ -1,7 +1,7 @@
 """Equivalence of the bit-exact model, the Amaranth simulation and the Verilated Verilog.
 
 ``check_equivalence(top="tacan", samples=N)`` feeds one realistic TACAN IF record (seeded
-:func:`cosim.tacan_signal.generate`, SNR 10 dB) through every backend and compares every
+:func:`cosim.tacan.signal.generate`, SNR 10 dB) through every backend and compares every
 FIFO word (amplitude, timestamp, tag) and the cycle it leaves on. With ``stall=True`` the DSP
 side's ``ready`` follows a seeded on/off pattern and the FIFO is made shallow, so drops,
 markers and the overflow counter are exercised too.
@@ -38,7 +38,7 @@ def check_record_size(samples) -> int:
 
 def tacan_record(samples: int, seed: int, snr_db: float | None = 10.0) -> np.ndarray:
     """``samples`` ADC codes of the default TACAN scenario (X mode, bearing 90 deg)."""
-    from .tacan_signal import TacanSignalConfig, generate
+    from .tacan.signal import TacanSignalConfig, generate
     cfg = TacanSignalConfig(duration_s=samples / 20e6 + 1e-6, snr_db=snr_db, seed=seed)
     return generate(cfg).samples[:samples].astype(np.int64)
 
@@ -85,7 +85,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         (True only when at least two backends compared a non-empty record and nothing
         differed) and ``verdict`` (why, in words).
     """
-    from hdl.model.tacan_frontend import TacanFrontendModel, TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
     if top not in TOPS:
         raise ValueError(f"top must be one of {TOPS}, not {top!r}")
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
@@ -129,7 +129,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
             skipped["pysim"] = (f"pysim runs only for samples <= {pysim_max_samples} "
                                 f"(~3e3 cycles/s for the whole top)")
         else:
-            from hdl.tacan_frontend import TacanFrontEnd
+            from hdl.tacan.frontend import TacanFrontEnd
             from .pysim import run_stream
             t = time.perf_counter()
             res = run_stream(TacanFrontEnd(params), x, out_ready=ready, n_cycles=n_cycles,
@@ -141,7 +141,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
             from .verilog import verilator_missing_message
             skipped["verilator"] = verilator_missing_message()
         else:
-            from hdl.tacan_frontend import TacanFrontEnd
+            from hdl.tacan.frontend import TacanFrontEnd
             t = time.perf_counter()
             sim = VerilatorStreamSim(TacanFrontEnd(params), name="tacan_frontend")
             res = sim.run(x, out_ready=ready, n_cycles=n_cycles, inputs={"freq": freq})

@@ -304,7 +304,7 @@ def run_link(write_cycles, payloads, n_cycles: int, fifo_params: FifoParams,
     write_cycles : array of int
         Cycle (from reset) at which each word is written: strictly increasing, in
         ``[start, start + n_cycles)`` with ``start = state.cycle`` (0 without a state);
-        e.g. :meth:`hdl.model.tacan_frontend.TacanFrontendModel.peak_cycles`.
+        e.g. :meth:`hdl.tacan.model.TacanFrontendModel.peak_cycles`.
     payloads : array of int
         One payload per write, ``0 <= payload < 2**fifo_params.width`` (e.g.
         ``TacanFrontendModel.words``).

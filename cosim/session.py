@@ -358,9 +358,9 @@ class PysimSession(FrontendSession):
 
 # -- the bit-exact model of the TACAN front end -----------------------------------------------
 class TacanModelSession(FrontendSession):
-    """The bit-exact model of :class:`hdl.tacan_frontend.TacanFrontEnd` as a session.
+    """The bit-exact model of :class:`hdl.tacan.frontend.TacanFrontEnd` as a session.
 
-    :class:`~hdl.model.tacan_frontend.TacanFrontendModel` (its state carried) gives the peaks
+    :class:`~hdl.tacan.model.TacanFrontendModel` (its state carried) gives the peaks
     and the cycle each is written to the FIFO; the FIFO model
     (:func:`~hdl.model.fifo.fifo_model_events`, its state carried) gives what the DSP reads.
     A peak written after the step's last cycle waits for the next step. ``freq`` writes take
@@ -378,7 +378,7 @@ class TacanModelSession(FrontendSession):
     backend = "model"
 
     def __init__(self, params, *, log_ranges: bool = False, fast: bool | None = None):
-        from hdl.model.tacan_frontend import TacanFrontendModel
+        from hdl.tacan.model import TacanFrontendModel
         super().__init__()
         self.params = params
         self.model = TacanFrontendModel(params, log_ranges=log_ranges, fast=fast)
@@ -478,8 +478,8 @@ class TacanModelSession(FrontendSession):
 
 # -- opening sessions ---------------------------------------------------------------------------
 def _tacan_types():
-    from hdl.model.tacan_frontend import TacanFrontendParams
-    from hdl.tacan_frontend import TacanFrontEnd
+    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.frontend import TacanFrontEnd
     return TacanFrontendParams, {
         "component": TacanFrontEnd,
         "model": TacanModelSession,

@@ -62,13 +62,13 @@ the step ``Delta = full_scale / 2**(b-1)``. Two conventions:
     ``+-(full_scale - Delta)``. With one bit this is the **sign only**: levels
     ``+-Delta/2``, threshold at 0, so the step (loading) does not matter.
 ``"mid_tread"``
-    Exactly the ADC of :mod:`cosim.tacan_signal`: ``c = clip(rint(x / Delta))``, meaning
+    Exactly the ADC of :mod:`cosim.tacan.signal`: ``c = clip(rint(x / Delta))``, meaning
     ``c Delta`` -- zero is a level, clipping is asymmetric (``-full_scale`` .. ``full_scale -
     Delta``). Note that with one bit this ADC is *not* a sign detector: its only threshold
     sits at ``-Delta/2`` (half of full scale).
 
 Loading (the step relative to the noise sigma): ``"optimal"`` maximises ``eta`` for each word
-length (:func:`optimal_step`); ``"agc"`` is the AGC of :mod:`cosim.tacan_signal` in the
+length (:func:`optimal_step`); ``"agc"`` is the AGC of :mod:`cosim.tacan.signal` in the
 noise-dominated limit (largest pulse + 4 sigma at 90 % of full scale, so full scale
 ``= 4 / 0.9 sigma`` when the pulses are negligible); a number is the full scale in noise
 sigmas ("as configured").
@@ -110,11 +110,11 @@ from scipy.special import ndtr
 from cosim.validate import (MAX_LIST_VALUES, check_choice, check_float, check_int,
                             check_memory, check_out_dir, dumps)
 
-#: Largest ADC word length accepted (as :class:`cosim.tacan_signal.TacanSignalConfig`).
+#: Largest ADC word length accepted (as :class:`cosim.tacan.signal.TacanSignalConfig`).
 MAX_BITS = 24
 #: Quantiser conventions (see the module docstring).
 QUANTIZERS: tuple[str, ...] = ("mid_rise", "mid_tread")
-#: Full scale over noise sigma of the :mod:`cosim.tacan_signal` AGC when noise dominates.
+#: Full scale over noise sigma of the :mod:`cosim.tacan.signal` AGC when noise dominates.
 AGC_FULL_SCALE_SIGMA = 4.0 / 0.9
 #: Default tone frequency in cycles per sample: (sqrt(5) - 1) / 8, irrational.
 DEFAULT_FREQ = (math.sqrt(5.0) - 1.0) / 8.0
@@ -476,7 +476,7 @@ def adc_loss_sweep(bits=range(1, 15), *, snr_db: float = -30.0, n_samples: int =
         Seeds everything; the record does not depend on ``bits``, so a word length gives
         the same row whatever else is swept.
     loading : "optimal", "agc" or float
-        Step per word length: the ``eta``-optimal step, the :mod:`cosim.tacan_signal` AGC
+        Step per word length: the ``eta``-optimal step, the :mod:`cosim.tacan.signal` AGC
         (full scale ``4/0.9`` sigma), or a given full scale in noise sigmas.
     quantizer : {"mid_rise", "mid_tread"}
         ADC convention (module docstring).

@@ -145,7 +145,7 @@ class FaultConfig:
                                  f"words ({w} bits), not {list(self.bits)}")
         # Every trial's record is built (and its front end validated) before the first point,
         # and the study must fit the machine (memory of a record, total time).
-        from cosim.tacan import check_run_size
+        from cosim.tacan.run import check_run_size
         from cosim.studies.sweep import CPU_S_PER_RECORD_S, MAX_STUDY_H
         from cosim.validate import cores
         run = _run_cfg(self, 0)
@@ -176,8 +176,8 @@ class FaultConfig:
 
 def _run_cfg(fc: FaultConfig, trial: int):
     from dsp.tacan.kalman import KalmanConfig
-    from cosim.tacan import TacanRunConfig
-    from cosim.tacan_signal import TacanSignalConfig
+    from cosim.tacan.run import TacanRunConfig
+    from cosim.tacan.signal import TacanSignalConfig
     rng = np.random.default_rng([fc.seed, trial, 31337])
     sig = TacanSignalConfig(snr_db=fc.snr_db, duration_s=fc.duration_s,
                             seed=int(rng.integers(1 << 31)),
@@ -220,8 +220,8 @@ def _score(fc: FaultConfig, run, track, truth_deg) -> dict:
 
 
 def _one(fc: FaultConfig, ber: float, trial: int, cache: dict) -> dict:
-    from cosim.tacan import FRONTENDS, _dsp_receive, run_dsp
-    from cosim.tacan_signal import TacanSignal, generate
+    from cosim.tacan.run import FRONTENDS, _dsp_receive, run_dsp
+    from cosim.tacan.signal import TacanSignal, generate
     run = _run_cfg(fc, trial)
     rng = np.random.default_rng([fc.seed, trial, int(round(ber * 1e12)), 99])
     key = ("sig", trial)
@@ -261,7 +261,7 @@ def _one(fc: FaultConfig, ber: float, trial: int, cache: dict) -> dict:
 
 def _register_run(fc: FaultConfig, run, s, p, ber, rng):
     """NCO frequency register upsets, scrubbed by the DSP every ``scrub_period_s``."""
-    from cosim.tacan import FRONTENDS, run_dsp
+    from cosim.tacan.run import FRONTENDS, run_dsp
     n = len(s.samples)
     period = max(1, int(round(fc.scrub_period_s * run.signal.fs_hz)))
     good = p.nco_freq_word
@@ -288,7 +288,7 @@ def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
     """Single-event upsets of the Kalman core's stored state (``x`` and the upper triangle
     of ``P``): each bit of each word flips with probability ``ber`` per filter update, in
     the compiled core between two updates (:meth:`EnvelopeKalman.schedule_upsets`)."""
-    from cosim.tacan import FRONTENDS
+    from cosim.tacan.run import FRONTENDS
     from dsp.tacan.kalman import EnvelopeKalman
     from dsp.tacan.receiver import ReceiverState, amplitude_codes, process_peaks
     fkey = ("fo", trial)

@@ -10,8 +10,8 @@ saturation log and a word-length proposal.
 Parameters (``--param NAME=VALUES``)
 -----------------------------------
 ``adc_bits``              ADC word length (the signal is digitised once per record for every
-                          value, :func:`cosim.tacan_signal.generate_adc_variants`).
-``<field>``               any field of :class:`hdl.model.tacan_frontend.TacanFrontendParams`
+                          value, :func:`cosim.tacan.signal.generate_adc_variants`).
+``<field>``               any field of :class:`hdl.tacan.model.TacanFrontendParams`
                           (``nco_amp_bits``, ``mixer_out_bits``, ``cic_out_bits``,
                           ``fir_coef_bits``, ``fir_out_bits``, ``env_iterations``,
                           ``mixer_rounding``, ...).
@@ -112,7 +112,7 @@ def parse_param(text: str) -> tuple[str, tuple]:
 
 def check_param(name: str) -> None:
     from dsp.tacan.kalman import KalmanConfig
-    from hdl.model.tacan_frontend import TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendParams
     hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
     if name == "adc_bits" or name in hdl_fields:
         return
@@ -245,7 +245,7 @@ class SweepConfig:
 # One point
 # ---------------------------------------------------------------------------------------
 def trial_signal(cfg: SweepConfig, snr_db: float, trial: int, adc_bits: int = 12):
-    from cosim.tacan_signal import TacanSignalConfig
+    from cosim.tacan.signal import TacanSignalConfig
     rng = np.random.default_rng([cfg.seed, trial, 7919])
     bearing = float(np.round(rng.uniform(0, 360), 3))
     seed = int(np.random.default_rng([cfg.seed, trial, int(round(snr_db * 1000))]).integers(1 << 31))
@@ -254,10 +254,10 @@ def trial_signal(cfg: SweepConfig, snr_db: float, trial: int, adc_bits: int = 12
 
 
 def run_config(cfg: SweepConfig, combo: tuple, sig):
-    """The :class:`cosim.tacan.TacanRunConfig` of a point (raises ValueError if invalid)."""
+    """The :class:`cosim.tacan.run.TacanRunConfig` of a point (raises ValueError if invalid)."""
     from dsp.fixed import FixedFormat
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
-    from cosim.tacan import TacanRunConfig
+    from cosim.tacan.run import TacanRunConfig
     from cosim.validate import check_choice, check_int
     hdl, kal, fmts = {}, {"memory_s": cfg.memory_s}, {}
     base = KalmanFixedConfig()
@@ -327,8 +327,8 @@ def _score(r: dict) -> dict:
 def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_dir: str | None,
              recheck_combos: tuple = ()) -> list[dict]:
     """All points of one record (SNR, trial): signal generation once, golden once."""
-    from cosim.tacan import TacanRunConfig, run_tacan
-    from cosim.tacan_signal import generate_adc_variants
+    from cosim.tacan.run import TacanRunConfig, run_tacan
+    from cosim.tacan.signal import generate_adc_variants
     cache = Path(cache_dir) if cache_dir else None
     out, todo = [], []
     for combo in combos:
@@ -383,7 +383,7 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
 def recheck_point(cfg: SweepConfig, run, signal) -> dict:
     """Re-run the first samples of a point cycle-accurately (:attr:`SweepConfig.recheck_plan`)
     and compare the FIFO words and their cycles with the bit-exact model."""
-    from cosim.tacan import FRONTENDS
+    from cosim.tacan.run import FRONTENDS
     backend, n = cfg.recheck_plan
     x = signal.samples[:n]
     t0 = time.perf_counter()
@@ -657,7 +657,7 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
            "rows": last["rows"], "attempts": attempts}
     if cfg.recheck > 0:
         # the combination proposed is the one to build: prove its bits on the RTL too
-        from cosim.tacan_signal import generate
+        from cosim.tacan.signal import generate
         combo = tuple((n, last["params"][n]) for n, _ in cfg.params)
         sig = trial_signal(cfg, cfg.snr_db[0], 0)
         run = replace(run_config(cfg, combo, sig), require_bearing=False)

@@ -1,6 +1,6 @@
 """Bearing from the envelope phases at the references, and the coarse/fine combination.
 
-With the convention of :mod:`cosim.tacan_signal` (the 15 Hz component is
+With the convention of :mod:`cosim.tacan.signal` (the 15 Hz component is
 ``A sin(2 pi 15 (t - t_M) - theta)``), the Kalman state at a pulse at ``t_k`` has 15 Hz
 phase ``alpha_k = 2 pi 15 (t_k - t_M) - theta``, hence the seed's eq. 15
 ``theta = theta_a - theta_b`` with ``theta_a = 2 pi 15 (t_k - t_M)`` (phase of the pulse

@@ -107,7 +107,7 @@ class FrontendConfig:
 
     @classmethod
     def for_signal(cls, sig_cfg, **changes) -> "FrontendConfig":
-        """The front end for a :class:`cosim.tacan_signal.TacanSignalConfig`'s rates."""
+        """The front end for a :class:`cosim.tacan.signal.TacanSignalConfig`'s rates."""
         kw = dict(fs_hz=sig_cfg.fs_hz, if_hz=sig_cfg.digital_if_hz, pulse_sigma_s=sig_cfg.pulse_sigma_s)
         kw.update(changes)
         return cls(**kw)

@@ -1,7 +1,7 @@
 """What the TACAN standard (MIL-STD-291C) fixes: modulation frequencies, pulse width and the
 reference-burst pulse codes.
 
-The DSP decodes against these; the signal generator (:mod:`cosim.tacan_signal`) imports them
+The DSP decodes against these; the signal generator (:mod:`cosim.tacan.signal`) imports them
 from here, so the generator and the receiver cannot disagree on the standard.
 
 Pulse codes

@@ -93,7 +93,7 @@ def test_quantize_models():
     for bits in (1, 2, 5, 12):
         full = 1 << (bits - 1)
         step = 4.0 / full
-        # mid-tread is exactly the ADC of cosim.tacan_signal (x in full-scale units)
+        # mid-tread is exactly the ADC of cosim.tacan.signal (x in full-scale units)
         tacan = np.clip(np.rint((x / 4.0) * full), -full, full - 1)
         np.testing.assert_array_equal(al.quantize(x, bits, step, quantizer="mid_tread"), tacan)
         # mid-rise: two's-complement code + 1/2, symmetric levels, clipping at full scale

@@ -64,15 +64,15 @@ def test_ticks_need_their_clock():
 
 
 def test_fixed_core_runs_on_the_signal_clock():
-    from cosim.tacan import TacanRunConfig
-    from cosim.tacan_signal import TacanSignalConfig
+    from cosim.tacan.run import TacanRunConfig
+    from cosim.tacan.signal import TacanSignalConfig
     run = TacanRunConfig(signal=TacanSignalConfig(fs_hz=24e6), dsp="fixed")
     assert run.receiver.kalman.tick_hz == 24e6
 
 
 def test_dsp_service_presets_keep_their_times_at_any_clock():
     """The presets are times in cycles of 20 MHz: the 1 ms timer stays 1 ms at 40 MS/s."""
-    from cosim.cli import tacan_run_config
+    from cosim.tacan.receiver import tacan_run_config
     p = build_parser()
     at = lambda *x: tacan_run_config(p.parse_args(["tacan", "--backend", "model", *x])).service
     d20, d40 = at(), at("--fs-hz", "40e6")

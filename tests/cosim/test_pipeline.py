@@ -12,8 +12,8 @@ import pytest
 from cosim.link import DspServiceConfig, run_link
 from cosim.pipeline import Pipeline
 from cosim.session import TacanModelSession, open_frontend, ready_window
-from cosim.tacan import TacanRunConfig
-from cosim.tacan_signal import TacanSignalConfig, generate
+from cosim.tacan.run import TacanRunConfig
+from cosim.tacan.signal import TacanSignalConfig, generate
 from cosim.verilator import verilator_available
 from dsp.tacan.kalman import KalmanConfig
 
@@ -142,7 +142,7 @@ def test_loop_writes_replayed_in_a_one_shot_run_give_the_same_words(long_record)
     """The writes the loop decided at run time, given up front to the old one-shot harness
     (``VerilatorStreamSim.run(writes=...)``): the same words on the same cycles."""
     from cosim.verilator import VerilatorStreamSim
-    from hdl.tacan_frontend import TacanFrontEnd
+    from hdl.tacan.frontend import TacanFrontEnd
     params, x = long_record
     svc = DspServiceConfig().with_stalls((60_000, 100_000))
     r = _closed_loop("verilator", params, x, 7, service=svc, flush=20_000)
@@ -159,7 +159,7 @@ def test_loop_writes_replayed_in_a_one_shot_run_give_the_same_words(long_record)
 def test_model_session_in_blocks_equals_model_and_link_in_one_call(long_record):
     """Open loop: the model session stepped in uneven blocks == the front-end model plus
     :func:`run_link` on the whole record."""
-    from hdl.model.tacan_frontend import TacanFrontendModel
+    from hdl.tacan.model import TacanFrontendModel
     params, x = long_record
     svc = DspServiceConfig().with_stalls((60_000, 100_000))
     n = x.size + 1000
@@ -213,7 +213,7 @@ def _old_chain(simulated_s, block_s, batch_s):
     from dsp.tacan.frontend import FrontendConfig
     from dsp.tacan.kalman import KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
-    from hdl.model.tacan_frontend import TacanFrontendModel, TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
     n_blocks = int(round(simulated_s / block_s))
     bearing, snr = 90.0, 10.0
     sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import cosim.studies.sweep as sw
-import cosim.tacan
+import cosim.tacan.run
 from cosim.cli import main
 from cosim.studies.sweep import SweepConfig, parse_param, parse_values, propose, study
 from cosim.verilator import verilator_available
@@ -131,8 +131,8 @@ def test_interrupted_sweep_resumes_from_its_cache(small_sweep, monkeypatch):
     victim = next(p for p in pts if json.loads(p.read_text())["kind"] == "point")
     victim.unlink()                          # as if interrupted before this point finished
     calls = []
-    real = cosim.tacan.run_tacan
-    monkeypatch.setattr(cosim.tacan, "run_tacan", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = cosim.tacan.run.run_tacan
+    monkeypatch.setattr(cosim.tacan.run, "run_tacan", lambda *a, **k: calls.append(1) or real(*a, **k))
     s2 = sw.run_sweep(replace_recheck(cfg), out, jobs=1, progress=False)
     assert len(calls) == 1                   # only the missing point was run again
     assert s2["rows"] == s["rows"]           # and it gave the same bits

@@ -29,7 +29,7 @@ def test_dsp_imports_neither_hdl_nor_cosim():
 
 
 def test_generator_uses_the_dsp_standard():
-    import cosim.tacan_signal as gen
+    import cosim.tacan.signal as gen
     import dsp.tacan.standard as std
     for name in ("F15", "F135", "PULSE_WIDTH_S", "burst_offsets", "pair_spacing_s"):
         assert getattr(gen, name) is getattr(std, name), name

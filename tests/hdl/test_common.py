@@ -16,7 +16,7 @@ from hdl.fir import Fir
 from hdl.mixer import Mixer
 from hdl.nco import Nco
 from hdl.peak import PeakSearch
-from hdl.tacan_frontend import TacanFrontEnd
+from hdl.tacan.frontend import TacanFrontEnd
 
 
 def _comb_eval(width: int, build, values) -> list[int]:

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.tacan_signal import (KIND_AUX, KIND_IDENT, KIND_MAIN, KIND_RANDOM, Multipath,
+from cosim.tacan.signal import (KIND_AUX, KIND_IDENT, KIND_MAIN, KIND_RANDOM, Multipath,
                                 TacanSignalConfig, burst_offsets, envelope_gain, fold_frequency,
                                 generate, noise_enbw_hz, pulse_observations, pulse_schedule)
 
@@ -195,7 +195,7 @@ def test_bad_multipath():
 def test_adc_variants_equal_separate_generation():
     from dataclasses import replace
 
-    from cosim.tacan_signal import generate_adc_variants
+    from cosim.tacan.signal import generate_adc_variants
     cfg = TacanSignalConfig(duration_s=0.01, snr_db=10, seed=3)
     v = generate_adc_variants(cfg, [4, 12, 8])
     for b in (4, 8, 12):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cosim.tacan_signal import TacanSignalConfig, pulse_observations
+from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig

@@ -10,13 +10,13 @@ import pytest
 
 from cosim.equivalence import check_equivalence, stall_pattern, tacan_record
 from cosim.pysim import run_stream
-from cosim.tacan_signal import TacanSignalConfig, generate
+from cosim.tacan.signal import TacanSignalConfig, generate
 from dsp.fixed import shift_right
 from dsp.tacan.frontend import FrontendConfig, run_golden_frontend
 from hdl.model.peak import PeakParams
-from hdl.model.tacan_frontend import (TacanFrontendModel, TacanFrontendParams,
+from hdl.tacan.model import (TacanFrontendModel, TacanFrontendParams,
                                       _fir_kernel, _round_consts, amp_error_terms)
-from hdl.tacan_frontend import TacanFrontEnd
+from hdl.tacan.frontend import TacanFrontEnd
 
 P = TacanFrontendParams()
 HAVE_VERILATOR = shutil.which("verilator") is not None

@@ -4,7 +4,7 @@ import numba
 import numpy as np
 import pytest
 
-from cosim.tacan_signal import TacanSignalConfig, pulse_observations
+from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp import qops
 from dsp.tacan import kalman as kfx

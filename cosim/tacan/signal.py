@@ -131,17 +131,22 @@ class TacanSignalConfig:
     multipath : Multipath or None
     """
 
-    bearing_deg: float = 90.0
-    mode: str = "X"
-    mod_15: float = 0.21
-    mod_135: float = 0.21
-    snr_db: float | None = 10.0
-    duration_s: float = 3.0
-    seed: int = 1
-    fs_hz: float = 20e6
-    if_hz: float = 63e6
+    bearing_deg: float = field(default=90.0, metadata={"help": "true bearing (deg, -360..360)"})
+    mode: str = field(default="X", metadata={"help": "TACAN channel mode (case-insensitive)",
+                                             "choices": ("X", "Y"), "case": "upper"})
+    mod_15: float = field(default=0.21, metadata={"help": "15 Hz modulation depth A (fraction, > 0)"})
+    mod_135: float = field(default=0.21, metadata={
+        "help": "135 Hz modulation depth B (fraction, > 0, A + B < 1)"})
+    snr_db: float | None = field(default=10.0, metadata={
+        "help": "SNR of the pulses (dB, in the 2 MHz noise band), or 'none' for no noise",
+        "none": ("none", "inf")})
+    duration_s: float = field(default=3.0, metadata={"help": "record length (s)"})
+    seed: int = field(default=1, metadata={"help": "random seed (>= 0)"})
+    fs_hz: float = field(default=20e6, metadata={
+        "help": "ADC sample rate = FPGA clock (Hz); the IF band must sit in one Nyquist zone"})
+    if_hz: float = field(default=63e6, metadata={"help": "analog IF (Hz), bandpass sampled"})
     noise_bw_hz: float = 2e6
-    adc_bits: int = 12
+    adc_bits: int = field(default=12, metadata={"help": "ADC word length (bits, 1..24)"})
     amplitude: float | None = None
     pulse_width_s: float = PULSE_WIDTH_S
     pairs_per_s: float = 3600.0

@@ -64,16 +64,16 @@ from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
 from dsp.jit import njit_cached
 from dsp.tacan.frontend import FrontendConfig, Peaks
 
-from .cic import CicParams, CicState, cic_model
-from .ddc import DdcCicKernel, DdcModel, DdcParams
-from .envelope import EnvelopeParams, envelope_model
-from .fifo import FifoParams, fifo_model
-from .fir import FirKernel, FirParams, FirState, fir_model
-from .fir import fir_kernel as _fir_kernel  # noqa: F401 (tests use it with _round_consts)
-from .mixer import MixerParams
-from .nco import NcoParams, NcoState, nco_freq_word
-from .peak import PeakParams, PeakState, peak_search
-from .rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
+from ..model.cic import CicParams, CicState, cic_model
+from ..model.ddc import DdcCicKernel, DdcModel, DdcParams
+from ..model.envelope import EnvelopeParams, envelope_model
+from ..model.fifo import FifoParams, fifo_model
+from ..model.fir import FirKernel, FirParams, FirState, fir_model
+from ..model.fir import fir_kernel as _fir_kernel  # noqa: F401 (tests use it with _round_consts)
+from ..model.mixer import MixerParams
+from ..model.nco import NcoParams, NcoState, nco_freq_word
+from ..model.peak import PeakParams, PeakState, peak_search
+from ..model.rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
 
 __all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",
            "FifoRun"]
@@ -452,7 +452,7 @@ class FifoRun:
 
 
 class TacanFrontendModel:
-    """Bit-exact model of :class:`hdl.tacan_frontend.TacanFrontEnd`.
+    """Bit-exact model of :class:`hdl.tacan.frontend.TacanFrontEnd`.
 
     Parameters
     ----------

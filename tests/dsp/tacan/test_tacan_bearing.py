@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cosim.tacan_signal import TacanSignalConfig, pulse_observations, pulse_schedule
+from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
 from dsp.tacan.bearing import combine_coarse_fine, seed_eq17, wrap_deg
 from dsp.tacan.decode import REF_AUX, REF_MAIN, DecoderConfig, decode
 from dsp.tacan.kalman import KalmanConfig
@@ -66,7 +66,7 @@ def test_decoder_robust_to_missing_and_extra_pulses(mode):
 def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
     """The compiled hypothesis scorer (one walking pointer per template pulse) gives the
     numpy nearest-neighbour matching's scores exactly, also at ties and at the tolerance."""
-    from cosim.tacan_signal import burst_offsets
+    from cosim.tacan.signal import burst_offsets
     from dsp.tacan import decode as dec
     rng = np.random.default_rng(4)
     cfg = TacanSignalConfig(mode=mode, duration_s=0.5, seed=12)
@@ -411,7 +411,7 @@ def test_bearing_from_fixed_kalman_state_on_tacan_pulses():
     """End to end with the integer core: run the fixed filter on pulse ticks, take its
     state and the tick differences to the latest main and latest reference: the integer
     bearing is the true one (20 dB) and within 2.1 LSB of the float readout."""
-    from cosim.tacan_signal import TacanSignalConfig, pulse_observations, pulse_schedule
+    from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
     from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
 
     cfg = TacanSignalConfig(duration_s=1.0, snr_db=20, seed=4)

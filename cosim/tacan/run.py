@@ -3,7 +3,7 @@
 Front-end backends (what turns ADC samples into pulse peaks):
 
 ``golden``     float64 model of the front end (:mod:`dsp.tacan.frontend`); no FIFO.
-``model``      bit-exact numpy model of the HDL (:class:`hdl.model.tacan_frontend.TacanFrontendModel`)
+``model``      bit-exact numpy model of the HDL (:class:`hdl.tacan.model.TacanFrontendModel`)
                and of its FIFO, read by the DSP service model of :mod:`cosim.link`.
 ``pysim``      the Amaranth design in ``amaranth.sim`` (cycle-accurate, ~1k cycles/s: short
                scenarios only).
@@ -33,8 +33,8 @@ from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, b
                                 crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.fifo_rx import receive_words
-from .link import ControlPath, DspServiceConfig
-from .tacan_signal import TacanSignalConfig, generate
+from ..link import ControlPath, DspServiceConfig
+from .signal import TacanSignalConfig, generate
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
 DSP_MODES = ("float", "fixed")
@@ -71,7 +71,7 @@ class TacanRunConfig:
     frontend_changes : tuple of (name, value)
         Overrides of :class:`dsp.tacan.frontend.FrontendConfig` (rates, structure).
     hdl_changes : tuple of (name, value)
-        Overrides of :class:`hdl.model.tacan_frontend.TacanFrontendParams` (word lengths).
+        Overrides of :class:`hdl.tacan.model.TacanFrontendParams` (word lengths).
     service : DspServiceConfig
         How the DSP reads the FIFO (HDL backends).
     control_writes : tuple of (cycle, register, value)
@@ -95,22 +95,37 @@ class TacanRunConfig:
     """
 
     signal: TacanSignalConfig = field(default_factory=TacanSignalConfig)
-    backend: str = "golden"
-    dsp: str = "float"
+    backend: str = field(default="golden", metadata={
+        "help": "front end: float golden model (no FIFO), bit-exact HDL model, Amaranth "
+                "simulation (~3k cycles/s: records of a few 0.01 s) or Verilator",
+        "choices": BACKENDS, "case": "lower"})
+    dsp: str = field(default="float", metadata={"help": "arithmetic of the bearing DSP core",
+                                                "choices": DSP_MODES, "case": "lower"})
     kalman: KalmanConfig = field(default_factory=KalmanConfig)
     fixed: KalmanFixedConfig | None = None
-    settle_s: float | None = None
+    settle_s: float | None = field(default=None, metadata={
+        "help": "bearings before this time (s) are not scored (default 2 x --memory-s)"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
     service: DspServiceConfig = field(default_factory=DspServiceConfig)
     control_writes: tuple = ()
     control_latency_cycles: int = 0
-    compare: str | None = None
+    compare: str | None = field(default=None, metadata={
+        "help": "also run the golden chain and report vs_golden_rms_deg",
+        "choices": ("golden",), "case": "lower"})
     require_bearing: bool = True
-    trace: str | None = None
+    trace: str | None = field(default=None, metadata={
+        "help": "waveform of the cycle-accurate front end, format from the suffix: .vcd "
+                "(pysim, verilator) or .fst (verilator); put it under build/",
+        "metavar": "FILE"})
     trace_window: tuple | None = None
-    recheck: str | None = None
-    recheck_samples: int | None = None
+    recheck: str | None = field(default=None, metadata={
+        "help": "with --backend model: re-run the start of the record cycle-accurately "
+                "(auto = Verilator when installed) and compare the FIFO words",
+        "choices": ("auto", "pysim", "verilator"), "case": "lower"})
+    recheck_samples: int | None = field(default=None, metadata={
+        "help": "ADC samples re-checked with --recheck (default 1e6 with Verilator, 4e4 "
+                "with pysim)"})
 
     def __post_init__(self):
         if self.backend not in BACKENDS:
@@ -171,7 +186,7 @@ class TacanRunConfig:
 
     @property
     def hdl_params(self):
-        from hdl.model.tacan_frontend import TacanFrontendParams
+        from hdl.tacan.model import TacanFrontendParams
         return TacanFrontendParams(config=self.frontend, adc_bits=self.signal.adc_bits,
                                    **dict(self.hdl_changes))
 
@@ -249,8 +264,8 @@ def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOut
     session (:func:`cosim.session.open_frontend`) fed the record and ``_n_cycles - len``
     idle cycles to flush the last peak, the DSP reading with ``run.service``, the
     ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after)."""
-    from .pipeline import Pipeline
-    from .session import open_frontend
+    from ..pipeline import Pipeline
+    from ..session import open_frontend
     p = run.hdl_params
     n_cycles = _n_cycles(samples, p)
     ctl = _freq_segments(run, p, n_cycles)
@@ -279,8 +294,8 @@ def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
     if kind == "pysim" or run.trace is None:
         return _session_frontend(samples, run, kind)
     # A Verilator waveform needs the one-shot run (a session's time base is per step).
-    from hdl.tacan_frontend import TacanFrontEnd
-    from .verilator import VerilatorStreamSim
+    from hdl.tacan.frontend import TacanFrontEnd
+    from ..verilator import VerilatorStreamSim
     p = run.hdl_params
     n_cycles = _n_cycles(samples, p)
     ctl = _freq_segments(run, p, n_cycles)
@@ -344,7 +359,7 @@ def check_run_size(run: TacanRunConfig) -> None:
     """Refuse, before any work, a run that cannot fit this machine: the memory its record
     needs (:data:`BYTES_PER_SAMPLE`) and, on a cycle-accurate backend, the simulation time
     (:data:`CYCLES_PER_S`, at most :data:`MAX_WALL_S`). The message names the option."""
-    from .validate import check_memory
+    from ..validate import check_memory
     sig = run.signal
     n = sig.duration_s * sig.fs_hz
     per = BYTES_PER_SAMPLE[run.backend] + (16 if run.compare else 0)
@@ -366,7 +381,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
               progress: bool = False) -> dict:
     """Run one scenario end to end; returns the result record (JSON-serialisable).
 
-    ``signal`` (a :class:`cosim.tacan_signal.TacanSignal` of ``run.signal``) skips the
+    ``signal`` (a :class:`cosim.tacan.signal.TacanSignal` of ``run.signal``) skips the
     generation (studies digitise one record with several ADCs). ``frontend_cache`` (a dict
     the caller keeps) reuses the front end's output between runs that differ only in the
     DSP (:func:`frontend_key`), e.g. a sweep of DSP word lengths. ``progress`` shows the
@@ -528,7 +543,7 @@ def recheck_cycle_accurate(run: TacanRunConfig, samples, backend: str = "auto",
     ``backend``: ``"verilator"``, ``"pysim"`` or ``"auto"`` (Verilator when installed);
     ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with pysim.
     """
-    from .verilator import verilator_available
+    from ..verilator import verilator_available
     if backend == "auto":
         backend = "verilator" if verilator_available() else "pysim"
     if backend not in ("pysim", "verilator"):

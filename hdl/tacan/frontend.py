@@ -1,6 +1,6 @@
 """TACAN FPGA front end: DDC -> CIC -> FIR -> envelope -> peak search -> FIFO, one clock.
 
-Parameters, word lengths and the bit-exact model are in :mod:`hdl.model.tacan_frontend`.
+Parameters, word lengths and the bit-exact model are in :mod:`hdl.tacan.model`.
 """
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ from amaranth.hdl import Module, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from .cic import Cic
-from .common import check_params
-from .ddc import Ddc
-from .envelope import Envelope
-from .fifo import DspFifo
-from .fir import Fir
-from .model.tacan_frontend import TacanFrontendParams
-from .peak import PeakSearch
+from ..cic import Cic
+from ..common import check_params
+from ..ddc import Ddc
+from ..envelope import Envelope
+from ..fifo import DspFifo
+from ..fir import Fir
+from .model import TacanFrontendParams
+from ..peak import PeakSearch
 
 __all__ = ["TacanFrontEnd", "TacanFrontendParams"]
 

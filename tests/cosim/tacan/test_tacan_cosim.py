@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from cosim.link import DSP_PRESETS, DspServiceConfig
-from cosim.tacan import TacanRunConfig, frontend_output, run_tacan
-from cosim.tacan_signal import TacanSignalConfig
+from cosim.tacan.run import TacanRunConfig, frontend_output, run_tacan
+from cosim.tacan.signal import TacanSignalConfig
 from cosim.verilator import verilator_available
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.kalman import KalmanConfig

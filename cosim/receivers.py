@@ -1,0 +1,340 @@
+"""The receiver registry: what ``python -m cosim`` knows about each receiver.
+
+A receiver is one package (its front end in ``hdl/<name>/``, its DSP in ``dsp/<name>/``,
+its signal generator and run in ``cosim/<name>/``) plus one :class:`Receiver` entry,
+handed to :func:`register` when its entry module is imported. The command line is built
+from the entries: the subcommand ``python -m cosim <name>``, the tops of ``verilog``,
+``check-equivalence --top`` and ``synth --top``, and ``sweep <name>`` / ``faults <name>``.
+How to add one: ``docs/adding_a_receiver.md``.
+
+Options are derived from the receiver's configuration dataclasses (:class:`Option`): the
+field name gives the flag (``duration_s`` -> ``--duration-s``), its annotation the type
+(``float``: a finite number; ``int``: a whole number, ``1e6`` allowed; ``bool``: a flag;
+``str`` with ``choices``), its default the default (written once, in the dataclass), and
+its help comes from the field's ``metadata["help"]``, else the :class:`Option`'s ``help``,
+else the class docstring's numpydoc entry for the field. ``metadata`` may also give ``choices``,
+``case`` (``"upper"``/``"lower"``: choices are case-insensitive), ``none`` (words read as
+None, e.g. ``("none", "inf")``) and ``metavar``. The parsed value lands in ``args.<dest>``
+(the field name with the prefix); :func:`config_kwargs` collects them back into keyword
+arguments of the dataclass.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib
+import math
+import re
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+__all__ = ["Receiver", "Study", "Figure", "Option", "Arg", "register", "unregister", "get",
+           "receivers", "add_options", "config_kwargs", "BUILTIN"]
+
+#: Entry modules of the receivers shipped with the toolkit (importing one registers it).
+BUILTIN = ("cosim.tacan.receiver",)
+
+_REGISTRY: dict[str, "Receiver"] = {}
+_MISSING = dataclasses.MISSING
+#: Option.default when the dataclass's default is the option's default.
+FROM_FIELD = type("FromField", (), {"__repr__": lambda self: "FROM_FIELD"})()
+
+
+# -- argument types ------------------------------------------------------------------------
+def parse_int(s: str) -> int:
+    """An integer; also 1e6-style literals that are whole numbers (not 4.5)."""
+    try:
+        return int(s)
+    except ValueError:
+        pass
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
+    if not (math.isfinite(v) and v.is_integer()):
+        raise argparse.ArgumentTypeError(f"must be a whole number, not {s}")
+    return int(v)
+
+
+def parse_finite(s: str) -> float:
+    """A finite float."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {s!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be a finite number, not {s}")
+    return v
+
+
+def _or_none(parse, words):
+    words = tuple(w.lower() for w in words)
+
+    def f(s: str):
+        return None if s.lower() in words else parse(s)
+    f.__name__ = parse.__name__     # argparse names the type in its "invalid ..." message
+    return f
+
+
+# -- what a receiver declares ---------------------------------------------------------------
+@dataclass(frozen=True)
+class Option:
+    """A command-line option derived from one field of a configuration dataclass.
+
+    Parameters
+    ----------
+    config : type
+        The dataclass (e.g. ``TacanSignalConfig``).
+    name : str
+        The field (e.g. ``"duration_s"``).
+    prefix : str
+        Put before the field name in the flag and ``args`` (``"dsp_"``: ``period_cycles``
+        -> ``--dsp-period-cycles``, ``args.dsp_period_cycles``).
+    flag : str, optional
+        The flag, when it is not the field's kebab-case name (``target_rel`` -> ``--target``).
+    default : optional
+        Only to say "unset" (None: e.g. "taken from a preset"); the real default is the
+        dataclass's, never written here.
+    help : str, optional
+        Used when the field has no ``metadata["help"]`` (before its docstring entry).
+    choices, case, metavar :
+        As in the field metadata (these win).
+    """
+
+    config: type
+    name: str
+    prefix: str = ""
+    flag: str | None = None
+    default: Any = FROM_FIELD
+    help: str | None = None
+    choices: tuple | None = None
+    case: str | None = None
+    metavar: str | None = None
+
+    @property
+    def dest(self) -> str:
+        return self.prefix + self.name
+
+    def argparse_kwargs(self) -> tuple[list[str], dict]:
+        """The flags and keyword arguments of ``parser.add_argument``."""
+        f = _field(self.config, self.name)
+        md = dict(f.metadata)
+        for k in ("choices", "case", "metavar"):
+            if getattr(self, k) is not None:
+                md[k] = getattr(self, k)
+        default = self.default if self.default is not FROM_FIELD else _field_default(f)
+        helptext = md.get("help") or self.help or _doc_entry(self.config, self.name)
+        if not helptext:
+            raise ValueError(f"option {self.config.__name__}.{self.name} has no help: give "
+                             f"metadata['help'], Option(help=...) or a docstring entry")
+        kw: dict = {"dest": self.dest, "default": default, "help": helptext}
+        typ = _resolve(self.config, self.name)
+        if typ is bool:
+            kw["action"] = "store_true"
+        else:
+            parse = {float: parse_finite, int: parse_int, str: str}.get(typ)
+            if parse is None:
+                raise TypeError(f"{self.config.__name__}.{self.name}: no command-line type for "
+                                f"{typ!r} (use Arg for it)")
+            case = md.get("case")
+            if case is not None:
+                parse = {"upper": str.upper, "lower": str.lower}[case]
+            if md.get("none"):
+                parse = _or_none(parse, md["none"])
+            kw["type"] = parse
+            if md.get("choices") is not None:
+                kw["choices"] = list(md["choices"])
+            if md.get("metavar") is not None:
+                kw["metavar"] = md["metavar"]
+        flag = self.flag or "--" + self.dest.replace("_", "-")
+        if self.flag and "metavar" not in kw and "action" not in kw:
+            kw["metavar"] = self.flag.lstrip("-").replace("-", "_").upper()
+        return [flag], kw
+
+
+@dataclass(frozen=True)
+class Arg:
+    """An option that is not a configuration field (``--json``, ``--dsp-stall START:STOP``):
+    ``parser.add_argument(*flags, **kwargs)``."""
+
+    flags: tuple
+    kwargs: dict = field(default_factory=dict)
+
+    def __init__(self, *flags, **kwargs):
+        object.__setattr__(self, "flags", flags)
+        object.__setattr__(self, "kwargs", kwargs)
+
+    def argparse_kwargs(self):
+        return list(self.flags), dict(self.kwargs)
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A receiver's primary figure of merit: ``key`` in its run's JSON, e.g. ``rmse_deg``."""
+
+    key: str
+    label: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class Study:
+    """A study subcommand of a receiver (``sweep <name>``, ``faults <name>``)."""
+
+    help: str
+    options: tuple
+    run: Callable[[argparse.Namespace], int]
+
+
+@dataclass(frozen=True)
+class Receiver:
+    """Everything the command line needs to know about one receiver.
+
+    Parameters
+    ----------
+    name : str
+        The subcommand (``python -m cosim <name>``) and the ``--top`` of its front end.
+    help : str
+        One line for ``python -m cosim --help``.
+    config : type
+        The run's configuration dataclass (e.g. ``TacanRunConfig``).
+    options : tuple of Option or Arg
+        Options of ``python -m cosim <name>``.
+    run : callable
+        ``run(args) -> exit code``: the subcommand.
+    frontend : type, optional
+        The front end's parameter dataclass, a key of :data:`cosim.session.FRONTEND_TYPES`
+        (its HDL top, bit-exact model session and Verilog name).
+    tops : dict, optional
+        Verilog module name -> a function building the top with default parameters
+        (``verilog`` exports and lints each; ``synth --top <name>`` synthesises the first).
+    equivalence : callable, optional
+        ``equivalence(samples=, backends=, seed=, stall=, progress=) -> dict`` for
+        ``check-equivalence --top <name>`` (the keys of
+        :func:`cosim.equivalence.check_equivalence`).
+    metrics : tuple of str
+        Keys of the run's JSON result that score it.
+    primary : Figure
+        The figure that says how good the receiver is.
+    sweep, faults : Study, optional
+        ``sweep <name>`` and ``faults <name>``.
+    """
+
+    name: str
+    help: str
+    config: type
+    options: tuple
+    run: Callable[[argparse.Namespace], int]
+    metrics: tuple
+    primary: Figure
+    frontend: type | None = None
+    tops: dict = field(default_factory=dict)
+    equivalence: Callable[..., dict] | None = None
+    sweep: Study | None = None
+    faults: Study | None = None
+
+    def __post_init__(self):
+        if not re.fullmatch(r"[a-z][a-z0-9-]*", self.name):
+            raise ValueError(f"receiver name must be lower-case letters, digits and '-', "
+                             f"not {self.name!r}")
+        if self.primary.key not in self.metrics:
+            raise ValueError(f"the primary figure {self.primary.key!r} must be one of the "
+                             f"metrics {list(self.metrics)}")
+
+
+def register(receiver: Receiver) -> Receiver:
+    """Add a receiver (its entry module calls this at import). A name is registered once."""
+    old = _REGISTRY.get(receiver.name)
+    if old is not None and old is not receiver:
+        raise ValueError(f"a receiver named {receiver.name!r} is already registered")
+    _REGISTRY[receiver.name] = receiver
+    return receiver
+
+
+def unregister(name: str) -> None:
+    """Remove a receiver (tests that register their own)."""
+    _REGISTRY.pop(name, None)
+
+
+def _load_builtin():
+    for mod in BUILTIN:
+        importlib.import_module(mod)
+
+
+def receivers() -> tuple[Receiver, ...]:
+    """Every registered receiver, the built-in ones first."""
+    _load_builtin()
+    return tuple(_REGISTRY.values())
+
+
+def get(name: str) -> Receiver:
+    _load_builtin()
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise ValueError(f"no receiver named {name!r} (known: "
+                         f"{', '.join(_REGISTRY)})") from None
+
+
+# -- options <-> dataclasses ----------------------------------------------------------------
+def add_options(parser: argparse.ArgumentParser, options) -> None:
+    for o in options:
+        flags, kw = o.argparse_kwargs()
+        parser.add_argument(*flags, **kw)
+
+
+def config_kwargs(args: argparse.Namespace, options, config: type) -> dict:
+    """Keyword arguments of ``config`` from the parsed options derived from its fields
+    (an option left unset, None where the field's default is not, is left out)."""
+    out = {}
+    for o in options:
+        if isinstance(o, Option) and o.config is config:
+            v = getattr(args, o.dest)
+            if v is None and o.default is None:
+                continue
+            out[o.name] = v
+    return out
+
+
+def _field(cls, name):
+    for f in dataclasses.fields(cls):
+        if f.name == name:
+            return f
+    raise ValueError(f"{cls.__name__} has no field {name!r}")
+
+
+def _field_default(f):
+    if f.default is not _MISSING:
+        return f.default
+    if f.default_factory is not _MISSING:
+        return f.default_factory()
+    raise ValueError(f"field {f.name!r} has no default: a command-line option needs one")
+
+
+def _resolve(cls, name):
+    """The field's type, ``X | None`` as ``X``."""
+    t = typing.get_type_hints(cls)[name]
+    args = [a for a in typing.get_args(t) if a is not type(None)]
+    if typing.get_origin(t) in (typing.Union, getattr(__import__("types"), "UnionType", None)) \
+            and len(args) == 1:
+        t = args[0]
+    return t
+
+
+def _doc_entry(cls, name) -> str | None:
+    """The numpydoc ``Parameters`` text of ``name`` in ``cls``'s docstring (first sentence
+    block, one line), or None."""
+    doc = cls.__doc__ or ""
+    lines = doc.splitlines()
+    for i, line in enumerate(lines):
+        head = line.strip().split(" : ")[0]
+        if name in [h.strip() for h in head.split(",")] and " : " in line:
+            indent = len(line) - len(line.lstrip())
+            body = []
+            for nxt in lines[i + 1:]:
+                if not nxt.strip() or len(nxt) - len(nxt.lstrip()) <= indent:
+                    break
+                body.append(nxt.strip())
+            return " ".join(body) or None
+    return None

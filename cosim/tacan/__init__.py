@@ -1,0 +1,2 @@
+"""TACAN receiver co-simulation: the signal generator (:mod:`cosim.tacan.signal`) and the
+end-to-end run (:mod:`cosim.tacan.run`)."""

@@ -1,0 +1,2 @@
+"""TACAN front end: the Amaranth top (:mod:`hdl.tacan.frontend`) and its parameters and
+bit-exact model (:mod:`hdl.tacan.model`)."""
