@@ -60,8 +60,8 @@ def check_visible(u, v, what="direction"):
     bad = ~(rho2 < 1.0)  # NaN is refused too
     if np.any(bad):
         k = np.flatnonzero(np.broadcast_to(bad, rho2.shape).ravel())[0]
-        ub = np.broadcast_to(u, rho2.shape).ravel()[k]
-        vb = np.broadcast_to(v, rho2.shape).ravel()[k]
+        ub = float(np.broadcast_to(u, rho2.shape).ravel()[k])
+        vb = float(np.broadcast_to(v, rho2.shape).ravel()[k])
         raise ValueError(f"{what} must lie in the visible region u^2 + v^2 < 1, not "
                          f"u = {ub!r}, v = {vb!r} (u^2 + v^2 = {ub * ub + vb * vb!r})")
 
@@ -79,6 +79,10 @@ def angles_from_uv(u, v):
     u = np.asarray(u, dtype=float)
     v = np.asarray(v, dtype=float)
     return np.arctan2(v, u), np.arcsin(np.hypot(u, v))
+
+
+def _cis(x):
+    return np.cos(x) + 1j * np.sin(x)
 
 
 def quantise_phase(phase_rad, bits):
@@ -191,12 +195,18 @@ class ArrayConfig:
         ``(u0, v0)`` scalars (one steering); ``u``, ``v`` arrays of the same shape.
         """
         check_visible(u, v, "target direction")
-        w = self.steering_weights(float(u0), float(v0))
-        p = self.element_offsets_wl
+        w = self.steering_weights(float(u0), float(v0)).reshape(self.elements_x,
+                                                                 self.elements_y)
+        d = self.element_spacing_wl
+        ex = (np.arange(self.elements_x) - (self.elements_x - 1) / 2) * d
+        ey = (np.arange(self.elements_y) - (self.elements_y - 1) / 2) * d
         u = np.asarray(u, float)
         v = np.asarray(v, float)
-        ph = -2 * np.pi * (np.multiply.outer(u, p[:, 0]) + np.multiply.outer(v, p[:, 1]))
-        return (np.exp(1j * ph) @ w) / p.shape[0]
+        # The grid is separable (exp(-j 2 pi (x u + y v)) = exp(-j 2 pi x u) exp(-j 2 pi y v))
+        # even when the quantised weights are not: Mx + My exponentials per direction, not Mx My.
+        ax = _cis(-2 * np.pi * np.multiply.outer(u, ex))
+        ay = _cis(-2 * np.pi * np.multiply.outer(v, ey))
+        return np.einsum("...x,xy,...y->...", ax, w, ay) / (self.elements_x * self.elements_y)
 
     def subarray_phases(self, u, v) -> np.ndarray:
         """``phi_i = 2 pi P_i.(u, v)``, shape (..., 4)."""
