@@ -110,7 +110,7 @@ class CsvTrajectory:
         if np.any(np.diff(t) <= 0):
             k = int(np.flatnonzero(np.diff(t) <= 0)[0])
             raise ValueError(f"trajectory times must be strictly increasing, not "
-                             f"{t[k]!r} then {t[k + 1]!r} (row {k + 1})")
+                             f"{float(t[k])!r} then {float(t[k + 1])!r} (row {k + 1})")
         check_visible(u, v, "trajectory point")
         self.t, self.u, self.v = t, u, v
 
@@ -119,8 +119,11 @@ class CsvTrajectory:
         """Columns ``time_s,u,v`` (comma separated, one optional header line)."""
         with open(path) as f:
             first = f.readline()
-        skip = 0 if first.strip() and first.split(",")[0].strip().lstrip("+-").replace(
-            ".", "", 1).replace("e", "", 1).replace("-", "").isdigit() else 1
+        try:
+            float(first.split(",")[0])
+            skip = 0
+        except ValueError:
+            skip = 1  # a header line
         data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
         if data.shape[1] != 3:
             raise ValueError(f"trajectory CSV {path} must have 3 columns time_s,u,v, not "
@@ -130,7 +133,7 @@ class CsvTrajectory:
     def __call__(self, t_s):
         t = np.asarray(t_s, float)
         if np.any(t < self.t[0]) or np.any(t > self.t[-1]):
-            raise ValueError(f"trajectory covers {self.t[0]!r}..{self.t[-1]!r} s, not "
+            raise ValueError(f"trajectory covers {float(self.t[0])!r}..{float(self.t[-1])!r} s, not "
                              f"{float(np.min(t))!r}..{float(np.max(t))!r} s")
         # Interpolated chords of a visible polyline stay visible (the disc is convex).
         return np.interp(t, self.t, self.u), np.interp(t, self.t, self.v)
