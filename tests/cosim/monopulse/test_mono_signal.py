@@ -117,4 +117,4 @@ def test_adc_clipping_is_counted():
     # Gaussian-dominated input clipped at 1 sigma: 31.7 % of samples (1 sigma of the count 0.46 %).
     assert np.all(np.abs(r.clipped / n - 0.317) < 0.02)
     assert r.samples.max() == 127 and r.samples.min() == -128
-    assert np.all(generate(small(), (0.3, 0.2), 0, 2).clipped == 0)
+    assert np.all(generate(small(adc_full_scale_sigma=6.0), (0.3, 0.2), 0, 2).clipped == 0)
