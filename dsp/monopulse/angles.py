@@ -88,16 +88,44 @@ def crb_uv(snr, n_snapshots, dx_wl, dy_wl):
     return 1.0 / (base * dx_wl ** 2), 1.0 / (base * dy_wl ** 2)
 
 
-def crb_angles(u, v, snr, n_snapshots, dx_wl, dy_wl):
-    """CRB on ``(az, el)`` variance (rad^2) by the Jacobian of ``(atan2, arcsin)`` at (u, v):
-    ``var az = (v^2 var_u + u^2 var_v) / rho^4``,
-    ``var el = (u^2 var_u + v^2 var_v) / (rho^2 cos^2 el)`` (covariance omitted: zero when
-    Dx = Dy). Undefined (inf) for az at the zenith."""
+def monopulse_covariance_uv(snr, n_snapshots, dx_wl, dy_wl, du, dv):
+    """First-order covariance ``(var u, var v, cov uv)`` of *this* estimator (Im form) at the
+    offset ``(du, dv) = (u - u0, v - v0)``::
+
+        var u  = crb_u / cos^2(pi Dy dv),   var v = crb_v / cos^2(pi Dx du),
+        cov uv = tan(pi Dx du) tan(pi Dy dv) / (8 pi^2 N snr Dx Dy)
+
+    Derivation: ``S_dA``, ``S_dE`` and ``S_S`` have uncorrelated noises of variance
+    ``4 sigma^2 / N``; the error of ``r = S_d / S_S`` is ``(n_d - r n_S) / S_S`` with
+    ``|S_S| = 4 |alpha| cos(dphi_2/2) cos(dphi_3/2)``, and ``d dphi = -2 cos^2(dphi/2) Im(d r)``.
+    A difference beam sums the channel pairs of the other axis with equal weights, coherent
+    only on that axis' boresight (the ``cos^2`` loss); the shared ``n_S`` correlates the two
+    axes off boresight (correlation ``sin(dphi_2/2) sin(dphi_3/2)``). On boresight the
+    estimator attains the CRB.
+    """
     vu, vv = crb_uv(snr, n_snapshots, dx_wl, dy_wl)
+    tx = np.tan(np.pi * dx_wl * np.asarray(du, float))
+    ty = np.tan(np.pi * dy_wl * np.asarray(dv, float))
+    base = 8 * np.pi ** 2 * n_snapshots * np.asarray(snr, float)
+    return vu * (1 + ty * ty), vv * (1 + tx * tx), tx * ty / (base * dx_wl * dy_wl)
+
+
+def angle_variances(u, v, var_u, var_v, cov_uv=0.0):
+    """``(var az, var el)`` (rad^2) from the ``(u, v)`` error covariance by the Jacobian of
+    ``(atan2, arcsin)`` at ``(u, v)``:
+    ``var az = (v^2 var_u + u^2 var_v - 2 u v cov) / rho^4``,
+    ``var el = (u^2 var_u + v^2 var_v + 2 u v cov) / (rho^2 cos^2 el)``; inf for az at the
+    zenith."""
     u = np.asarray(u, float)
     v = np.asarray(v, float)
     r2 = u * u + v * v
     with np.errstate(divide="ignore", invalid="ignore"):
-        var_az = (v * v * vu + u * u * vv) / (r2 * r2)
-        var_el = (u * u * vu + v * v * vv) / (r2 * (1.0 - r2))
-    return var_az, var_el
+        return (v * v * var_u + u * u * var_v - 2 * u * v * cov_uv) / (r2 * r2), \
+            (u * u * var_u + v * v * var_v + 2 * u * v * cov_uv) / (r2 * (1.0 - r2))
+
+
+def crb_angles(u, v, snr, n_snapshots, dx_wl, dy_wl):
+    """CRB on ``(az, el)`` variance (rad^2): ``crb_uv`` through ``angle_variances`` (the
+    az/el covariance, ``u v (var_v - var_u) / (rho^3 cos el)``, is zero when Dx = Dy)."""
+    vu, vv = crb_uv(snr, n_snapshots, dx_wl, dy_wl)
+    return angle_variances(u, v, vu, vv)
