@@ -118,3 +118,13 @@ def test_adc_clipping_is_counted():
     assert np.all(np.abs(r.clipped / n - 0.317) < 0.02)
     assert r.samples.max() == 127 and r.samples.min() == -128
     assert np.all(generate(small(adc_full_scale_sigma=6.0), (0.3, 0.2), 0, 2).clipped == 0)
+
+
+def test_one_default_block():
+    """The seed's block: 8192 snapshots = 81920 samples per ADC, 12-bit codes, no clipping
+    expected at 4 sigma full scale beyond a handful (P = 6e-5 per sample)."""
+    c = MonopulseSignalConfig()
+    r = generate(c, (0.3, 0.2), 0, 1)
+    assert r.samples.shape == (4, 81920) and r.replica.shape == (1, 8192)
+    assert np.all(r.clipped < 25)
+    assert np.abs(r.samples).max() <= 2048
