@@ -58,11 +58,26 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dsp.jit import njit_cached
+
 from .array import N_CHANNELS, ArrayConfig, angles_from_uv, check_visible
 from .trajectory import ConstantRate
 
 STREAM_NOISE, STREAM_CHIPS, STREAM_PHASE, STREAM_FAST = 0, 1, 2, 3
 SPEED_OF_LIGHT = 299_792_458.0
+
+
+@njit_cached(nogil=True)
+def _if_kernel(env_re, env_im, m0, f_ratio, decimation, out):
+    """``out[i, m] += Re{env[m // D, i] exp(j 2 pi f_IF t)}`` (one LO per sample, 4 channels)."""
+    for m in range(out.shape[1]):
+        n = m // decimation
+        f = (m0 + m) * f_ratio
+        ph = 2.0 * np.pi * (f - np.floor(f))
+        c = np.cos(ph)
+        s = np.sin(ph)
+        for i in range(out.shape[0]):
+            out[i, m] += env_re[n, i] * c - env_im[n, i] * s
 
 
 def _num(name, v, lo=None, strict=True):
@@ -282,18 +297,18 @@ def generate(cfg: MonopulseSignalConfig, steering, first_block: int = 0,
     N, D = cfg.snapshots, cfg.decimation
     chips = np.stack([cfg.chips(first_block + k) for k in range(n_blocks)])
     b = h * (np.exp(1j * cfg.carrier_phase) * chips)[..., None]  # (K, N, 4) complex envelope
-    m = (first_block * N * D + np.arange(n_blocks * N * D, dtype=np.int64))
-    lo = np.exp(2j * np.pi * np.mod(m * (cfg.if_hz / cfg.fs_hz), 1.0))  # (K N D,)
-    env = np.repeat(b.reshape(n_blocks * N, N_CHANNELS).T, D, axis=1)  # (4, K N D)
-    x = (env * lo).real
+    x = np.zeros((N_CHANNELS, n_blocks * N * D))
     if cfg.snr_db is not None:
         gabs = np.abs(cfg.array.channel_gains)
         for i in range(N_CHANNELS):
             for k in range(n_blocks):
                 rng = np.random.default_rng(np.random.SeedSequence(
                     cfg.seed, spawn_key=(STREAM_NOISE, first_block + k, i)))
-                x[i, k * N * D:(k + 1) * N * D] += \
-                    gabs[i] * cfg.sigma_w * rng.standard_normal(N * D)
+                x[i, k * N * D:(k + 1) * N * D] = \
+                    (gabs[i] * cfg.sigma_w) * rng.standard_normal(N * D)
+    env = np.ascontiguousarray(b.reshape(n_blocks * N, N_CHANNELS))
+    _if_kernel(np.ascontiguousarray(env.real), np.ascontiguousarray(env.imag),
+               first_block * N * D, cfg.if_hz / cfg.fs_hz, D, x)
     clipped = np.zeros(N_CHANNELS, np.int64)
     if cfg.adc_bits is None:
         samples, scale = x, 1.0
