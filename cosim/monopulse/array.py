@@ -20,7 +20,9 @@ Steering (decision): each element's phase shifter applies ``+2 pi p_e.(u0, v0)``
 multiple of ``2 pi / 2^phase_bits``; the four subarrays hold the same relative positions,
 so they have the *same* quantised pattern and it cancels in Delta/Sigma (quantisation costs
 gain, not bias). The inter-subarray steering phase ``phi_i0`` is applied digitally after the
-DDC with the channel correction (``steering_correction``), exactly.
+DDC with the channel correction (``steering_correction``), exactly. The alternative,
+``subarray_steering="elements"``, puts the full-array phase in the shifters (each subarray
+then has its own quantised pattern, and the quantisation biases the angle).
 
 Subarray pattern (normalised, 1 at the steering direction with ideal shifters)::
 
@@ -111,6 +113,12 @@ class ArrayConfig:
         Phase-shifter word length, >= 1 (6); None = ideal (unquantised) shifters.
     gain_db, phase_deg : tuple of 4 floats
         Per-channel gain (dB) and phase (deg) mismatch of channels 1-4.
+    subarray_steering : "digital" or "elements"
+        Where the inter-subarray steering phase ``phi_i0`` is applied: "digital" (default,
+        after the DDC, exact; the quantised pattern is common to the 4 subarrays) or
+        "elements" (in the element phase shifters with the full-array phase
+        ``2 pi (P_i + p_e).(u0, v0)`` quantised: each subarray gets its own pattern, the
+        quantisation then biases Delta/Sigma; ``steering_correction`` is 1).
     """
 
     elements_x: int = 8
@@ -121,6 +129,7 @@ class ArrayConfig:
     phase_bits: int | None = 6
     gain_db: tuple = (0.0, 0.0, 0.0, 0.0)
     phase_deg: tuple = (0.0, 0.0, 0.0, 0.0)
+    subarray_steering: str = "digital"
 
     def __post_init__(self):
         _pos_int("elements_x", self.elements_x)
@@ -142,6 +151,9 @@ class ArrayConfig:
                     and not isinstance(x, bool) and math.isfinite(x) for x in v):
                 raise ValueError(f"{name} must be 4 finite numbers (channels 1-4), not {v!r}")
             object.__setattr__(self, name, tuple(float(x) for x in v))
+        if self.subarray_steering not in ("digital", "elements"):
+            raise ValueError(f"subarray_steering must be 'digital' or 'elements', not "
+                             f"{self.subarray_steering!r}")
 
     @property
     def dx_wl(self) -> float:
@@ -216,12 +228,31 @@ class ArrayConfig:
         return 2 * np.pi * (np.multiply.outer(u, P[:, 0]) + np.multiply.outer(v, P[:, 1]))
 
     def channel_response(self, u, v, u0, v0) -> np.ndarray:
-        """Channel outputs per unit target amplitude before the ADC: ``g_i AF exp(-j phi_i)``,
-        shape (..., 4)."""
-        af = self.subarray_pattern(u, v, u0, v0)
-        return self.channel_gains * af[..., None] * np.exp(-1j * self.subarray_phases(u, v))
+        """Channel outputs per unit target amplitude before the ADC, shape (..., 4):
+        ``g_i AF exp(-j phi_i)`` ("digital"), or ``g_i AF_i`` with ``AF_i`` the pattern of
+        subarray i's elements at their absolute positions under full-array quantised
+        steering ("elements")."""
+        if self.subarray_steering == "digital":
+            af = self.subarray_pattern(u, v, u0, v0)
+            return self.channel_gains * af[..., None] * np.exp(-1j * self.subarray_phases(u, v))
+        check_visible(u0, v0, "steering direction")
+        check_visible(u, v, "target direction")
+        u = np.asarray(u, float)
+        v = np.asarray(v, float)
+        p = self.element_offsets_wl
+        out = np.empty(u.shape + (N_CHANNELS,), complex)
+        for i, c in enumerate(self.subarray_centres_wl):  # 4 subarrays
+            x, y = p[:, 0] + c[0], p[:, 1] + c[1]
+            w = np.exp(1j * quantise_phase(2 * np.pi * (x * u0 + y * v0), self.phase_bits)[0])
+            ph = -2 * np.pi * (np.multiply.outer(u, x) + np.multiply.outer(v, y))
+            out[..., i] = (_cis(ph) @ w) / p.shape[0]
+        return self.channel_gains * out
 
     def steering_correction(self, u0, v0) -> np.ndarray:
-        """Digital steering ``exp(j phi_i0)`` applied after the DDC, shape (..., 4)."""
+        """Digital steering applied after the DDC, shape (..., 4): ``exp(j phi_i0)``
+        ("digital") or 1 ("elements")."""
         check_visible(u0, v0, "steering direction")
-        return np.exp(1j * self.subarray_phases(u0, v0))
+        ph = self.subarray_phases(u0, v0)
+        if self.subarray_steering == "elements":
+            return np.ones_like(ph, dtype=complex)
+        return np.exp(1j * ph)

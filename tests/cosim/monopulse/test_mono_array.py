@@ -98,3 +98,20 @@ def test_corrected_channels_follow_the_seed_model():
     d2, d3 = 2 * np.pi * 4 * (v0 - v), 2 * np.pi * 4 * (u0 - u)
     np.testing.assert_allclose(y / y[0], np.exp(1j * np.array([0, d2, d3, d2 + d3])), atol=1e-12)
     np.testing.assert_allclose(np.abs(a.channel_gains), 10 ** (np.array(a.gain_db) / 20))
+
+
+def test_steering_in_the_elements_equals_digital_when_ideal_and_biases_when_quantised():
+    u, v, u0, v0 = np.array([0.36, 0.27]), np.array([0.15, 0.22]), 0.3, 0.2
+    resp = {}
+    for mode in ("digital", "elements"):
+        for bits in (None, 3):
+            a = ArrayConfig(phase_bits=bits, subarray_steering=mode)
+            resp[mode, bits] = a.channel_response(u, v, u0, v0) * a.steering_correction(u0, v0)
+    np.testing.assert_allclose(resp["elements", None], resp["digital", None], atol=1e-12)
+    # Quantised: digital keeps channel ratios exact, elements does not.
+    d, e = resp["digital", 3], resp["elements", 3]
+    ideal = resp["digital", None]
+    np.testing.assert_allclose(d / d[..., :1], ideal / ideal[..., :1], atol=1e-12)
+    assert np.max(np.abs(e / e[..., :1] - ideal / ideal[..., :1])) > 1e-3
+    with pytest.raises(ValueError, match="subarray_steering must be 'digital' or 'elements', not 'x'"):
+        ArrayConfig(subarray_steering="x")

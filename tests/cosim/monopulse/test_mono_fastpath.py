@@ -20,10 +20,13 @@ def if_outputs(cfg, steering, first_block, n_blocks):
                                cfg.decimation, first_block * cfg.samples_per_block), rec
 
 
-def test_noise_free_fast_path_equals_the_if_path():
+@pytest.mark.parametrize("mode", ["digital", "elements"])
+def test_noise_free_fast_path_equals_the_if_path(mode):
     """No noise, no ADC: the fast path's mean is the IF chain's output to rounding, for a
     manoeuvring target, channel mismatch, quantised shifters and per-block steering."""
-    cfg = MonopulseSignalConfig(array=MISMATCH, snapshots=256, snr_db=None, adc_bits=None,
+    arr = ArrayConfig(phase_bits=4, gain_db=MISMATCH.gain_db, phase_deg=MISMATCH.phase_deg,
+                      subarray_steering=mode)
+    cfg = MonopulseSignalConfig(array=arr, snapshots=256, snr_db=None, adc_bits=None,
                                 trajectory=Manoeuvre(0.3, 0.2, 2.0, -1.0,
                                                      segments=((0.0, 1.0, 300.0, 200.0),)))
     steer = np.array([[0.3, 0.2], [0.305, 0.198], [0.31, 0.195], [0.3, 0.21]])
