@@ -1,0 +1,1 @@
+"""Monopulse DSP: float golden DDC / matched filter / beams, angle equations, CRB."""
