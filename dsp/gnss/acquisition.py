@@ -133,6 +133,8 @@ def acquire(x, fs_hz: float, prn: int, if_hz: float, inverted: bool = False,
         S[i] = np.sum(Yk.real ** 2 + Yk.imag ** 2, axis=0)
     K = n_noncoherent
     var = float(S.mean() / (2 * K))
+    if not (math.isfinite(var) and var > 0):
+        raise ValueError(f"the snapshot has no noise power to normalise by (mean cell {var!r})")
     lam = S / var
     th = threshold(pfa, lam.size, K)
     b, m = np.unravel_index(int(np.argmax(lam)), lam.shape)
