@@ -42,10 +42,12 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
                bn_hz: float = 15.0, dll_bn_hz: float = 1.0, spacing_chips: float = 0.5,
                latency: int = 0, costas: bool = True, fll_bn_hz: float | None = None,
                shape=(), seed: int = 0, phase0_err_cycles=0.0, freq0_err_hz=0.0,
-               code0_err_chips=0.0) -> FastTrackResult:
+               code0_err_chips=0.0, arith=None, fs_hz: float = 16.368e6) -> FastTrackResult:
     """Run the channel closed loop on the fast path; batch shape = broadcast of
     ``cn0_dbhz`` and ``shape``. Starts on the truth (plus the given initial errors), with
-    the PLL's rate state on the true Doppler rate (as after pull-in)."""
+    the PLL's rate state on the true Doppler rate (as after pull-in). ``arith``
+    (``dsp.gnss.loops_fixed.FLOAT`` or a ``FixedArith``) runs the one-source
+    ``ChannelCore`` instead (no FLL), its NCO words turned back into Hz at ``fs_hz``."""
     rng = np.random.default_rng(seed)
     batch = np.broadcast_shapes(np.shape(cn0_dbhz), tuple(shape))
     t = np.arange(n_epochs + 1) * T_s
@@ -56,8 +58,17 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
     f = (a["doppler_hz"][0] + freq0_err_hz) * ones
     phi = (th[0] - phase0_err_cycles) * ones
     chi = (a["code_chips_total"][0] - code0_err_chips) * ones
-    ch = TrackingChannel(T_s, order, bn_hz, dll_bn_hz, spacing_chips, 0.0, False, f,
-                         a["doppler_rate_hz_s"][0] * ones, fll_bn_hz, costas)
+    if arith is None:
+        ch = TrackingChannel(T_s, order, bn_hz, dll_bn_hz, spacing_chips, 0.0, False, f,
+                             a["doppler_rate_hz_s"][0] * ones, fll_bn_hz, costas)
+        update = ch.update
+    else:
+        from dsp.gnss.loops_fixed import ChannelCore
+        core = ChannelCore(arith, fs_hz, T_s, order, bn_hz, dll_bn_hz, spacing_chips, 0.0,
+                           False, f, a["doppler_rate_hz_s"][0] * ones, costas)
+
+        def update(*iq):
+            return core.frequencies_hz(core.step(*iq))
     cr = CHIP_RATE_HZ + f / 1540.0
     queue = [(f, cr)] * latency
     E = np.empty((n_epochs,) + batch)
@@ -71,7 +82,7 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
                            rng=rng, shape=batch)
         phi = phi + f * T_s
         chi = chi + cr * T_s
-        fc, kc = ch.update(x.early.real, x.early.imag, x.prompt.real, x.prompt.imag,
+        fc, kc = update(x.early.real, x.early.imag, x.prompt.real, x.prompt.imag,
                            x.late.real, x.late.imag)
         queue.append((fc, kc))
         f, cr = queue.pop(0)
