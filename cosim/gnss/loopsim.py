@@ -118,7 +118,7 @@ def kaplan_threshold_dbhz(bn_hz: float = 15.0, T_s: float = 1e-3, jerk_g_per_s: 
     return hi
 
 
-def tracking_threshold(cn0_grid_dbhz=np.arange(20.0, 36.01, 0.5), n_trials: int = 50,
+def tracking_threshold(cn0_grid_dbhz=np.arange(22.0, 34.01, 0.5), n_trials: int = 50,
                        bn_hz: float = 15.0, T_s: float = 1e-3, jerk_g_per_s: float = 5.0,
                        jerk_start_s: float = 0.5, jerk_duration_s: float = 2.0,
                        settle_s: float = 0.5, latency: int = 0, seed: int = 1,
@@ -128,7 +128,12 @@ def tracking_threshold(cn0_grid_dbhz=np.arange(20.0, 36.01, 0.5), n_trials: int 
     for ``jerk_duration_s``, then ``settle_s`` more. A trial holds lock if its true phase
     error never slips (:func:`cycle_slips` = 0). The threshold is the lowest C/N0 of the
     grid at and above which at least ``hold_fraction`` of the trials hold lock at every
-    grid value. Returns the threshold, the per-C/N0 hold fractions and Kaplan's value."""
+    grid value. Returns the threshold, the per-C/N0 hold fractions and Kaplan's value.
+
+    Measured (defaults, grid 22-34 dB-Hz by 0.5, 50 trials, seed 1): 32.5 dB-Hz (all 50
+    hold from 32.5 up; 98 % at 32.0, 52 % at 31.0, none at 28.5 and below) beside Kaplan's
+    28.7 dB-Hz rule: the rule bounds a 3-sigma excursion, "no slip in 3 s x 50 trials" is
+    stricter (the 3rd-order loop's lightly damped poles also add transient stress)."""
     grid = np.asarray(cn0_grid_dbhz, float)
     dur = jerk_start_s + jerk_duration_s + settle_s
     n = int(round(dur / T_s))
@@ -148,3 +153,36 @@ def tracking_threshold(cn0_grid_dbhz=np.arange(20.0, 36.01, 0.5), n_trials: int 
     return {"threshold_dbhz": thr, "cn0_dbhz": grid.tolist(), "hold_fraction": frac.tolist(),
             "n_trials": n_trials, "kaplan_rule_dbhz": kaplan_threshold_dbhz(bn_hz, T_s, jerk_g_per_s),
             "bn_hz": bn_hz, "T_s": T_s, "jerk_g_per_s": jerk_g_per_s}
+
+
+def jitter_vs_kaplan(cn0_dbhz=(35.0, 40.0, 45.0, 50.0), n_trials: int = 100, bn_hz: float = 15.0,
+                     T_s: float = 1e-3, duration_s: float = 4.0, skip_s: float = 0.3,
+                     latency: int = 0, seed: int = 2) -> dict:
+    """Closed-loop thermal jitter (3rd-order Costas PLL, seed-002 1000 m/s + 1 g, fast path)
+    against Kaplan's formula with the nominal and with the actual digital-loop Bn."""
+    from dsp.gnss.loops import noise_bandwidth
+    c = np.asarray(cn0_dbhz, float)
+    n = int(round(duration_s / T_s))
+    tr = truth_for(seed002(q=0), duration_s + 0.01, seed=seed)
+    r = track_fast(tr, c[:, None], n, T_s, 3, bn_hz, shape=(c.size, n_trials), latency=latency,
+                   seed=seed)
+    meas = (r.phase_err_cycles[int(round(skip_s / T_s)):] * 360.0).std(axis=(0, 2))
+    bn_act = noise_bandwidth(3, bn_hz, T_s, latency)
+    ka = kaplan_jitter_deg(c, bn_act, T_s)
+    return {"cn0_dbhz": c.tolist(), "measured_deg": meas.tolist(),
+            "kaplan_actual_bn_deg": ka.tolist(),
+            "kaplan_nominal_bn_deg": kaplan_jitter_deg(c, bn_hz, T_s).tolist(),
+            "ratio_to_actual": (meas / ka).tolist(), "bn_actual_hz": bn_act,
+            "slipped_trials": np.count_nonzero(cycle_slips(r.phase_err_cycles), axis=-1).tolist()}
+
+
+def jerk_stress(jerk_g_per_s: float = 5.0, bn_hz: float = 15.0, T_s: float = 1e-3,
+                latency: int = 0, duration_s: float = 4.0) -> dict:
+    """Noise-free steady-state phase error (last second) under constant jerk vs
+    ``0.4828 J / Bn^3``."""
+    tr = truth_for(seed002(q=0, jerk_g_per_s=jerk_g_per_s, jerk_start_s=0.0), duration_s + 0.01)
+    n = int(round(duration_s / T_s))
+    r = track_fast(tr, None, n, T_s, 3, bn_hz, latency=latency)
+    meas = float(r.phase_err_cycles[n - int(round(1.0 / T_s)):].mean() * 360.0)
+    th = jerk_stress_deg(jerk_cycles_s3(jerk_g_per_s) * 360.0, bn_hz)
+    return {"measured_deg": meas, "kaplan_deg": th, "ratio": meas / th}
