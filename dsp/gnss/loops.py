@@ -113,6 +113,48 @@ def pli(ip_sum, qp_sum):
     return (i2 - q2) / np.where(i2 + q2 > 0, i2 + q2, 1.0)
 
 
+class LockDetector:
+    """Phase-lock (narrowband PLI) and C/N0 lock detectors over windows of ``window``
+    prompts (batched).
+
+    * PLI: prompts summed coherently over blocks of ``m`` epochs, ``NBD = sum_b (I_b^2 -
+      Q_b^2)``, ``NBP = sum_b (I_b^2 + Q_b^2)``, ``PLI = NBD / NBP`` (~ ``cos 2 e``). A block
+      straddling a data-bit edge keeps the carrier phase (its sum is ``a e^{j e}`` times
+      ``n1 - n2``), so only its weight drops: the detector works on data-modulated
+      signals with a Costas loop. Phase lock if ``PLI >= pli_min`` (0.8: |e| <~ 18 deg).
+    * C/N0: the data-insensitive M2M4 estimator (``dsp.gnss.cn0``) on the window; C/N0
+      lock if the estimate ``>= cn0_min_dbhz``.
+
+    ``update(prompt)`` returns ``True`` when a window closed (the fields then updated).
+    """
+
+    def __init__(self, T_s: float = 1e-3, window: int = 100, m: int = 10,
+                 pli_min: float = 0.8, cn0_min_dbhz: float = 28.0):
+        if window % m:
+            raise ValueError(f"window ({window}) must be a whole number of PLI blocks m = {m}")
+        self.T, self.window, self.m = float(T_s), int(window), int(m)
+        self.pli_min, self.cn0_min = float(pli_min), float(cn0_min_dbhz)
+        self._buf = []
+        self.pli = self.cn0_dbhz = np.nan
+        self.phase_lock = self.cn0_lock = False
+
+    def update(self, prompt) -> bool:
+        from .cn0 import cn0_m2m4
+        self._buf.append(np.asarray(prompt, complex))
+        if len(self._buf) < self.window:
+            return False
+        p = np.stack(self._buf, axis=-1)
+        self._buf = []
+        b = p.reshape(p.shape[:-1] + (-1, self.m)).sum(axis=-1)
+        nbd = (b.real ** 2 - b.imag ** 2).sum(axis=-1)
+        nbp = (b.real ** 2 + b.imag ** 2).sum(axis=-1)
+        self.pli = nbd / np.where(nbp > 0, nbp, 1.0)
+        self.cn0_dbhz = cn0_m2m4(p, self.T)
+        self.phase_lock = self.pli >= self.pli_min
+        self.cn0_lock = self.cn0_dbhz >= self.cn0_min
+        return True
+
+
 def hz_to_word(f_hz, fs_hz: float, bits: int = 32):
     """NCO frequency word ``round(f 2^bits / fs)`` (two's complement range) and the error
     ``word fs / 2^bits - f`` (Hz, ``|err| <= fs / 2^(bits+1)``). Pure."""
@@ -131,14 +173,16 @@ class TrackingChannel:
 
     Carrier: 2nd/3rd order PLL on a Costas (``costas=True``) or atan2 discriminator,
     optional FLL assist (cross/dot on successive prompts). Code: carrier-aided 1st order DLL
-    on the normalised early-minus-late envelope. ``carrier_freq = if_hz + s f_D`` with
+    on the normalised early-minus-late envelope. Lock detectors (PLI, C/N0) in ``lock``
+    (:class:`LockDetector`). ``carrier_freq = if_hz + s f_D`` with
     ``s = -1`` for an inverted spectrum (the measured phase then has the opposite sign).
     """
 
     def __init__(self, T_s: float = 1e-3, order: int = 3, bn_hz: float = 15.0,
                  dll_bn_hz: float = 1.0, spacing_chips: float = 0.5, if_hz: float = 0.0,
                  inverted: bool = False, doppler0_hz=0.0, doppler_rate0_hz_s=0.0,
-                 fll_bn_hz: float | None = None, costas: bool = True, pli_window: int = 20):
+                 fll_bn_hz: float | None = None, costas: bool = True,
+                 lock: "LockDetector | None" = None):
         self.T, self.s = float(T_s), (-1.0 if inverted else 1.0)
         self.if_hz, self.d, self.costas = float(if_hz), float(spacing_chips), bool(costas)
         self.pll = CarrierLoop(order, bn_hz, T_s, doppler0_hz, doppler_rate0_hz_s, fll_bn_hz)
@@ -146,9 +190,7 @@ class TrackingChannel:
         self.doppler = np.array(doppler0_hz, float)
         self.code_rate = CHIP_RATE_HZ * (1 + self.doppler / L1_HZ)
         self._prev = None
-        self.pli_window = int(pli_window)
-        self._acc = [0.0, 0.0, 0]
-        self.lock_pli = np.nan
+        self.lock = LockDetector(T_s) if lock is None else lock
         self.last_e = self.last_tau = None
 
     def update(self, ie, qe, ip, qp, il, ql):
@@ -163,13 +205,7 @@ class TrackingChannel:
         tau = dll_nelp(ie, qe, il, ql, self.d)
         self.code_rate = CHIP_RATE_HZ + self.doppler / (L1_HZ / CHIP_RATE_HZ) + self.k_dll * tau
         self.last_e, self.last_tau = e, tau
-        a = self._acc
-        a[0] = a[0] + np.asarray(ip, float)
-        a[1] = a[1] + qp_s
-        a[2] += 1
-        if a[2] == self.pli_window:
-            self.lock_pli = pli(a[0], a[1])
-            self._acc = [0.0, 0.0, 0]
+        self.lock.update(np.asarray(ip, float) + 1j * qp_s)
         return self.if_hz + self.s * self.doppler, self.code_rate
 
     def words(self, fs_hz: float, bits: int = 32):

@@ -157,3 +157,32 @@ def test_if_path_closed_loop_golden_correlator():
     assert np.std(diff) < 1.5 * sig and np.max(np.abs(diff)) < 6 * sig, (np.std(diff), sig)
     assert np.abs(ref.phase_err_cycles).max() > 0.03     # a real transient was followed
     assert np.max(np.abs(np.array(taus) - ref.code_err_chips)) < 0.02
+    # lock detectors over the last 100 epochs: the PLI reads the true cos 2e (the jerk
+    # transient reaches ~30 deg here); the C/N0 estimate is the generator's 45 dB-Hz less
+    # the 2-bit ADC loss (~0.55 dB), the ~0.06 chip code-error loss (~0.5 dB) and the
+    # phase-error loss, with ~0.4 dB rms M2M4 spread on 100 prompts
+    assert abs(ch.lock.pli - np.mean(np.cos(4 * np.pi * e[200:]))) < 0.1
+    assert ch.lock.cn0_lock and 41.5 < ch.lock.cn0_dbhz < 45.5
+
+
+def test_lock_detectors_in_lock_and_out():
+    from cosim.gnss.fastpath import correlate_fast
+    from dsp.gnss.loops import LockDetector
+    rng = np.random.default_rng(8)
+    bits = np.repeat(rng.choice([-1.0, 1.0], 50), 20)[None, :]     # data, unaligned windows
+    k = np.arange(1000)
+    # (C/N0, phase error, frequency error, phase lock expected, C/N0 lock expected):
+    # in lock; a 37 Hz frequency error (the phase turns 0.37 cycle per PLI block: phase
+    # lock lost, C/N0 still there); 10 dB-Hz, nothing to track (neither)
+    for cn0, err, freq, plock, clock in ((45.0, 0.02, 0.0, True, True),
+                                         (45.0, 0.037 * k, 37.0, False, True),
+                                         (10.0, 0.0, 0.0, False, False)):
+        det = LockDetector(T, window=1000, m=10)
+        x = correlate_fast(cn0, err, freq, 0.0, np.roll(bits, 7), T, rng=rng, shape=(16, 1000))
+        closed = [det.update(x.prompt[:, j]) for j in range(1000)]
+        assert closed[-1] and not any(closed[:-1])
+        assert np.all(det.phase_lock == plock) and np.all(det.cn0_lock == clock), (cn0, det.pli, det.cn0_dbhz)
+        if plock:
+            assert np.all(np.abs(det.pli - np.cos(4 * np.pi * err)) < 0.05)
+            # M2M4 on 1000 prompts at 45 dB-Hz: ~0.2 dB rms per estimate
+            assert abs(np.mean(det.cn0_dbhz) - cn0) < 0.3 and np.all(np.abs(det.cn0_dbhz - cn0) < 1.0)
