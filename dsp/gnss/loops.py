@@ -27,7 +27,6 @@ latency. The digital loop's noise bandwidth differs from the nominal ``Bn`` by
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

@@ -31,7 +31,6 @@ DSP core, whose CORDIC is outside this model.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
