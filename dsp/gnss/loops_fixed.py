@@ -1,0 +1,183 @@
+"""The tracking channel's loop arithmetic written once, run in float64 or in fixed point.
+
+One source: :func:`channel_step` is written in terms of the operators of an arithmetic
+object (``FLOAT`` or a :class:`FixedArith`): ``q(x, fmt)`` puts a real value into a format
+(float: identity; fixed: round-half-up to ``fmt.frac`` fraction bits, saturated to
+``fmt.bits``, saturations counted), ``mul(a, k, shift)`` multiplies by a coefficient and
+re-scales (float: ``a k``; fixed: the exact integer product shifted right ``shift`` bits,
+round half up), ``add``. The float run is the golden (``dsp.gnss.loops.TrackingChannel``
+without FLL, same equations to float64 rounding); the fixed run differs from it only where
+the formats quantise. Vectorised over any batch shape (numpy ``int64``; every product is
+checked below ``2^62`` by the format widths, and the test re-does every step with Python
+integers).
+
+Named formats (``Format(bits, frac)``, signed, value = integer * 2^-frac):
+
+=============  =====================  ================================================
+DISC_PHASE     Q(16, 15) cycles       Costas/atan2 output (|e| <= 1/2)
+DISC_CODE      Q(16, 14) chips        normalised E-L envelope (|tau| <= 1)
+COEF           24 fraction bits       loop gains T w0^3, T a3 w0^2, b3 w0, (4 Bn_dll)
+V2             Q(40, 20) Hz/s         3rd-order rate integrator
+T_Q            30 fraction bits       the epoch T (1 ms is not binary: 1.7e-7 relative)
+V1, FREQ       Q(48, 32) Hz           frequency integrator and the Doppler output
+F16            16 fraction bits       Doppler fed to the word multiplier
+WORD_COEF      24 fraction bits       2^32 / fs (carrier), 2^32 / (1540 fs) (code)
+NCO word       32-bit two's complement  round(f 2^32 / fs), carrier and code
+=============  =====================  ================================================
+
+The discriminators themselves (atan, envelope division) are evaluated in float64 and
+quantised at their output to DISC_PHASE / DISC_CODE: in the FPGA+DSP split they run on the
+DSP core, whose CORDIC is outside this model.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .ca_code import CHIP_RATE_HZ
+from .discriminators import costas_atan, dll_nelp, pll_atan2
+from .loops import A2, A3, B3, pll_w0
+
+
+@dataclass(frozen=True)
+class Format:
+    bits: int
+    frac: int
+
+
+DISC_PHASE = Format(16, 15)
+DISC_CODE = Format(16, 14)
+V2 = Format(40, 20)
+V1 = Format(48, 32)
+COEF_FRAC = 24
+T_FRAC = 30
+F16_FRAC = 16
+WORD_COEF_FRAC = 24
+WORD_BITS = 32
+
+
+class FloatArith:
+    fixed = False
+
+    def q(self, x, fmt):
+        return np.asarray(x, dtype=np.float64)
+
+    def coef(self, c, frac):
+        return float(c)
+
+    def mul(self, a, k, shift):
+        return a * k
+
+    def add(self, a, b, fmt=None):
+        return a + b
+
+    def word(self, f_hz, scale):
+        return f_hz
+
+
+class FixedArith:
+    """Fixed point on numpy int64; ``sat`` counts saturations per format name."""
+
+    fixed = True
+
+    def __init__(self):
+        self.sat = {}
+
+    @staticmethod
+    def rs(v, s):
+        v = np.asarray(v, dtype=np.int64)
+        if s <= 0:
+            return v << -s
+        return (v + (1 << (s - 1))) >> s
+
+    def _sat(self, v, fmt):
+        hi, lo = (1 << (fmt.bits - 1)) - 1, -(1 << (fmt.bits - 1))
+        n = int(np.count_nonzero((v > hi) | (v < lo)))
+        if n:
+            self.sat[fmt] = self.sat.get(fmt, 0) + n
+        return np.clip(v, lo, hi)
+
+    def q(self, x, fmt):
+        return self._sat(np.floor(np.asarray(x, float) * 2.0 ** fmt.frac + 0.5).astype(np.int64), fmt)
+
+    def coef(self, c, frac):
+        return int(round(c * 2 ** frac))
+
+    def mul(self, a, k, shift):
+        return self.rs(np.asarray(a, np.int64) * k, shift)
+
+    def add(self, a, b, fmt=None):
+        s = np.asarray(a, np.int64) + b
+        return s if fmt is None else self._sat(s, fmt)
+
+
+FLOAT = FloatArith()
+
+
+class ChannelCore:
+    """PLL (2nd/3rd order) + carrier-aided 1st-order DLL, one source for both arithmetics.
+
+    ``step(ie, qe, ip, qp, il, ql) -> (carrier_word, code_word)`` (fixed: int64 NCO words;
+    float: the frequencies in Hz, whose words are ``loops.hz_to_word``). ``doppler_hz()``
+    gives the Doppler state as a real value in both forms."""
+
+    def __init__(self, arith, fs_hz: float, T_s: float = 1e-3, order: int = 3,
+                 bn_hz: float = 15.0, dll_bn_hz: float = 1.0, spacing_chips: float = 0.5,
+                 if_hz: float = 0.0, inverted: bool = False, doppler0_hz=0.0,
+                 doppler_rate0_hz_s=0.0, costas: bool = True):
+        o = self.o = arith
+        self.order, self.d, self.costas = int(order), float(spacing_chips), bool(costas)
+        self.s = -1 if inverted else 1
+        w = pll_w0(self.order, bn_hz)
+        T = float(T_s)
+        if self.order == 3:
+            k3, k2, k1 = T * w ** 3, T * A3 * w ** 2, B3 * w
+        else:
+            k3, k2, k1 = 0.0, T * w ** 2, A2 * w
+        self.K3, self.K2, self.K1 = (o.coef(k, COEF_FRAC) for k in (k3, k2, k1))
+        self.KT = o.coef(T, T_FRAC)
+        self.KD = o.coef(4.0 * dll_bn_hz, COEF_FRAC)   # chips/s per chip of code error
+        self.fs = float(fs_hz)
+        self.if_hz = float(if_hz)
+        # word scales (fixed) -- in float the frequencies are carried in Hz
+        self.KWC = o.coef(2.0 ** WORD_BITS / fs_hz, WORD_COEF_FRAC)
+        self.KWK = o.coef(2.0 ** WORD_BITS / fs_hz / 1540.0, WORD_COEF_FRAC)
+        self.KWD = o.coef(2.0 ** WORD_BITS / fs_hz * 4.0 * dll_bn_hz, WORD_COEF_FRAC)
+        self.W_IF = int(round(if_hz * 2 ** WORD_BITS / fs_hz))
+        self.W_CHIP = int(round(CHIP_RATE_HZ * 2 ** WORD_BITS / fs_hz))
+        self.v1 = o.q(doppler0_hz, V1)
+        self.v2 = o.q(np.broadcast_to(doppler_rate0_hz_s, np.shape(self.v1)), V2)
+        self.e = self.tau = None
+
+    def doppler_hz(self):
+        return self.v1 * 2.0 ** -V1.frac if self.o.fixed else self.v1
+
+    def step(self, ie, qe, ip, qp, il, ql):
+        o = self.o
+        qs = self.s * np.asarray(qp, float)
+        e = o.q(costas_atan(ip, qs) if self.costas else pll_atan2(ip, qs), DISC_PHASE)
+        tau = o.q(dll_nelp(ie, qe, il, ql, self.d), DISC_CODE)
+        ef = DISC_PHASE.frac + COEF_FRAC
+        if self.order == 3:
+            self.v2 = o.add(self.v2, o.mul(e, self.K3, ef - V2.frac), V2)
+            self.v1 = o.add(o.add(self.v1, o.mul(e, self.K2, ef - V1.frac)),
+                            o.mul(self.v2, self.KT, V2.frac + T_FRAC - V1.frac), V1)
+        else:
+            self.v1 = o.add(self.v1, o.mul(e, self.K2, ef - V1.frac), V1)
+        f = o.add(self.v1, o.mul(e, self.K1, ef - V1.frac), V1)    # Doppler, V1 format
+        self.e, self.tau = e, tau
+        if not o.fixed:
+            return self.if_hz + self.s * f, CHIP_RATE_HZ + f / 1540.0 + self.KD * tau
+        f16 = o.mul(f, 1, V1.frac - F16_FRAC)
+        cw = self.W_IF + self.s * o.mul(f16, self.KWC, F16_FRAC + WORD_COEF_FRAC)
+        kw = self.W_CHIP + o.mul(f16, self.KWK, F16_FRAC + WORD_COEF_FRAC) \
+            + o.mul(tau, self.KWD, DISC_CODE.frac + WORD_COEF_FRAC)
+        return cw, kw
+
+    def frequencies_hz(self, words):
+        """Fixed: the frequencies the NCO words stand for (Hz); float: as given."""
+        if not self.o.fixed:
+            return words
+        cw, kw = words
+        return cw * self.fs / 2.0 ** WORD_BITS, kw * self.fs / 2.0 ** WORD_BITS

@@ -1,0 +1,123 @@
+"""The one-source channel core: float form == the float golden channel; fixed form bit
+exact against a Python-int reference on random dumps; fixed within a stated bound of float
+in closed loop."""
+import numpy as np
+import pytest
+
+from cosim.gnss.dynamics import seed002
+from cosim.gnss.loopsim import cycle_slips, track_fast, truth_for
+from dsp.gnss.discriminators import costas_atan, dll_nelp
+from dsp.gnss.loops import TrackingChannel, hz_to_word
+from dsp.gnss.loops_fixed import (COEF_FRAC, DISC_CODE, DISC_PHASE, F16_FRAC, FLOAT, T_FRAC, V1,
+                                  V2, WORD_COEF_FRAC, ChannelCore, FixedArith)
+
+FS = 16.368e6
+T = 1e-3
+#: Stated bound, fixed vs float in closed loop (same noise): carrier phase error within
+#: 0.025 deg (~2 LSB of DISC_PHASE, 2^-15 cycle = 0.011 deg), code error within 2e-4 chip.
+PHASE_BOUND_DEG, CODE_BOUND_CHIPS = 0.025, 2e-4
+
+
+def _dumps(rng, n, batch):
+    e = rng.normal(0, 0.05, (n, batch))
+    a = rng.uniform(20, 200, (n, batch))
+    p = a * np.exp(2j * np.pi * e) + rng.normal(0, 3, (n, batch)) + 1j * rng.normal(0, 3, (n, batch))
+    tau = rng.normal(0, 0.1, (n, batch))
+    E = a * (1 - np.abs(tau - 0.25)) + rng.normal(0, 3, (n, batch))
+    L = a * (1 - np.abs(tau + 0.25)) + rng.normal(0, 3, (n, batch))
+    return E, rng.normal(0, 3, (n, batch)), p.real, p.imag, L, rng.normal(0, 3, (n, batch))
+
+
+def _q(x, fmt):
+    v = int(np.floor(x * 2.0 ** fmt.frac + 0.5))
+    hi = (1 << (fmt.bits - 1)) - 1
+    return max(-hi - 1, min(hi, v))
+
+
+def _rs(v, s):
+    return (v + (1 << (s - 1))) >> s if s > 0 else v << -s
+
+
+def _sat(v, fmt):
+    hi = (1 << (fmt.bits - 1)) - 1
+    return max(-hi - 1, min(hi, v))
+
+
+def test_float_form_is_the_golden_channel():
+    rng = np.random.default_rng(3)
+    d = _dumps(rng, 300, 16)
+    gold = TrackingChannel(T, 3, 15.0, 1.0, 0.5, 4.092e6, False, 5255.0 * np.ones(16), 51.5)
+    core = ChannelCore(FLOAT, FS, T, 3, 15.0, 1.0, 0.5, 4.092e6, False, 5255.0 * np.ones(16), 51.5)
+    for k in range(300):
+        g = gold.update(*(x[k] for x in d))
+        c = core.step(*(x[k] for x in d))
+        assert np.allclose(g[0], c[0], rtol=0, atol=1e-9) and np.allclose(g[1], c[1], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("order,inverted", [(3, False), (2, True)])
+def test_fixed_is_bit_exact_against_python_ints(order, inverted):
+    rng = np.random.default_rng(order)
+    n, batch = 200, 8
+    d = _dumps(rng, n, batch)
+    f0, r0 = rng.uniform(-5000, 5000, batch), rng.uniform(-60, 60, batch)
+    core = ChannelCore(FixedArith(), FS, T, order, 15.0, 1.0, 0.5, 4.092e6, inverted, f0, r0)
+    K1, K2, K3, KT = core.K1, core.K2, core.K3, core.KT
+    assert K3 == (round(T * (15 / 0.7845) ** 3 * 2 ** COEF_FRAC) if order == 3 else 0)
+    s = -1 if inverted else 1
+    v1 = [_q(f, V1) for f in f0]
+    v2 = [_q(r, V2) for r in r0]
+    ef = DISC_PHASE.frac + COEF_FRAC
+    for k in range(n):
+        cw, kw = core.step(*(x[k] for x in d))
+        for b in range(batch):
+            ie, qe, ip, qp, il, ql = (float(x[k, b]) for x in d)
+            e = _q(float(costas_atan(ip, s * qp)), DISC_PHASE)
+            tau = _q(float(dll_nelp(ie, qe, il, ql, 0.5)), DISC_CODE)
+            if order == 3:
+                v2[b] = _sat(v2[b] + _rs(e * K3, ef - V2.frac), V2)
+                v1[b] = _sat(v1[b] + _rs(e * K2, ef - V1.frac) + _rs(v2[b] * KT, V2.frac + T_FRAC - V1.frac), V1)
+            else:
+                v1[b] = _sat(v1[b] + _rs(e * K2, ef - V1.frac), V1)
+            f = _sat(v1[b] + _rs(e * K1, ef - V1.frac), V1)
+            f16 = _rs(f, V1.frac - F16_FRAC)
+            w_c = core.W_IF + s * _rs(f16 * core.KWC, F16_FRAC + WORD_COEF_FRAC)
+            w_k = core.W_CHIP + _rs(f16 * core.KWK, F16_FRAC + WORD_COEF_FRAC) \
+                + _rs(tau * core.KWD, DISC_CODE.frac + WORD_COEF_FRAC)
+            assert (int(cw[b]), int(kw[b])) == (w_c, w_k), (k, b)
+            assert int(core.v1[b]) == v1[b] and int(core.v2[b]) == v2[b]
+    # and the words are the float frequencies' words to within the quantisation
+    fl = ChannelCore(FLOAT, FS, T, order, 15.0, 1.0, 0.5, 4.092e6, inverted, f0, r0)
+    fx = ChannelCore(FixedArith(), FS, T, order, 15.0, 1.0, 0.5, 4.092e6, inverted, f0, r0)
+    for k in range(n):
+        c_f = fl.step(*(x[k] for x in d))
+        c_x = fx.step(*(x[k] for x in d))
+    wf = hz_to_word(c_f[0], FS)[0]
+    assert np.max(np.abs(c_x[0] - wf)) <= 2     # open loop: integrated e quantisation
+
+
+def _closed(duration_s, n_trials, seed):
+    tr = truth_for(seed002(q=0, jerk_g_per_s=5.0, jerk_start_s=0.5, jerk_duration_s=duration_s),
+                   duration_s + 1.01)
+    n = int(round((duration_s + 1.0) / T))
+    fx = FixedArith()
+    a = track_fast(tr, 45.0, n, shape=(n_trials,), seed=seed, arith=FLOAT)
+    b = track_fast(tr, 45.0, n, shape=(n_trials,), seed=seed, arith=fx)
+    return a, b, fx
+
+
+def _check_closed(a, b, fx):
+    assert fx.sat == {}
+    assert np.all(cycle_slips(b.phase_err_cycles) == 0)
+    dp = np.abs(a.phase_err_cycles - b.phase_err_cycles).max() * 360
+    dc = np.abs(a.code_err_chips - b.code_err_chips).max()
+    assert dp < PHASE_BOUND_DEG and dc < CODE_BOUND_CHIPS, (dp, dc)
+    assert dp > 0          # the fixed form really quantises
+
+
+def test_fixed_within_bound_of_float_closed_loop_short():
+    _check_closed(*_closed(1.0, 8, 1))
+
+
+@pytest.mark.slow
+def test_fixed_within_bound_of_float_seed002_jerk_10_s():
+    _check_closed(*_closed(10.0, 8, 2))
