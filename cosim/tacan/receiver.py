@@ -11,13 +11,14 @@ import sys
 from dsp.tacan.kalman import KalmanConfig
 
 from ..link import DspServiceConfig
-from ..receivers import (Arg, Figure, Option, Receiver, Study, config_kwargs, parse_int,
-                         register)
+from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
+                         parse_int, register)
 from ..studies.faults import TARGETS, FaultConfig
 from ..studies.sweep import SweepConfig
 from ..validate import check_jobs, check_out_dir, check_out_file, dumps, warn
 from .run import TacanRunConfig
 from .signal import TacanSignalConfig
+from .study import SWEEP_MODEL
 
 #: Clock the DSP service presets (``cosim.link.DSP_PRESETS``) are written for.
 PRESET_CLK_HZ = 20e6
@@ -211,7 +212,7 @@ SWEEP_OPTIONS = (
              "dsp.K.rounding=floor,half_up (repeatable; default adc_bits=4:14)"),
     Arg("--snr-db", default=None,
         help=f"SNR values (dB; a:b:step or a list; default "
-             f"{','.join(f'{v:g}' for v in SweepConfig().snr_db)})"),
+             f"{','.join(f'{v:g}' for v in _SW.__dataclass_fields__['snr_db'].default)})"),
     Option(_SW, "design", choices=("grid", "oat"), case="lower",
            help="grid: every combination; oat: one parameter at a time (the others at their "
                 "largest value)"),
@@ -369,9 +370,21 @@ def _equivalence(**kw) -> dict:
     return check_equivalence(top="tacan", **kw)
 
 
-def _frontend_params():
+def _component(params):
+    from hdl.tacan.frontend import TacanFrontEnd
+    return TacanFrontEnd(params)
+
+
+def _model_session(params, **kw):
+    from .session import TacanModelSession
+    return TacanModelSession(params, **kw)
+
+
+def _frontend():
     from hdl.tacan.model import TacanFrontendParams
-    return TacanFrontendParams
+    return Frontend(params=TacanFrontendParams, component=_component, model=_model_session,
+                    verilog_name="tacan_frontend",
+                    inputs=lambda p: {"freq": p.nco_freq_word})
 
 
 TACAN = register(Receiver(
@@ -383,11 +396,11 @@ TACAN = register(Receiver(
     metrics=("rmse_deg", "mean_error_deg", "max_abs_error_deg", "rmse_over_crb",
              "vs_golden_rms_deg"),
     primary=Figure("rmse_deg", "bearing RMSE", "deg"),
-    frontend=_frontend_params(),
+    frontend=_frontend(),
     tops={"tacan_frontend": _top},
     equivalence=_equivalence,
     sweep=Study("quantisation sweep: word lengths/modes x SNR x trials, report, word-length "
-                "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep),
+                "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),
     faults=Study("bit-error study: flip bits in the ADC samples, FIFO words, the NCO register "
                  "or the DSP state", FAULT_OPTIONS, cmd_faults),
 ))
