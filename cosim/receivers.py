@@ -29,7 +29,8 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-__all__ = ["Receiver", "Study", "Figure", "Frontend", "SweepModel", "Option", "Arg", "register", "unregister",
+__all__ = ["Receiver", "Study", "Figure", "Frontend", "SweepModel", "FaultModel",
+           "Option", "Arg", "register", "unregister",
            "get", "receivers", "frontend_for", "add_options", "config_kwargs", "BUILTIN"]
 
 #: Entry modules of the receivers shipped with the toolkit (importing one registers it).
@@ -257,9 +258,41 @@ class SweepModel:
 
 
 @dataclass(frozen=True)
+class FaultModel:
+    """The receiver's side of the generic fault study (:mod:`cosim.studies.faults`): the
+    engine runs BER 0 and every BER x trial, aggregates and reports; the receiver says
+    where bits can flip and runs one (BER, trial).
+
+    Parameters
+    ----------
+    targets : tuple of str
+        Where the bits flip (``--target``).
+    check : callable
+        ``check(fc)``: the receiver's rules on a ``FaultConfig`` (ValueError).
+    check_size : callable
+        ``check_size(fc)``: build the first record, validate it, refuse one too big.
+    word_width : callable
+        ``word_width(fc)``: width of the target's words (``--bits`` positions).
+    record : callable
+        ``record(fc, ber, trial, cache) -> dict``: one run (``flips``, ``exception``,
+        the scores); never raises. ``cache`` is shared by the runs of one trial.
+    cpu_s_per_record_s : float
+        CPU seconds a run costs per second of record (the up-front size check).
+    """
+
+    targets: tuple
+    check: Callable[[Any], None]
+    check_size: Callable[[Any], None]
+    word_width: Callable[[Any], int]
+    record: Callable[..., dict]
+    cpu_s_per_record_s: float = 1.5
+
+
+@dataclass(frozen=True)
 class Study:
     """A study subcommand of a receiver (``sweep <name>``, ``faults <name>``); ``model``
-    (a :class:`SweepModel` for a sweep) lets the generic engine run the receiver's points."""
+    (a :class:`SweepModel` for a sweep, a :class:`FaultModel` for faults) lets the generic
+    engine run the receiver's points."""
 
     help: str
     options: tuple

@@ -13,11 +13,12 @@ from dsp.tacan.kalman import KalmanConfig
 from ..link import DspServiceConfig
 from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
                          parse_int, register)
-from ..studies.faults import TARGETS, FaultConfig
+from ..studies.faults import FaultConfig
 from ..studies.sweep import SweepConfig
 from ..validate import check_jobs, check_out_dir, check_out_file, dumps, warn
 from .run import TacanRunConfig
 from .signal import TacanSignalConfig
+from .faults import FAULT_MODEL, TARGETS
 from .study import SWEEP_MODEL
 
 #: Clock the DSP service presets (``cosim.link.DSP_PRESETS``) are written for.
@@ -296,7 +297,7 @@ FAULT_OPTIONS = (
     Option(_FC, "target", choices=TARGETS, case="lower", help="where the bits flip"),
     Arg("--ber", default=None,
         help=f"bit error rates (per bit): lo:hi (every decade) or a comma list (default "
-             f"{_decades(FaultConfig().ber)})"),
+             f"{_decades(_FC.__dataclass_fields__['ber'].default)})"),
     Arg("--bits", default=None,
         help="only these bit positions (comma list, 0 = LSB), e.g. the MSBs (default: every "
              "bit of the target's words)"),
@@ -402,5 +403,5 @@ TACAN = register(Receiver(
     sweep=Study("quantisation sweep: word lengths/modes x SNR x trials, report, word-length "
                 "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),
     faults=Study("bit-error study: flip bits in the ADC samples, FIFO words, the NCO register "
-                 "or the DSP state", FAULT_OPTIONS, cmd_faults),
+                 "or the DSP state", FAULT_OPTIONS, cmd_faults, model=FAULT_MODEL),
 ))
