@@ -29,8 +29,9 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-__all__ = ["Receiver", "Study", "Figure", "Option", "Arg", "register", "unregister", "get",
-           "receivers", "add_options", "config_kwargs", "BUILTIN"]
+__all__ = ["Receiver", "Study", "Figure", "Frontend", "SweepModel", "FaultModel",
+           "Option", "Arg", "register", "unregister",
+           "get", "receivers", "frontend_for", "add_options", "config_kwargs", "BUILTIN"]
 
 #: Entry modules of the receivers shipped with the toolkit (importing one registers it).
 BUILTIN = ("cosim.tacan.receiver",)
@@ -179,12 +180,124 @@ class Figure:
 
 
 @dataclass(frozen=True)
+class Frontend:
+    """A receiver's front end, as :func:`cosim.session.open_frontend` opens it.
+
+    Parameters
+    ----------
+    params : type
+        The front end's parameter dataclass: ``open_frontend(backend, params)`` finds this
+        entry by ``isinstance(params, Frontend.params)``.
+    component : callable
+        ``component(params)`` -> the Amaranth top (a stream ``wiring.Component``; ``pysim``
+        and ``verilator`` sessions run it).
+    model : callable
+        ``model(params, log_ranges=False)`` -> the bit-exact model as a
+        :class:`cosim.session.FrontendSession` (the ``model`` backend).
+    verilog_name : str
+        The Verilog module name of the top (Verilator sessions).
+    inputs : callable, optional
+        ``inputs(params)`` -> ``{port: value}`` set at reset (e.g. an NCO word); default none.
+    """
+
+    params: type
+    component: Callable[[Any], Any]
+    model: Callable[..., Any]
+    verilog_name: str
+    inputs: Callable[[Any], dict] | None = None
+
+    def reset_inputs(self, params) -> dict:
+        return {} if self.inputs is None else dict(self.inputs(params))
+
+
+@dataclass(frozen=True)
+class SweepModel:
+    """The receiver's side of the generic sweep engine (:mod:`cosim.studies.sweep`): the
+    engine designs the points (grid / one at a time), caches and resumes them, pairs each
+    with the golden run of the same record, bootstraps, proposes, confirms and reports; the
+    receiver says what a parameter is and runs one record.
+
+    Parameters
+    ----------
+    check_param : callable
+        ``check_param(name)``: raise ValueError for a parameter name the receiver does not
+        know (the up-front validation of ``--param``).
+    check_point : callable
+        ``check_point(cfg, combo)``: build the point's configuration from the swept values
+        ``combo`` (``((name, value), ...)``) and raise ValueError if it is refused; called for
+        every point before the first runs.
+    record : callable
+        ``record(cfg, snr_db, trial, combos)`` -> an object for one Monte Carlo record
+        (the signal of that SNR and trial seed made once, a front-end cache shared by its
+        points) with ``base`` (a dict every row of the record carries), ``golden()`` and
+        ``point(combo, recheck=False)``; each returns the metrics dict: the primary figure
+        (``Receiver.primary.key``), ``locked`` (bool), optionally ``dsp_events``,
+        ``ranges``, ``recheck`` and any other metric. A point is paired with the golden
+        run of its own record.
+    confirm_recheck : callable, optional
+        ``confirm_recheck(cfg, combo) -> dict``: re-check the confirmed combination on a
+        cycle-accurate backend (``same_bits``, ...).
+    default_params : tuple
+        The swept parameters when none is given.
+    cpu_s_per_record_s : float
+        CPU seconds a point costs per second of record (the up-front size check).
+    title : str
+        The report's title.
+    description : str
+        The report's sentence on what a point runs and what its golden pairing is.
+    """
+
+    check_param: Callable[[str], None]
+    check_point: Callable[..., None]
+    record: Callable[..., Any]
+    confirm_recheck: Callable[..., dict] | None = None
+    default_params: tuple = ()
+    cpu_s_per_record_s: float = 1.5
+    title: str = "quantisation sweep"
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class FaultModel:
+    """The receiver's side of the generic fault study (:mod:`cosim.studies.faults`): the
+    engine runs BER 0 and every BER x trial, aggregates and reports; the receiver says
+    where bits can flip and runs one (BER, trial).
+
+    Parameters
+    ----------
+    targets : tuple of str
+        Where the bits flip (``--target``).
+    check : callable
+        ``check(fc)``: the receiver's rules on a ``FaultConfig`` (ValueError).
+    check_size : callable
+        ``check_size(fc)``: build the first record, validate it, refuse one too big.
+    word_width : callable
+        ``word_width(fc)``: width of the target's words (``--bits`` positions).
+    record : callable
+        ``record(fc, ber, trial, cache) -> dict``: one run (``flips``, ``exception``,
+        the scores); never raises. ``cache`` is shared by the runs of one trial.
+    cpu_s_per_record_s : float
+        CPU seconds a run costs per second of record (the up-front size check).
+    """
+
+    targets: tuple
+    check: Callable[[Any], None]
+    check_size: Callable[[Any], None]
+    word_width: Callable[[Any], int]
+    record: Callable[..., dict]
+    cpu_s_per_record_s: float = 1.5
+
+
+@dataclass(frozen=True)
 class Study:
-    """A study subcommand of a receiver (``sweep <name>``, ``faults <name>``)."""
+    """A study subcommand of a receiver (``sweep <name>``, ``faults <name>``); ``model``
+    (a :class:`SweepModel` for a sweep, a :class:`FaultModel` for faults) lets the generic
+    engine run the receiver's points."""
 
     help: str
     options: tuple
     run: Callable[[argparse.Namespace], int]
+    model: Any = None
 
 
 @dataclass(frozen=True)
@@ -203,9 +316,9 @@ class Receiver:
         Options of ``python -m cosim <name>``.
     run : callable
         ``run(args) -> exit code``: the subcommand.
-    frontend : type, optional
-        The front end's parameter dataclass, a key of :data:`cosim.session.FRONTEND_TYPES`
-        (its HDL top, bit-exact model session and Verilog name).
+    frontend : Frontend, optional
+        The front end: its parameter class, Amaranth top, bit-exact model session and
+        Verilog name (:func:`cosim.session.open_frontend` opens it on every backend).
     tops : dict, optional
         Verilog module name -> a function building the top with default parameters
         (``verilog`` exports and lints each; ``synth --top <name>`` synthesises the first).
@@ -228,7 +341,7 @@ class Receiver:
     run: Callable[[argparse.Namespace], int]
     metrics: tuple
     primary: Figure
-    frontend: type | None = None
+    frontend: Frontend | None = None
     tops: dict = field(default_factory=dict)
     equivalence: Callable[..., dict] | None = None
     sweep: Study | None = None
@@ -238,6 +351,9 @@ class Receiver:
         if not re.fullmatch(r"[a-z][a-z0-9-]*", self.name):
             raise ValueError(f"receiver name must be lower-case letters, digits and '-', "
                              f"not {self.name!r}")
+        if self.frontend is not None and not isinstance(self.frontend, Frontend):
+            raise TypeError(f"Receiver.frontend must be a Frontend, not "
+                            f"{type(self.frontend).__name__}")
         if self.primary.key not in self.metrics:
             raise ValueError(f"the primary figure {self.primary.key!r} must be one of the "
                              f"metrics {list(self.metrics)}")
@@ -275,6 +391,17 @@ def get(name: str) -> Receiver:
     except KeyError:
         raise ValueError(f"no receiver named {name!r} (known: "
                          f"{', '.join(_REGISTRY)})") from None
+
+
+def frontend_for(params) -> Frontend:
+    """The registered :class:`Frontend` whose parameter class ``params`` is an instance of."""
+    rs = receivers()
+    for r in rs:
+        if r.frontend is not None and isinstance(params, r.frontend.params):
+            return r.frontend
+    known = [r.frontend.params.__name__ for r in rs if r.frontend is not None]
+    raise TypeError(f"no front end registered for parameters of type "
+                    f"{type(params).__name__} (known: {', '.join(known)})")
 
 
 # -- options <-> dataclasses ----------------------------------------------------------------

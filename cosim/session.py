@@ -25,11 +25,12 @@ the step; cycles past its end are ready), ``None`` (always ready), or a
 :class:`~cosim.link.DspServiceConfig` / :class:`~hdl.model.fifo.ReadySchedule`, a pattern in
 cycles from reset (the bit-exact model then steps event by event, without per-cycle arrays).
 
-Backends: :class:`TacanModelSession` (the bit-exact model of the TACAN front end and its
-FIFO, state carried), :class:`PysimSession` (one ``amaranth.sim`` simulator kept running;
-any stream component), :class:`cosim.verilator.VerilatorSession` (the compiled model kept
-alive; any stream component). :func:`open_frontend` opens the right one for a front end's
-parameters (:data:`FRONTEND_TYPES` maps a parameter class to its component and model).
+Backends: a receiver's bit-exact model session (a :class:`FrontendSession` subclass in its
+own package, ``cosim/<receiver>/session.py``), :class:`PysimSession` (one
+``amaranth.sim`` simulator kept running; any stream component),
+:class:`cosim.verilator.VerilatorSession` (the compiled model kept alive; any stream
+component). :func:`open_frontend` opens the right one for a front end's parameters, looked up
+in the receiver registry (``Receiver.frontend``, a :class:`cosim.receivers.Frontend`).
 """
 from __future__ import annotations
 
@@ -42,10 +43,9 @@ import numpy as np
 from amaranth.hdl import Value
 
 from dsp.fixed import check_int as _int
-from hdl.model.fifo import FifoState, ReadySchedule, fifo_model_events
+from hdl.model.fifo import ReadySchedule
 
-__all__ = ["StepResult", "FrontendSession", "PysimSession", "TacanModelSession",
-           "ready_window", "open_frontend", "open_stream_session", "FRONTEND_TYPES",
+__all__ = ["StepResult", "FrontendSession", "PysimSession", "ready_window", "open_frontend", "open_stream_session", "FRONTEND_TYPES",
            "BACKENDS"]
 
 BACKENDS = ("model", "pysim", "verilator")
@@ -356,153 +356,19 @@ class PysimSession(FrontendSession):
         self._stack.close()
 
 
-# -- the bit-exact model of the TACAN front end -----------------------------------------------
-class TacanModelSession(FrontendSession):
-    """The bit-exact model of :class:`hdl.tacan.frontend.TacanFrontEnd` as a session.
-
-    :class:`~hdl.tacan.model.TacanFrontendModel` (its state carried) gives the peaks
-    and the cycle each is written to the FIFO; the FIFO model
-    (:func:`~hdl.model.fifo.fifo_model_events`, its state carried) gives what the DSP reads.
-    A peak written after the step's last cycle waits for the next step. ``freq`` writes take
-    effect from the first ADC sample offered at or after their cycle (the NCO samples the
-    port with each valid sample), as in the HDL. Ports: ``freq`` (write/read),
-    ``overflow_count`` (read).
-
-    Parameters
-    ----------
-    params : TacanFrontendParams
-    log_ranges : bool
-        Keep the model's range log (:meth:`ranges`).
-    """
-
-    backend = "model"
-
-    def __init__(self, params, *, log_ranges: bool = False, fast: bool | None = None):
-        from hdl.tacan.model import TacanFrontendModel
-        super().__init__()
-        self.params = params
-        self.model = TacanFrontendModel(params, log_ranges=log_ranges, fast=fast)
-        self._fe_state = None
-        self._fifo_state = FifoState()
-        self._carry_wc = np.zeros(0, np.int64)
-        self._carry_w = np.zeros(0, np.int64)
-        self._n_samples = 0
-        # Runs of samples offered on consecutive cycles: sample s0 + j at cycle c0 + j.
-        self._run_s = np.zeros(0, np.int64)
-        self._run_c = np.zeros(0, np.int64)
-        self._ch_idx: list[int] = []   # freq changes by ADC sample index
-        self._ch_val: list[int] = []
-        self._changes = None           # the same as int64 arrays, for the model
-        self._freq = int(params.nco_freq_word)
-        self.n_peaks = 0
-
-    def _check_port(self, port) -> None:
-        if port != "freq":
-            raise KeyError(f"the TACAN front-end model has one writable port, 'freq', "
-                           f"not {port!r}")
-
-    def _read(self, port):
-        if port == "overflow_count":
-            return self._fifo_state.overflow
-        if port == "freq":
-            return self._freq
-        raise KeyError(f"the TACAN front-end model reads 'freq' and 'overflow_count', "
-                       f"not {port!r}")
-
-    def ranges(self) -> dict:
-        return self.model.ranges()
-
-    @property
-    def fifo_state(self) -> FifoState:
-        return self._fifo_state
-
-    def _add_change(self, idx: int, value: int) -> None:
-        if self._ch_idx and self._ch_idx[-1] == idx:     # same sample: the later write wins
-            self._ch_val[-1] = value
-        else:
-            self._ch_idx.append(idx)
-            self._ch_val.append(value)
-        self._changes = None
-
-    def _step(self, queue, ready, n, writes):
-        from .link import DspServiceConfig
-        p = self.params
-        start, stop = self.cycle, self.cycle + n
-        x = queue[:n]
-        n0 = self._n_samples
-        for c, _port, v in writes:   # sample index of the first sample at or after cycle c
-            if v < 0 or v >= 1 << p.nco_phase_bits:
-                raise ValueError(f"freq words must lie in [0, 2**{p.nco_phase_bits}), not {v}")
-            self._add_change(n0 + min(c - start, x.size), v)
-            self._freq = v
-        if x.size:
-            if not (self._run_c.size and self._run_c[-1] - self._run_s[-1] == start - n0):
-                self._run_s = np.r_[self._run_s, np.int64(n0)]
-                self._run_c = np.r_[self._run_c, np.int64(start)]
-            if self._changes is None and self._ch_idx:
-                self._changes = (np.array(self._ch_idx, np.int64),
-                                 np.array(self._ch_val, np.int64))
-            changes = self._changes
-            pk, self._fe_state = self.model.run(x, self._fe_state, freq_changes=changes)
-            self._n_samples += x.size
-            self.n_peaks += len(pk)
-            adc_idx = (pk.end_index + 1) * np.int64(p.decimation) - 1
-            r = np.searchsorted(self._run_s, adc_idx, side="right") - 1
-            wc = self._run_c[r] + (adc_idx - self._run_s[r]) + np.int64(p.peak_latency)
-            wc = np.r_[self._carry_wc, wc]
-            w = np.r_[self._carry_w, self.model.words(pk)]
-        else:
-            wc, w = self._carry_wc, self._carry_w
-        now = wc < stop
-        self._carry_wc, self._carry_w = wc[~now], w[~now]
-        wc, w = wc[now], w[now]
-        if isinstance(ready, DspServiceConfig):
-            out_w, out_c = [], []
-            st = self._fifo_state
-            for a, b, sched in ready.segments(n, start):
-                i0, i1 = np.searchsorted(wc, [a, b])
-                res = fifo_model_events(wc[i0:i1], w[i0:i1], b - a, sched, p.fifo, state=st)
-                st = res.state
-                out_w.append(res.words)
-                out_c.append(res.cycles)
-            self._fifo_state = st
-            words, cycles = np.concatenate(out_w), np.concatenate(out_c)
-        else:
-            rdy = ReadySchedule(period=1) if ready is None else (
-                ready if isinstance(ready, ReadySchedule) else ready_window(ready, start, n))
-            res = fifo_model_events(wc, w, n, rdy, p.fifo, state=self._fifo_state)
-            self._fifo_state = res.state
-            words, cycles = res.words, res.cycles
-        return words, cycles, x.size
-
-
 # -- opening sessions ---------------------------------------------------------------------------
-def _tacan_types():
-    from hdl.tacan.model import TacanFrontendParams
-    from hdl.tacan.frontend import TacanFrontEnd
-    return TacanFrontendParams, {
-        "component": TacanFrontEnd,
-        "model": TacanModelSession,
-        "verilog_name": "tacan_frontend",
-        "inputs": lambda p: {"freq": p.nco_freq_word},
-    }
-
-
-#: Front ends :func:`open_frontend` knows: parameter class -> component class, model session
-#: class, Verilog top name, and the port values set at reset (a new front end adds an entry).
+#: Front ends :func:`open_frontend` knows besides the registered receivers' (parameter
+#: class -> :class:`cosim.receivers.Frontend`); a receiver declares its front end in its
+#: registry entry (``Receiver.frontend``), which is looked up after this dict.
 FRONTEND_TYPES: dict = {}
 
 
-def _frontend_entry(params) -> dict:
-    if not FRONTEND_TYPES:
-        cls, entry = _tacan_types()
-        FRONTEND_TYPES[cls] = entry
+def _frontend_entry(params):
     for cls, entry in FRONTEND_TYPES.items():
         if isinstance(params, cls):
             return entry
-    raise TypeError(f"no front end registered for parameters of type "
-                    f"{type(params).__name__} (known: "
-                    f"{', '.join(c.__name__ for c in FRONTEND_TYPES)})")
+    from .receivers import frontend_for
+    return frontend_for(params)
 
 
 def open_stream_session(backend: str, dut, *, name: str = "dut", inputs: dict | None = None,
@@ -521,15 +387,16 @@ def open_stream_session(backend: str, dut, *, name: str = "dut", inputs: dict | 
 
 def open_frontend(backend: str, params, *, log_ranges: bool = False,
                   vcd: str | Path | None = None) -> FrontendSession:
-    """A front-end session for ``params`` (e.g. a ``TacanFrontendParams``) on ``backend``
-    (``"model"``, ``"pysim"`` or ``"verilator"``), reset, with its control ports at their
-    reset values (the TACAN ``freq`` port at the digital IF word)."""
+    """A front-end session for ``params`` (an instance of a registered front end's parameter
+    class, :class:`cosim.receivers.Frontend`) on ``backend`` (``"model"``, ``"pysim"`` or
+    ``"verilator"``), reset, with its control ports at their reset values
+    (``Frontend.inputs``)."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
     entry = _frontend_entry(params)
     if backend == "model":
         if vcd is not None:
             raise ValueError("the bit-exact model has no waveform; use pysim or verilator")
-        return entry["model"](params, log_ranges=log_ranges)
-    return open_stream_session(backend, entry["component"](params), name=entry["verilog_name"],
-                               inputs=entry["inputs"](params), vcd=vcd)
+        return entry.model(params, log_ranges=log_ranges)
+    return open_stream_session(backend, entry.component(params), name=entry.verilog_name,
+                               inputs=entry.reset_inputs(params), vcd=vcd)

@@ -36,13 +36,23 @@ import csv
 import json
 import math
 import time
-import traceback
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+#: TACAN's targets (kept here for callers of the first registry; a receiver gives its own
+#: in ``FaultModel.targets``).
 TARGETS = ("adc", "fifo", "register", "dsp-state")
+
+
+def fault_model(receiver: str):
+    """The :class:`~cosim.receivers.FaultModel` of a registered receiver (ValueError if none)."""
+    from cosim.receivers import get
+    r = get(receiver)
+    if r.faults is None or r.faults.model is None:
+        raise ValueError(f"receiver {receiver!r} has no fault study model")
+    return r.faults.model
 
 
 def parse_ber(spec: str) -> tuple[float, ...]:
@@ -115,12 +125,14 @@ class FaultConfig:
     scrub_period_s: float = 0.01
     disturbed_deg: float = 1.0
     fifo_parity: bool = False
+    receiver: str = "tacan"
 
     def __post_init__(self):
         if not isinstance(self.fifo_parity, bool):
             raise ValueError(f"fifo_parity must be a bool, not {self.fifo_parity!r}")
-        if self.target not in TARGETS:
-            raise ValueError(f"target must be one of {list(TARGETS)}, not {self.target!r}")
+        model = fault_model(self.receiver)
+        if self.target not in model.targets:
+            raise ValueError(f"target must be one of {list(model.targets)}, not {self.target!r}")
         if not self.ber or not all(0 <= b < 1 for b in self.ber):
             raise ValueError(f"ber values must lie in [0, 1), not {self.ber!r}")
         if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
@@ -129,14 +141,10 @@ class FaultConfig:
             raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s, not {self.duration_s}")
         if self.backend not in ("model", "pysim", "verilator"):
             raise ValueError(f"backend must be model, pysim or verilator, not {self.backend!r}")
-        if self.target != "register" and self.backend != "model":
-            raise ValueError("only the register target runs on a cycle-accurate backend; the "
-                             "others use the bit-exact model")
         if not (math.isfinite(self.scrub_period_s) and self.scrub_period_s > 0):
             raise ValueError(f"scrub_period_s must be > 0, not {self.scrub_period_s}")
-        if self.fifo_parity and self.target != "fifo":
-            raise ValueError(f"fifo_parity protects the FIFO words: it changes nothing for "
-                             f"target {self.target!r} (use target 'fifo')")
+        # the receiver's own rules (which targets run on which backend, ...)
+        model.check(self)
         if self.bits is not None:
             w = self.word_width()
             if not self.bits or any(isinstance(b, bool) or not isinstance(b, (int, np.integer))
@@ -145,177 +153,19 @@ class FaultConfig:
                                  f"words ({w} bits), not {list(self.bits)}")
         # Every trial's record is built (and its front end validated) before the first point,
         # and the study must fit the machine (memory of a record, total time).
-        from cosim.tacan.run import check_run_size
-        from cosim.studies.sweep import CPU_S_PER_RECORD_S, MAX_STUDY_H
-        from cosim.validate import cores
-        run = _run_cfg(self, 0)
-        run.hdl_params
-        check_run_size(replace(run, backend=self.backend if self.target == "register"
-                               else "model"))
+        from cosim.studies.sweep import MAX_STUDY_H
+        model.check_size(self)
         n = self.trials * (len(set(self.ber) | {0.0}))
-        hours = n * self.duration_s * CPU_S_PER_RECORD_S / 3600
+        hours = n * self.duration_s * model.cpu_s_per_record_s / 3600
         if hours > MAX_STUDY_H:
             raise ValueError(f"{n:,} runs of {self.duration_s:g} s would take about "
                              f"{hours:,.0f} h (limit {MAX_STUDY_H:g} h): reduce --trials, "
                              f"--ber or --duration-s")
 
     def word_width(self) -> int:
-        """Width (bits) of the words the target's flips hit (``dsp-state``: the widest of
-        ``x`` and ``P``)."""
-        run = _run_cfg(self, 0)
-        if self.target == "adc":
-            return int(run.signal.adc_bits)
-        p = run.hdl_params
-        if self.target == "fifo":
-            return int(p.fifo.word_width)
-        if self.target == "register":
-            return int(p.nco_phase_bits)
-        fx = run.receiver.kalman
-        return int(max(fx.x.width, fx.P.width))
-
-
-def _run_cfg(fc: FaultConfig, trial: int):
-    from dsp.tacan.kalman import KalmanConfig
-    from cosim.tacan.run import TacanRunConfig
-    from cosim.tacan.signal import TacanSignalConfig
-    rng = np.random.default_rng([fc.seed, trial, 31337])
-    sig = TacanSignalConfig(snr_db=fc.snr_db, duration_s=fc.duration_s,
-                            seed=int(rng.integers(1 << 31)),
-                            bearing_deg=float(np.round(rng.uniform(0, 360), 3)))
-    return TacanRunConfig(signal=sig, backend="model", dsp="fixed",
-                          kalman=KalmanConfig(memory_s=fc.memory_s), require_bearing=False,
-                          hdl_changes=(("fifo_parity", True),) if fc.fifo_parity else ())
-
-
-def _score(fc: FaultConfig, run, track, truth_deg) -> dict:
-    from dsp.tacan.bearing import wrap_deg
-    keep = track.times_s >= run.settle
-    b = track.bearing_deg[0, keep]
-    t = track.times_s[keep]
-    nan = int(np.count_nonzero(~np.isfinite(b)))
-    err = wrap_deg(b - truth_deg)
-    dist = np.abs(err) > fc.disturbed_deg
-    valid = track.valid[0, keep] if track.valid is not None else np.ones(b.size, bool)
-    ev_ok = err[valid]
-    longest = 0.0
-    if dist.any():
-        # contiguous disturbed stretches: from the last good bearing before to the first after
-        idx = np.flatnonzero(dist)
-        starts = idx[np.r_[True, np.diff(idx) > 1]]
-        ends = idx[np.r_[np.diff(idx) > 1, True]]
-        for s, e in zip(starts, ends):
-            t0 = t[s - 1] if s > 0 else run.settle
-            t1 = t[e + 1] if e + 1 < t.size else t[e]
-            longest = max(longest, float(t1 - t0))
-    ev = {k: int(v[0]) for k, v in track.events.items()}
-    return {"n_bearings": int(b.size), "nan_bearings": nan,
-            "rmse_deg": float(np.sqrt(np.mean(err ** 2))) if b.size else None,
-            "max_abs_error_deg": float(np.abs(err).max()) if b.size else None,
-            "disturbed_fraction": float(dist.mean()) if b.size else None,
-            "longest_disturbance_s": longest, "events": ev,
-            "flagged_fraction": float(np.mean(~valid)) if b.size else None,
-            "misleading_fraction": float(np.mean(dist & valid)) if b.size else None,
-            "valid_rmse_deg": float(np.sqrt(np.mean(ev_ok ** 2))) if ev_ok.size else None,
-            "valid_max_abs_error_deg": float(np.abs(ev_ok).max()) if ev_ok.size else None}
-
-
-def _one(fc: FaultConfig, ber: float, trial: int, cache: dict) -> dict:
-    from cosim.tacan.run import FRONTENDS, _dsp_receive, run_dsp
-    from cosim.tacan.signal import TacanSignal, generate
-    run = _run_cfg(fc, trial)
-    rng = np.random.default_rng([fc.seed, trial, int(round(ber * 1e12)), 99])
-    key = ("sig", trial)
-    if key not in cache:
-        cache[key] = generate(run.signal)
-    s = cache[key]
-    truth = s.truth.bearing_deg
-    rec = {"target": fc.target, "ber": ber, "trial": trial, "bearing_deg": truth,
-           "flips": 0, "exception": None}
-    try:
-        p = run.hdl_params
-        if fc.target == "adc":
-            x, wi, _ = _flip_signed(s.samples, run.signal.adc_bits, ber, rng, fc.bits)
-            rec["flips"] = int(wi.size)
-            fo = FRONTENDS["model"](x, run)
-            track = run_dsp(fo, run, run.signal.fs_hz)
-        elif fc.target == "fifo":
-            fkey = ("fo", trial)
-            if fkey not in cache:
-                cache[fkey] = FRONTENDS["model"](s.samples, run)
-            fo0 = cache[fkey]
-            w, wi, _ = flip_bits(fo0.words, p.fifo.word_width, ber, rng, fc.bits)
-            rec["flips"] = int(wi.size)
-            fo = _dsp_receive(w, fo0.cycles, p, fo0.n_cycles, fo0.fifo_dropped)
-            rec["rx"] = fo.extra.get("rx")
-            track = run_dsp(fo, run, run.signal.fs_hz)
-        elif fc.target == "register":
-            track, rec["flips"] = _register_run(fc, run, s, p, ber, rng)
-        else:
-            track, rec["flips"] = _dsp_state_run(fc, run, s, ber, rng, cache, trial)
-        rec.update(_score(fc, run, track, truth))
-    except Exception as e:   # the study's point: report, never crash
-        rec["exception"] = f"{type(e).__name__}: {e}"
-        rec["traceback"] = traceback.format_exc(limit=5)
-    return rec
-
-
-def _register_run(fc: FaultConfig, run, s, p, ber, rng):
-    """NCO frequency register upsets, scrubbed by the DSP every ``scrub_period_s``."""
-    from cosim.tacan.run import FRONTENDS, run_dsp
-    n = len(s.samples)
-    period = max(1, int(round(fc.scrub_period_s * run.signal.fs_hz)))
-    good = p.nco_freq_word
-    writes, flips = [], 0
-    for k0 in range(0, n, period):
-        _, wi, bi = flip_bits(np.array([good]), p.nco_phase_bits, ber, rng, fc.bits)
-        if bi.size == 0:
-            continue
-        flips += int(bi.size)
-        bad = good
-        for b in bi:
-            bad ^= 1 << int(b)
-        c = k0 + int(rng.integers(0, period))
-        writes.append((c, "freq", bad))
-        if k0 + period < n:
-            writes.append((k0 + period, "freq", good))      # the scrub restores it
-    r = replace(run, control_writes=tuple(writes), control_latency_cycles=0,
-                backend=fc.backend)
-    fo = FRONTENDS[fc.backend](s.samples, r)
-    return run_dsp(fo, r, run.signal.fs_hz), flips
-
-
-def _dsp_state_run(fc: FaultConfig, run, s, ber, rng, cache, trial):
-    """Single-event upsets of the Kalman core's stored state (``x`` and the upper triangle
-    of ``P``): each bit of each word flips with probability ``ber`` per filter update, in
-    the compiled core between two updates (:meth:`EnvelopeKalman.schedule_upsets`)."""
-    from cosim.tacan.run import FRONTENDS
-    from dsp.tacan.kalman import EnvelopeKalman
-    from dsp.tacan.receiver import ReceiverState, amplitude_codes, process_peaks
-    fkey = ("fo", trial)
-    if fkey not in cache:
-        cache[fkey] = FRONTENDS["model"](s.samples, run)
-    fo = cache[fkey]
-    rc = run.receiver
-    fx = rc.kalman
-    widths = np.array([fx.x.width if n == "x" else fx.P.width
-                       for n, _, _ in EnvelopeKalman.STATE_WORDS])
-    word_of_bit = np.repeat(np.arange(widths.size), widths)
-    bit_in_word = np.concatenate([np.arange(w) for w in widths])
-    if fc.bits is not None:         # chosen bit positions: only those of each word
-        keep = np.isin(bit_in_word, np.asarray(fc.bits))
-        word_of_bit, bit_in_word = word_of_bit[keep], bit_in_word[keep]
-    n_steps = int(fo.ticks.size)    # an upper bound on the updates (gated ones included)
-    total = n_steps * word_of_bit.size
-    n_flips = int(rng.binomial(total, ber)) if ber > 0 and total else 0
-    flat = np.sort(rng.integers(0, total, n_flips)) if n_flips else np.zeros(0, np.int64)
-    steps = flat // word_of_bit.size
-    sel = flat % word_of_bit.size
-    kf = EnvelopeKalman(fx, batch=1)
-    kf.schedule_upsets(steps, word_of_bit[sel], bit_in_word[sel])
-    y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, fx.y)
-    track = process_peaks(fo.ticks / run.signal.fs_hz, y, rc, ticks=fo.ticks,
-                          tick_hz=run.signal.fs_hz, state=ReceiverState(kf=kf))
-    return track, int(kf.upsets_applied)
+        """Width (bits) of the words the target's flips hit (the receiver's
+        ``FaultModel.word_width``)."""
+        return int(fault_model(self.receiver).word_width(self))
 
 
 def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = True) -> dict:
@@ -325,11 +175,12 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
     import sys
     t0 = time.perf_counter()
     bers = tuple(sorted(set((0.0,) + tuple(fc.ber))))
+    model = fault_model(fc.receiver)
     cache: dict = {}
     recs = []
     items = [(ber, tr) for tr in range(fc.trials) for ber in bers]
     for ber, tr in tqdm(items, desc=f"faults ({fc.target})", file=sys.stderr, disable=not progress):
-        recs.append(_one(fc, ber, tr, cache))
+        recs.append(model.record(fc, ber, tr, cache))
         if len(cache) > 4:          # keep memory bounded (signals are large)
             for k in [k for k in cache if k[1] != tr]:
                 del cache[k]

@@ -7,19 +7,11 @@ chain run on the *same* record (paired comparison: the trial-to-trial noise canc
 ratio), and writes CSV/JSON of every point, plots, and a Markdown report with the range and
 saturation log and a word-length proposal.
 
-Parameters (``--param NAME=VALUES``)
------------------------------------
-``adc_bits``              ADC word length (the signal is digitised once per record for every
-                          value, :func:`cosim.tacan.signal.generate_adc_variants`).
-``<field>``               any field of :class:`hdl.tacan.model.TacanFrontendParams`
-                          (``nco_amp_bits``, ``mixer_out_bits``, ``cic_out_bits``,
-                          ``fir_coef_bits``, ``fir_out_bits``, ``env_iterations``,
-                          ``mixer_rounding``, ...).
-``dsp.<fmt>``             total width of a format of the fixed-point core (``y``, ``x``, ``P``,
-                          ``K``, ``cs``, ``innov``, ``r``), integer bits kept: fraction bits
-                          change.
-``dsp.<fmt>.rounding``    rounding of that format (``floor`` / ``half_up``).
-``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
+The receiver is a registered one (:mod:`cosim.receivers`) whose ``sweep`` study has a
+:class:`~cosim.receivers.SweepModel`: it names the parameters (``--param NAME=VALUES``;
+TACAN's: :mod:`cosim.tacan.study`), runs one record (the point runner: swept values + SNR +
+trial seed -> metrics with the primary figure, and the golden run of the same record) and
+keeps its own front-end cache; everything else here is generic.
 
 Values: ``a:b`` (integers a..b), ``a:b:s`` (a, a+s, ... <= b), or a comma list.
 
@@ -38,19 +30,34 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from cosim.validate import check_jobs, dumps
 
-GOLDEN_ADC_BITS = 16
-#: CPU seconds one point costs per second of record (model front end, FIFO, fixed DSP and
-#: its share of the golden chain; measured ~1 s, with margin) and the longest study started.
+#: CPU seconds one point costs per second of record (TACAN's: model front end, FIFO, fixed
+#: DSP and its share of the golden chain; measured ~1 s, with margin; a receiver gives its
+#: own in ``SweepModel.cpu_s_per_record_s``) and the longest study started.
 CPU_S_PER_RECORD_S = 1.5
 MAX_STUDY_H = 48.0
-FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
+
+
+def sweep_model(receiver: str):
+    """The :class:`~cosim.receivers.SweepModel` of a registered receiver (ValueError if it
+    has none)."""
+    from cosim.receivers import get
+    r = get(receiver)
+    if r.sweep is None or r.sweep.model is None:
+        raise ValueError(f"receiver {receiver!r} has no sweep study model")
+    return r.sweep.model
+
+
+def primary_key(receiver: str) -> str:
+    """The receiver's primary figure (``Receiver.primary.key``), e.g. ``rmse_deg``."""
+    from cosim.receivers import get
+    return get(receiver).primary.key
 
 
 # ---------------------------------------------------------------------------------------
@@ -100,32 +107,19 @@ def parse_values(spec: str, option: str = "values") -> tuple:
     return tuple(out)
 
 
-def parse_param(text: str) -> tuple[str, tuple]:
+def parse_param(text: str, receiver: str = "tacan") -> tuple[str, tuple]:
     """``"NAME=VALUES"`` -> ``(NAME, values)`` (name checked by :func:`check_param`)."""
     if "=" not in text:
         raise ValueError(f"--param must be NAME=VALUES, not {text!r}")
     name, spec = text.split("=", 1)
     name = name.strip()
-    check_param(name)
+    check_param(name, receiver)
     return name, parse_values(spec, f"--param {name}")
 
 
-def check_param(name: str) -> None:
-    from dsp.tacan.kalman import KalmanConfig
-    from hdl.tacan.model import TacanFrontendParams
-    hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
-    if name == "adc_bits" or name in hdl_fields:
-        return
-    parts = name.split(".")
-    if parts[0] == "dsp" and len(parts) in (2, 3) and parts[1] in FORMATS and \
-            (len(parts) == 2 or parts[2] == "rounding"):
-        return
-    if parts[0] == "kalman" and len(parts) == 2 and parts[1] in {f.name for f in fields(KalmanConfig)}:
-        return
-    raise ValueError(
-        f"unknown parameter {name!r}: use adc_bits, a TacanFrontendParams field "
-        f"({', '.join(sorted(hdl_fields))}), dsp.<fmt>[.rounding] with fmt in {FORMATS}, "
-        f"or kalman.<field>")
+def check_param(name: str, receiver: str = "tacan") -> None:
+    """Refuse a parameter the receiver's sweep model does not know (ValueError)."""
+    sweep_model(receiver).check_param(name)
 
 
 # ---------------------------------------------------------------------------------------
@@ -135,8 +129,11 @@ class SweepConfig:
 
     Parameters
     ----------
+    receiver : str
+        A registered receiver whose sweep study has a model (:mod:`cosim.receivers`).
     params : tuple of (name, values)
-        Swept parameters (crossed). Default: ``adc_bits`` 4..14.
+        Swept parameters (crossed). Default: the receiver's ``SweepModel.default_params``
+        (TACAN: ``adc_bits`` 4..14).
     snr_db : tuple of float
     trials : int
         Monte Carlo records per SNR (independent seeds; bearing drawn per trial).
@@ -158,7 +155,7 @@ class SweepConfig:
     """
 
     receiver: str = "tacan"
-    params: tuple = (("adc_bits", tuple(range(4, 15))),)
+    params: tuple = ()
     snr_db: tuple = (0.0, 5.0, 10.0, 15.0, 20.0)
     trials: int = 20
     duration_s: float = 1.0
@@ -171,13 +168,14 @@ class SweepConfig:
     design: str = "grid"
 
     def __post_init__(self):
-        if self.receiver != "tacan":
-            raise ValueError(f"receiver must be 'tacan' (the others come later), not {self.receiver!r}")
+        model = sweep_model(self.receiver)    # a registered receiver with a sweep model
+        if not self.params:
+            object.__setattr__(self, "params", tuple(model.default_params))
         names = [n for n, _ in self.params]
         if len(set(names)) != len(names):
             raise ValueError(f"parameter given twice: {names}")
         for n, vals in self.params:
-            check_param(n)
+            check_param(n, self.receiver)
             if not vals:
                 raise ValueError(f"parameter {n} has no values")
         if not self.snr_db or not all(isinstance(s, (int, float)) and math.isfinite(s)
@@ -244,48 +242,6 @@ class SweepConfig:
 # ---------------------------------------------------------------------------------------
 # One point
 # ---------------------------------------------------------------------------------------
-def trial_signal(cfg: SweepConfig, snr_db: float, trial: int, adc_bits: int = 12):
-    from cosim.tacan.signal import TacanSignalConfig
-    rng = np.random.default_rng([cfg.seed, trial, 7919])
-    bearing = float(np.round(rng.uniform(0, 360), 3))
-    seed = int(np.random.default_rng([cfg.seed, trial, int(round(snr_db * 1000))]).integers(1 << 31))
-    return TacanSignalConfig(snr_db=float(snr_db), duration_s=cfg.duration_s, seed=seed,
-                             bearing_deg=bearing, adc_bits=adc_bits)
-
-
-def run_config(cfg: SweepConfig, combo: tuple, sig):
-    """The :class:`cosim.tacan.run.TacanRunConfig` of a point (raises ValueError if invalid)."""
-    from dsp.fixed import FixedFormat
-    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
-    from cosim.tacan.run import TacanRunConfig
-    from cosim.validate import check_choice, check_int
-    hdl, kal, fmts = {}, {"memory_s": cfg.memory_s}, {}
-    base = KalmanFixedConfig()
-    for name, v in combo:
-        if name == "adc_bits":
-            sig = replace(sig, adc_bits=check_int("adc_bits", v, 1, 24))
-        elif name.startswith("dsp."):
-            parts = name.split(".")
-            f = fmts.get(parts[1], getattr(base, parts[1]))
-            if len(parts) == 2:
-                w = check_int(name, v, 2, 62)
-                f = FixedFormat(w, f.frac + (w - f.width), f.signed, f.rounding, f.overflow)
-            else:
-                check_choice(name, v, ("floor", "half_up"))
-                f = FixedFormat(f.width, f.frac, f.signed, v, f.overflow)
-            fmts[parts[1]] = f
-        elif name.startswith("kalman."):
-            kal[name.split(".")[1]] = v
-        else:
-            hdl[name] = v
-    kalman = KalmanConfig(**kal)
-    fixed = KalmanFixedConfig(kalman=kalman, **fmts)
-    run = TacanRunConfig(signal=sig, backend="model", dsp="fixed", kalman=kalman, fixed=fixed,
-                         hdl_changes=tuple(sorted(hdl.items())))
-    run.hdl_params  # validates the word lengths (headroom, widths)
-    return run
-
-
 def check_points(cfg: SweepConfig) -> None:
     """Every point's configuration, built and validated before the first point runs: a
     value the front end or the DSP core refuses (a 4.5-bit ADC, an unknown rounding, a
@@ -293,10 +249,10 @@ def check_points(cfg: SweepConfig) -> None:
     ending up as an "invalid" row of the report. Also refuses a study too big to start
     (points x record length)."""
     from cosim.validate import check_memory
-    sig = trial_signal(cfg, cfg.snr_db[0], 0)
+    model = sweep_model(cfg.receiver)
     for combo in cfg.combos:
         try:
-            run_config(cfg, combo, sig)
+            model.check_point(cfg, combo)
         except ValueError as e:
             raise ValueError(f"sweep point {', '.join(f'{n}={v}' for n, v in combo)}: {e}") \
                 from None
@@ -304,7 +260,7 @@ def check_points(cfg: SweepConfig) -> None:
     check_memory(cfg.n_points * 20e3, f"{cfg.n_points:,} points", "the swept values, "
                  "--snr-db or --trials")
     from cosim.validate import cores
-    hours = cfg.n_points * cfg.duration_s * CPU_S_PER_RECORD_S / cores() / 3600
+    hours = cfg.n_points * cfg.duration_s * model.cpu_s_per_record_s / cores() / 3600
     if hours > MAX_STUDY_H:
         raise ValueError(f"{cfg.n_points:,} points of {cfg.duration_s:g} s would take about "
                          f"{hours:,.0f} h on {cores()} cores (limit {MAX_STUDY_H:g} h): reduce "
@@ -318,17 +274,11 @@ def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:20]
 
 
-def _score(r: dict) -> dict:
-    keep = ("rmse_deg", "mean_error_deg", "max_abs_error_deg", "crb_deg", "n_bearings",
-            "gated", "reinit", "adc_clipped", "fifo_dropped", "dsp_events", "ranges", "digest")
-    return {k: r.get(k) for k in keep}
-
-
 def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_dir: str | None,
              recheck_combos: tuple = ()) -> list[dict]:
-    """All points of one record (SNR, trial): signal generation once, golden once."""
-    from cosim.tacan.run import TacanRunConfig, run_tacan
-    from cosim.tacan.signal import generate_adc_variants
+    """All points of one record (SNR, trial): the receiver's record (its signal generated
+    once, its front-end cache), its golden run once, then every point not yet cached."""
+    model = sweep_model(cfg.receiver)
     cache = Path(cache_dir) if cache_dir else None
     out, todo = [], []
     for combo in combos:
@@ -343,61 +293,26 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
     golden = json.loads(gfile.read_text()) if gfile is not None and gfile.exists() else None
     if not todo and golden is not None:
         return out + [golden]
-    sig = trial_signal(cfg, snr_db, trial)
-    bits = sorted({int(dict(c).get("adc_bits", sig.adc_bits)) for c, _, _ in todo} |
-                  {GOLDEN_ADC_BITS})
-    signals = generate_adc_variants(sig, bits)
-    base = {"snr_db": float(snr_db), "trial": trial, "bearing_deg": sig.bearing_deg}
+    rec = model.record(cfg, snr_db, trial, [c for c, _, _ in todo])
+    base = {"snr_db": float(snr_db), "trial": trial, **rec.base}
     if golden is None:
-        from dsp.tacan.kalman import KalmanConfig
-        gs = signals[GOLDEN_ADC_BITS]
-        grun = TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
-                              kalman=KalmanConfig(memory_s=cfg.memory_s), require_bearing=False)
         golden = {**base, "combo": [["golden", 1]], "kind": "golden", "locked": False}
         try:
-            g = run_tacan(grun, gs)
-            golden.update(_score(g), locked=g["n_bearings"] > 0)
+            golden.update(rec.golden())
         except (ValueError, RuntimeError) as e:
             golden["error"] = str(e)
         if gfile is not None:
             gfile.write_text(json.dumps(golden))
-    fe_cache: dict = {}      # combos that differ only in the DSP share the front end's run
     for combo, key, f in todo:
-        rec = {**base, "combo": [list(c) for c in combo], "kind": "point", "locked": False,
+        row = {**base, "combo": [list(c) for c in combo], "kind": "point", "locked": False,
                "key": key}
         # the configuration was validated before the study started (check_points); an
         # error here stops the study with its message instead of becoming a row
-        run = run_config(cfg, combo, sig)
-        run = replace(run, require_bearing=False)
-        s = signals[run.signal.adc_bits]
-        r = run_tacan(run, s, frontend_cache=fe_cache)
-        rec.update(_score(r), locked=r["n_bearings"] > 0)
-        if tuple(combo) in recheck_combos:
-            rec["recheck"] = recheck_point(cfg, run, s)
+        row.update(rec.point(combo, recheck=tuple(combo) in recheck_combos))
         if f is not None:
-            f.write_text(json.dumps(rec))
-        out.append(rec)
+            f.write_text(json.dumps(row))
+        out.append(row)
     return out + [golden]
-
-
-def recheck_point(cfg: SweepConfig, run, signal) -> dict:
-    """Re-run the first samples of a point cycle-accurately (:attr:`SweepConfig.recheck_plan`)
-    and compare the FIFO words and their cycles with the bit-exact model."""
-    from cosim.tacan.run import FRONTENDS
-    backend, n = cfg.recheck_plan
-    x = signal.samples[:n]
-    t0 = time.perf_counter()
-    a = FRONTENDS["model"](x, run)
-    try:
-        b = FRONTENDS[backend](x, run)
-    except RuntimeError as e:           # e.g. Verilator missing
-        return {"backend": backend, "error": str(e)}
-    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles)
-            and a.fifo_dropped == b.fifo_dropped)
-    return {"backend": backend, "samples": int(len(x)), "words": int(len(a.words)),
-            "same_bits": bool(same), "seconds": time.perf_counter() - t0,
-            **({"error": "no FIFO words in the re-checked samples: inconclusive"}
-               if len(a.words) == 0 else {})}
 
 
 # ---------------------------------------------------------------------------------------
@@ -494,7 +409,7 @@ def _cfg_dict(cfg: SweepConfig) -> dict:
 # ---------------------------------------------------------------------------------------
 # Aggregation, proposal, report
 # ---------------------------------------------------------------------------------------
-def _ratio_ci(pairs, key: str, n_boot: int = 2000) -> list[float] | None:
+def _ratio_ci(pairs, key: str, n_boot: int = 2000, fig: str = "rmse_deg") -> list[float] | None:
     """95 % bootstrap interval (over trials, paired) of the RMSE ratio point / golden.
 
     Within one trial the bearings are strongly correlated (the filter's memory spans a good
@@ -503,8 +418,8 @@ def _ratio_ci(pairs, key: str, n_boot: int = 2000) -> list[float] | None:
     results give the same interval."""
     if len(pairs) < 3:
         return None
-    a = np.array([r["rmse_deg"] ** 2 for r, _ in pairs])
-    b = np.array([g["rmse_deg"] ** 2 for _, g in pairs])
+    a = np.array([r[fig] ** 2 for r, _ in pairs])
+    b = np.array([g[fig] ** 2 for _, g in pairs])
     seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "little")
     idx = np.random.default_rng(seed).integers(0, len(pairs), (n_boot, len(pairs)))
     ratio = np.sqrt(a[idx].mean(axis=1) / np.maximum(b[idx].mean(axis=1), 1e-300))
@@ -515,6 +430,7 @@ def _ratio_ci(pairs, key: str, n_boot: int = 2000) -> list[float] | None:
 def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
     """Per (combo, SNR): RMSE over the trials (locked ones), lock rate, the paired golden
     RMSE on the same records, CRB, events, drops."""
+    P = primary_key(cfg.receiver)
     gold = {(r["snr_db"], r["trial"]): r for r in results if r.get("kind") == "golden"}
     pts = [r for r in results if r.get("kind") == "point"]
     rows = []
@@ -525,26 +441,27 @@ def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
             if not rs:
                 continue
             err = [r.get("error") for r in rs if r.get("error")]
-            ok = [r for r in rs if r["locked"] and r.get("rmse_deg") is not None]
+            ok = [r for r in rs if r["locked"] and r.get(P) is not None]
             gok = [gold.get((r["snr_db"], r["trial"])) for r in ok]
             paired = [(r, g) for r, g in zip(ok, gok) if g and g.get("locked")]
             ev: dict = {}
             for r in rs:
                 for k, v in (r.get("dsp_events") or {}).items():
                     ev[k] = ev.get(k, 0) + int(v)
-            rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in ok]))) if ok else None
-            g_rmse = float(np.sqrt(np.mean([g["rmse_deg"] ** 2 for _, g in paired]))) if paired else None
-            p_rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r, _ in paired]))) if paired else None
+            rmse = float(np.sqrt(np.mean([r[P] ** 2 for r in ok]))) if ok else None
+            g_rmse = float(np.sqrt(np.mean([g[P] ** 2 for _, g in paired]))) if paired else None
+            p_rmse = float(np.sqrt(np.mean([r[P] ** 2 for r, _ in paired]))) if paired else None
             ng = sum(1 for r in rs if (gold.get((r["snr_db"], r["trial"])) or {}).get("locked"))
             g_reinit = sum(int(((gold.get((r["snr_db"], r["trial"])) or {}).get("dsp_events")
                                 or {}).get("reinit", 0)) for r in rs)
             row = {**{n: v for n, v in combo}, "snr_db": float(snr), "trials": len(rs),
                    "invalid": err[0] if err else None,
                    "locked": len(ok), "golden_locked": ng, "golden_reinit": g_reinit,
-                   "rmse_deg": rmse, "golden_rmse_deg": g_rmse,
+                   P: rmse, "golden_" + P: g_rmse,
                    "ratio_to_golden": (p_rmse / g_rmse) if (paired and g_rmse) else None,
-                   "ratio_ci95": _ratio_ci(paired, json.dumps([cl, float(snr)])),
-                   "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in ok])) if ok else None,
+                   "ratio_ci95": _ratio_ci(paired, json.dumps([cl, float(snr)]), fig=P),
+                   "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in ok]))
+                   if ok and all(r.get("mean_error_deg") is not None for r in ok) else None,
                    "crb_deg": rs[0].get("crb_deg") or (gold.get((rs[0]["snr_db"], rs[0]["trial"])) or {}).get("crb_deg"),
                    "adc_clipped": int(sum(r.get("adc_clipped") or 0 for r in rs)),
                    "fifo_dropped": int(sum(r.get("fifo_dropped") or 0 for r in rs)),
@@ -655,20 +572,18 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
     last = attempts[-1]
     res = {"confirmed": last["confirmed"], "params": last["params"], "seed": cfg.seed + 1,
            "rows": last["rows"], "attempts": attempts}
-    if cfg.recheck > 0:
+    model = sweep_model(cfg.receiver)
+    if cfg.recheck > 0 and model.confirm_recheck is not None:
         # the combination proposed is the one to build: prove its bits on the RTL too
-        from cosim.tacan.signal import generate
         combo = tuple((n, last["params"][n]) for n, _ in cfg.params)
-        sig = trial_signal(cfg, cfg.snr_db[0], 0)
-        run = replace(run_config(cfg, combo, sig), require_bearing=False)
-        res["recheck"] = {"combo": [list(c) for c in combo],
-                          **recheck_point(cfg, run, generate(run.signal))}
+        res["recheck"] = {"combo": [list(c) for c in combo], **model.confirm_recheck(cfg, combo)}
     return res
 
 
 def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: float = 0.0) -> dict:
     from cosim.bench import machine_info
     out = Path(out)
+    P = primary_key(cfg.receiver)
     rows = aggregate(cfg, results)
     proposal = propose(cfg, rows)
     pts = sorted((r for r in results if r.get("kind") in ("point", "golden")),
@@ -685,18 +600,18 @@ def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: f
     names = [n for n, _ in cfg.params]
     with open(out / "points.csv", "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["kind", "combo", "snr_db", "trial", "bearing_deg", "locked", "rmse_deg",
+        w.writerow(["kind", "combo", "snr_db", "trial", "bearing_deg", "locked", P,
                     "mean_error_deg", "max_abs_error_deg", "crb_deg", "adc_clipped",
                     "fifo_dropped", "gated", "reinit", "error"])
         for r in pts:
             w.writerow([r["kind"], json.dumps(r["combo"]), r["snr_db"], r["trial"],
-                        r.get("bearing_deg"), r["locked"], r.get("rmse_deg"),
+                        r.get("bearing_deg"), r["locked"], r.get(P),
                         r.get("mean_error_deg"), r.get("max_abs_error_deg"), r.get("crb_deg"),
                         r.get("adc_clipped"), r.get("fifo_dropped"), r.get("gated"),
                         r.get("reinit"), r.get("error")])
     with open(out / "summary.csv", "w", newline="") as f:
-        keys = names + ["snr_db", "trials", "locked", "golden_locked", "rmse_deg",
-                        "golden_rmse_deg", "ratio_to_golden", "mean_error_deg", "crb_deg",
+        keys = names + ["snr_db", "trials", "locked", "golden_locked", P,
+                        "golden_" + P, "ratio_to_golden", "mean_error_deg", "crb_deg",
                         "adc_clipped", "fifo_dropped", "invalid"]
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
@@ -731,6 +646,8 @@ def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from cosim.receivers import get
+    P, fig_m = primary_key(cfg.receiver), get(cfg.receiver).primary
     names = [n for n, _ in cfg.params]
     ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0] for n, v in cfg.params}
     files = []
@@ -741,24 +658,24 @@ def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
         for ci, snr in enumerate(cfg.snr_db):
             sel = {r[n]: r for r in rows if r["snr_db"] == float(snr)
                    and all(r[m] == ref[m] for m in names if m != n)}
-            ys = [sel[v]["rmse_deg"] if v in sel and sel[v]["rmse_deg"] is not None else np.nan
+            ys = [sel[v][P] if v in sel and sel[v][P] is not None else np.nan
                   for v in vals]
             col = f"C{ci}"
             ax.semilogy(xs, ys, "o-", color=col, label=f"{snr:g} dB")
-            g = [sel[v]["golden_rmse_deg"] for v in vals if v in sel and sel[v]["golden_rmse_deg"]]
+            g = [sel[v]["golden_" + P] for v in vals if v in sel and sel[v]["golden_" + P]]
             if g:
                 ax.axhline(float(np.median(g)), color=col, ls="--", lw=1)
-            c = [sel[v]["crb_deg"] for v in vals if v in sel and sel[v]["crb_deg"]]
+            c = [sel[v]["crb_deg"] for v in vals if v in sel and sel[v].get("crb_deg")]
             if c:
                 ax.axhline(float(c[0]), color=col, ls=":", lw=1)
         if not numeric:
             ax.set_xticks(xs, [str(v) for v in vals])
         ax.set_xlabel(n)
-        ax.set_ylabel("bearing RMSE (deg)")
+        ax.set_ylabel(f"{fig_m.label} ({fig_m.unit})")
         import textwrap
         others = ", ".join(f"{m}={ref[m]}" for m in names if m != n)
         sub = "\n".join(textwrap.wrap(f"others at {others}", 95)) + "\n" if others else ""
-        ax.set_title(f"TACAN bearing RMSE vs {n}\n{sub}"
+        ax.set_title(f"{cfg.receiver.upper()} {fig_m.label} vs {n}\n{sub}"
                      "dashed: float golden (same records)   dotted: Cramer-Rao bound",
                      fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
@@ -773,9 +690,10 @@ def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
 
 def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
     m = s["machine"]
+    P = primary_key(cfg.receiver)
     names = [n for n, _ in cfg.params]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
-    lines = [f"# TACAN quantisation sweep", "",
+    lines = [f"# {sweep_model(cfg.receiver).title}", "",
              f"`{m['command']}` on {m['cpu']} ({m['cores']} cores), {m['date']}, commit "
              f"{m['commit']}: {s['n_points']} points in {s['elapsed_s']:.0f} s"
              + (f" ({s['from_cache']} of them read from the cache of an earlier run)"
@@ -783,9 +701,7 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
              f"Swept: " + "; ".join(f"`{n}` = {', '.join(map(str, v))}" for n, v in cfg.params) +
              f"; SNR {', '.join(f'{x:g}' for x in cfg.snr_db)} dB; {cfg.trials} trials of "
              f"{cfg.duration_s:g} s (filter memory {cfg.memory_s:g} s, bearings after "
-             f"{2 * cfg.memory_s:g} s scored). Path: bit-exact front-end model, FIFO/link model, "
-             f"fixed-point DSP core. Golden: float front end + float DSP on the same records "
-             f"(ADC {GOLDEN_ADC_BITS} bits).", ""]
+             f"{2 * cfg.memory_s:g} s scored). {sweep_model(cfg.receiver).description}", ""]
     for p in plots:
         lines += [f"![{p}]({p})", ""]
     lines += ["## Every setting", "",
@@ -797,8 +713,8 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
         inv = f" ({r['invalid']})" if r["invalid"] else ""
         lines.append("| " + " | ".join(str(r[n]) for n in names) +
                      f" | {r['snr_db']:g} | {r['locked']}/{r['trials']} (golden "
-                     f"{r['golden_locked']}){inv} | {f(r['rmse_deg'], '.4f')} | "
-                     f"{f(r['golden_rmse_deg'], '.4f')} | {f(r['ratio_to_golden'], '.3f')} | "
+                     f"{r['golden_locked']}){inv} | {f(r[P], '.4f')} | "
+                     f"{f(r['golden_' + P], '.4f')} | {f(r['ratio_to_golden'], '.3f')} | "
                      f"{_ci_text(r.get('ratio_ci95'))} | {f(r['mean_error_deg'], '+.4f')} | {f(r['crb_deg'], '.4f')} | "
                      f"{r['adc_clipped']} | {r['fifo_dropped']} | {sat} |")
     lines += ["", "## Ranges and overflows (all points)", "",
@@ -841,8 +757,8 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
             for r in a["rows"]:
                 ev = r.get("dsp_events") or {}
                 lines.append(
-                    f"- SNR {r['snr_db']:g} dB: RMSE {f(r['rmse_deg'], '.4f')} deg vs golden "
-                    f"{f(r['golden_rmse_deg'], '.4f')} (ratio {f(r['ratio_to_golden'], '.3f')}, "
+                    f"- SNR {r['snr_db']:g} dB: RMSE {f(r[P], '.4f')} deg vs golden "
+                    f"{f(r['golden_' + P], '.4f')} (ratio {f(r['ratio_to_golden'], '.3f')}, "
                     f"95 % CI {_ci_text(r.get('ratio_ci95'))}), locked {r['locked']}/"
                     f"{r['trials']} (golden {r['golden_locked']}), re-inits "
                     f"{ev.get('reinit', 0)} (golden {r.get('golden_reinit', 0)})")

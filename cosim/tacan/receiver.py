@@ -11,13 +11,15 @@ import sys
 from dsp.tacan.kalman import KalmanConfig
 
 from ..link import DspServiceConfig
-from ..receivers import (Arg, Figure, Option, Receiver, Study, config_kwargs, parse_int,
-                         register)
-from ..studies.faults import TARGETS, FaultConfig
+from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
+                         parse_int, register)
+from ..studies.faults import FaultConfig
 from ..studies.sweep import SweepConfig
 from ..validate import check_jobs, check_out_dir, check_out_file, dumps, warn
 from .run import TacanRunConfig
 from .signal import TacanSignalConfig
+from .faults import FAULT_MODEL, TARGETS
+from .study import SWEEP_MODEL
 
 #: Clock the DSP service presets (``cosim.link.DSP_PRESETS``) are written for.
 PRESET_CLK_HZ = 20e6
@@ -211,7 +213,7 @@ SWEEP_OPTIONS = (
              "dsp.K.rounding=floor,half_up (repeatable; default adc_bits=4:14)"),
     Arg("--snr-db", default=None,
         help=f"SNR values (dB; a:b:step or a list; default "
-             f"{','.join(f'{v:g}' for v in SweepConfig().snr_db)})"),
+             f"{','.join(f'{v:g}' for v in _SW.__dataclass_fields__['snr_db'].default)})"),
     Option(_SW, "design", choices=("grid", "oat"), case="lower",
            help="grid: every combination; oat: one parameter at a time (the others at their "
                 "largest value)"),
@@ -295,7 +297,7 @@ FAULT_OPTIONS = (
     Option(_FC, "target", choices=TARGETS, case="lower", help="where the bits flip"),
     Arg("--ber", default=None,
         help=f"bit error rates (per bit): lo:hi (every decade) or a comma list (default "
-             f"{_decades(FaultConfig().ber)})"),
+             f"{_decades(_FC.__dataclass_fields__['ber'].default)})"),
     Arg("--bits", default=None,
         help="only these bit positions (comma list, 0 = LSB), e.g. the MSBs (default: every "
              "bit of the target's words)"),
@@ -369,9 +371,21 @@ def _equivalence(**kw) -> dict:
     return check_equivalence(top="tacan", **kw)
 
 
-def _frontend_params():
+def _component(params):
+    from hdl.tacan.frontend import TacanFrontEnd
+    return TacanFrontEnd(params)
+
+
+def _model_session(params, **kw):
+    from .session import TacanModelSession
+    return TacanModelSession(params, **kw)
+
+
+def _frontend():
     from hdl.tacan.model import TacanFrontendParams
-    return TacanFrontendParams
+    return Frontend(params=TacanFrontendParams, component=_component, model=_model_session,
+                    verilog_name="tacan_frontend",
+                    inputs=lambda p: {"freq": p.nco_freq_word})
 
 
 TACAN = register(Receiver(
@@ -383,11 +397,11 @@ TACAN = register(Receiver(
     metrics=("rmse_deg", "mean_error_deg", "max_abs_error_deg", "rmse_over_crb",
              "vs_golden_rms_deg"),
     primary=Figure("rmse_deg", "bearing RMSE", "deg"),
-    frontend=_frontend_params(),
+    frontend=_frontend(),
     tops={"tacan_frontend": _top},
     equivalence=_equivalence,
     sweep=Study("quantisation sweep: word lengths/modes x SNR x trials, report, word-length "
-                "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep),
+                "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),
     faults=Study("bit-error study: flip bits in the ADC samples, FIFO words, the NCO register "
-                 "or the DSP state", FAULT_OPTIONS, cmd_faults),
+                 "or the DSP state", FAULT_OPTIONS, cmd_faults, model=FAULT_MODEL),
 ))

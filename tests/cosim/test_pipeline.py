@@ -11,7 +11,8 @@ import pytest
 
 from cosim.link import DspServiceConfig, run_link
 from cosim.pipeline import Pipeline
-from cosim.session import TacanModelSession, open_frontend, ready_window
+from cosim.session import open_frontend, ready_window
+from cosim.tacan.session import TacanModelSession
 from cosim.tacan.run import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
 from cosim.verilator import verilator_available

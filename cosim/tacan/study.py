@@ -1,0 +1,183 @@
+"""TACAN's side of the generic studies (:mod:`cosim.studies.sweep`): its parameter space,
+the run of one sweep point (signal, front end, FIFO and fixed-point DSP on the bit-exact
+fast path) and of the paired float golden chain, and the cycle-accurate re-check.
+
+Parameters (``--param NAME=VALUES``)
+-----------------------------------
+``adc_bits``              ADC word length (the signal is digitised once per record for every
+                          value, :func:`cosim.tacan.signal.generate_adc_variants`).
+``<field>``               any field of :class:`hdl.tacan.model.TacanFrontendParams`
+                          (``nco_amp_bits``, ``mixer_out_bits``, ``cic_out_bits``,
+                          ``fir_coef_bits``, ``fir_out_bits``, ``env_iterations``,
+                          ``mixer_rounding``, ...).
+``dsp.<fmt>``             total width of a format of the fixed-point core (``y``, ``x``, ``P``,
+                          ``K``, ``cs``, ``innov``, ``r``), integer bits kept: fraction bits
+                          change.
+``dsp.<fmt>.rounding``    rounding of that format (``floor`` / ``half_up``).
+``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import fields, replace
+
+import numpy as np
+
+from ..receivers import SweepModel
+
+__all__ = ["GOLDEN_ADC_BITS", "FORMATS", "check_param", "trial_signal", "run_config",
+           "recheck_point", "TacanSweepRecord", "SWEEP_MODEL"]
+
+#: ADC word length of the float golden chain's record.
+GOLDEN_ADC_BITS = 16
+#: Formats of the fixed-point Kalman core a sweep may resize (``dsp.<fmt>``).
+FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
+
+
+def check_param(name: str) -> None:
+    """Refuse a swept parameter name TACAN does not know (ValueError)."""
+    from dsp.tacan.kalman import KalmanConfig
+    from hdl.tacan.model import TacanFrontendParams
+    hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
+    if name == "adc_bits" or name in hdl_fields:
+        return
+    parts = name.split(".")
+    if parts[0] == "dsp" and len(parts) in (2, 3) and parts[1] in FORMATS and \
+            (len(parts) == 2 or parts[2] == "rounding"):
+        return
+    if parts[0] == "kalman" and len(parts) == 2 and parts[1] in {f.name for f in fields(KalmanConfig)}:
+        return
+    raise ValueError(
+        f"unknown parameter {name!r}: use adc_bits, a TacanFrontendParams field "
+        f"({', '.join(sorted(hdl_fields))}), dsp.<fmt>[.rounding] with fmt in {FORMATS}, "
+        f"or kalman.<field>")
+
+
+def trial_signal(cfg, snr_db: float, trial: int, adc_bits: int = 12):
+    """The :class:`~cosim.tacan.signal.TacanSignalConfig` of a record (SNR, trial seed)."""
+    from .signal import TacanSignalConfig
+    rng = np.random.default_rng([cfg.seed, trial, 7919])
+    bearing = float(np.round(rng.uniform(0, 360), 3))
+    seed = int(np.random.default_rng([cfg.seed, trial, int(round(snr_db * 1000))]).integers(1 << 31))
+    return TacanSignalConfig(snr_db=float(snr_db), duration_s=cfg.duration_s, seed=seed,
+                             bearing_deg=bearing, adc_bits=adc_bits)
+
+
+def run_config(cfg, combo: tuple, sig):
+    """The :class:`cosim.tacan.run.TacanRunConfig` of a point (raises ValueError if invalid)."""
+    from dsp.fixed import FixedFormat
+    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+    from ..validate import check_choice, check_int
+    from .run import TacanRunConfig
+    hdl, kal, fmts = {}, {"memory_s": cfg.memory_s}, {}
+    base = KalmanFixedConfig()
+    for name, v in combo:
+        if name == "adc_bits":
+            sig = replace(sig, adc_bits=check_int("adc_bits", v, 1, 24))
+        elif name.startswith("dsp."):
+            parts = name.split(".")
+            f = fmts.get(parts[1], getattr(base, parts[1]))
+            if len(parts) == 2:
+                w = check_int(name, v, 2, 62)
+                f = FixedFormat(w, f.frac + (w - f.width), f.signed, f.rounding, f.overflow)
+            else:
+                check_choice(name, v, ("floor", "half_up"))
+                f = FixedFormat(f.width, f.frac, f.signed, v, f.overflow)
+            fmts[parts[1]] = f
+        elif name.startswith("kalman."):
+            kal[name.split(".")[1]] = v
+        else:
+            hdl[name] = v
+    kalman = KalmanConfig(**kal)
+    fixed = KalmanFixedConfig(kalman=kalman, **fmts)
+    run = TacanRunConfig(signal=sig, backend="model", dsp="fixed", kalman=kalman, fixed=fixed,
+                         hdl_changes=tuple(sorted(hdl.items())))
+    run.hdl_params  # validates the word lengths (headroom, widths)
+    return run
+
+
+def check_point(cfg, combo: tuple) -> None:
+    """Build and validate a point's run configuration (ValueError if refused)."""
+    run_config(cfg, combo, trial_signal(cfg, cfg.snr_db[0], 0))
+
+
+def _score(r: dict) -> dict:
+    keep = ("rmse_deg", "mean_error_deg", "max_abs_error_deg", "crb_deg", "n_bearings",
+            "gated", "reinit", "adc_clipped", "fifo_dropped", "dsp_events", "ranges", "digest")
+    return {k: r.get(k) for k in keep}
+
+
+def recheck_point(cfg, run, signal) -> dict:
+    """Re-run the first samples of a point cycle-accurately (``cfg.recheck_plan``) and
+    compare the FIFO words and their cycles with the bit-exact model."""
+    from .run import FRONTENDS
+    backend, n = cfg.recheck_plan
+    x = signal.samples[:n]
+    t0 = time.perf_counter()
+    a = FRONTENDS["model"](x, run)
+    try:
+        b = FRONTENDS[backend](x, run)
+    except RuntimeError as e:           # e.g. Verilator missing
+        return {"backend": backend, "error": str(e)}
+    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles)
+            and a.fifo_dropped == b.fifo_dropped)
+    return {"backend": backend, "samples": int(len(x)), "words": int(len(a.words)),
+            "same_bits": bool(same), "seconds": time.perf_counter() - t0,
+            **({"error": "no FIFO words in the re-checked samples: inconclusive"}
+               if len(a.words) == 0 else {})}
+
+
+def confirm_recheck(cfg, combo: tuple) -> dict:
+    """The cycle-accurate re-check of the confirmed combination (first SNR, trial 0)."""
+    from .signal import generate
+    sig = trial_signal(cfg, cfg.snr_db[0], 0)
+    run = replace(run_config(cfg, combo, sig), require_bearing=False)
+    return recheck_point(cfg, run, generate(run.signal))
+
+
+class TacanSweepRecord:
+    """One (SNR, trial) record of a sweep: the signal generated once (digitised at every ADC
+    width the points need and at the golden one), the front end's run shared by the points
+    that differ only in the DSP (the front-end cache, keyed by ``run_tacan``)."""
+
+    def __init__(self, cfg, snr_db: float, trial: int, combos: list):
+        from .signal import generate_adc_variants
+        self.cfg = cfg
+        self.sig = sig = trial_signal(cfg, snr_db, trial)
+        bits = sorted({int(dict(c).get("adc_bits", sig.adc_bits)) for c in combos} |
+                      {GOLDEN_ADC_BITS})
+        self.signals = generate_adc_variants(sig, bits)
+        self.fe_cache: dict = {}
+        #: what every row of this record carries
+        self.base = {"bearing_deg": sig.bearing_deg}
+
+    def golden(self) -> dict:
+        from dsp.tacan.kalman import KalmanConfig
+        from . import run as tr
+        gs = self.signals[GOLDEN_ADC_BITS]
+        grun = tr.TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
+                                 kalman=KalmanConfig(memory_s=self.cfg.memory_s),
+                                 require_bearing=False)
+        g = tr.run_tacan(grun, gs)
+        return {**_score(g), "locked": g["n_bearings"] > 0}
+
+    def point(self, combo: tuple, recheck: bool = False) -> dict:
+        from . import run as tr
+        run = run_config(self.cfg, combo, self.sig)
+        run = replace(run, require_bearing=False)
+        s = self.signals[run.signal.adc_bits]
+        r = tr.run_tacan(run, s, frontend_cache=self.fe_cache)
+        out = {**_score(r), "locked": r["n_bearings"] > 0}
+        if recheck:
+            out["recheck"] = recheck_point(self.cfg, run, s)
+        return out
+
+
+#: What :mod:`cosim.studies.sweep` needs of TACAN (``Study.model`` of ``sweep tacan``).
+SWEEP_MODEL = SweepModel(check_param=check_param, check_point=check_point,
+                         record=TacanSweepRecord, confirm_recheck=confirm_recheck,
+                         default_params=(("adc_bits", tuple(range(4, 15))),),
+                         cpu_s_per_record_s=1.5, title="TACAN quantisation sweep",
+                         description=f"Path: bit-exact front-end model, FIFO/link model, "
+                                     f"fixed-point DSP core. Golden: float front end + float "
+                                     f"DSP on the same records (ADC {GOLDEN_ADC_BITS} bits).")
