@@ -54,3 +54,96 @@ def test_pysim_matches_model_with_writes_and_backpressure():
     got = run_pysim(GnssChannel(p), x, writes, ready, n_cycles, p.reg_data_width)
     np.testing.assert_array_equal(got.words, want.words)
     np.testing.assert_array_equal(got.cycles, want.cycles)
+
+
+def test_model_chunks_give_the_same_records():
+    p = SMALL
+    n = 4 * 2046
+    x, writes, _ = stimulus(p, n, seed=2, n_writes=3)
+    whole = GnssChannelModel(p).step(x, writes)
+    m = GnssChannelModel(p)
+    parts = []
+    cuts = [0, 1, 700, 2500, 2501, 6000, n]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        # Writes handed over in the chunk where they happen.
+        w = [wr for wr in writes if a <= wr[0] < b]
+        parts.append(m.step(x[a:b], w))
+    np.testing.assert_array_equal(np.concatenate([r.cycles for r in parts]), whole.cycles)
+    np.testing.assert_array_equal(np.concatenate([r.fields for r in parts]), whole.fields)
+
+
+def test_correlation_peak_and_register_effects():
+    """Physical sanity on the default front end: a PRN-3 signal aligned with the early
+    replica correlates E > P > L; after a PRN write the dumps decorrelate; a slew of
+    d samples moves the peak onto the prompt; the epoch counter counts."""
+    p = GnssChannelParams()
+    fs, n = p.fs_hz, 16368 * 7
+    t = np.arange(n)
+    code = ca_code_levels(3)
+    sig = code[(t // 16) % 1023] * np.cos(2 * np.pi * p.if_hz * t / fs + 0.3)
+    x = np.clip(np.floor(sig * 1.5 + 0.5), -2, 1).astype(np.int64)
+    m = GnssChannelModel(replace_prn(p, 3))
+    # Boundary 1 (end of epoch 1): a slew of a period minus d samples advances the replica
+    # by d, putting the prompt on the signal (epoch 2 is the long one); the PRN-4 write
+    # lands after boundary 3, so epoch 5 is the first with the wrong code.
+    writes = [(100, REG_SLEW, 16368 - p.half_spacing), (16368 * 4 + 100, REG_PRN, 4)]
+    recs = [unpack_record(v, p) for v in m.step(x, writes).values(p)]
+    mag = [{a: abs(r["i" + a]) + abs(r["q" + a]) for a in "epl"} for r in recs]
+    assert [r["epoch"] for r in recs] == list(range(1, len(recs) + 1))
+    assert mag[0]["e"] > mag[0]["p"] > mag[0]["l"]
+    # Epoch 3 (after the slew): prompt on the peak, early and late equal.
+    assert mag[2]["p"] > 1.2 * max(mag[2]["e"], mag[2]["l"])
+    assert abs(mag[2]["e"] - mag[2]["l"]) < 0.05 * mag[2]["p"]
+    assert mag[4]["p"] < 0.2 * mag[2]["p"]
+
+
+def replace_prn(p, prn):
+    from dataclasses import replace
+    return replace(p, prn=prn)
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(prn=0), r"PRN must be an integer in \[1, 32\], not 0"),
+    (dict(prn=33), r"PRN must be an integer in \[1, 32\], not 33"),
+    (dict(dump_epochs=1.5), r"dump length must be a whole number of code periods .*not 1.5"),
+    (dict(dump_epochs=0), r"GNSS dump_epochs must be an integer in \[1, 64\], not 0"),
+    (dict(record_words=4), r"GNSS record of 212 bits is wider than the FIFO record "
+                           r"\(record_words \* fifo_width = 4 \* 51 = 204 bits\)"),
+    (dict(adc_bits=0), r"GNSS adc_bits must be an integer in \[1, 16\], not 0"),
+    (dict(adc_bits=17), r"GNSS adc_bits must be an integer in \[1, 16\], not 17"),
+    (dict(fs_hz=1e6), r"sample rate fs_hz must be >= the C/A signal bandwidth 2.046e\+06 Hz, "
+                      r"not 1000000.0"),
+    (dict(if_hz=9e6), r"IF must lie in the first Nyquist zone \[0, fs_hz/2 = 8.184e\+06\) Hz, "
+                      r"not 9000000.0"),
+    (dict(fs_hz=float("nan")), r"fs_hz must be a finite number, not nan"),
+    (dict(el_spacing_samples=3), r"el_spacing_samples .* must be an even integer in "
+                                 r"\[2, 128\], not 3"),
+    (dict(carr_phase_bits=40), r"carr_phase_bits must be an integer in \[8, 32\], not 40"),
+])
+def test_parameter_errors(kw, msg):
+    with pytest.raises(ValueError, match=msg):
+        GnssChannelParams(**kw)
+
+
+def test_dump_length_and_write_errors():
+    assert dump_epochs_for(0.02) == 20
+    with pytest.raises(ValueError, match=r"dump length must be a whole number \(>= 1\) of "
+                                         r"1 ms code periods, not 0.0015 s"):
+        dump_epochs_for(0.0015)
+    p = GnssChannelParams()
+    with pytest.raises(ValueError, match=r"PRN must be an integer in \[1, 32\], not 40"):
+        GnssChannelModel(p).step(np.zeros(10, np.int64), [(1, REG_PRN, 40)])
+    with pytest.raises(ValueError, match=r"register 3 takes unsigned 16-bit values, not 70000"):
+        GnssChannelModel(p).step(np.zeros(10, np.int64), [(1, REG_SLEW, 70000)])
+    with pytest.raises(ValueError, match=r"GnssChannel needs a GnssChannelParams, not 3"):
+        GnssChannel(3)
+
+
+def test_widths_are_derived():
+    p = GnssChannelParams()
+    assert p.iq_width == 5                       # 2-bit ADC x 4-bit LO, full precision
+    assert p.max_dump_samples == 16370 + 65535   # 1 ms at 1.023 Mcps - 100 Hz, max slew
+    assert p.acc_width == 5 + 17
+    assert p.record_bits == 6 * 22 + 16 + 32 + 32
+    assert p.fifo.record_words == 5
+    assert GnssChannelParams(dump_epochs=20, slew_bits=8).acc_width == 5 + 19
