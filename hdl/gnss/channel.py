@@ -158,16 +158,17 @@ class GnssCorrelator(wiring.Component):
             m.d.sync += [cf.eq(sh_code), prn.eq(sh_prn), hold.eq(Mux(slew_pend, sh_slew, 0)),
                          slew_pend.eq(0), pend_carr.eq(sh_carr), code_epoch.eq(s[:CB])]
         # Bus writes after the latch: a write in the boundary cycle waits for the next one.
-        with m.If(self.reg_we):
-            with m.Switch(self.reg_addr):
-                with m.Case(REG_CARR_FREQ):
-                    m.d.sync += sh_carr.eq(self.reg_data[:PB])
-                with m.Case(REG_CODE_FREQ):
-                    m.d.sync += sh_code.eq(self.reg_data[:CB])
-                with m.Case(REG_PRN):
-                    m.d.sync += sh_prn.eq(self.reg_data[:6])
-                with m.Case(REG_SLEW):
-                    m.d.sync += [sh_slew.eq(self.reg_data[:SB]), slew_pend.eq(1)]
+        # (Separate Ifs, not a Switch: the export of a Switch over all 4 addresses leaves
+        # per-register case statements Verilator flags as incomplete.)
+        we = self.reg_we
+        with m.If(we & (self.reg_addr == REG_CARR_FREQ)):
+            m.d.sync += sh_carr.eq(self.reg_data[:PB])
+        with m.If(we & (self.reg_addr == REG_CODE_FREQ)):
+            m.d.sync += sh_code.eq(self.reg_data[:CB])
+        with m.If(we & (self.reg_addr == REG_PRN)):
+            m.d.sync += sh_prn.eq(self.reg_data[:6])
+        with m.If(we & (self.reg_addr == REG_SLEW)):
+            m.d.sync += [sh_slew.eq(self.reg_data[:SB]), slew_pend.eq(1)]
 
         # -- delay line: (code bit, epoch, first) per sample --------------------------------
         taps = [Signal(3, name=f"line{k}") for k in range(L)]
