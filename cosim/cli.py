@@ -327,12 +327,14 @@ def _cmd_check_equivalence(a) -> int:
 
 
 def hdl_blocks() -> dict:
-    """Every HDL block (default-ish parameters) and the TACAN top, by Verilog module name."""
+    """Every HDL block (default-ish parameters), the TACAN top and the GNSS channel tops (1 and
+    12 channels), by Verilog module name."""
     from hdl.cic import Cic
     from hdl.ddc import Ddc
     from hdl.envelope import Envelope
     from hdl.fifo import DspFifo
     from hdl.fir import Fir
+    from hdl.gnss.channel import gnss_top
     from hdl.mixer import Mixer
     from hdl.model.tacan_frontend import TacanFrontendParams
     from hdl.nco import Nco
@@ -349,6 +351,8 @@ def hdl_blocks() -> dict:
         "peak": lambda: PeakSearch(p.peak),
         "fifo": lambda: DspFifo(p.fifo),
         "tacan_frontend": lambda: TacanFrontEnd(p),
+        "gnss_channel": lambda: gnss_top(1),
+        "gnss_channel_array12": lambda: gnss_top(12),
     }
 
 

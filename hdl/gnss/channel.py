@@ -286,10 +286,10 @@ class GnssChannel(wiring.Component):
 class GnssChannelArray(wiring.Component):
     """``channels`` tracking channels on one ADC stream, one record FIFO.
 
-    The records carry a ``channel`` field (:func:`array_params`); an arbiter takes at most
-    one record per cycle, the lowest pending channel first (records of one channel are a
-    code period apart, so one pending flag per channel suffices: the core's record register
-    holds until its next dump).
+    The records carry a ``channel`` field (:func:`array_params`); an arbiter passes at most
+    one record every ``record_words`` cycles (the FIFO writes a word per cycle), the lowest
+    pending channel first (records of one channel are a code period apart, so one pending
+    flag per channel suffices: the core's record register holds until its next dump).
 
     Ports
     -----
@@ -336,9 +336,14 @@ class GnssChannelArray(wiring.Component):
         out = Signal(p.record_bits)
         out_valid = Signal()
         m.d.sync += out_valid.eq(0)
+        # The FIFO writes one word per cycle: a record every record_words cycles at most.
+        n = self.fifo_params.record_words
+        gap = Signal(range(max(n, 2)))
+        with m.If(gap != 0):
+            m.d.sync += gap.eq(gap - 1)
         # Grant first (lowest pending channel), then new records set their flags.
-        with m.If(pend.any()):
-            m.d.sync += out_valid.eq(1)
+        with m.If(pend.any() & (gap == 0)):
+            m.d.sync += [out_valid.eq(1), gap.eq(n - 1)]
             for ch in range(self.channels):
                 cond = pend[ch] if ch == 0 else (pend[ch] & ~pend[:ch].any())
                 with m.If(cond):

@@ -582,29 +582,30 @@ class ChannelRun:
     dropped: np.ndarray
 
 
-def arbitrate(ready_cycles, channels) -> np.ndarray:
+def arbitrate(ready_cycles, channels, spacing: int = 1) -> np.ndarray:
     """The array's arbiter: a record pending from cycle ``r`` (per channel at most one at a
     time) is granted in the first cycle ``>= r`` in which no lower channel is pending and
-    nothing else is granted; it reaches the FIFO the cycle after its grant. Returns the
-    FIFO input cycle of each record (same order as given)."""
+    at least ``spacing`` cycles (the FIFO's ``record_words``: it writes a word per cycle)
+    have passed since the previous grant; it reaches the FIFO the cycle after its grant.
+    Returns the FIFO input cycle of each record (same order as given)."""
+    import heapq
     rc = np.asarray(ready_cycles, np.int64)
     ch = np.asarray(channels, np.int64)
     order = np.lexsort((ch, rc))
     out = np.empty(rc.size, np.int64)
     pending: list[tuple[int, int]] = []   # (channel, index)
-    t = None
+    t = -(1 << 62)          # earliest cycle of the next grant
     k = 0
-    import heapq
     while k < order.size or pending:
         if not pending:
-            t = int(rc[order[k]]) if t is None or t < rc[order[k]] else t
+            t = max(t, int(rc[order[k]]))
         while k < order.size and rc[order[k]] <= t:
             j = int(order[k])
             heapq.heappush(pending, (int(ch[j]), j))
             k += 1
         _, j = heapq.heappop(pending)
         out[j] = t + 1
-        t += 1
+        t += spacing
     return out
 
 
@@ -641,7 +642,7 @@ class GnssArrayModel:
         cyc = np.concatenate(cyc) if cyc else np.zeros(0, np.int64)
         chans = np.concatenate(chans) if chans else np.zeros(0, np.int64)
         if self.arbiter:
-            cyc = arbitrate(cyc + 1, chans)
+            cyc = arbitrate(cyc + 1, chans, self.params.fifo.record_words)
         order = np.argsort(cyc, kind="stable")
         return cyc[order], [vals[j] for j in order]
 

@@ -222,7 +222,7 @@ def test_array_pysim_matches_model():
     writes += [(30, 4 * 2 + REG_SLEW, 5), (40, 4 * 1 + REG_CODE_FREQ, p.code_word(1.0231e6))]
     n_cycles = n + 80
     want = _model_run(array_params(p, 3), 3, x, writes, ready, n_cycles)
-    assert len(want.records) >= 5
+    assert len(want.records) >= 5 and not want.dropped.any()
     got = _sim_run(GnssChannelArray(p, 3), x, writes, ready, n_cycles, p)
     _assert_same(got, want)
     chans = [unpack_record(v, array_params(p, 3))["channel"] for v in want.records]
@@ -236,7 +236,7 @@ def test_array12_default_verilator_matches_model():
     x, writes, ready = stimulus(p, n, seed=6, n_writes=3, ready_p=0.5, ch=12)
     n_cycles = n + 200
     want = _model_run(array_params(p, 12), 12, x, writes, ready, n_cycles)
-    assert len(want.records) >= 36
+    assert len(want.records) >= 30 and not want.dropped.any()
     got = _sim_run(verilator_sim(GnssChannelArray(p, 12), "gnss_channel_array12"), x, writes,
                    ready, n_cycles, p)
     _assert_same(got, want)
