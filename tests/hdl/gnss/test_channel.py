@@ -298,3 +298,27 @@ def test_closed_loop_model_writes_replayed_on_verilator():
     got = _sim_run(verilator_sim(GnssChannel(p), "gnss_channel_small"), x, writes, None,
                    n + 60, p)
     _assert_same(got, want)
+
+
+@pytest.mark.slow
+@needs_verilator
+def test_verilator_default_front_end_long_run():
+    """200 ms of the default front end, 40 register writes, a slow DSP: Verilator == model."""
+    p = GnssChannelParams()
+    n = 200 * 16368
+    x, writes, ready = stimulus(p, n, seed=9, n_writes=10, ready_p=0.2)
+    want = _model_run(p, 1, x, writes, ready, n + 60)
+    assert len(want.records) >= 150
+    got = _sim_run(verilator_sim(GnssChannel(p), "gnss_channel"), x, writes, ready, n + 60, p)
+    _assert_same(got, want)
+
+
+@pytest.mark.synth
+@pytest.mark.slow
+def test_synth_one_channel_meets_100mhz():
+    from cosim.synth import synth, yowasp_available
+    if not yowasp_available():
+        pytest.skip("YoWASP yosys/nextpnr not installed")
+    from hdl.gnss.channel import gnss_top
+    r = synth(gnss_top(1), name="gnss_channel_1", target_mhz=100)
+    assert r["timing_met"] and r["fmax_mhz"] >= 100, r["fmax_mhz"]
