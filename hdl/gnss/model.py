@@ -582,30 +582,58 @@ class ChannelRun:
     dropped: np.ndarray
 
 
+class Arbiter:
+    """The array's arbiter, chunk by chunk.
+
+    A record pending from cycle ``r`` (per channel at most one at a time) is granted in the
+    first cycle ``>= r`` in which no lower channel is pending and at least ``spacing``
+    cycles (the FIFO's ``record_words``: it writes one word per cycle) have passed since the
+    previous grant; it reaches the FIFO the cycle after its grant. Grants are only decided
+    below a *horizon* (no later record can be pending before it); the rest wait for the next
+    :meth:`feed`.
+    """
+
+    def __init__(self, spacing: int = 1):
+        self.spacing = int(spacing)
+        self.t = -(1 << 62)            # earliest cycle of the next grant
+        self.waiting: list = []        # (ready, channel, value) not granted yet
+
+    def feed(self, ready_cycles, channels, values, horizon: int | None = None):
+        """Add records, grant what can be decided; returns (FIFO input cycles, values)."""
+        import heapq
+        w = sorted(self.waiting + [(int(r), int(c), v) for r, c, v in
+                                   zip(ready_cycles, channels, values)],
+                   key=lambda e: (e[0], e[1]))
+        lim = (1 << 62) if horizon is None else int(horizon)
+        pend: list = []
+        out_c, out_v = [], []
+        k, t = 0, self.t
+        while True:
+            if not pend:
+                if k >= len(w):
+                    break
+                t = max(t, w[k][0])
+            if t >= lim:
+                break
+            while k < len(w) and w[k][0] <= t:
+                heapq.heappush(pend, (w[k][1], w[k][0], k))
+                k += 1
+            _, _, j = heapq.heappop(pend)
+            out_c.append(t + 1)
+            out_v.append(w[j][2])
+            t += self.spacing
+        self.t = t
+        self.waiting = [w[j] for _, _, j in pend] + w[k:]
+        return np.array(out_c, np.int64), out_v
+
+
 def arbitrate(ready_cycles, channels, spacing: int = 1) -> np.ndarray:
-    """The array's arbiter: a record pending from cycle ``r`` (per channel at most one at a
-    time) is granted in the first cycle ``>= r`` in which no lower channel is pending and
-    at least ``spacing`` cycles (the FIFO's ``record_words``: it writes a word per cycle)
-    have passed since the previous grant; it reaches the FIFO the cycle after its grant.
-    Returns the FIFO input cycle of each record (same order as given)."""
-    import heapq
-    rc = np.asarray(ready_cycles, np.int64)
-    ch = np.asarray(channels, np.int64)
-    order = np.lexsort((ch, rc))
-    out = np.empty(rc.size, np.int64)
-    pending: list[tuple[int, int]] = []   # (channel, index)
-    t = -(1 << 62)          # earliest cycle of the next grant
-    k = 0
-    while k < order.size or pending:
-        if not pending:
-            t = max(t, int(rc[order[k]]))
-        while k < order.size and rc[order[k]] <= t:
-            j = int(order[k])
-            heapq.heappush(pending, (int(ch[j]), j))
-            k += 1
-        _, j = heapq.heappop(pending)
-        out[j] = t + 1
-        t += spacing
+    """FIFO input cycles the :class:`Arbiter` gives records pending from ``ready_cycles``
+    (same order as given)."""
+    idx = list(range(len(ready_cycles)))
+    c, v = Arbiter(spacing).feed(ready_cycles, channels, idx)
+    out = np.empty(len(idx), np.int64)
+    out[np.asarray(v, np.int64)] = c
     return out
 
 
@@ -614,7 +642,8 @@ class GnssArrayModel:
     without arbiter and channel field: :class:`hdl.gnss.channel.GnssChannel`).
 
     ``step(samples, writes, cycles=...)`` returns the records of the chunk with their FIFO
-    input cycles; :meth:`fifo` turns a whole run's records into FIFO output words.
+    input cycles (state carried, chunks give the same bits); :meth:`run` is a whole run from
+    reset including the FIFO (:func:`hdl.model.fifo.fifo_model_events`).
     """
 
     def __init__(self, params: GnssChannelParams, channels: int = 1, *, arbiter=None):
@@ -622,10 +651,15 @@ class GnssArrayModel:
         self.channels = channels
         self.arbiter = channels > 1 if arbiter is None else arbiter
         self.models = [GnssChannelModel(params) for _ in range(channels)]
+        self._arb = Arbiter(params.fifo.record_words)
         self.fifo_state = FifoState()
 
     def step(self, samples, writes=(), *, cycles=None):
-        """Writes are ``(cycle, addr, value)`` with ``addr = 4 * channel + reg``."""
+        """Advance every channel over ``samples``; writes are ``(cycle, addr, value)`` with
+        ``addr = 4 * channel + reg``. Returns ``(fifo_input_cycles, record_values)`` of the
+        records decided so far (in the array, records the arbiter cannot grant yet because a
+        later chunk may hold a lower channel's record wait for the next step or
+        :meth:`flush`)."""
         per = [[] for _ in range(self.channels)]
         for c, a, v in writes:
             ch, reg = divmod(int(a), 4)
@@ -642,14 +676,26 @@ class GnssArrayModel:
         cyc = np.concatenate(cyc) if cyc else np.zeros(0, np.int64)
         chans = np.concatenate(chans) if chans else np.zeros(0, np.int64)
         if self.arbiter:
-            cyc = arbitrate(cyc + 1, chans, self.params.fifo.record_words)
+            # A later sample (cycle >= next_cycle) makes a record pending from
+            # next_cycle + latency + 1 at the earliest.
+            horizon = self.models[0].next_cycle + self.params.latency + 1
+            return self._arb.feed(cyc + 1, chans, vals, horizon)
         order = np.argsort(cyc, kind="stable")
         return cyc[order], [vals[j] for j in order]
+
+    def flush(self):
+        """Grant every record still waiting (end of the run)."""
+        if not self.arbiter:
+            return np.zeros(0, np.int64), []
+        return self._arb.feed([], [], [], None)
 
     def run(self, samples, writes=(), *, n_cycles: int, out_ready=None,
             cycles=None) -> ChannelRun:
         """One whole run from reset: records, then the FIFO over ``n_cycles`` cycles."""
         rc, vals = self.step(samples, writes, cycles=cycles)
+        rc2, vals2 = self.flush()
+        rc = np.concatenate([rc, rc2])
+        vals = list(vals) + list(vals2)
         keep = rc < n_cycles
         rc = rc[keep]
         vals = [v for v, k in zip(vals, keep) if k]
