@@ -345,3 +345,20 @@ def test_array_model_chunks_give_the_same_records():
     np.testing.assert_array_equal(np.concatenate(got_c + [c]), whole_c)
     assert got_v + v == whole_v
     assert len(whole_v) >= 24
+
+
+def test_check_stream_without_writes():
+    """The public check (cosim.testing.check_stream) on the channel at its reset registers,
+    with a stalling reader: pysim and Verilator against the model, words and cycles."""
+    from cosim.testing import check_stream
+    p = SMALL
+    n = 2 * 2046 + 100
+    x, _, ready = stimulus(p, n, seed=11, ready_p=0.4)
+    n_cycles = n + 60
+
+    def model(s):
+        r = GnssArrayModel(p).run(s, (), n_cycles=n_cycles, out_ready=ready)
+        return r.words, r.cycles
+
+    check_stream(GnssChannel(p), model, x, ready=ready[:n_cycles], n_cycles=n_cycles,
+                 name="gnss_channel_small")
