@@ -301,8 +301,13 @@ class GnssChannelArray(wiring.Component):
 
     def __init__(self, params: GnssChannelParams, channels: int = 12):
         _check_params(self, params)
+        try:
+            ap = array_params(params, channels)
+        except ValueError:
+            self._MustUse__silence = True
+            raise
         self.channels = channels
-        self.params = array_params(params, channels) if params.channel_bits == 0 else params
+        self.params = ap if params.channel_bits == 0 else params
         if (1 << self.params.channel_bits) < channels:
             self._MustUse__silence = True
             raise ValueError(f"GNSS channel_bits {self.params.channel_bits} cannot number "

@@ -137,6 +137,8 @@ def test_dump_length_and_write_errors():
         GnssChannelModel(p).step(np.zeros(10, np.int64), [(1, REG_SLEW, 70000)])
     with pytest.raises(ValueError, match=r"GnssChannel needs a GnssChannelParams, not 3"):
         GnssChannel(3)
+    with pytest.raises(ValueError, match=r"channel array needs channels in \[1, 64\], not 0"):
+        GnssChannelArray(p, 0)
 
 
 def test_widths_are_derived():
@@ -362,3 +364,25 @@ def test_check_stream_without_writes():
 
     check_stream(GnssChannel(p), model, x, ready=ready[:n_cycles], n_cycles=n_cycles,
                  name="gnss_channel_small")
+
+
+def test_write_in_the_boundary_cycle_waits_for_the_next_boundary():
+    """Reduced rate, exact 2 samples/chip: the generator's first epoch ends at sample 2045
+    (cycle 2045). A slew written in cycle 2044 delays the 2nd dump; written in 2045 (the
+    boundary cycle itself) it delays the 3rd. pysim agrees on the corner case."""
+    p = SMALL
+    n = 3 * 2046 + 40
+    x = np.random.default_rng(12).integers(-2, 2, n)
+
+    def dumps(c):
+        return GnssChannelModel(p).step(x, [(c, REG_SLEW, 5)]).cycles
+
+    base = GnssChannelModel(p).step(x).cycles
+    np.testing.assert_array_equal(np.diff(base), [2046, 2046])
+    np.testing.assert_array_equal(dumps(2044) - base, [0, 5, 5])
+    np.testing.assert_array_equal(dumps(2045) - base, [0, 0, 5][:len(dumps(2045))])
+    writes = [(2045, REG_SLEW, 5), (2044, REG_PRN, 9)]
+    want = GnssArrayModel(p).run(x, writes, n_cycles=n + 60)
+    got = run_pysim(GnssChannel(p), x, writes, None, n + 60, p.reg_data_width)
+    np.testing.assert_array_equal(got.words, want.words)
+    np.testing.assert_array_equal(got.cycles, want.cycles)
