@@ -27,7 +27,7 @@ from hdl.nco import Nco
 from .model import (ACC_FIELDS, REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW,
                     GnssChannelParams)
 
-__all__ = ["GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
+__all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
            "record_layout", "gnss_top"]
 
 
@@ -55,6 +55,47 @@ def _lfsr_step(reg, feedback):
     for t in feedback[1:]:
         fb = fb ^ reg[t - 1]
     return Cat(fb, reg[:9])
+
+
+class CaCodeGenerator(wiring.Component):
+    """C/A code generator: G1 and G2 10-stage registers (IS-GPS-200, :mod:`dsp.gnss.ca_code`)
+    and the G2 phase selector of Table 3-Ia.
+
+    Ports
+    -----
+    prn : In(unsigned(6))
+        PRN 1-32 (any other value: G1 alone); combinational into ``chip``.
+    step : In(1)
+        Advance one chip at the clock edge.
+    restart : In(1)
+        Set both registers to all ones at the clock edge (the code epoch; overrides
+        ``step``).
+    chip : Out(1)
+        The current chip, logic level (0 = +1): G1 stage 10 XOR the PRN's two G2 stages.
+    """
+
+    def __init__(self):
+        # Explicit members: this module's annotations are strings (``from __future__``).
+        super().__init__({"prn": In(unsigned(6)), "step": In(1), "restart": In(1),
+                          "chip": Out(1)})
+
+    def elaborate(self, platform):
+        m = Module()
+        g1 = Signal(10, init=0x3FF)
+        g2 = Signal(10, init=0x3FF)
+        g2i = Signal()
+        with m.Switch(self.prn):
+            for n, (a, b) in G2_TAPS.items():
+                with m.Case(n):
+                    m.d.comb += g2i.eq(g2[a - 1] ^ g2[b - 1])
+            with m.Default():
+                m.d.comb += g2i.eq(0)
+        m.d.comb += self.chip.eq(g1[9] ^ g2i)
+        with m.If(self.restart):
+            m.d.sync += [g1.eq(0x3FF), g2.eq(0x3FF)]
+        with m.Elif(self.step):
+            m.d.sync += [g1.eq(_lfsr_step(g1, G1_FEEDBACK)), g2.eq(_lfsr_step(g2, G2_FEEDBACK))]
+        return m
 
 
 class GnssCorrelator(wiring.Component):
@@ -112,20 +153,12 @@ class GnssCorrelator(wiring.Component):
         code_acc = Signal(CB)
         chip = Signal(range(1023))
         hold = Signal(SB)
-        g1 = Signal(10, init=0x3FF)
-        g2 = Signal(10, init=0x3FF)
         gen_ep = Signal()
         gen_first = Signal()
         code_epoch = Signal(CB)
-        g2i = Signal()
-        with m.Switch(prn):
-            for n, (a, b) in G2_TAPS.items():
-                with m.Case(n):
-                    m.d.comb += g2i.eq(g2[a - 1] ^ g2[b - 1])
-            with m.Default():
-                m.d.comb += g2i.eq(0)
-        bit_e = Signal()
-        m.d.comb += bit_e.eq(g1[9] ^ g2i)
+        m.submodules.ca = ca = CaCodeGenerator()
+        bit_e = ca.chip
+        m.d.comb += ca.prn.eq(prn)
 
         s = Signal(CB + 1)
         m.d.comb += s.eq(code_acc + cf)
@@ -149,11 +182,8 @@ class GnssCorrelator(wiring.Component):
             with m.Else():
                 m.d.sync += code_acc.eq(s[:CB])
             with m.If(advance):
-                with m.If(chip == 1022):
-                    m.d.sync += [chip.eq(0), g1.eq(0x3FF), g2.eq(0x3FF)]
-                with m.Else():
-                    m.d.sync += [chip.eq(chip + 1), g1.eq(_lfsr_step(g1, G1_FEEDBACK)),
-                                 g2.eq(_lfsr_step(g2, G2_FEEDBACK))]
+                m.d.sync += chip.eq(Mux(chip == 1022, 0, chip + 1))
+        m.d.comb += [ca.step.eq(advance), ca.restart.eq(wrap)]
         with m.If(boundary):
             m.d.sync += [cf.eq(sh_code), prn.eq(sh_prn), hold.eq(Mux(slew_pend, sh_slew, 0)),
                          slew_pend.eq(0), pend_carr.eq(sh_carr), code_epoch.eq(s[:CB])]
