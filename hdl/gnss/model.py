@@ -50,7 +50,7 @@ Record layout (LSB first): ``ie, qe, ip, qp, il, ql`` (signed ``acc_width`` each
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from typing import NamedTuple
 
@@ -701,7 +701,8 @@ class GnssArrayModel:
         vals = [v for v, k in zip(vals, keep) if k]
         p = self.params
         fp = p.fifo
-        recs = np.array([record_to_words(v, p) for v in vals], np.int64).reshape(-1, fp.record_words)
+        recs = np.array([record_to_words(v, p) for v in vals],
+                        np.int64).reshape(-1, fp.record_words)
         ready = np.ones(n_cycles, bool) if out_ready is None else \
             np.asarray(out_ready, bool)[:n_cycles]
         if ready.size < n_cycles:

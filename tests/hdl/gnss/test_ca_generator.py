@@ -1,9 +1,5 @@
 """The HDL C/A generator's registers against the IS-GPS-200 tables, all 32 PRNs."""
-import sys
-from pathlib import Path
-
 import numpy as np
-import pytest
 from amaranth.hdl import Module, Mux, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
@@ -11,9 +7,7 @@ from amaranth.lib.wiring import In, Out
 from cosim.testing import check_stream
 from dsp.gnss.ca_code import CODE_LENGTH, FIRST_10_CHIPS_OCTAL, ca_code, ca_code_table
 from hdl.gnss.channel import CaCodeGenerator
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _util import needs_verilator  # noqa: E402
+from _util import needs_verilator  # on sys.path: tests/hdl/conftest.py
 
 
 class _Bench(wiring.Component):

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from _util import assert_lints_clean, needs_verilator, verilator_sim  # tests/hdl/conftest.py
 from cosim.pysim import run_stream
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
@@ -152,11 +153,6 @@ def test_widths_are_derived():
 
 
 # -- Verilator, arrays, lint ------------------------------------------------------------------
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _util import assert_lints_clean, needs_verilator, verilator_sim  # noqa: E402
 
 
 def _sample_cycles(valid, n):
