@@ -318,7 +318,7 @@ class GnssChannelArray(wiring.Component):
 
     The records carry a ``channel`` field (:func:`array_params`); an arbiter passes at most
     one record every ``record_words`` cycles (the FIFO writes a word per cycle), the lowest
-    pending channel first (records of one channel are a code period apart, so one pending
+    pending channel first, two cycles from grant to the FIFO input (records of one channel are a code period apart, so one pending
     flag per channel suffices: the core's record register holds until its next dump).
 
     Ports
@@ -368,9 +368,14 @@ class GnssChannelArray(wiring.Component):
                          core.reg_addr.eq(self.reg_addr[:2]), core.reg_data.eq(self.reg_data)]
             cores.append(core)
         pend = Signal(self.channels)
+        # Two stages for 100 MHz with 12 channels: (1) pick the lowest pending channel into
+        # a one-hot register, (2) AND-OR multiplex its record (the core's record register
+        # holds until its next dump, a code period later) into the FIFO input register.
+        sel = Signal(self.channels)
+        sel_valid = Signal()
         out = Signal(p.record_bits)
         out_valid = Signal()
-        m.d.sync += out_valid.eq(0)
+        m.d.sync += sel_valid.eq(0)
         # The FIFO writes one word per cycle: a record every record_words cycles at most.
         n = self.fifo_params.record_words
         gap = Signal(range(max(n, 2)))
@@ -378,16 +383,19 @@ class GnssChannelArray(wiring.Component):
             m.d.sync += gap.eq(gap - 1)
         # Grant first (lowest pending channel), then new records set their flags.
         with m.If(pend.any() & (gap == 0)):
-            m.d.sync += [out_valid.eq(1), gap.eq(n - 1)]
+            m.d.sync += [sel_valid.eq(1), gap.eq(n - 1)]
             for ch in range(self.channels):
                 cond = pend[ch] if ch == 0 else (pend[ch] & ~pend[:ch].any())
                 with m.If(cond):
-                    m.d.sync += [pend[ch].eq(0),
-                                 out.eq(Cat(Value.cast(cores[ch].rec.payload),
-                                            Const(ch, p.channel_bits)))]
+                    m.d.sync += [pend[ch].eq(0), sel.eq(1 << ch)]
         for ch, core in enumerate(cores):
             with m.If(core.rec.valid):
                 m.d.sync += pend[ch].eq(1)
+        mux = Const(0, p.record_bits)
+        for ch, core in enumerate(cores):
+            rec = Cat(Value.cast(core.rec.payload), Const(ch, p.channel_bits))
+            mux = mux | (rec & sel[ch].replicate(p.record_bits))
+        m.d.sync += [out_valid.eq(sel_valid), out.eq(mux)]
         m.d.comb += [fifo.i.valid.eq(out_valid), fifo.i.payload.eq(out),
                      self.overflow_count.eq(fifo.overflow_count)]
         wiring.connect(m, wiring.flipped(self.o), fifo.o)

@@ -588,7 +588,8 @@ class Arbiter:
     A record pending from cycle ``r`` (per channel at most one at a time) is granted in the
     first cycle ``>= r`` in which no lower channel is pending and at least ``spacing``
     cycles (the FIFO's ``record_words``: it writes one word per cycle) have passed since the
-    previous grant; it reaches the FIFO the cycle after its grant. Grants are only decided
+    previous grant; it reaches the FIFO input two cycles after its grant (one-hot select
+    register, then the multiplexed record register). Grants are only decided
     below a *horizon* (no later record can be pending before it); the rest wait for the next
     :meth:`feed`.
     """
@@ -619,7 +620,7 @@ class Arbiter:
                 heapq.heappush(pend, (w[k][1], w[k][0], k))
                 k += 1
             _, _, j = heapq.heappop(pend)
-            out_c.append(t + 1)
+            out_c.append(t + 2)
             out_v.append(w[j][2])
             t += self.spacing
         self.t = t
