@@ -7,7 +7,7 @@ from amaranth.lib.wiring import In, Out
 from cosim.testing import check_stream
 from dsp.gnss.ca_code import CODE_LENGTH, FIRST_10_CHIPS_OCTAL, ca_code, ca_code_table
 from hdl.gnss.channel import CaCodeGenerator
-from _util import needs_verilator  # on sys.path: tests/hdl/conftest.py
+from _util import needs_verilator, verilator_sim  # on sys.path: tests/hdl/conftest.py
 
 
 class _Bench(wiring.Component):
@@ -46,9 +46,12 @@ def test_generator_pysim_prn_7_two_periods_and_first_chips():
 
 @needs_verilator
 def test_generator_verilator_all_prns():
+    """One Verilator build, every PRN register value 1-32 plus two invalid ones (G1 only)."""
+    sim = verilator_sim(_Bench(), "ca_code_bench")
     n = CODE_LENGTH + 11
     for prn in list(range(1, 33)) + [0, 40]:
-        r = check_stream(_Bench(), _expected(prn, n), np.zeros(n, np.int64),
-                         inputs={"prn": prn}, backends=("verilator",), name="ca_code_bench")
+        r = sim.run(np.zeros(n, np.int64), inputs={"prn": prn}, n_cycles=n + 2)
+        np.testing.assert_array_equal(r.words, _expected(prn, n), err_msg=f"PRN {prn}")
+        np.testing.assert_array_equal(r.cycles, np.arange(1, n + 1))
         if 1 <= prn <= 32:
             np.testing.assert_array_equal(r.words[:CODE_LENGTH], ca_code(prn))
