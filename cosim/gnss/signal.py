@@ -53,8 +53,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-import numba
 import numpy as np
+
+from dsp.jit import njit_cached
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
 
@@ -75,7 +76,7 @@ STREAM_NOISE, STREAM_NAV, STREAM_DYNAMICS, STREAM_OSC = 0, 1, 2, 3
 MAX_STEP_SIGMA = {2: 0.9957, 3: 0.5860, 4: 0.3352, 5: 0.1881}
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _if_kernel(n0, f_ratio, sign, phase0, chip0, chips_per_sample, motion, phi, code, bits,
                bit0, sigma, noise, amp, out):
     """One pass over a block: code x data x carrier (+ noise), the model of the docstring.

@@ -25,13 +25,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
+
+from dsp.jit import njit_cached
 
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH, ca_code_levels, check_prn
 
 
-@numba.njit(cache=True, nogil=True)
+@njit_cached(nogil=True)
 def _epoch_kernel(x, phase0, fc, code0, dp, half, code, out):
     """One epoch, one pass: out = [IE, QE, IP, QP, IL, QL] (the sums of the docstring).
 

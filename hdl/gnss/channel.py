@@ -1,0 +1,409 @@
+"""GPS L1 C/A tracking channel: code NCO and C/A generator, carrier NCO and wipe-off,
+early/prompt/late integrate-and-dump, records to the DSP FIFO, double-buffered registers.
+
+Arithmetic and timing are specified in :mod:`hdl.gnss.model` (module docstring); this
+file builds it. Pipeline of one sample (input cycle ``c``):
+
+* ``c``: code NCO / generator / delay line / carrier accumulator update (registers);
+  the replicas and the carrier phase of the sample are the registers' values in ``c``;
+* ``c .. c+5``: carrier NCO (:class:`hdl.nco.Nco`, phase port), the ADC word delayed
+  alongside; ``c+5 .. c+9``: real mixer (:class:`hdl.mixer.Mixer`); replica bits and
+  epoch flags delayed 9 cycles;
+* ``c+9``: accumulators (a dump loads the record registers); ``c+10``: record valid.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from dsp.gnss.ca_code import G1_FEEDBACK, G2_FEEDBACK, G2_TAPS
+from hdl.fifo import DspFifo
+from hdl.mixer import Mixer
+from hdl.nco import Nco
+
+from .model import (ACC_FIELDS, REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW,
+                    GnssChannelParams)
+
+__all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
+           "record_layout", "gnss_top"]
+
+
+def record_layout(params: GnssChannelParams) -> data.StructLayout:
+    """The record as a struct, fields LSB first (:attr:`GnssChannelParams.record_fields`)."""
+    return data.StructLayout({n: (signed(w) if s else unsigned(w))
+                              for n, w, s in params.record_fields})
+
+
+def array_params(params: GnssChannelParams, channels: int) -> GnssChannelParams:
+    """``params`` with the ``channel`` record field an array of ``channels`` needs."""
+    if isinstance(channels, bool) or not isinstance(channels, int) or not 1 <= channels <= 64:
+        raise ValueError(f"GNSS channel array needs channels in [1, 64], not {channels!r}")
+    return replace(params, channel_bits=max(1, (channels - 1).bit_length()))
+
+
+def _check_params(obj, params):
+    if not isinstance(params, GnssChannelParams):
+        obj._MustUse__silence = True
+        raise ValueError(f"{type(obj).__name__} needs a GnssChannelParams, not {params!r}")
+
+
+def _lfsr_step(reg, feedback):
+    fb = reg[feedback[0] - 1]
+    for t in feedback[1:]:
+        fb = fb ^ reg[t - 1]
+    return Cat(fb, reg[:9])
+
+
+class CaCodeGenerator(wiring.Component):
+    """C/A code generator: G1 and G2 10-stage registers (IS-GPS-200, :mod:`dsp.gnss.ca_code`)
+    and the G2 phase selector of Table 3-Ia.
+
+    Ports
+    -----
+    prn : In(unsigned(6))
+        PRN 1-32 (any other value: G1 alone); combinational into ``chip``.
+    step : In(1)
+        Advance one chip at the clock edge.
+    restart : In(1)
+        Set both registers to all ones at the clock edge (the code epoch; overrides
+        ``step``).
+    chip : Out(1)
+        The current chip, logic level (0 = +1): G1 stage 10 XOR the PRN's two G2 stages.
+    """
+
+    def __init__(self):
+        # Explicit members: this module's annotations are strings (``from __future__``).
+        super().__init__({"prn": In(unsigned(6)), "step": In(1), "restart": In(1),
+                          "chip": Out(1)})
+
+    def elaborate(self, platform):
+        m = Module()
+        g1 = Signal(10, init=0x3FF)
+        g2 = Signal(10, init=0x3FF)
+        g2i = Signal()
+        with m.Switch(self.prn):
+            for n, (a, b) in G2_TAPS.items():
+                with m.Case(n):
+                    m.d.comb += g2i.eq(g2[a - 1] ^ g2[b - 1])
+            with m.Default():
+                m.d.comb += g2i.eq(0)
+        m.d.comb += self.chip.eq(g1[9] ^ g2i)
+        with m.If(self.restart):
+            m.d.sync += [g1.eq(0x3FF), g2.eq(0x3FF)]
+        with m.Elif(self.step):
+            m.d.sync += [g1.eq(_lfsr_step(g1, G1_FEEDBACK)), g2.eq(_lfsr_step(g2, G2_FEEDBACK))]
+        return m
+
+
+class GnssCorrelator(wiring.Component):
+    """One channel's correlator core (no FIFO).
+
+    Ports
+    -----
+    i : In(stream.Signature(signed(adc_bits), always_ready=True))
+        ADC samples, one per ``valid`` cycle (gaps allowed).
+    reg_we, reg_addr (2 bits), reg_data (``reg_data_width`` bits) : In
+        Register bus: a write when ``reg_we`` is high (addresses
+        :data:`~hdl.gnss.model.REG_CARR_FREQ` ...), into the shadow registers.
+    rec : Out(stream.Signature(record_layout(params), always_ready=True))
+        One record per dump, :attr:`GnssChannelParams.latency` cycles after the input cycle
+        of the dump's first sample; the payload holds until the next dump.
+    """
+
+    def __init__(self, params: GnssChannelParams):
+        _check_params(self, params)
+        self.params = params
+        self.layout = record_layout(replace(params, channel_bits=0))
+        super().__init__({
+            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "reg_we": In(1),
+            "reg_addr": In(2),
+            "reg_data": In(unsigned(params.reg_data_width)),
+            "rec": Out(stream.Signature(self.layout, always_ready=True)),
+        })
+
+    @property
+    def latency(self) -> int:
+        return self.params.latency
+
+    def elaborate(self, platform):
+        p = self.params
+        m = Module()
+        CB, PB, SB = p.code_phase_bits, p.carr_phase_bits, p.slew_bits
+        K, d = p.dump_epochs, p.half_spacing
+        L = 2 * d
+        cw, kw = p.carr_word(p.if_hz), p.code_word()
+        valid = self.i.valid
+
+        # -- registers: shadow (bus side) and active ------------------------------------
+        sh_carr = Signal(PB, init=cw)
+        sh_code = Signal(CB, init=kw)
+        sh_prn = Signal(6, init=p.prn)
+        sh_slew = Signal(SB)
+        slew_pend = Signal()
+        cf = Signal(CB, init=kw)
+        prn = Signal(6, init=p.prn)
+        pend_carr = Signal(PB, init=cw)
+        carr_f = Signal(PB, init=cw)
+
+        # -- code NCO and C/A generator ----------------------------------------------------
+        code_acc = Signal(CB)
+        chip = Signal(range(1023))
+        hold = Signal(SB)
+        gen_ep = Signal()
+        gen_first = Signal()
+        code_epoch = Signal(CB)
+        m.submodules.ca = ca = CaCodeGenerator()
+        bit_e = ca.chip
+        m.d.comb += ca.prn.eq(prn)
+
+        s = Signal(CB + 1)
+        m.d.comb += s.eq(code_acc + cf)
+        advance = Signal()
+        wrap = Signal()
+        boundary = Signal()
+        m.d.comb += [advance.eq(valid & (hold == 0) & s[CB]),
+                     wrap.eq(advance & (chip == 1022))]
+        if K > 1:
+            gen_k = Signal(range(K))
+            m.d.comb += boundary.eq(wrap & (gen_k == K - 1))
+            with m.If(wrap):
+                m.d.sync += gen_k.eq(Mux(gen_k == K - 1, 0, gen_k + 1))
+        else:
+            m.d.comb += boundary.eq(wrap)
+
+        with m.If(valid):
+            m.d.sync += [gen_ep.eq(wrap), gen_first.eq(boundary)]
+            with m.If(hold != 0):
+                m.d.sync += hold.eq(hold - 1)
+            with m.Else():
+                m.d.sync += code_acc.eq(s[:CB])
+            with m.If(advance):
+                m.d.sync += chip.eq(Mux(chip == 1022, 0, chip + 1))
+        m.d.comb += [ca.step.eq(advance), ca.restart.eq(wrap)]
+        with m.If(boundary):
+            m.d.sync += [cf.eq(sh_code), prn.eq(sh_prn), hold.eq(Mux(slew_pend, sh_slew, 0)),
+                         slew_pend.eq(0), pend_carr.eq(sh_carr), code_epoch.eq(s[:CB])]
+        # Bus writes after the latch: a write in the boundary cycle waits for the next one.
+        # (Separate Ifs, not a Switch: the export of a Switch over all 4 addresses leaves
+        # per-register case statements Verilator flags as incomplete.)
+        we = self.reg_we
+        with m.If(we & (self.reg_addr == REG_CARR_FREQ)):
+            m.d.sync += sh_carr.eq(self.reg_data[:PB])
+        with m.If(we & (self.reg_addr == REG_CODE_FREQ)):
+            m.d.sync += sh_code.eq(self.reg_data[:CB])
+        with m.If(we & (self.reg_addr == REG_PRN)):
+            m.d.sync += sh_prn.eq(self.reg_data[:6])
+        with m.If(we & (self.reg_addr == REG_SLEW)):
+            m.d.sync += [sh_slew.eq(self.reg_data[:SB]), slew_pend.eq(1)]
+
+        # -- delay line: (code bit, epoch, first) per sample --------------------------------
+        taps = [Signal(3, name=f"line{k}") for k in range(L)]
+        with m.If(valid):
+            m.d.sync += taps[0].eq(Cat(bit_e, gen_ep, gen_first))
+            m.d.sync += [taps[k].eq(taps[k - 1]) for k in range(1, L)]
+        prompt, late = taps[d - 1], taps[L - 1]
+        bit_p, ep_p, first_p, bit_l = prompt[0], prompt[1], prompt[2], late[0]
+
+        # -- carrier accumulator and NCO -----------------------------------------------------
+        carr_acc = Signal(PB)
+        carr_at = Signal(PB)
+        code_at = Signal(CB)
+        with m.If(valid):
+            with m.If(first_p):
+                m.d.sync += [carr_at.eq(carr_acc), code_at.eq(code_epoch),
+                             carr_f.eq(pend_carr), carr_acc.eq(carr_acc + pend_carr)]
+            with m.Else():
+                m.d.sync += carr_acc.eq(carr_acc + carr_f)
+        m.submodules.nco = nco = Nco(p.nco)
+        m.d.comb += [nco.i.valid.eq(valid), nco.freq.eq(0), nco.phase.eq(carr_acc)]
+
+        # -- ADC word and flags alongside the NCO / mixer pipelines -------------------------
+        mp = p.mixer
+        if p.adc_bits == 1:
+            x0 = Cat(Const(1, 1), self.i.payload).as_signed()   # s in {0, -1} -> 2 s + 1
+        else:
+            x0 = self.i.payload
+        x = x0
+        for k in range(p.nco.latency):
+            r = Signal(signed(mp.in_width), name=f"x_d{k + 1}")
+            m.d.sync += r.eq(x)
+            x = r
+        m.submodules.mixer = mixer = Mixer(mp)
+        m.d.comb += [mixer.i.valid.eq(nco.o.valid), mixer.i.payload.x.eq(x),
+                     mixer.i.payload.lo.eq(nco.o.payload)]
+        flags = Cat(bit_e, bit_p, bit_l, ep_p, first_p)
+        for k in range(p.nco.latency + mp.latency):
+            r = Signal(5, name=f"flags_d{k + 1}")
+            m.d.sync += r.eq(flags)
+            flags = r
+        f_e, f_p, f_l, f_ep, f_first = (flags[k] for k in range(5))
+
+        # -- integrate and dump --------------------------------------------------------------
+        W = p.acc_width
+        iv, qv = mixer.o.payload.i, mixer.o.payload.q
+        accs = {n: Signal(signed(W), name=f"acc_{n}") for n in ACC_FIELDS}
+        terms = {}
+        for arm, bit in (("e", f_e), ("p", f_p), ("l", f_l)):
+            for comp, v in (("i", iv), ("q", qv)):
+                t = Signal(signed(p.iq_width + 1), name=f"t_{comp}{arm}")
+                m.d.comb += t.eq(Mux(bit, -v, v))
+                terms[comp + arm] = t
+        epoch = Signal(p.epoch_bits)
+        rec = Signal(self.layout)
+        rec_valid = Signal()
+        m.d.sync += rec_valid.eq(0)
+        with m.If(mixer.o.valid):
+            with m.If(f_ep):
+                m.d.sync += epoch.eq(epoch + 1)
+            with m.If(f_first):
+                m.d.sync += [getattr(rec, n).eq(accs[n]) for n in ACC_FIELDS]
+                m.d.sync += [rec.epoch.eq(epoch + 1), rec.carr_phase.eq(carr_at),
+                             rec.code_phase.eq(code_at), rec_valid.eq(1)]
+                m.d.sync += [accs[n].eq(terms[n]) for n in ACC_FIELDS]
+            with m.Else():
+                m.d.sync += [accs[n].eq(accs[n] + terms[n]) for n in ACC_FIELDS]
+        m.d.comb += [self.rec.valid.eq(rec_valid), self.rec.payload.eq(rec)]
+        return m
+
+
+class GnssChannel(wiring.Component):
+    """One tracking channel: :class:`GnssCorrelator` into the record FIFO.
+
+    Ports
+    -----
+    i : In(stream.Signature(signed(adc_bits), always_ready=True))
+        ADC samples.
+    reg_we, reg_addr (2 bits), reg_data : In
+        Register bus (see :class:`GnssCorrelator`).
+    o : Out(stream.Signature(DspFifo out layout))
+        Tagged FIFO words to the DSP, ``record_words`` per record (first tagged 1).
+    overflow_count : Out(unsigned(count_width))
+        Records dropped.
+    """
+
+    def __init__(self, params: GnssChannelParams):
+        _check_params(self, params)
+        self.params = params
+        self.fifo_params = params.fifo
+        self._fifo = DspFifo(self.fifo_params)
+        super().__init__({
+            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "reg_we": In(1),
+            "reg_addr": In(2),
+            "reg_data": In(unsigned(params.reg_data_width)),
+            "o": Out(stream.Signature(self._fifo.out_layout)),
+            "overflow_count": Out(unsigned(self.fifo_params.count_width)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.core = core = GnssCorrelator(replace(self.params, channel_bits=0))
+        m.submodules.fifo = fifo = self._fifo
+        m.d.comb += [core.i.valid.eq(self.i.valid), core.i.payload.eq(self.i.payload),
+                     core.reg_we.eq(self.reg_we), core.reg_addr.eq(self.reg_addr),
+                     core.reg_data.eq(self.reg_data),
+                     fifo.i.valid.eq(core.rec.valid),
+                     fifo.i.payload.eq(Value.cast(core.rec.payload)),
+                     self.overflow_count.eq(fifo.overflow_count)]
+        wiring.connect(m, wiring.flipped(self.o), fifo.o)
+        return m
+
+
+class GnssChannelArray(wiring.Component):
+    """``channels`` tracking channels on one ADC stream, one record FIFO.
+
+    The records carry a ``channel`` field (:func:`array_params`); an arbiter passes at most
+    one record every ``record_words`` cycles (the FIFO writes a word per cycle), the lowest
+    pending channel first, two cycles from grant to the FIFO input (records of one channel are a code period apart, so one pending
+    flag per channel suffices: the core's record register holds until its next dump).
+
+    Ports
+    -----
+    i : In(stream.Signature(signed(adc_bits), always_ready=True))
+    reg_we, reg_addr (``2 + ceil(log2(channels))`` bits: ``4 * channel + reg``), reg_data : In
+    o : Out(stream.Signature(DspFifo out layout))
+    overflow_count : Out(unsigned(count_width))
+    """
+
+    def __init__(self, params: GnssChannelParams, channels: int = 12):
+        _check_params(self, params)
+        try:
+            ap = array_params(params, channels)
+        except ValueError:
+            self._MustUse__silence = True
+            raise
+        self.channels = channels
+        self.params = ap if params.channel_bits == 0 else params
+        if (1 << self.params.channel_bits) < channels:
+            self._MustUse__silence = True
+            raise ValueError(f"GNSS channel_bits {self.params.channel_bits} cannot number "
+                             f"{channels} channels")
+        self.fifo_params = self.params.fifo
+        self._fifo = DspFifo(self.fifo_params)
+        self.addr_bits = 2 + max(1, (channels - 1).bit_length())
+        super().__init__({
+            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "reg_we": In(1),
+            "reg_addr": In(self.addr_bits),
+            "reg_data": In(unsigned(params.reg_data_width)),
+            "o": Out(stream.Signature(self._fifo.out_layout)),
+            "overflow_count": Out(unsigned(self.fifo_params.count_width)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        p = self.params
+        core_p = replace(p, channel_bits=0, record_words=None)
+        m.submodules.fifo = fifo = self._fifo
+        cores = []
+        for ch in range(self.channels):
+            core = GnssCorrelator(core_p)
+            m.submodules[f"ch{ch}"] = core
+            m.d.comb += [core.i.valid.eq(self.i.valid), core.i.payload.eq(self.i.payload),
+                         core.reg_we.eq(self.reg_we & (self.reg_addr[2:] == ch)),
+                         core.reg_addr.eq(self.reg_addr[:2]), core.reg_data.eq(self.reg_data)]
+            cores.append(core)
+        pend = Signal(self.channels)
+        # Two stages for 100 MHz with 12 channels: (1) pick the lowest pending channel into
+        # a one-hot register, (2) AND-OR multiplex its record (the core's record register
+        # holds until its next dump, a code period later) into the FIFO input register.
+        sel = Signal(self.channels)
+        sel_valid = Signal()
+        out = Signal(p.record_bits)
+        out_valid = Signal()
+        m.d.sync += sel_valid.eq(0)
+        # The FIFO writes one word per cycle: a record every record_words cycles at most.
+        n = self.fifo_params.record_words
+        gap = Signal(range(max(n, 2)))
+        with m.If(gap != 0):
+            m.d.sync += gap.eq(gap - 1)
+        # Grant first (lowest pending channel), then new records set their flags.
+        with m.If(pend.any() & (gap == 0)):
+            m.d.sync += [sel_valid.eq(1), gap.eq(n - 1)]
+            for ch in range(self.channels):
+                cond = pend[ch] if ch == 0 else (pend[ch] & ~pend[:ch].any())
+                with m.If(cond):
+                    m.d.sync += [pend[ch].eq(0), sel.eq(1 << ch)]
+        for ch, core in enumerate(cores):
+            with m.If(core.rec.valid):
+                m.d.sync += pend[ch].eq(1)
+        mux = Const(0, p.record_bits)
+        for ch, core in enumerate(cores):
+            rec = Cat(Value.cast(core.rec.payload), Const(ch, p.channel_bits))
+            mux = mux | (rec & sel[ch].replicate(p.record_bits))
+        m.d.sync += [out_valid.eq(sel_valid), out.eq(mux)]
+        m.d.comb += [fifo.i.valid.eq(out_valid), fifo.i.payload.eq(out),
+                     self.overflow_count.eq(fifo.overflow_count)]
+        wiring.connect(m, wiring.flipped(self.o), fifo.o)
+        return m
+
+
+def gnss_top(channels: int = 1, params: GnssChannelParams | None = None):
+    """The synthesis / export top for ``channels`` channels: :class:`GnssChannel` for 1,
+    :class:`GnssChannelArray` otherwise (default parameters)."""
+    p = GnssChannelParams() if params is None else params
+    return GnssChannel(p) if channels == 1 else GnssChannelArray(p, channels)
