@@ -42,12 +42,15 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
                bn_hz: float = 15.0, dll_bn_hz: float = 1.0, spacing_chips: float = 0.5,
                latency: int = 0, costas: bool = True, fll_bn_hz: float | None = None,
                shape=(), seed: int = 0, phase0_err_cycles=0.0, freq0_err_hz=0.0,
-               code0_err_chips=0.0, arith=None, fs_hz: float = 16.368e6) -> FastTrackResult:
+               code0_err_chips=0.0, arith=None, fs_hz: float = 16.368e6,
+               tracker=None) -> FastTrackResult:
     """Run the channel closed loop on the fast path; batch shape = broadcast of
     ``cn0_dbhz`` and ``shape``. Starts on the truth (plus the given initial errors), with
     the PLL's rate state on the true Doppler rate (as after pull-in). ``arith``
     (``dsp.gnss.loops_fixed.FLOAT`` or a ``FixedArith``) runs the one-source
-    ``ChannelCore`` instead (no FLL), its NCO words turned back into Hz at ``fs_hz``."""
+    ``ChannelCore`` instead (no FLL), its NCO words turned back into Hz at ``fs_hz``.
+    ``tracker``: a name registered in :mod:`dsp.gnss.trackers` (built for this run's
+    context, in ``arith``, default float) or a tracker object; it replaces the PLL."""
     rng = np.random.default_rng(seed)
     batch = np.broadcast_shapes(np.shape(cn0_dbhz), tuple(shape))
     t = np.arange(n_epochs + 1) * T_s
@@ -58,7 +61,19 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
     f = (a["doppler_hz"][0] + freq0_err_hz) * ones
     phi = (th[0] - phase0_err_cycles) * ones
     chi = (a["code_chips_total"][0] - code0_err_chips) * ones
-    if arith is None:
+    if tracker is not None:
+        if isinstance(tracker, str):
+            from dsp.gnss.loops_fixed import FLOAT
+            from dsp.gnss.trackers import TrackerContext, make_tracker
+            ctx = TrackerContext(fs_hz=fs_hz, T_s=T_s, doppler0_hz=f,
+                                 doppler_rate0_hz_s=a["doppler_rate_hz_s"][0] * ones,
+                                 cn0_dbhz=None if np.ndim(cn0_dbhz) else float(cn0_dbhz),
+                                 spacing_chips=spacing_chips, latency_epochs=latency)
+            tracker = make_tracker(tracker, ctx, FLOAT if arith is None else arith)
+
+        def update(*iq):
+            return tracker.frequencies_hz(tracker.step(*iq))
+    elif arith is None:
         ch = TrackingChannel(T_s, order, bn_hz, dll_bn_hz, spacing_chips, 0.0, False, f,
                              a["doppler_rate_hz_s"][0] * ones, fll_bn_hz, costas)
         update = ch.update

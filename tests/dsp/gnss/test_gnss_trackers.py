@@ -19,3 +19,13 @@ def test_builtin_plls_are_the_channel_core():
 def test_unknown_tracker_named():
     with pytest.raises(ValueError, match="unknown tracker 'pll9'; choose from"):
         make_tracker("pll9", TrackerContext(fs_hz=1e6), FLOAT)
+
+
+def test_fast_path_runs_a_registered_tracker_like_the_core():
+    from dsp.gnss.loops_fixed import FixedArith
+    from cosim.gnss.dynamics import seed002
+    from cosim.gnss.loopsim import track_fast, truth_for
+    truth = truth_for(seed002(q=0), 0.3)
+    a = track_fast(truth, 45.0, 200, arith=FixedArith(), seed=3)
+    b = track_fast(truth, 45.0, 200, arith=FixedArith(), seed=3, tracker="pll3")
+    assert np.array_equal(a.doppler_hz, b.doppler_hz)
