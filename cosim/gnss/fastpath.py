@@ -83,8 +83,12 @@ def noise_correlation(spacing_chips: float = 0.5, bandwidth_hz: float | None = N
     """The 3x3 correlation of the E, P, L noise (either arm), model above."""
     h = spacing_chips / 2
     off = np.array([h, 0.0, -h])
-    return code_correlation(off[:, None] - off[None, :], bandwidth_hz, prn) / \
+    r = code_correlation(off[:, None] - off[None, :], bandwidth_hz, prn) / \
         code_correlation(0.0, bandwidth_hz, prn)
+    # the zero-lag terms are 1 by definition; the band-limited quadrature's matrix product
+    # may round them differently from the scalar zero-lag value (BLAS blocking)
+    np.fill_diagonal(r, 1.0)
+    return r
 
 
 @dataclass
