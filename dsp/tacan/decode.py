@@ -18,6 +18,25 @@ burst time is compared with the grid phase of its neighbours (median over +-8 bu
 an offset that is a whole number of code steps (within ``tol_s``) is corrected, and a burst
 off the grid by anything else is a false decode and is dropped (counted).
 
+Below ~5 dB the main burst, which at some bearings sits in the envelope trough, is rarely
+decoded on its own (bearing 90 deg, 4 dB: 1 main in 45) although the auxiliary bursts around
+it are. What the signal guarantees then decides instead (:func:`_infer_main`, on with
+``infer_main``): the references lie on one 135 Hz grid and the main burst takes exactly one
+of the nine grid slots of a rotation. The grid is fitted to the decoded references (its
+period gives the beacon's rotation rate, not assumed to be 15 Hz); at every grid position the
+main and auxiliary templates are scored and accumulated per slot (grid index mod 9), rotation
+by rotation, as the main template's share ``M / (M + A)`` of the matched fractions -- a
+share that does not depend on how many pulses the detector catches (~0.2 in an auxiliary
+slot, ~0.67 in the main slot in X mode, 0.5 on random peaks). The main slot is declared when
+the best slot's share leads the runner-up's by ``slot_margin`` with ``min_slot_pulses``
+matched pulses in it, after at least ``min_rotations`` rotations; from then on every rotation
+gets its main reference at the grid time (a decoded auxiliary burst in that slot is relabelled,
+a decoded main burst elsewhere is dropped and counted). References inferred before the
+declaration are known only at the declaration (``ref_done_s``), so the DSP stays causal and
+reports no bearing before it. False references: on noise alone no grid forms (too few decoded
+references on one 135 Hz grid: ``min_grid_refs``); a beacon of the other mode gives no
+template a lead. A record where the mains are all decoded (>= 5 dB) is left as it was.
+
 ``min_fraction`` = 0.5 lets the main burst be found when the references sit in the envelope
 trough at low SNR (bearing 90 deg: half the trough pulses fall under the detection
 threshold at 6 dB). It cannot create main bursts from random pairs: those are at least
@@ -41,6 +60,12 @@ class DecoderConfig:
     tol_s: float = 1.0e-6
     min_fraction: float = 0.5
     align: int = 4
+    infer_main: bool = True
+    slot_margin: float = 0.2
+    min_rotations: int = 3
+    min_slot_pulses: int = 30
+    min_pairs_x: int = 3
+    min_grid_refs: int = 8
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -51,6 +76,16 @@ class DecoderConfig:
             raise ValueError(f"decoder min_fraction must be in (0, 1], not {self.min_fraction}")
         if int(self.align) < 1:
             raise ValueError(f"decoder align must be >= 1, not {self.align}")
+        if not 0 < self.slot_margin <= 2:
+            raise ValueError(f"decoder slot_margin must be in (0, 2], not {self.slot_margin}")
+        if int(self.min_rotations) < 1:
+            raise ValueError(f"decoder min_rotations must be >= 1, not {self.min_rotations}")
+        if int(self.min_slot_pulses) < 1:
+            raise ValueError(f"decoder min_slot_pulses must be >= 1, not {self.min_slot_pulses}")
+        if not 1 <= int(self.min_pairs_x) <= 12:
+            raise ValueError(f"decoder min_pairs_x must be in 1..12, not {self.min_pairs_x}")
+        if int(self.min_grid_refs) < 3:
+            raise ValueError(f"decoder min_grid_refs must be >= 3, not {self.min_grid_refs}")
 
 
 @dataclass
@@ -63,6 +98,11 @@ class Decoded:
     ref_done_s: np.ndarray     # time the burst's last pulse arrived (when a DSP knows it)
     measurement_mask: np.ndarray  # per input peak: belongs to a burst or a valid pair
     n_off_grid: int = 0        # decoded bursts dropped for being off the 135 Hz grid
+    n_wrong_mode: int = 0      # main bursts of the other mode (X vs Y), dropped
+    n_inferred_main: int = 0   # main references placed by the rotation-slot detector
+    n_main_off_slot: int = 0   # decoded main bursts outside the declared slot (dropped)
+    main_slot_s: float | None = None   # when the main slot was declared (None: never/not needed)
+    rotation_hz: float | None = None   # beacon rotation rate from the fitted 135 Hz grid
 
 
 def _match(t: np.ndarray, targets: np.ndarray, tol: float):
@@ -162,6 +202,7 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     main_off = burst_offsets(cfg.mode, "main")
     aux_off = burst_offsets(cfg.mode, "aux")
     tm, sm, _, um = _bursts(t, main_off, cfg)
+    tm, sm, n_wrong_mode = _mode_check(t, tm, sm, cfg)
     ta, sa, _, ua = _bursts(t, aux_off, cfg)
     # A burst found by both templates (overlapping spans) keeps the better fractional score.
     if tm.size and ta.size:
@@ -181,12 +222,138 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     ref_t, on_grid = _snap_to_grid(ref_t, kinds, cfg)
     n_off = int(np.count_nonzero(~on_grid))
     ref_t, kinds, scores, done = ref_t[on_grid], kinds[on_grid], scores[on_grid], done[on_grid]
+    info = {}
+    if cfg.infer_main:
+        ref_t, kinds, scores, done, used, info = _infer_main(t, ref_t, kinds, scores, done,
+                                                              main_off, aux_off, cfg)
+        um = um | used
 
     pair = pair_spacing_s(cfg.mode)
     _, fwd = _match(t, t + pair, cfg.tol_s)
     _, back = _match(t, t - pair, cfg.tol_s)
     mask = um | ua | fwd | back
-    return Decoded(ref_t, kinds, scores, done, mask, n_off)
+    return Decoded(ref_t, kinds, scores, done, mask, n_off, n_wrong_mode=n_wrong_mode, **info)
+
+
+def _mode_check(t, tm, sm, cfg: DecoderConfig):
+    """Drop main bursts of the other mode. The two main codes share 12 pulses 30 us apart
+    (X: pairs 12 us wide; Y: single pulses), so each template finds half or more of the other
+    mode's main burst, in X at either alignment of its pairs. Whole pairs tell them apart:
+    an X receiver keeps a burst only with at least ``min_pairs_x`` pairs found complete (a Y
+    burst has none but by a noise peak 12 us after a pulse); a Y receiver drops a burst
+    whose pulses have a partner 12 us later at half the rate they are found or more (an X
+    burst's pairs)."""
+    if tm.size == 0:
+        return tm, sm, 0
+    if cfg.mode == "X":
+        off = burst_offsets("X", "main")
+        _, ok = _match(t, (tm[:, None] + off[None, :]).ravel(), cfg.tol_s)
+        ok = ok.reshape(tm.size, off.size)
+        keep = np.count_nonzero(ok[:, 0::2] & ok[:, 1::2], axis=1) >= cfg.min_pairs_x
+    else:
+        off = burst_offsets("Y", "main")
+        _, ok = _match(t, (tm[:, None] + off[None, :]).ravel(), cfg.tol_s)
+        _, ok12 = _match(t, (tm[:, None] + off[None, :] + pair_spacing_s("X")).ravel(), cfg.tol_s)
+        ok, ok12 = ok.reshape(tm.size, off.size), ok12.reshape(tm.size, off.size)
+        keep = np.count_nonzero(ok & ok12, axis=1) < 0.5 * np.count_nonzero(ok, axis=1)
+    return tm[keep], sm[keep], int(np.count_nonzero(~keep))
+
+
+def _fit_grid(ref_t: np.ndarray, period: float, tol: float, min_refs: int):
+    """Least-squares 135 Hz grid ``t = a + p n`` through the references: indices from the
+    nominal period, then refitted twice on the references within ``tol`` of the grid (a
+    burst mis-aligned by a code step does not pull it). None when fewer than ``min_refs``
+    references, or fewer than 80 % of them, lie on one grid."""
+    a, p = float(ref_t[0]), period
+    inl = np.ones(ref_t.size, bool)
+    for _ in range(3):
+        n = np.rint((ref_t - a) / p)
+        A = np.stack([np.ones(np.count_nonzero(inl)), n[inl]], axis=1)
+        (a, p), *_ = np.linalg.lstsq(A, ref_t[inl], rcond=None)
+        n = np.rint((ref_t - a) / p)
+        inl = np.abs(ref_t - (a + p * n)) <= tol
+        if np.count_nonzero(inl) < max(min_refs, 2):
+            return None
+    if np.count_nonzero(inl) < 0.8 * ref_t.size:
+        return None
+    return float(a), float(p), np.rint((ref_t - a) / p).astype(np.int64)
+
+
+def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderConfig):
+    """The rotation-slot detector (module docstring). Returns the references, the peaks the
+    inferred bursts matched, and the counts for :class:`Decoded`."""
+    none = np.zeros(t.size, bool)
+    n_rot = t.size and (t[-1] - t[0]) * 15.0
+    if ref_t.size < cfg.min_grid_refs or n_rot < cfg.min_rotations:
+        return ref_t, kinds, scores, done, none, {}
+    # A record whose main bursts were all decoded needs no inference.
+    main_n = np.count_nonzero(kinds == REF_MAIN)
+    if main_n >= np.floor(n_rot) - 1 and main_n >= cfg.min_rotations:
+        return ref_t, kinds, scores, done, none, {}
+    fit = _fit_grid(ref_t, 1.0 / 135.0, cfg.tol_s, int(cfg.min_grid_refs))
+    if fit is None:
+        return ref_t, kinds, scores, done, none, {}
+    a, p, n_ref = fit
+    span = max(main_off[-1], aux_off[-1])
+    lo = int(np.ceil((t[0] - a) / p))
+    hi = int(np.floor((t[-1] - span - a) / p))
+    if hi - lo + 1 < 9 * cfg.min_rotations:
+        return ref_t, kinds, scores, done, none, {}
+    n_all = np.arange(lo, hi + 1)
+    starts = a + p * n_all
+    sm = _scores(t, starts, main_off, cfg.tol_s)
+    sa = _scores(t, starts, aux_off, cfg.tol_s)
+    fm, fa = sm / main_off.size, sa / aux_off.size
+    slot = n_all % 9
+    # Rotation by rotation: per slot, the share of the main template in the matched template
+    # fractions so far, M / (M + A). It does not depend on how many pulses the detector
+    # catches: ~0.2 in an auxiliary slot (the main template finds 6 of 24 pulses of an
+    # auxiliary burst), ~0.67 in the main slot (X mode), 0.5 on random peaks. Declared at the
+    # first rotation end where the best slot leads the runner-up by slot_margin with at least
+    # min_slot_pulses matched pulses in it.
+    rot = (n_all - lo) // 9
+    declared = None
+    for r in range(int(cfg.min_rotations) - 1, int(rot[-1]) + 1):
+        m = rot <= r
+        M = np.bincount(slot[m], weights=fm[m], minlength=9)
+        A = np.bincount(slot[m], weights=fa[m], minlength=9)
+        pulses = np.bincount(slot[m], weights=(sm + sa)[m], minlength=9)
+        share = np.where(M + A > 0, M / np.where(M + A > 0, M + A, 1.0), 0.0)
+        order = np.argsort(share)
+        if (share[order[-1]] - share[order[-2]] >= cfg.slot_margin
+                and pulses[order[-1]] >= cfg.min_slot_pulses):
+            declared = (int(order[-1]), int(n_all[m][-1]))
+            break
+    info = {"rotation_hz": float(1.0 / (9.0 * p))}
+    if declared is None:
+        return ref_t, kinds, scores, done, none, info
+    s_main, n_decl = declared
+    t_decl = float(a + p * n_decl + span)
+    ref_slot = n_ref % 9
+    # Decoded mains outside the slot are false; auxiliaries inside it are mislabelled mains.
+    off_slot = (kinds == REF_MAIN) & (ref_slot != s_main)
+    in_slot = ref_slot == s_main
+    keep = ~(off_slot | in_slot)
+    have = {int(k) for k in n_ref[in_slot & (kinds == REF_MAIN)]}
+    n_main = n_all[(slot == s_main)]
+    main_t = np.where(np.isin(n_main, n_ref[in_slot]),
+                      np.interp(n_main, n_ref, ref_t), a + p * n_main)
+    # (a decoded burst in the slot keeps its own refined time; the others take the grid's)
+    m_idx, m_ok = _match(t, (main_t[:, None] + main_off[None, :]).ravel(), cfg.tol_s)
+    m_ok = m_ok.reshape(main_t.size, main_off.size)
+    used = np.zeros(t.size, bool)
+    used[m_idx.reshape(m_ok.shape)[m_ok]] = True
+    m_done = np.maximum(main_t + main_off[-1], t_decl)
+    m_score = m_ok.sum(axis=1)
+    inferred = int(sum(1 for k in n_main if int(k) not in have))
+    ref_t = np.concatenate([ref_t[keep], main_t])
+    kinds = np.concatenate([kinds[keep], np.full(main_t.size, REF_MAIN, np.int8)])
+    scores = np.concatenate([scores[keep], m_score])
+    done = np.concatenate([done[keep], m_done])
+    o = np.argsort(ref_t, kind="stable")
+    info.update(n_inferred_main=inferred, n_main_off_slot=int(np.count_nonzero(off_slot)),
+                main_slot_s=t_decl)
+    return ref_t[o], kinds[o], scores[o], done[o], used, info
 
 
 #: Code steps (s) by which a burst with a lost end pulse can be mis-aligned.
