@@ -88,7 +88,8 @@ class GnssModelSession(FrontendSession):
         self._fifo_state = FifoState()
         self._bus = {"reg_we": 0, "reg_addr": 0, "reg_data": 0}
         self._widths = {"reg_we": 1, "reg_addr": 2, "reg_data": params.reg_data_width}
-        rw = params.fifo.record_words
+        self._fifo = params.fifo        # derived properties: computed once, not per step
+        rw = self._fifo.record_words
         self._carry_wc = np.zeros(0, np.int64)
         self._carry_w = np.zeros((0, rw), np.int64)
         #: Bus writes ``(cycle, reg, value)`` the model has been given.
@@ -133,8 +134,7 @@ class GnssModelSession(FrontendSession):
         return out
 
     def _step(self, queue, ready, n, writes):
-        from hdl.gnss.model import record_to_words
-        p = self.params
+        p, fp = self.params, self._fifo
         start, stop = self.cycle, self.cycle + n
         x = queue[:n]
         bus = self._bus_cycles(writes, start, stop)
@@ -142,13 +142,14 @@ class GnssModelSession(FrontendSession):
         r = self.model.step(x, bus, cycles=np.arange(start, start + x.size, dtype=np.int64))
         vals = r.values(p)
         self.n_records += len(vals)
-        rw = p.fifo.record_words
-        new = np.array([record_to_words(v, p) for v in vals], np.int64).reshape(-1, rw)
+        rw, m = fp.record_words, (1 << fp.width) - 1
+        new = np.array([[(v >> (j * fp.width)) & m for j in range(rw)] for v in vals],
+                       np.int64).reshape(-1, rw)
         wc = np.r_[self._carry_wc, r.cycles]
         w = np.concatenate([self._carry_w, new])
         now = wc < stop
         self._carry_wc, self._carry_w = wc[~now], w[~now]
-        words, cycles, self._fifo_state = fifo_step(wc[now], w[now], ready, n, start, p.fifo,
+        words, cycles, self._fifo_state = fifo_step(wc[now], w[now], ready, n, start, fp,
                                                     self._fifo_state)
         return words, cycles, x.size
 
