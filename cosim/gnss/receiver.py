@@ -13,8 +13,10 @@ _SIG, _DYN, _RUN = GnssSignalConfig, DynamicsChoice, GnssRunConfig
 
 #: Options of ``python -m cosim gnss``.
 OPTIONS = (
-    Option(_SIG, "prn"), Option(_SIG, "cn0_dbhz"), Option(_SIG, "duration_s"),
-    Option(_SIG, "seed"), Option(_SIG, "fs_hz"), Option(_SIG, "if_hz"),
+    Option(_SIG, "prn"), Option(_SIG, "cn0_dbhz", help="carrier to noise density (dB-Hz)"), Option(_SIG, "duration_s"),
+    Option(_SIG, "seed", help="random seed (>= 0) of the noise, data bits, dynamics"),
+    Option(_SIG, "fs_hz", help="ADC sample rate = channel clock (S/s)"),
+    Option(_SIG, "if_hz", help="IF (Hz), in the first Nyquist zone"),
     Option(_SIG, "adc_bits"), Option(_SIG, "code_phase_chips"),
     Option(_DYN, "dynamics"), Option(_DYN, "jerk_g_per_s"), Option(_DYN, "jerk_start_s"),
     Option(_DYN, "jerk_duration_s"),

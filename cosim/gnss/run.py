@@ -172,8 +172,9 @@ class GnssRunConfig:
         "help": "interrupt latency before the DSP reads (cycles)"})
     service_batch_words: int = field(default=16, metadata={
         "help": "FIFO words the DSP reads per service at most"})
-    settle_s: float = field(default=1.0, metadata={"help": "records before this time (s) "
-                                                           "are not scored"})
+    settle_s: float = field(default=0.5, metadata={
+        "help": "records before this time (s) are not scored (the 3rd-order loop's pull-in "
+                "of the unknown Doppler rate rings for ~0.5-0.8 s at Bn 15 Hz)"})
     acq_coherent_ms: int = field(default=1, metadata={"help": "acquisition coherent ms"})
     acq_noncoherent: int = field(default=5, metadata={"help": "acquisition non-coherent sums"})
     acq_bin_hz: float = field(default=250.0, metadata={
