@@ -259,8 +259,13 @@ def _estimation(out: Path, quick: bool = False, jobs: int | None = None) -> dict
     return estimation_speed(out, quick=quick)
 
 
+def _gnss_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gnss.bench import gnss_speed
+    return gnss_speed(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
-              "sim-speed": _sim_speed, "estimation": _estimation}
+              "sim-speed": _sim_speed, "estimation": _estimation, "gnss-speed": _gnss_speed}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:
