@@ -2,6 +2,8 @@
 the bit-exact model, the Amaranth simulation and Verilator, the tracker's writes decided on
 the fly from the records each backend delivers: the same FIFO words on the same cycles, the
 same register writes, the same DSP bits."""
+import json
+
 import numpy as np
 import pytest
 
@@ -82,3 +84,12 @@ def test_closed_loop_model_equals_verilator():
         v = _run("verilator", x, dsp)
         assert len(m.track.words) >= 37
         _same(m, v)
+
+
+def test_gnss_speed_bench_writes_results_and_backends_agree(tmp_path):
+    from cosim.gnss.bench import gnss_speed
+    r = gnss_speed(tmp_path, duration_s=0.03)
+    assert r["same_bits"] and r["rows"][0]["backend"] == "model"
+    assert all(row["records"] >= 28 for row in r["rows"])
+    assert (tmp_path / "gnss_speed.md").read_text().startswith("# GNSS closed-loop")
+    assert json.loads((tmp_path / "gnss_speed.json").read_text())["rows"] == r["rows"]
