@@ -264,8 +264,14 @@ def _suite_time(out: Path, quick: bool = False, jobs: int | None = None) -> dict
     return suite_time(out, quick=quick)
 
 
+def _gnss_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gnss.bench import gnss_speed
+    return gnss_speed(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
-              "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time}
+              "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
+              "gnss-speed": _gnss_speed}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

@@ -142,3 +142,33 @@ def acquire(x, fs_hz: float, prn: int, if_hz: float, inverted: bool = False,
     return AcquisitionResult(prn, peak > th, float(dopplers[b]), float(m * CHIP_RATE_HZ / fs),
                              int(m), peak, th, var, bw, dopplers.size, lam.size, float(pfa),
                              int(n0), float(if_hz), bool(inverted), lam if keep_grid else None)
+
+
+def refine_doppler(x, fs_hz: float, prn: int, if_hz: float, doppler_hz: float,
+                   code_phase_chips: float, inverted: bool = False, n_ms: int = 20,
+                   pad: int = 16) -> float:
+    """A finer Doppler than the acquisition bin, for the hand-over to a PLL.
+
+    With the code wiped at the acquired code phase and the carrier at the acquired Doppler,
+    the 1 ms prompt sums ``P_k`` carry the residual ``s (f_true - doppler_hz)``; squaring
+    them removes the data bits (BPSK) and doubles it. The peak of the ``pad``-times
+    zero-padded FFT of ``P_k^2`` over ``n_ms`` ms gives the residual (unambiguous within
+    +-250 Hz, so the coarse bins must be <= 500 Hz wide; resolution ``1000 / (2 pad n_ms)``
+    Hz). Returns the refined Doppler (Hz)."""
+    prn = check_prn(prn)
+    fs = float(fs_hz)
+    N = int(round(fs * CODE_PERIOD_S))
+    if isinstance(n_ms, bool) or not isinstance(n_ms, (int, np.integer)) or n_ms < 2:
+        raise ValueError(f"n_ms (refinement length, ms) must be an integer >= 2, not {n_ms!r}")
+    x = np.asarray(x, dtype=np.float64)
+    if x.size < n_ms * N:
+        raise ValueError(f"Doppler refinement needs {n_ms * N} samples ({n_ms} ms), not {x.size}")
+    s = -1.0 if inverted else 1.0
+    n = np.arange(n_ms * N)
+    code = ca_code_levels(prn).astype(np.float64)
+    chips = np.floor(code_phase_chips + n * CHIP_RATE_HZ / fs).astype(np.int64) % CODE_LENGTH
+    y = x[:n.size] * code[chips] * np.exp(-2j * np.pi * ((if_hz + s * doppler_hz) / fs) * n)
+    p = y.reshape(n_ms, N).sum(axis=1)
+    F = np.abs(np.fft.fft(p * p, pad * n_ms))
+    fr = np.fft.fftfreq(pad * n_ms, CODE_PERIOD_S)
+    return float(doppler_hz + s * fr[int(np.argmax(F))] / 2)

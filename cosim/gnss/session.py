@@ -1,0 +1,222 @@
+"""The bit-exact GNSS channel as a persistent session, and the register view of any session.
+
+:class:`GnssModelSession` is the ``model`` backend of :func:`cosim.session.open_frontend`
+for :class:`hdl.gnss.model.GnssChannelParams`: the bit-exact channel
+(:class:`~hdl.gnss.model.GnssChannelModel`, its state carried) and its record FIFO
+(:func:`~hdl.model.fifo.fifo_model_events`, its state carried). It has the ports of
+:class:`hdl.gnss.channel.GnssChannel`, so the same port writes drive the model, the
+Amaranth simulation and Verilator:
+
+* ``reg_we``, ``reg_addr``, ``reg_data`` (write): the register bus. Every cycle in which
+  ``reg_we`` is 1 is a bus write of ``reg_data`` to register ``reg_addr`` (a value set at
+  cycle ``c`` holds from ``c`` until changed; ``reg_we`` held high writes every cycle, as in
+  the HDL). The shadow register has it from the next cycle; it becomes active at the next
+  dump boundary (:mod:`hdl.gnss.model`).
+* ``overflow_count`` (read): records the FIFO dropped.
+
+The DSP thinks in registers, not bus cycles: :class:`GnssRegisterSession` wraps a session
+of any backend and takes writes to ``carr_freq``, ``code_freq``, ``prn`` and ``slew``
+(:data:`hdl.gnss.model.REG_NAMES`). A register write taking effect at cycle ``e`` is the
+bus pulse ``reg_we = 1`` with its address and data at bus cycle ``b = max(e, previous
+b + 1)`` and ``reg_we = 0`` at ``b + 1`` (the bus takes one write per cycle, so two
+registers written for the same cycle go out on consecutive cycles, in the order written).
+:func:`open_gnss` opens one.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hdl.model.fifo import FifoState, ReadySchedule, fifo_model_events
+
+from ..session import FrontendSession, open_frontend, ready_window
+
+__all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss", "BUS_PORTS"]
+
+#: The register bus ports of :class:`hdl.gnss.channel.GnssChannel`.
+BUS_PORTS = ("reg_we", "reg_addr", "reg_data")
+
+
+def fifo_step(wc, w, ready, n, start, fifo_params, state: FifoState):
+    """The FIFO model over cycles ``start .. start + n - 1``: records ``w`` written at
+    ``wc`` (all ``< start + n``), read with ``ready`` (a session's ``ready``: ``None``,
+    bool array, ReadySchedule or DspServiceConfig). Returns ``(words, cycles, state)``."""
+    from ..link import DspServiceConfig
+    if isinstance(ready, DspServiceConfig):
+        out_w, out_c = [], []
+        st = state
+        for a, b, sched in ready.segments(n, start):
+            i0, i1 = np.searchsorted(wc, [a, b])
+            res = fifo_model_events(wc[i0:i1], w[i0:i1], b - a, sched, fifo_params, state=st)
+            st = res.state
+            out_w.append(res.words)
+            out_c.append(res.cycles)
+        return np.concatenate(out_w), np.concatenate(out_c), st
+    rdy = ReadySchedule(period=1) if ready is None else (
+        ready if isinstance(ready, ReadySchedule) else ready_window(ready, start, n))
+    res = fifo_model_events(wc, w, n, rdy, fifo_params, state=state)
+    return res.words, res.cycles, res.state
+
+
+class GnssModelSession(FrontendSession):
+    """The bit-exact model of :class:`hdl.gnss.channel.GnssChannel` as a session (module
+    doc). Samples are offered one per cycle while queued; cycles without a queued sample
+    have ``i.valid`` low.
+
+    Parameters
+    ----------
+    params : GnssChannelParams
+        A single channel (``channel_bits == 0``).
+    log_ranges : bool
+        Accepted for :func:`cosim.session.open_frontend`; the GNSS model keeps no range log
+        (its accumulators are sized never to overflow), so it must be False.
+    """
+
+    backend = "model"
+
+    def __init__(self, params, *, log_ranges: bool = False):
+        from hdl.gnss.model import GnssChannelModel, GnssChannelParams
+        if not isinstance(params, GnssChannelParams):
+            raise ValueError(f"params must be a GnssChannelParams, not {type(params).__name__}")
+        if params.channel_bits:
+            raise ValueError(f"GnssModelSession models one channel (channel_bits 0), not "
+                             f"channel_bits {params.channel_bits}")
+        if log_ranges:
+            raise ValueError("the GNSS channel model keeps no range log (log_ranges=False)")
+        super().__init__()
+        self.params = params
+        self.model = GnssChannelModel(params)
+        self._fifo_state = FifoState()
+        self._bus = {"reg_we": 0, "reg_addr": 0, "reg_data": 0}
+        self._widths = {"reg_we": 1, "reg_addr": 2, "reg_data": params.reg_data_width}
+        self._fifo = params.fifo        # derived properties: computed once, not per step
+        rw = self._fifo.record_words
+        self._carry_wc = np.zeros(0, np.int64)
+        self._carry_w = np.zeros((0, rw), np.int64)
+        #: Bus writes ``(cycle, reg, value)`` the model has been given.
+        self.bus_writes: list[tuple[int, int, int]] = []
+        self.n_records = 0
+
+    @property
+    def fifo_state(self) -> FifoState:
+        return self._fifo_state
+
+    def _check_port(self, port) -> None:
+        if port not in BUS_PORTS:
+            raise KeyError(f"the GNSS channel model's writable ports are "
+                           f"{', '.join(BUS_PORTS)}, not {port!r}")
+
+    def _read(self, port):
+        if port == "overflow_count":
+            return self._fifo_state.overflow
+        if port in self._bus:
+            return self._bus[port]
+        raise KeyError(f"the GNSS channel model reads overflow_count and "
+                       f"{', '.join(BUS_PORTS)}, not {port!r}")
+
+    def _bus_cycles(self, writes, start, stop):
+        """Bus writes ``(cycle, reg, value)`` of the cycles ``start .. stop - 1``."""
+        out = []
+        c = start
+        k = 0
+        while c < stop:
+            while k < len(writes) and writes[k][0] <= c:
+                _, port, v = writes[k]
+                if not 0 <= v < 1 << self._widths[port]:
+                    raise ValueError(f"{port} takes unsigned {self._widths[port]}-bit values, "
+                                     f"not {v}")
+                self._bus[port] = v
+                k += 1
+            nxt = writes[k][0] if k < len(writes) else stop
+            if self._bus["reg_we"]:
+                out += [(cc, self._bus["reg_addr"], self._bus["reg_data"])
+                        for cc in range(c, nxt)]
+            c = nxt
+        return out
+
+    def _step(self, queue, ready, n, writes):
+        p, fp = self.params, self._fifo
+        start, stop = self.cycle, self.cycle + n
+        x = queue[:n]
+        bus = self._bus_cycles(writes, start, stop)
+        self.bus_writes += bus
+        r = self.model.step(x, bus, cycles=np.arange(start, start + x.size, dtype=np.int64))
+        vals = r.values(p)
+        self.n_records += len(vals)
+        rw, m = fp.record_words, (1 << fp.width) - 1
+        new = np.array([[(v >> (j * fp.width)) & m for j in range(rw)] for v in vals],
+                       np.int64).reshape(-1, rw)
+        wc = np.r_[self._carry_wc, r.cycles]
+        w = np.concatenate([self._carry_w, new])
+        now = wc < stop
+        self._carry_wc, self._carry_w = wc[~now], w[~now]
+        words, cycles, self._fifo_state = fifo_step(wc[now], w[now], ready, n, start, fp,
+                                                    self._fifo_state)
+        return words, cycles, x.size
+
+
+class GnssRegisterSession(FrontendSession):
+    """Register-level writes (``carr_freq``, ``code_freq``, ``prn``, ``slew``) on a GNSS
+    channel session of any backend, as bus pulses (module doc).
+
+    Parameters
+    ----------
+    inner : FrontendSession
+        A fresh session of :class:`hdl.gnss.channel.GnssChannel` (model, pysim or
+        verilator); this session owns it (closing this closes it).
+    params : GnssChannelParams
+    """
+
+    def __init__(self, inner: FrontendSession, params):
+        if not isinstance(inner, FrontendSession):
+            raise ValueError(f"inner must be a FrontendSession, not {type(inner).__name__}")
+        if inner.cycle != 0:
+            raise ValueError(f"the inner session must be fresh (at cycle 0), not at "
+                             f"{inner.cycle}")
+        super().__init__()
+        self.inner = inner
+        self.params = params
+        self.backend = inner.backend
+        self._next_bus = 0
+        #: Bus writes ``(bus cycle, address, value)`` made, in order.
+        self.bus_writes: list[tuple[int, int, int]] = []
+
+    def _check_port(self, port) -> None:
+        from hdl.gnss.model import REG_NAMES
+        if port not in REG_NAMES:
+            raise KeyError(f"GNSS registers are {', '.join(REG_NAMES)}, not {port!r}")
+
+    def write(self, port: str, value: int, cycle: int | None = None) -> int:
+        from hdl.gnss.model import REG_NAMES
+        self._check_port(port)
+        self.params.check_write(REG_NAMES[port], int(value))
+        return super().write(port, value, cycle)
+
+    def _step(self, queue, ready, n, writes):
+        from hdl.gnss.model import REG_NAMES
+        for c, reg, v in writes:
+            b = max(int(c), self._next_bus)
+            a = REG_NAMES[reg]
+            self.inner.write("reg_addr", a, cycle=b)
+            self.inner.write("reg_data", int(v), cycle=b)
+            self.inner.write("reg_we", 1, cycle=b)
+            self.inner.write("reg_we", 0, cycle=b + 1)
+            self.bus_writes.append((b, a, int(v)))
+            self._next_bus = b + 1
+        x = queue[:n]
+        r = self.inner.step(x, ready, n_cycles=n)
+        if r.in_accepted != x.size:
+            raise RuntimeError(f"internal: the channel's always-ready input took "
+                               f"{r.in_accepted} of {x.size} samples")
+        return r.words, r.cycles, r.in_accepted
+
+    def _read(self, port):
+        return self.inner.read(port)
+
+    def _close(self):
+        self.inner.close()
+
+
+def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:
+    """A GNSS channel on ``backend`` (``model``, ``pysim``, ``verilator``) with register-level
+    writes: :func:`cosim.session.open_frontend` wrapped in a :class:`GnssRegisterSession`."""
+    return GnssRegisterSession(open_frontend(backend, params, **kw), params)
