@@ -269,9 +269,14 @@ def _gnss_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict
     return gnss_speed(out, quick=quick)
 
 
+def _gnss_tracking(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gnss.bench import gnss_tracking
+    return gnss_tracking(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
-              "gnss-speed": _gnss_speed}
+              "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

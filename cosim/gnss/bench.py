@@ -89,3 +89,131 @@ def _markdown(r: dict) -> str:
         lines += ["", f"Model / Verilator speed ratio (same run): "
                       f"{r['model_over_verilator']:.2f}."]
     return "\n".join(lines) + "\n"
+
+
+#: Issue 14's criteria: thermal jitter within 10 % of Kaplan's formula at and above
+#: 35 dB-Hz; the 3rd-order loop's jerk stress within 5 % of ``0.4828 J / Bn^3``.
+JITTER_TOL, JITTER_MIN_CN0_DBHZ, JERK_TOL = 0.10, 35.0, 0.05
+
+
+def tracking_verdicts(jitter: list[dict], jerk: list[dict]) -> dict:
+    """Pass/fail of the tracking figures against the issue's criteria, from the figures:
+    every jitter run's ratio to Kaplan (actual digital-loop Bn) within ``JITTER_TOL`` of 1
+    at C/N0 >= ``JITTER_MIN_CN0_DBHZ`` with no slipped trial, and every jerk run's ratio
+    within ``JERK_TOL`` of 1."""
+    jit_ok = all(abs(q - 1) < JITTER_TOL and s == 0
+                 for j in jitter
+                 for c, q, s in zip(j["cn0_dbhz"], j["ratio_to_actual"], j["slipped_trials"])
+                 if c >= JITTER_MIN_CN0_DBHZ)
+    jerk_ok = all(abs(j["ratio"] - 1) < JERK_TOL for j in jerk)
+    return {"jitter_within_10pct_above_35dbhz": bool(jit_ok),
+            "jerk_stress_within_5pct": bool(jerk_ok)}
+
+
+def gnss_tracking(out: Path, quick: bool = False) -> dict:
+    """``python -m cosim bench gnss-tracking``: the 3rd-order Costas PLL (Bn 15 Hz, T 1 ms)
+    on the correlation-domain fast path (:mod:`cosim.gnss.loopsim`), with the FPGA
+    channel's one-epoch write latency and without: thermal jitter vs C/N0 against Kaplan's
+    formula (:func:`~cosim.gnss.loopsim.jitter_vs_kaplan`), the noise-free steady-state
+    error under a constant 5 g/s jerk against ``0.4828 J / Bn^3``
+    (:func:`~cosim.gnss.loopsim.jerk_stress`), and the tracking threshold through a 5 g/s
+    jerk (:func:`~cosim.gnss.loopsim.tracking_threshold`) beside Kaplan's rule of thumb
+    (:func:`~cosim.gnss.loopsim.kaplan_threshold_dbhz`). Written to
+    ``gnss_tracking.json`` / ``.md`` under ``out``."""
+    from .loopsim import jerk_stress, jitter_vs_kaplan, kaplan_threshold_dbhz, tracking_threshold
+    t0 = time.perf_counter()
+    bn, T, jerk_g = 15.0, 1e-3, 5.0
+    if quick:
+        jit_kw = dict(cn0_dbhz=(35.0, 45.0), n_trials=10, duration_s=1.0)
+        thr_kw = dict(cn0_grid_dbhz=np.arange(24.0, 34.1, 2.0), n_trials=10,
+                      jerk_duration_s=1.0, settle_s=0.2)
+    else:
+        jit_kw = dict(cn0_dbhz=(30.0, 35.0, 40.0, 45.0, 50.0), n_trials=100, duration_s=4.0)
+        thr_kw = dict(cn0_grid_dbhz=np.arange(22.0, 34.01, 0.5), n_trials=50)
+    latencies = (0, 1)
+    jitter = [{"latency": lat, **jitter_vs_kaplan(bn_hz=bn, T_s=T, latency=lat, **jit_kw)}
+              for lat in latencies]
+    jerk = [{"latency": lat, "jerk_g_per_s": jerk_g,
+             **jerk_stress(jerk_g, bn_hz=bn, T_s=T, latency=lat)} for lat in latencies]
+    thr = [{"latency": lat, **tracking_threshold(bn_hz=bn, T_s=T, jerk_g_per_s=jerk_g,
+                                                 latency=lat, **thr_kw)} for lat in latencies]
+    res = {"machine": machine_info(), "benchmark": "gnss-tracking", "quick": quick,
+           "loop": {"order": 3, "discriminator": "Costas atan", "bn_hz": bn, "T_s": T,
+                    "dll_bn_hz": 1.0, "spacing_chips": 0.5},
+           "config": {"jitter": {k: list(v) if isinstance(v, tuple) else v
+                                 for k, v in jit_kw.items()},
+                      "threshold": {k: np.asarray(v).tolist() for k, v in thr_kw.items()}},
+           "jitter": jitter, "jerk": jerk, "threshold": thr,
+           "kaplan_threshold_dbhz": kaplan_threshold_dbhz(bn, T, jerk_g),
+           "verdict": tracking_verdicts(jitter, jerk),
+           "elapsed_s": time.perf_counter() - t0}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "gnss_tracking.json").write_text(json.dumps(res, indent=1) + "\n")
+    (out / "gnss_tracking.md").write_text(_tracking_markdown(res))
+    return res
+
+
+def _tracking_markdown(r: dict) -> str:
+    m, lp = r["machine"], r["loop"]
+    lat = {0: "no write latency", 1: "1-epoch write latency (FPGA channel)"}
+    lines = ["# GNSS carrier tracking: thermal jitter, jerk stress, tracking threshold", "",
+             f"Measured {m['date']} on {m['host']} ({m['cpu']}, {m['cores']} cores, shared), "
+             f"commit {m['commit']}, command `{m['command']}`"
+             + (" (quick: reduced trials and grid)" if r["quick"] else "") + ".", "",
+             f"3rd-order {lp['discriminator']} PLL, Bn {lp['bn_hz']:g} Hz, T "
+             f"{lp['T_s'] * 1e3:g} ms (DLL Bn {lp['dll_bn_hz']:g} Hz, E-L "
+             f"{lp['spacing_chips']:g} chip), closed loop on the correlation-domain fast path "
+             "(`cosim.gnss.loopsim`), seed-002 dynamics (1000 m/s, 1 g).", "",
+             "## Thermal jitter vs Kaplan", "",
+             f"{r['config']['jitter']['n_trials']} trials x "
+             f"{r['config']['jitter']['duration_s']:g} s per C/N0 (first 0.3 s skipped); "
+             "Kaplan's formula with the actual noise bandwidth of the digital loop. "
+             "Criterion: within 10 % at and above 35 dB-Hz.", "",
+             "| latency | Bn actual (Hz) | C/N0 (dB-Hz) | measured (deg) | Kaplan, actual Bn "
+             "(deg) | Kaplan, nominal Bn (deg) | ratio | slipped trials |",
+             "|---|---|---|---|---|---|---|---|"]
+    for j in r["jitter"]:
+        for c, me, ka, kn, q, s in zip(j["cn0_dbhz"], j["measured_deg"],
+                                       j["kaplan_actual_bn_deg"], j["kaplan_nominal_bn_deg"],
+                                       j["ratio_to_actual"], j["slipped_trials"]):
+            lines.append(f"| {j['latency']} | {j['bn_actual_hz']:.3f} | {c:g} | {me:.3f} | "
+                         f"{ka:.3f} | {kn:.3f} | {q:.3f} | {s} |")
+    lines += ["", "## Steady-state error under constant jerk", "",
+              "Noise free, mean of the last second of 4 s; theory 0.4828 J / Bn^3. "
+              "Criterion: within 5 %.", "",
+              "| latency | jerk (g/s) | measured (deg) | 0.4828 J / Bn^3 (deg) | ratio |",
+              "|---|---|---|---|---|"]
+    for j in r["jerk"]:
+        lines.append(f"| {j['latency']} | {j['jerk_g_per_s']:g} | {j['measured_deg']:.4f} | "
+                     f"{j['kaplan_deg']:.4f} | {j['ratio']:.5f} |")
+    tc = r["config"]["threshold"]
+    grid = tc["cn0_grid_dbhz"]
+    lines += ["", "## Tracking threshold through a 5 g/s jerk", "",
+              f"Lowest C/N0 of the grid ({grid[0]:g}-{grid[-1]:g} dB-Hz, "
+              f"{len(grid)} values) from which every trial of every higher value holds lock "
+              f"(no cycle slip of the true phase error), {tc['n_trials']} trials each; "
+              "jerk from 0.5 s for "
+              f"{tc.get('jerk_duration_s', 2.0):g} s, then {tc.get('settle_s', 0.5):g} s. "
+              f"Kaplan's rule of thumb (3 sigma + jerk stress <= 45 deg): "
+              f"{r['kaplan_threshold_dbhz']:.2f} dB-Hz.", "",
+              "| latency | threshold (dB-Hz) | Kaplan rule (dB-Hz) | measured - rule (dB) |",
+              "|---|---|---|---|"]
+    for t in r["threshold"]:
+        d = t["threshold_dbhz"] - t["kaplan_rule_dbhz"]
+        lines.append(f"| {t['latency']} | {t['threshold_dbhz']:g} | "
+                     f"{t['kaplan_rule_dbhz']:.2f} | {d:+.2f} |")
+    lines += ["", "Fraction of trials holding lock per C/N0:", "",
+              "| C/N0 (dB-Hz) | " + " | ".join(f"latency {t['latency']}" for t in r["threshold"])
+              + " |", "|---|" + "---|" * len(r["threshold"])]
+    for i, c in enumerate(grid):
+        lines.append(f"| {c:g} | " + " | ".join(f"{t['hold_fraction'][i]:.2f}"
+                                                 for t in r["threshold"]) + " |")
+    v = r["verdict"]
+    lines += ["", "## Verdict", "",
+              f"- Jitter within 10 % of Kaplan at and above 35 dB-Hz, no slip: "
+              f"{'PASS' if v['jitter_within_10pct_above_35dbhz'] else 'FAIL'}",
+              f"- Jerk stress within 5 % of 0.4828 J / Bn^3: "
+              f"{'PASS' if v['jerk_stress_within_5pct'] else 'FAIL'}", "",
+              f"Elapsed {r['elapsed_s']:.1f} s."]
+    return "\n".join(lines) + "\n"
