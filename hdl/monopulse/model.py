@@ -280,9 +280,6 @@ class MonopulseFrontendParams:
                                 lo_width=self.corr_coef_bits, out_width=self.corr_out_bits,
                                 rounding=self.corr_rounding, overflow="saturate",
                                 headroom_bits=self.corr_headroom_bits)
-        if self.acc_width > 62:
-            raise ValueError(f"monopulse accumulator width must be <= 62 bits, not "
-                             f"{self.acc_width} (reduce corr_out_bits or snapshots)")
         b["cordic"] = CordicConfig(width=2 * self.cordic_in_bits + 1,
                                    iterations=self.cordic_iterations,
                                    angle_bits=self.angle_bits, signed_angle=True)
@@ -628,6 +625,10 @@ class MonopulseFrontendModel:
         self.next_cycle = 0
         self._acc = np.zeros(8, np.int64)
         self.fifo_state = FifoState()
+        # Snapshots decimated but not yet at the correction input before the horizon (their
+        # block boundary may still see a register write): (z, t_corr, k).
+        self._pend = (np.zeros((0, 4, 2), np.int64), np.zeros(0, np.int64),
+                      np.zeros(0, np.int64))
 
     # -- registers -------------------------------------------------------------------------
     def _latch(self, t_boundary: int) -> tuple[int, int]:
@@ -656,12 +657,15 @@ class MonopulseFrontendModel:
         return w - (1 << b) if w >> (b - 1) else w
 
     # -- stepping --------------------------------------------------------------------------
-    def step(self, x, chips, writes=(), *, cycles=None) -> MonopulseRecords:
+    def step(self, x, chips, writes=(), *, cycles=None, horizon=None) -> MonopulseRecords:
         """Advance over ADC samples ``x`` (n, 4) with replica bits ``chips`` (n,).
 
         ``writes``: register writes ``(cycle, reg, value)``; a write takes effect at the
         first block boundary in a later cycle (this or a later step). ``cycles``: input
-        cycle of each sample (default one per cycle, continuing).
+        cycle of each sample (default one per cycle, continuing). ``horizon``: the snapshots
+        reaching the correction stage before this cycle are processed (default: the cycle
+        after the last sample); the others wait, since a write made later may still land
+        before their block boundary (:meth:`advance` processes them).
         """
         p = self.params
         x = np.asarray(x)
@@ -699,11 +703,29 @@ class MonopulseFrontendModel:
             snaps.append(y)
         z = np.stack(snaps, axis=1)                       # (m, 4, 2)
         m = z.shape[0]
-        k0 = self.n_snapshots
-        k = k0 + np.arange(m, dtype=np.int64)
+        k = self.n_snapshots + np.arange(m, dtype=np.int64)
         # ADC sample (chunk index) completing each snapshot, and the cycles that follow.
         last = (k + 1) * p.snapshot_decimation - 1 - self.n_samples
         t_corr = scyc[last] + p.latency_pre if m else np.zeros(0, np.int64)
+        self.n_samples += n
+        self.n_snapshots += m
+        if n:
+            self.next_cycle = int(scyc[-1]) + 1
+        pz, pt, pk = self._pend
+        self._pend = (np.concatenate([pz, z]), np.concatenate([pt, t_corr]),
+                      np.concatenate([pk, k]))
+        return self.advance(self.next_cycle if horizon is None else horizon)
+
+    def advance(self, horizon: int) -> MonopulseRecords:
+        """Process the snapshots waiting for the correction stage with ``t_corr < horizon``
+        (every register write before ``horizon`` must have been given)."""
+        p = self.params
+        pz, pt, pk = self._pend
+        j = int(np.searchsorted(pt, horizon))
+        z, t_corr, k = pz[:j], pt[:j], pk[:j]
+        self._pend = (pz[j:], pt[j:], pk[j:])
+        m = z.shape[0]
+        k0 = int(k[0]) if m else 0
         N = p.snapshots
         blk = k // N
         w = np.empty((m, 4, 2), np.int64)
@@ -736,10 +758,6 @@ class MonopulseFrontendModel:
                 out_cyc.append(int(t_corr[j]) + p.corr.latency + 2 + p.latency_angle)
                 self._acc = np.zeros(8, np.int64)
             start = stop
-        self.n_samples += n
-        self.n_snapshots += m
-        if n:
-            self.next_cycle = int(scyc[-1]) + 1
         acc = np.array(accs, np.int64).reshape(-1, 8)
         f = angle_unit(acc, np.array(u0s, np.int64), np.array(v0s, np.int64), p)
         f["block"] = np.array(blocks, np.int64) & ((1 << p.block_bits) - 1)
@@ -752,7 +770,7 @@ class MonopulseFrontendModel:
         """One step then the FIFO over ``n_cycles`` cycles from the model's FIFO state:
         returns ``(records, fifo_result)`` (records written at or after ``n_cycles`` are
         not offered)."""
-        r = self.step(x, chips, writes, cycles=cycles)
+        r = self.step(x, chips, writes, cycles=cycles, horizon=n_cycles)
         keep = r.cycles < n_cycles
         words = np.array([record_to_words(v, self.params) for v, k in zip(r.values, keep) if k],
                          np.int64).reshape(-1, self.params.record_words)
