@@ -198,39 +198,43 @@ def test_widths_are_derived():
     assert abs(k / 2 ** (s + p.dc_frac_bits - p.angle_bits) - 0.5) < 1e-12   # 2 / Dx, Dx = 4
 
 
-def test_verilog_lint_clean():
-    assert_lints_clean(MonopulseFrontEnd(SMALL), "monopulse_frontend_small")
-    assert_lints_clean(MonopulseFrontEnd(MonopulseFrontendParams()), "monopulse_frontend")
+@pytest.mark.parametrize("small", [True, False])
+def test_verilog_lint_clean(small):
+    if small:
+        assert_lints_clean(MonopulseFrontEnd(SMALL), "monopulse_frontend_small")
+    else:
+        assert_lints_clean(MonopulseFrontEnd(MonopulseFrontendParams()), "monopulse_frontend")
 
 
 @needs_verilator
-def test_verilator_small_matches_model():
-    for p, name, seed in ((SMALL, "monopulse_frontend_small", 5),
-                          (SMALL_FIR, "monopulse_frontend_small_fir", 6)):
-        n = 20 * 48
-        x, chips, writes, ready = stimulus(p, n, seed=seed, n_writes=12, ready_p=0.3)
-        valid = np.random.default_rng(seed).random(2 * n) < 0.9
-        n_cycles = int(np.flatnonzero(valid)[n - 1]) + p.latency + 60
-        r, res = model_run(p, x, chips, writes, ready, n_cycles, valid)
-        assert len(r.values) >= 19
-        got = sim_run(verilator_sim(MonopulseFrontEnd(p), name), p, x, chips, writes, ready,
-                      n_cycles, valid)
-        assert_same(got, res)
+@pytest.mark.parametrize("fir", [False, True])
+def test_verilator_small_matches_model(fir):
+    p, name, seed = ((SMALL_FIR, "monopulse_frontend_small_fir", 6) if fir else
+                     (SMALL, "monopulse_frontend_small", 5))
+    n = 20 * 48
+    x, chips, writes, ready = stimulus(p, n, seed=seed, n_writes=12, ready_p=0.3)
+    valid = np.random.default_rng(seed).random(2 * n) < 0.9
+    n_cycles = int(np.flatnonzero(valid)[n - 1]) + p.latency + 60
+    r, res = model_run(p, x, chips, writes, ready, n_cycles, valid)
+    assert len(r.values) >= 19
+    got = sim_run(verilator_sim(MonopulseFrontEnd(p), name), p, x, chips, writes, ready,
+                  n_cycles, valid)
+    assert_same(got, res)
 
 
 @needs_verilator
 def test_verilator_default_front_end_matches_model():
-    """Default parameters (N = 8192, 10 samples a snapshot): 3 blocks of a noisy monopulse
-    signal, steering and coefficient writes, a slow DSP."""
+    """Default parameters (N = 8192, 10 samples a snapshot): 2 blocks of a noisy monopulse
+    signal, steering and coefficient writes in both, a slow DSP."""
     p = MonopulseFrontendParams()
-    x, chips, k, _ = monopulse_signal(p, snr_db=-8.0, n_blocks=3, du=0.03, dv=-0.02)
+    x, chips, k, _ = monopulse_signal(p, snr_db=-8.0, n_blocks=2, du=0.03, dv=-0.02)
     rng = np.random.default_rng(7)
     writes = [(1000 + i, REG_COEF + i, coef_word(k[i], p)) for i in range(4)]
-    writes += [(90000, REG_U0, dc_word(0.21, p)), (170000, REG_COEF + 3, coef_word(0.5j, p))]
+    writes += [(90000, REG_U0, dc_word(0.21, p)), (150000, REG_COEF + 3, coef_word(0.5j, p))]
     ready = rng.random(len(x) + 2000) < 0.05
     n_cycles = len(x) + p.latency + 400
     r, res = model_run(p, x, chips, writes, ready, n_cycles)
-    assert len(r.values) == 3
+    assert len(r.values) == 2
     got = sim_run(verilator_sim(MonopulseFrontEnd(p), "monopulse_frontend"), p, x, chips,
                   writes, ready, n_cycles)
     assert_same(got, res)
