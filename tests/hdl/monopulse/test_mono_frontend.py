@@ -184,7 +184,7 @@ def test_write_and_input_errors():
 
 def test_widths_are_derived():
     p = MonopulseFrontendParams()
-    assert p.nco_freq_word == 1 << 32 // 5 or p.nco_freq_word == round(0.2 * 2 ** 32)
+    assert p.nco_freq_word == round(0.2 * 2 ** 32)          # 20 MHz at 100 MS/s
     assert p.cic.full_width == 16 + 4 and p.snap_width == 18
     assert p.beam_width == 18 + 2
     assert p.acc_width == 20 + 13                  # N = 8192: 13 bits of growth
