@@ -1,0 +1,1 @@
+"""Monopulse front end (issue 17): model and Amaranth top."""
