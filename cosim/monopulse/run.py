@@ -97,7 +97,8 @@ class MonopulseRunConfig:
         "channel gain mismatch: channels 2-4 drawn in +- this (dB, seeded)"))
     phase_spread_deg: float = field(default=3.0, metadata=_h(
         "channel phase mismatch: channels 2-4 drawn in +- this (deg, seeded)"))
-    calibrate: bool = field(default=True, metadata=_h("calibrate the channels before the run"))
+    skip_calibration: bool = field(default=False, metadata=_h(
+        "do not calibrate the channels before the run"))
     cal_snapshots: int = field(default=1 << 20, metadata=_h("snapshots of the calibration measurement"))
     cal_snr_db: float | None = field(default=10.0, metadata=_h(
         "SNR per snapshot of the calibration source (dB; none: noise-free)", none=("none",)))
@@ -257,7 +258,7 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
     cal_sig = MonopulseSignalConfig(array=arr, trajectory=ConstantRate(*pointing, 0.0, 0.0),
                                     snapshots=run.cal_snapshots, snr_db=run.cal_snr_db,
                                     adc_bits=run.adc_bits, seed=run.seed)
-    if run.calibrate:
+    if not run.skip_calibration:
         s_cal = matched_filter_outputs(cal_sig, pointing, seed=[run.seed, STREAM_FAST, 2])
         cal = calibration_from_measurement(s_cal)
     bias_before = _bias(sig, None, tuple(pointing))
@@ -374,7 +375,7 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
     r["acquired_trials"] = int(np.sum(acquired >= 0))
     r["acquisition_block_max"] = int(np.max(acquired)) if np.all(acquired >= 0) else None
     r["search_cycles"] = int(sum(s.cycles for s in search))
-    r["calibration"] = {"applied": run.calibrate, "gain_db": list(arr.gain_db),
+    r["calibration"] = {"applied": not run.skip_calibration, "gain_db": list(arr.gain_db),
                         "phase_deg": list(arr.phase_deg), "bias_before": bias_before,
                         "bias_after": bias_after}
     r["dsp_events"] = tracker.counts()
