@@ -24,9 +24,10 @@ def _check_c2_c5(r):
     assert r["pointing_error_max_fraction"] < 1.0 and r["outside_unambiguous_blocks"] == 0, r
 
 
-@pytest.mark.parametrize("tracker", ["adaptive", "fixed"])
-def test_c2_c5_short(tracker):
-    r = run_monopulse(MonopulseRunConfig(trials=10, duration_s=0.4, tracker=tracker, seed=3))
+@pytest.mark.parametrize("tracker,dsp", [("adaptive", "float"), ("fixed", "fixed")])
+def test_c2_c5_short(tracker, dsp):
+    r = run_monopulse(MonopulseRunConfig(trials=10, duration_s=0.4, tracker=tracker, dsp=dsp,
+                                         seed=3))
     _check_c2_c5(r)
 
 
