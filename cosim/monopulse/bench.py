@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bench import machine_info, source_commit
-from .run import MonopulseRunConfig, run_monopulse
+from .run import TRACK, MonopulseRunConfig, run_monopulse
 
 KEYS = ("az_meas_rms_deg", "az_track_rms_deg", "az_crb_deg", "az_meas_over_crb",
         "el_meas_rms_deg", "el_track_rms_deg", "el_crb_deg", "el_meas_over_crb",
@@ -44,7 +44,9 @@ def _plot(path, seed=1):
     azt, elt = angles(tr[:, 0], tr[:, 1])
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     for ax, i, name in ((axes[0], 0, "azimuth"), (axes[1], 1, "elevation")):
-        for x, lab in ((s["meas"][:, 0], "measurement"), (s["est"][:, 0], "tracking")):
+        trk = (s["modes"][:, 0] == TRACK)[:, None]    # tracking blocks (not the search dwells)
+        for x, lab in ((np.where(trk, s["meas"][:, 0], np.nan), "measurement"),
+                       (s["est"][:, 0], "tracking")):
             a = angles(x[:, 0], x[:, 1])[i]
             e = np.rad2deg(np.angle(np.exp(1j * (a - (azt if i == 0 else elt)))))
             ax.plot(s["t_s"], e, lw=0.6, label=f"{lab} error")
