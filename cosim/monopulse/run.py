@@ -39,7 +39,7 @@ from dsp.monopulse.tracker import (MONOPULSE_FORMATS, AngleTracker, SearchCaptur
                                    calibration_from_measurement, measure_uv)
 
 from .array import ArrayConfig
-from .fastpath import matched_filter_outputs, mean_outputs, noise_variance
+from .fastpath import mean_outputs, noise_variance
 from .signal import STREAM_FAST, MonopulseSignalConfig, generate
 from .trajectory import ConstantRate, Manoeuvre
 
@@ -259,7 +259,11 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
                                     snapshots=run.cal_snapshots, snr_db=run.cal_snr_db,
                                     adc_bits=run.adc_bits, seed=run.seed)
     if not run.skip_calibration:
-        s_cal = matched_filter_outputs(cal_sig, pointing, seed=[run.seed, STREAM_FAST, 2])
+        # A fixed source: the block-centre response is the exact block mean (no 2^20-point sum).
+        cal_rng = [np.random.default_rng(np.random.SeedSequence(run.seed, spawn_key=(STREAM_FAST, 2)))]
+        s_cal, _, _ = block_outputs(cal_sig, pointing[None, :], float(pointing[0]),
+                                    float(pointing[1]), np.ones(4), np.array([cal_sig.carrier_phase]),
+                                    cal_rng, noise=run.cal_snr_db is not None)
         cal = calibration_from_measurement(s_cal)
     bias_before = _bias(sig, None, tuple(pointing))
     bias_after = _bias(sig, cal, tuple(pointing))

@@ -26,7 +26,7 @@ def _check_c2_c5(r):
 
 @pytest.mark.parametrize("tracker,dsp", [("adaptive", "float"), ("fixed", "fixed")])
 def test_c2_c5_short(tracker, dsp):
-    r = run_monopulse(MonopulseRunConfig(trials=10, duration_s=0.4, tracker=tracker, dsp=dsp,
+    r = run_monopulse(MonopulseRunConfig(trials=8, duration_s=0.3, tracker=tracker, dsp=dsp,
                                          seed=3))
     _check_c2_c5(r)
 
