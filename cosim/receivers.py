@@ -34,7 +34,7 @@ __all__ = ["Receiver", "Study", "Figure", "Frontend", "SweepModel", "FaultModel"
            "get", "receivers", "frontend_for", "add_options", "config_kwargs", "BUILTIN"]
 
 #: Entry modules of the receivers shipped with the toolkit (importing one registers it).
-BUILTIN = ("cosim.tacan.receiver", "cosim.gnss.receiver")
+BUILTIN = ("cosim.tacan.receiver", "cosim.gnss.receiver", "cosim.monopulse.receiver")
 
 _REGISTRY: dict[str, "Receiver"] = {}
 _MISSING = dataclasses.MISSING

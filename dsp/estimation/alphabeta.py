@@ -270,9 +270,12 @@ class AlphaBetaFilter:
                 raise ValueError(f"sigma_v must be a finite number > 0 in adaptive mode, not {sigma_v!r}")
             if isinstance(window, bool) or not isinstance(window, int) or not 2 <= window <= 64:
                 raise ValueError(f"window must be an integer in [2, 64], not {window!r}")
-            for name, v in (("noise_floor", noise_floor), ("manoeuvre_gain", manoeuvre_gain)):
-                if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                    raise ValueError(f"{name} must be a finite number > 0, not {v!r}")
+            if not (isinstance(noise_floor, (int, float)) and math.isfinite(noise_floor)
+                    and noise_floor >= 0):
+                raise ValueError(f"noise_floor must be a finite number >= 0, not {noise_floor!r}")
+            if not (isinstance(manoeuvre_gain, (int, float)) and math.isfinite(manoeuvre_gain)
+                    and manoeuvre_gain > 0):
+                raise ValueError(f"manoeuvre_gain must be a finite number > 0, not {manoeuvre_gain!r}")
             if not 0.0 < alpha_min < alpha_max < 1.0:
                 raise ValueError(f"alpha limits must satisfy 0 < alpha_min < alpha_max < 1, not "
                                  f"{alpha_min!r}, {alpha_max!r}")
@@ -317,11 +320,37 @@ class AlphaBetaFilter:
             self.x = x0.astype(dt)
             self.c = np.array(np.broadcast_to(coef, (self.trials, 3)), dtype=dt, order="C")
             self.consts = consts.astype(dt)
+        self._x_scale = np.array([1.0, T_s, T_s * T_s / 2][:n])
+        self._c0 = self.c.copy()
         self.ring = np.zeros((self.trials, window), dt)
         self.rpos = np.zeros(self.trials, np.int64)
         self.rcnt = np.zeros(self.trials, np.int64)
         self.ev = EVENTS.new((self.trials,))
         self.k = 0
+
+    def reset(self, mask, x0) -> None:
+        """Re-initialise the trials selected by ``mask`` ((B,) bool) at the physical state
+        ``x0`` ((n,) or (count, n)): state, coefficients back to their initial values, the
+        adaptive window emptied. Event counters and the step count are kept."""
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != (self.trials,):
+            raise ValueError(f"mask must have shape ({self.trials},), not {mask.shape}")
+        m = int(mask.sum())
+        x0 = np.asarray(x0, dtype=np.float64)
+        if x0.shape not in ((self.n,), (m, self.n)):
+            raise ValueError(f"x0 must have shape ({self.n},) or ({m}, {self.n}), not {x0.shape}")
+        if m == 0:
+            return
+        xs = np.broadcast_to(x0, (m, self.n)) * self._x_scale
+        if self.kind == "fixed":
+            fits("x0 (per-sample units)", xs, self.formats.x)
+            self.x[mask] = to_fixed(xs, self.formats.x)
+        else:
+            self.x[mask] = xs.astype(self.x.dtype)
+        self.c[mask] = self._c0[mask]
+        self.ring[mask] = 0
+        self.rpos[mask] = 0
+        self.rcnt[mask] = 0
 
     def counts(self) -> dict:
         return EVENTS.counts(self.ev)

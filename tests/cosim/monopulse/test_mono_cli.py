@@ -1,0 +1,48 @@
+"""``python -m cosim monopulse``: the registry entry, the JSON report, bad input -> exit 2."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from cosim import receivers
+from cosim.cli import main
+from cosim.monopulse.run import MonopulseRunConfig
+
+
+def test_registered_with_options_from_the_config(capsys):
+    r = receivers.get("monopulse")
+    assert r.config is MonopulseRunConfig
+    with pytest.raises(SystemExit):
+        main(["monopulse", "--help"])
+    out = capsys.readouterr().out
+    for flag in ("--snr-db", "--snapshots", "--duration-s", "--tracker", "--backend", "--dsp",
+                 "--spacing-wl", "--phase-bits", "--json"):
+        assert flag in out
+
+
+def test_json_report(capsys):
+    rc = main(["monopulse", "--snr-db", "-8", "--snapshots", "8192", "--duration-s", "0.1",
+               "--tracker", "fixed", "--backend", "fast", "--dsp", "fixed", "--json"])
+    assert rc == 0
+    r = json.loads(capsys.readouterr().out)
+    for k in ("az_meas_rms_deg", "az_track_rms_deg", "el_meas_mean_deg", "az_crb_deg",
+              "az_meas_over_crb", "pointing_error_max_fraction", "lost_track_events",
+              "fifo_dropped", "digest", "calibration"):
+        assert k in r
+    assert r["dsp"] == "fixed" and r["tracker"] == "fixed" and r["blocks"] == 122
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["--spacing-wl", "0"], "error: subarray_spacing_x_wl must be a finite number > 0, not 0.0"),
+    (["--spacing-wl", "-1"], "error: subarray_spacing_x_wl must be a finite number > 0, not -1.0"),
+    (["--snapshots", "0"], "error: snapshots must be an integer >= 1, not 0"),
+    (["--u0", "0.8", "--v0", "0.7"], "error: initial target direction must lie in the visible "
+                                      "region u^2 + v^2 < 1, not u = 0.8, v = 0.7"),
+    (["--phase-bits", "0"], "error: phase_bits must be an integer in [1, 24] or None (ideal), not 0"),
+    (["--backend", "verilator"], "error: backend 'verilator' needs the monopulse HDL front end"),
+])
+def test_bad_input_exits_2_with_an_error_line(argv, msg, capsys):
+    assert main(["monopulse", "--duration-s", "0.01"] + argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(msg), err
