@@ -36,8 +36,10 @@ the filter's time constant. Its expectation, for a master in steady state with t
 ``q_hat``, is *linear* in the true ``q``: ``h(q) = a(q_hat) q + b(q_hat)``, from the
 mismatched-filter Lyapunov equation of the linearised loop (:func:`block_moments`,
 tabulated on a log grid of ``q_hat``); ``Rq = 2 h(q_hat)^2`` (``z`` is a squared Gaussian).
-The slave's own prior is derived: ``Pq0 = q0^2``, ``Qq = (0.05 q0)^2`` per block (the seed's
-``Pq0 = 1e-8`` would freeze ``q_hat`` at ``q0``). ``slave="seed"`` runs the seed's slave
+The block slave's state is ``ln q`` (a scalar UKF in ``q`` let a quarter of the runs at
+``q_true = 0.1 q0`` collapse onto the floor ``q >= 0``); its prior is derived: ``P_lnq0 = 1``
+(a factor e at 1 sigma), ``Q_lnq = 0.01`` per block (the seed's ``Pq0 = 1e-8`` on ``q`` would
+freeze ``q_hat`` at ``q0``). ``slave="seed"`` runs the seed's slave
 literally: per epoch, ``z = diag(nu nu^T)``, ``h(q_j) = diag Pyy(q_j)``, ``q0 = 5``,
 ``Pq0 = 1e-8``, ``Qq = 1e-10``, ``Rq = diag(1e-8, 1e-8)``. ``eq414="literal"`` takes the
 seed's eq. 4.14 as written (``P_k|k-1 = Qq``), default ``P_k|k-1 = P_k-1 + Qq``.
@@ -375,7 +377,7 @@ class AukfTracker:
     def __init__(self, ctx, arith="float64", *, adaptive: bool = True, epsilon: float = 1.027,
                  beta: float = 2.0, kappa: float = 0.0, alpha_per_s: float = 0.1, q0: float = 5.0,
                  P0=None, r_mode: str = "cn0", slave: str = "block", eq414: str = "plausible",
-                 block_epochs: int = 1000, Pq0: float | None = None, Qq: float | None = None,
+                 block_epochs: int = 500, Pq0: float | None = None, Qq: float | None = None,
                  loop_bn_hz: float = 10.0, loop_xi: float = 0.707, dll_bn_hz: float = 1.0,
                  amplitude: float | None = None, data_wipe: bool = True, form: str = "closed",
                  p_floor: float = 1e-12):
@@ -468,12 +470,16 @@ class AukfTracker:
             self.Pq0 = 1e-8 if Pq0 is None else float(Pq0)
             self.Qq = 1e-10 if Qq is None else float(Qq)
             self.Rq = 1e-8
-        else:
-            self.Pq0 = q0 * q0 if Pq0 is None else float(Pq0)
-            self.Qq = (0.05 * q0) ** 2 if Qq is None else float(Qq)
+        else:   # the block slave estimates ln q (it cannot collapse to q <= 0)
+            if q0 <= 0:
+                raise ValueError(f"q0 must be > 0 for the block slave (it estimates ln q), not {q0!r}")
+            self.Pq0 = 1.0 if Pq0 is None else float(Pq0)
+            self.Qq = 0.01 if Qq is None else float(Qq)
         self.q0 = float(q0)
         self.qhat = np.full(Bn, float(q0))
         self.Pq = np.full(Bn, self.Pq0)
+        self.log = slave == "block"
+        self.lq = np.full(Bn, math.log(q0) if q0 > 0 else 0.0)
         self.q_traj = [self.qhat.copy()]
         self.k = 0
         self.w2_start = self.x[:, 3].copy()
@@ -511,16 +517,22 @@ class AukfTracker:
         eps, beta, kappa = self.ut
         wm, wc, cL = sigma_weights(1, eps, beta, kappa)
         sq = np.sqrt(cL * np.maximum(self.Pq, 0.0))
-        Q = np.stack([self.qhat, self.qhat + sq, self.qhat - sq], axis=1)
-        Q = np.maximum(Q, self.qmin)
+        c0 = self.lq if self.log else self.qhat
+        X = np.stack([c0, c0 + sq, c0 - sq], axis=1)
+        Q = np.exp(X) if self.log else np.maximum(X, self.qmin)
         Z = h_of_q(Q)                                           # (B, 3, m)
         zp = np.einsum("j,bjm->bm", wm, Z)
         dz = Z - zp[:, None, :]
-        dq = Q - self.qhat[:, None]
+        dq = X - c0[:, None]
         S = np.einsum("j,bjm,bjn->bmn", wc, dz, dz) + Rq
         Pqz = np.einsum("j,bj,bjm->bm", wc, dq, dz)
         K = np.linalg.solve(S, Pqz[..., None])[..., 0]
-        self.qhat = np.maximum(self.qhat + np.einsum("bm,bm->b", K, z - zp), self.qmin)
+        new = c0 + np.einsum("bm,bm->b", K, z - zp)
+        if self.log:
+            self.lq = np.clip(new, math.log(self.qmin), math.log(1e6))
+            self.qhat = np.exp(self.lq)
+        else:
+            self.qhat = np.maximum(new, self.qmin)
         self.Pq = np.maximum(self.Pq - np.einsum("bm,bmn,bn->b", K, S, K), 0.0)
         if self.mode == 2:
             f = self.formats.q

@@ -106,5 +106,5 @@ def test_a3_short():
     rms = lambda r: float(np.sqrt(np.mean(r.freq_err_hz[n // 2:] ** 2)))
     assert rms(ra) <= 1.1 * rms(ru), (rms(ra), rms(ru))
     rep = ta.report()
-    assert len(rep["q_hat"]["trajectory_median"]) == n // 1000 + 1
+    assert len(rep["q_hat"]["trajectory_median"]) == n // 500 + 1
     assert rep["diverged_count"] == 0
