@@ -120,3 +120,35 @@ def markdown_table(points) -> str:
             rows.append(f"| {p['cn0_dbhz']:g} | {p['q_true'] / Q0:g} | {t} | {r['doppler_rmse_hz']:.4f} | "
                         f"{r['phase_rmse_cyc']:.4f} | {r['cycle_slips']} | {r['lost']}/{p['n_runs']} | {dv} | {qh} |")
     return "\n".join(rows) + "\n"
+
+
+def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_runs: int = 20,
+                       duration_s: float = 10.0, seed: int = 1):
+    """The seed's figure 3 as a plot: RMS over runs of the Doppler-estimate error vs time,
+    UKF (fixed q0) and AUKF, truth with ``q_true = q_factor q0``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from dsp.gnss.loops_fixed import FLOAT
+    from dsp.gnss.trackers import TrackerContext, make_tracker
+    n = int(round(duration_s / 1e-3))
+    truth = stacked_truth([truth_for(seed002(q=q_factor * Q0), duration_s + 0.01, seed=seed * 100003 + i)
+                           for i in range(n_runs)])
+    a0 = truth(np.array([0.0]))
+    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][0],
+                         doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for t in ("ukf", "aukf"):
+        trk = _Recorder(make_tracker(t, ctx, FLOAT))
+        r = track_fast(truth, cn0_dbhz, n, shape=(n_runs,), seed=seed, tracker=trk)
+        err = r.freq_err_hz + r.doppler_hz - np.array(trk.est)
+        w = 50
+        rms = np.sqrt(np.convolve(np.mean(err ** 2, axis=1), np.ones(w) / w, mode="same"))
+        ax.plot(r.t_s, rms, label=t.upper())
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("Doppler error RMS (Hz)")
+    ax.set_title(f"q_true = {q_factor:g} q0, {cn0_dbhz:g} dB-Hz, {n_runs} runs")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
