@@ -1,0 +1,154 @@
+"""Monte Carlo study of the seed-002 trackers on the correlation-domain fast path.
+
+For each true process-noise intensity ``q_true`` (multiples of the prior ``q0 = 5``) and
+C/N0, one truth per trial is drawn from the jerk process (``cosim.gnss.dynamics.seed002``,
+seeded per trial), and the trackers ``aukf``, ``ukf`` (fixed q = q0) and ``pll3`` run on the
+*same* truth and the *same* correlator noise (the fast path's generator seeded alike).
+Figures per (tracker, q_true, C/N0): Doppler RMSE (Hz: the tracker's Doppler estimate
+against the truth; ``nco_doppler_rmse_hz`` is the replica Doppler in force, which also
+carries the loop filter's phase-nulling term) and phase RMSE (cycles, wrapped to
+the Costas lock point) over the second half of the run, cycle slips (total), divergences
+(the tracker's own ``diverged`` flag for the UKFs; for every tracker also "lost": the
+Doppler error's RMS over the last 100 ms above 5 Hz or a slip), and the median final q_hat.
+
+Batching: one truth per trial (distinct seeded trajectories), stacked on the batch axis of
+one ``track_fast`` run (:func:`stacked_truth`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .dynamics import seed002
+from .loopsim import cycle_slips, track_fast, truth_for
+
+Q0 = 5.0
+
+
+class _Recorder:
+    """A tracker wrapper keeping ``doppler_hz()`` after every step (the estimate for the
+    epoch just dumped)."""
+
+    def __init__(self, inner):
+        self.inner, self.est = inner, []
+
+    def step(self, *iq):
+        out = self.inner.step(*iq)
+        self.est.append(np.array(self.inner.doppler_hz(), float))
+        return out
+
+    def frequencies_hz(self, out):
+        return self.inner.frequencies_hz(out)
+
+
+def stacked_truth(truths):
+    """One ``truth_at`` whose arrays carry the trials on the last axis (``track_fast``
+    broadcasts them against its batch shape ``(n_runs,)``)."""
+    def truth_at(t):
+        parts = [tr(t) for tr in truths]
+        return {k: np.stack([p[k] for p in parts], axis=-1) for k in parts[0]}
+    return truth_at
+
+
+def run_point(q_true: float, cn0_dbhz: float, trackers=("aukf", "ukf", "pll3"), n_runs: int = 100,
+              duration_s: float = 10.0, seed: int = 1, arith=None, tracker_opts=None) -> dict:
+    """Monte Carlo figures of each tracker at one ``(q_true, C/N0)``: ``n_runs`` truths (one
+    per trial, batched), the same truths and noise seed for every tracker."""
+    from dsp.gnss.loops_fixed import FLOAT
+    from dsp.gnss.trackers import TrackerContext, make_tracker
+    if isinstance(n_runs, bool) or not isinstance(n_runs, int) or n_runs < 1:
+        raise ValueError(f"n_runs must be an integer >= 1, not {n_runs!r}")
+    n = int(round(duration_s / 1e-3))
+    half = n // 2
+    truth = stacked_truth([truth_for(seed002(q=q_true), duration_s + 0.01, seed=seed * 100003 + i)
+                           for i in range(n_runs)])
+    a0 = truth(np.array([0.0]))
+    out = {"q_true": q_true, "cn0_dbhz": cn0_dbhz, "n_runs": n_runs, "duration_s": duration_s}
+    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][0],
+                         doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
+    for t in trackers:
+        opts = (tracker_opts or {}) if t in ("aukf", "ukf") else {}
+        trk = _Recorder(make_tracker(t, ctx, FLOAT if arith is None else arith, **opts))
+        r = track_fast(truth, cn0_dbhz, n, shape=(n_runs,), seed=seed, tracker=trk)
+        # the tracker's Doppler estimate at epoch k's midpoint against the epoch's mean
+        # true frequency (= freq_err + the replica Doppler in force)
+        est_err = r.freq_err_hz + r.doppler_hz - np.array(trk.est)
+        df = est_err[half:]
+        nco = r.freq_err_hz[half:]
+        pe = r.phase_err_cycles[half:]
+        pe = pe - 0.5 * np.rint(pe / 0.5)
+        slips = cycle_slips(r.phase_err_cycles)
+        lost = (slips > 0) | (np.sqrt(np.mean(r.freq_err_hz[-100:] ** 2, axis=0)) > 5.0)
+        res = {"doppler_rmse_hz": float(np.sqrt(np.mean(df ** 2))),
+               "nco_doppler_rmse_hz": float(np.sqrt(np.mean(nco ** 2))),
+               "phase_rmse_cyc": float(np.sqrt(np.mean(pe ** 2))),
+               "cycle_slips": int(slips.sum()), "lost": int(lost.sum()),
+               "diverged": None, "q_hat_median_final": None}
+        if hasattr(trk.inner, "report"):
+            rep = trk.inner.report()
+            res["diverged"] = rep["diverged_count"]
+            res["q_hat_median_final"] = rep["q_hat"]["median_final"]
+            res["q_hat_final"] = rep["q_hat"]["final"]
+            res["q_hat_trajectory_median"] = rep["q_hat"]["trajectory_median"]
+            res["events"] = rep["events"]
+        out[t] = res
+    return out
+
+
+def study(q_factors=(0.1, 1.0, 10.0), cn0s=(32.0, 36.0, 40.0), **kw) -> list:
+    return [run_point(f * Q0, c, **kw) for c in cn0s for f in q_factors]
+
+
+if __name__ == "__main__":   # python -m cosim.gnss.study_aukf [n_runs]
+    import json
+    import sys
+    nr = int(sys.argv[1]) if len(sys.argv) > 1 else 100
+    for p in study(n_runs=nr, cn0s=(32.0,) if len(sys.argv) > 2 else (32.0, 36.0, 40.0)):
+        print(json.dumps(p), flush=True)
+
+
+def markdown_table(points) -> str:
+    """The study's table (one row per tracker and point) as Markdown."""
+    rows = ["| C/N0 dB-Hz | q_true / q0 | tracker | Doppler RMSE Hz | phase RMSE cyc | slips | lost | "
+            "diverged | median q_hat |", "|---|---|---|---|---|---|---|---|---|"]
+    for p in points:
+        for t in ("aukf", "ukf", "pll3"):
+            if t not in p:
+                continue
+            r = p[t]
+            qh = "-" if r["q_hat_median_final"] is None else f"{r['q_hat_median_final']:.3g}"
+            dv = "-" if r["diverged"] is None else str(r["diverged"])
+            rows.append(f"| {p['cn0_dbhz']:g} | {p['q_true'] / Q0:g} | {t} | {r['doppler_rmse_hz']:.4f} | "
+                        f"{r['phase_rmse_cyc']:.4f} | {r['cycle_slips']} | {r['lost']}/{p['n_runs']} | {dv} | {qh} |")
+    return "\n".join(rows) + "\n"
+
+
+def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_runs: int = 20,
+                       duration_s: float = 10.0, seed: int = 1):
+    """The seed's figure 3 as a plot: RMS over runs of the Doppler-estimate error vs time,
+    UKF (fixed q0) and AUKF, truth with ``q_true = q_factor q0``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from dsp.gnss.loops_fixed import FLOAT
+    from dsp.gnss.trackers import TrackerContext, make_tracker
+    n = int(round(duration_s / 1e-3))
+    truth = stacked_truth([truth_for(seed002(q=q_factor * Q0), duration_s + 0.01, seed=seed * 100003 + i)
+                           for i in range(n_runs)])
+    a0 = truth(np.array([0.0]))
+    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][0],
+                         doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for t in ("ukf", "aukf"):
+        trk = _Recorder(make_tracker(t, ctx, FLOAT))
+        r = track_fast(truth, cn0_dbhz, n, shape=(n_runs,), seed=seed, tracker=trk)
+        err = r.freq_err_hz + r.doppler_hz - np.array(trk.est)
+        w = 50
+        rms = np.sqrt(np.convolve(np.mean(err ** 2, axis=1), np.ones(w) / w, mode="same"))
+        ax.plot(r.t_s, rms, label=t.upper())
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("Doppler error RMS (Hz)")
+    ax.set_title(f"q_true = {q_factor:g} q0, {cn0_dbhz:g} dB-Hz, {n_runs} runs")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

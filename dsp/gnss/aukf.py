@@ -1,0 +1,662 @@
+"""Seed 002: master-slave adaptive UKF carrier tracker (``"aukf"``) and its fixed-q UKF
+baseline (``"ukf"``), float64 / float32 / fixed point from one source.
+
+Master (RECEIVERS.md section 1): state ``x = [theta, w0, w1, w2]`` (rad, rad/s, rad/s^2,
+rad/s^3) of the Singer jerk model (``cosim.gnss.dynamics.jerk_phi`` / ``jerk_q``), where
+``theta`` is the carrier phase *minus the replica (NCO) phase* at the epoch's midpoint (the
+residual the I/Q pair measures) and ``w0..w2`` are absolute. Prediction (linear, exact in
+any UKF): ``x- = Phi x - [2 pi T (f_k + f_k+1) / 2, 0, 0, 0]`` (the NCO's advance between
+the midpoints, ``f`` the replica Doppler in force, Hz), ``P- = Phi P Phi^T + q_hat Q_bar``.
+Update: the seed's closed form (its eqs 7.1-7.11, reconstructed in RECEIVERS.md) of the
+augmented UKF with ``n = 10`` (4 states, 4 process noise, 2 measurement noise), lower
+Cholesky ``S`` of ``P-``: ``c = sqrt((n + lambda) P-_11)``, ``a = W1 + 18 W2 + 2 cos(c) W2``,
+``y_hat = A a u``, ``Pyy = A^2 ((W4 - l) u u^T + m I) + R``, ``Pxy = 2 A W2 sin(c)
+sqrt(n + lambda) S[:, 0] v^T`` (``u = [cos th, sin th]``, ``v = [-sin th, cos th]``). As
+``Pxy`` has rank 1, ``P = P- - g^2 (v^T Pyy^-1 v) s0 s0^T`` (``s0 = sqrt(n+lambda) S[:,0]``,
+``g = 2 A W2 sin c``). :func:`master_update` is this form (a numba kernel);
+:func:`master_update_generic` runs the same update through the generic augmented UKF of
+:mod:`dsp.estimation.ukf` (identity transition, zero process noise: its 21 sigma points are
+then exactly the seed's); test A1 holds them to 1e-12.
+
+Measurement: the prompt ``P = I + jQ`` divided by the amplitude ``A_c`` (from C/N0:
+``sqrt(2 T C/N0)`` for unit noise per component, the fast path's scale) so that ``A = 1`` and
+the noise variance is ``1 / (2 T C/N0)`` ("R from C/N0", default) or the seed's ``1e-9``
+(``r_mode="seed"``); the navigation bit is removed by the sign of the prompt rotated by the
+predicted residual (``data_wipe``).
+
+Slave (scalar ``q``). Order per block (RECEIVERS.md): slave predict -> master epochs with
+``q_hat_k|k-1`` -> slave update. **Deviation from the seed** (``slave="block"``, default):
+at 32 dB-Hz the q-dependent part of one epoch's innovation covariance is ~1 % of the thermal
+noise (the steady-state ``P-_11 / R`` is 0.009 at q = 5), so the seed's per-epoch measurement
+``z = diag(nu nu^T)`` hardly moves ``q_hat`` (a previous attempt failed A2/A4 that way). The
+slave instead measures, once per block of ``M`` epochs, ``z = (w2_hat_end - s^M w2_hat_start)^2``
+(``s = e^-alpha T``) -- the sum of the master's jerk corrections ``sum s^(M-k) K4 nu_k``
+over the block, in which the process noise dominates the thermal noise once ``M T`` exceeds
+the filter's time constant. Its expectation, for a master in steady state with the gain of
+``q_hat``, is *linear* in the true ``q``: ``h(q) = a(q_hat) q + b(q_hat)``, from the
+mismatched-filter Lyapunov equation of the linearised loop (:func:`block_moments`,
+tabulated on a log grid of ``q_hat``); ``Rq = 2 h(q_hat)^2`` (``z`` is a squared Gaussian).
+The block slave's state is ``ln q`` (a scalar UKF in ``q`` let a quarter of the runs at
+``q_true = 0.1 q0`` collapse onto the floor ``q >= 0``); its prior is derived: ``P_lnq0 = 1``
+(a factor e at 1 sigma), ``Q_lnq = 0.01`` per block (the seed's ``Pq0 = 1e-8`` on ``q`` would
+freeze ``q_hat`` at ``q0``). ``slave="seed"`` runs the seed's slave
+literally: per epoch, ``z = diag(nu nu^T)``, ``h(q_j) = diag Pyy(q_j)``, ``q0 = 5``,
+``Pq0 = 1e-8``, ``Qq = 1e-10``, ``Rq = diag(1e-8, 1e-8)``. ``eq414="literal"`` takes the
+seed's eq. 4.14 as written (``P_k|k-1 = Qq``), default ``P_k|k-1 = P_k-1 + Qq``.
+
+Loop: ``f_next = w0_pred / 2 pi + (C1 e + C2 sum e) / T`` with ``e = theta_hat / 2 pi``
+(cycles; RECEIVERS.md's 2nd-order filter, ``K0 Kd = 1``, ``wn`` from ``loop_bn_hz``) and
+``w0_pred`` the master's ``w0`` predicted to the epoch the write takes effect in
+(``latency_epochs``); carrier-aided 1st-order DLL as ``loops_fixed.ChannelCore``.
+
+Divergence (``report()["diverged"]``, per trial): the narrow-band lock indicator of the
+data-wiped prompt summed over blocks of 20 epochs, ``((sum I)^2 - (sum Q)^2) / ((sum I)^2
++ (sum Q)^2)``, below 0 in 3 consecutive blocks after the first 100 epochs, or a non-finite
+state.
+
+Fixed point (:class:`AukfFormats`): every stored signal of the master (predicted state and
+covariance, trig values, ``c``, ``Pyy``, its inverse, gain terms, state and covariance) is
+rounded half-up to its format's fraction bits and saturated (counted) -- an emulation of
+the DSP's word lengths evaluated in float64 (exact products of up to 53 bits), not an
+integer bit-exact model. float32 rounds every stored signal to float32.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..estimation.ukf import NonlinearModel, UnscentedKalmanFilter, sigma_weights
+from ..estimation.models import check_psd
+from ..jit import njit_cached
+from .ca_code import CHIP_RATE_HZ
+from .discriminators import dll_nelp
+from .loops_fixed import DISC_CODE, WORD_BITS
+from .trackers import register_tracker
+
+TWO_PI = 2.0 * np.pi
+N_AUG = 10
+SEED_X0 = (0.0, 32995.519, 323.356, 0.0)
+SEED_P0 = 1e-3
+SEED_R = 1e-9
+EVENTS = ("chol_fail", "s_not_pd", "saturations")
+
+
+@dataclass(frozen=True)
+class QFormat:
+    """Signed fixed-point format: ``bits`` total, ``frac`` fraction bits."""
+
+    bits: int
+    frac: int
+
+    def __post_init__(self):
+        if not (isinstance(self.bits, int) and 2 <= self.bits <= 62):
+            raise ValueError(f"format bits must be an integer in 2..62, not {self.bits!r}")
+        if not (isinstance(self.frac, int) and 0 <= self.frac < self.bits + 40):
+            raise ValueError(f"format frac must be an integer >= 0, not {self.frac!r}")
+
+    @property
+    def max_value(self) -> float:
+        return (2.0 ** (self.bits - 1) - 1) * 2.0 ** -self.frac
+
+
+@dataclass(frozen=True)
+class AukfFormats:
+    """Word lengths of the fixed-point master and slave (each a :class:`QFormat`).
+
+    theta, w0, w1, w2 : state elements (rad, rad/s, rad/s^2, rad/s^3)
+    P : covariance entries; y : normalised I/Q and the innovation; trig : sin/cos values;
+    gain : ``Pyy^-1`` entries and the gain terms; q : the slave's ``q_hat`` and its variance.
+    """
+
+    theta: QFormat = QFormat(24, 20)
+    w0: QFormat = QFormat(48, 30)
+    w1: QFormat = QFormat(40, 28)
+    w2: QFormat = QFormat(32, 22)
+    P: QFormat = QFormat(48, 36)
+    y: QFormat = QFormat(24, 18)
+    trig: QFormat = QFormat(20, 18)
+    gain: QFormat = QFormat(32, 22)
+    q: QFormat = QFormat(32, 16)
+
+    def __post_init__(self):
+        for f in fields(self):
+            if not isinstance(getattr(self, f.name), QFormat):
+                raise ValueError(f"AukfFormats.{f.name} must be a QFormat, not {getattr(self, f.name)!r}")
+
+    def table(self) -> np.ndarray:
+        """``(9, 2)`` float array ``[frac, max]`` in field order (kernel input)."""
+        return np.array([[getattr(self, f.name).frac, getattr(self, f.name).max_value]
+                         for f in fields(self)], np.float64)
+
+
+_ITH, _IW0, _IW1, _IW2, _IP, _IY, _ITRIG, _IGAIN, _IQ = range(9)
+
+
+@njit_cached
+def _qs(v, mode, fm, i, ev):
+    """Store ``v`` into signal ``i``: mode 0 float64, 1 float32, 2 fixed (round half up to
+    ``fm[i, 0]`` fraction bits, saturate at ``fm[i, 1]``, count in ``ev[2]``)."""
+    if mode == 0:
+        return v
+    if mode == 1:
+        return float(np.float32(v))
+    s = 2.0 ** fm[i, 0]
+    r = math.floor(v * s + 0.5) / s
+    if r > fm[i, 1]:
+        ev[2] += 1
+        return fm[i, 1]
+    if r < -fm[i, 1]:
+        ev[2] += 1
+        return -fm[i, 1]
+    return r
+
+
+@njit_cached
+def _pyy_terms(p11, th, A, W, mode, fm, ev):
+    """``(a, u, v, Pyy without R (3 entries), c)`` of the closed form for ``P-_11``."""
+    W1, W2, W3, cL = W[0], W[1], W[2], W[3]
+    c = _qs(math.sqrt(cL * p11), mode, fm, _ITH, ev)
+    cc = _qs(math.cos(c), mode, fm, _ITRIG, ev)
+    sc = _qs(math.sin(c), mode, fm, _ITRIG, ev)
+    a = _qs(W1 + 18.0 * W2 + 2.0 * cc * W2, mode, fm, _ITRIG, ev)
+    W6 = W3 + 18.0 * W2
+    W4 = W6 * (1.0 - a) * (1.0 - a)
+    m = 2.0 * W2 * sc * sc
+    nn = 2.0 * W2 * (cc - a) * (cc - a)
+    l_ = m - nn
+    u0 = _qs(math.cos(th), mode, fm, _ITRIG, ev)
+    u1 = _qs(math.sin(th), mode, fm, _ITRIG, ev)
+    A2 = A * A
+    g = W4 - l_
+    s00 = _qs(A2 * (g * u0 * u0 + m), mode, fm, _IP, ev)
+    s01 = _qs(A2 * g * u0 * u1, mode, fm, _IP, ev)
+    s11 = _qs(A2 * (g * u1 * u1 + m), mode, fm, _IP, ev)
+    return a, u0, u1, s00, s01, s11, sc
+
+
+@njit_cached
+def _master_kernel(x, P, y, ok, dphi, qhat, Phi, Qbar, R, A, W, pfloor, mode, fm, ev, nu_out,
+                   predict):
+    """One epoch for every trial: prediction (``predict``) then the closed-form update.
+    ``x (B, 4)``, ``P (B, 4, 4)`` updated in place; ``nu_out (B, 2)`` the innovation."""
+    B = x.shape[0]
+    xp = np.empty(4)
+    Pp = np.empty((4, 4))
+    tmp = np.empty((4, 4))
+    fx = np.array([_ITH, _IW0, _IW1, _IW2])
+    for b in range(B):
+        eb = ev[b]
+        if predict:
+            for i in range(4):
+                acc = 0.0
+                for j in range(4):
+                    acc += Phi[i, j] * x[b, j]
+                xp[i] = acc
+            xp[0] -= dphi[b]
+            for i in range(4):
+                xp[i] = _qs(xp[i], mode, fm, fx[i], eb)
+            for i in range(4):
+                for j in range(4):
+                    acc = 0.0
+                    for k in range(4):
+                        acc += Phi[i, k] * P[b, k, j]
+                    tmp[i, j] = acc
+            for i in range(4):
+                for j in range(i, 4):
+                    acc = qhat[b] * Qbar[i, j]
+                    for k in range(4):
+                        acc += tmp[i, k] * Phi[j, k]
+                    Pp[i, j] = _qs(acc, mode, fm, _IP, eb)
+                    Pp[j, i] = Pp[i, j]
+        else:
+            for i in range(4):
+                xp[i] = x[b, i]
+                for j in range(4):
+                    Pp[i, j] = P[b, i, j]
+        if not Pp[0, 0] > 0.0:                     # Cholesky of P- fails at its first pivot
+            eb[0] += 1
+            for i in range(4):
+                d = Pp[i, i]
+                if not d > pfloor:
+                    d = pfloor
+                for j in range(4):
+                    Pp[i, j] = 0.0
+                Pp[i, i] = d
+        nu_out[b, 0] = 0.0
+        nu_out[b, 1] = 0.0
+        if ok[b]:
+            a, u0, u1, s00, s01, s11, sc = _pyy_terms(Pp[0, 0], xp[0], A, W, mode, fm, eb)
+            s00 += R[0, 0]
+            s01 += R[0, 1]
+            s11 += R[1, 1]
+            det = s00 * s11 - s01 * s01
+            if s00 > 0.0 and det > 0.0:
+                i00 = _qs(s11 / det, mode, fm, _IGAIN, eb)
+                i01 = _qs(-s01 / det, mode, fm, _IGAIN, eb)
+                i11 = _qs(s00 / det, mode, fm, _IGAIN, eb)
+                e0 = _qs(y[b, 0] - A * a * u0, mode, fm, _IY, eb)
+                e1 = _qs(y[b, 1] - A * a * u1, mode, fm, _IY, eb)
+                nu_out[b, 0] = e0
+                nu_out[b, 1] = e1
+                v0, v1 = -u1, u0
+                # Pxy = g s0 v^T, s0 = sqrt(cL / P-11) P-[:, 0], g = 2 A W2 sin c
+                g = 2.0 * A * W[1] * sc * math.sqrt(W[3] / Pp[0, 0])
+                g = _qs(g, mode, fm, _IGAIN, eb)
+                wv0 = v0 * i00 + v1 * i01               # Pyy^-1 v
+                wv1 = v0 * i01 + v1 * i11
+                r = _qs(wv0 * e0 + wv1 * e1, mode, fm, _IGAIN, eb)   # v^T Pyy^-1 nu
+                vv = _qs(v0 * wv0 + v1 * wv1, mode, fm, _IGAIN, eb)  # v^T Pyy^-1 v
+                for i in range(4):
+                    x[b, i] = _qs(xp[i] + g * Pp[i, 0] * r, mode, fm, fx[i], eb)
+                h = g * g * vv
+                for i in range(4):
+                    for j in range(i, 4):
+                        P[b, i, j] = _qs(Pp[i, j] - h * Pp[i, 0] * Pp[j, 0], mode, fm, _IP, eb)
+                        P[b, j, i] = P[b, i, j]
+                continue
+            eb[1] += 1
+        for i in range(4):
+            x[b, i] = xp[i]
+            for j in range(4):
+                P[b, i, j] = Pp[i, j]
+
+
+@njit_cached
+def _pyy_diag_kernel(p11, th, A, W, R, out):
+    """``diag Pyy`` for ``P-_11`` values ``p11 (B, J)`` (the seed slave's ``h_q``)."""
+    ev = np.zeros(3, np.int64)
+    fm = np.zeros((9, 2))
+    for b in range(p11.shape[0]):
+        for j in range(p11.shape[1]):
+            a, u0, u1, s00, s01, s11, sc = _pyy_terms(max(p11[b, j], 0.0), th[b], A, W, 0, fm, ev)
+            out[b, j, 0] = s00 + R[0, 0]
+            out[b, j, 1] = s11 + R[1, 1]
+
+
+def ut_weights(epsilon: float = 1.027, beta: float = 2.0, kappa: float = 0.0, L: int = N_AUG):
+    """``[W1 = Wm0, W2 = Wi, W3 = Wc0, n + lambda]`` of the seed's scaled UT."""
+    wm, wc, c = sigma_weights(L, epsilon, beta, kappa)
+    return np.array([wm[0], wm[1], wc[0], c])
+
+
+def master_update(xp, Pp, y, R, amplitude: float = 1.0, epsilon: float = 1.027, beta: float = 2.0,
+                  kappa: float = 0.0):
+    """Closed-form measurement update (float64) of predicted ``xp (B, 4)``, ``Pp (B, 4, 4)``
+    with I/Q ``y (B, 2)``; returns ``(x, P, events)``."""
+    x = np.array(xp, np.float64, ndmin=2, copy=True)
+    P = np.array(Pp, np.float64, ndmin=3, copy=True)
+    B = x.shape[0]
+    ev = np.zeros((B, 3), np.int64)
+    _master_kernel(x, P, np.ascontiguousarray(np.reshape(y, (B, 2)), np.float64), np.ones(B, np.bool_),
+                   np.zeros(B), np.zeros(B), np.eye(4), np.zeros((4, 4)), np.asarray(R, np.float64),
+                   float(amplitude), ut_weights(epsilon, beta, kappa), 1e-12, 0, np.zeros((9, 2)), ev,
+                   np.zeros((B, 2)), False)
+    return x, P, ev
+
+
+def master_update_generic(xp, Pp, y, R, amplitude: float = 1.0, epsilon: float = 1.027,
+                          beta: float = 2.0, kappa: float = 0.0):
+    """The same update by the generic augmented UKF (``dsp.estimation.ukf``, n = 10: the
+    identity transition with zero process noise leaves the sigma points of ``P-``)."""
+    xp = np.array(xp, np.float64, ndmin=2)
+    Pp = np.array(Pp, np.float64, ndmin=3)
+    B = xp.shape[0]
+    model = NonlinearModel.phase_iq(np.eye(4), np.zeros((4, 4)), R, amplitude)
+    f = UnscentedKalmanFilter(model, xp, Pp, alpha=epsilon, beta=beta, kappa=kappa,
+                              noise="augmented", trials=B)
+    r = f.run(np.reshape(y, (B, 1, 2)), keep_P=True)
+    return r.x[:, 0], r.P[:, 0], r.events
+
+
+# ------------------------------------------------------------------------------------------
+# the block slave's measurement model
+# ------------------------------------------------------------------------------------------
+def _linear_gain(Phi, Q, Rph):
+    import scipy.linalg as sl
+    H = np.array([[1.0, 0, 0, 0]])
+    Pm = sl.solve_discrete_are(Phi.T, H.T, Q, np.array([[Rph]]))
+    return (Pm @ H.T / (Pm[0, 0] + Rph))[:, 0]
+
+
+def block_moments(q_hat, Phi, Qbar, r_phase: float, M: int):
+    """``(a, b)`` with ``E[z] = a q + b`` for ``z = (w2_hat_end - s^M w2_hat_start)^2`` over
+    ``M`` epochs, the linearised master in steady state with the gain of ``q_hat`` and the
+    truth's intensity ``q`` (phase-measurement variance ``r_phase`` rad^2)."""
+    import scipy.linalg as sl
+    K = _linear_gain(Phi, q_hat * Qbar, r_phase)
+    H = np.array([1.0, 0, 0, 0])
+    IKH = np.eye(4) - np.outer(K, H)
+    Ae = IKH @ Phi
+    s = Phi[3, 3]
+    A = np.zeros((5, 5))
+    A[:4, :4] = Ae
+    A[4, :4] = K[3] * (H @ Phi)
+    A[4, 4] = s
+    Bw = np.vstack([IKH, K[3] * H[None, :]])
+    Bv = np.concatenate([-K, [K[3]]])
+    out = []
+    for Qn, Rn in ((Qbar, 0.0), (np.zeros((4, 4)), r_phase)):
+        Se = sl.solve_discrete_lyapunov(Ae, IKH @ Qn @ IKH.T + Rn * np.outer(K, K))
+        C = np.zeros((5, 5))
+        C[:4, :4] = Se
+        N = Bw @ Qn @ Bw.T + Rn * np.outer(Bv, Bv)
+        for _ in range(M):
+            C = A @ C @ A.T + N
+        out.append(C[4, 4])
+    return out[0], out[1]
+
+
+_MOMENTS: dict = {}
+
+
+def block_table(Phi, Qbar, r_phase, M, q_lo=1e-3, q_hi=1e4, n=57):
+    key = (Phi.tobytes(), Qbar.tobytes(), float(r_phase), int(M), q_lo, q_hi, n)
+    t = _MOMENTS.get(key)
+    if t is None:
+        g = np.geomspace(q_lo, q_hi, n)
+        ab = np.array([block_moments(v, Phi, Qbar, r_phase, M) for v in g])
+        t = _MOMENTS[key] = (np.log(g), ab[:, 0], ab[:, 1])
+    return t
+
+
+# ------------------------------------------------------------------------------------------
+# the tracker
+# ------------------------------------------------------------------------------------------
+def _check_pos(name, v):
+    if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a finite number > 0, not {v!r}")
+    return float(v)
+
+
+class AukfTracker:
+    """The seed-002 carrier tracker (``adaptive=False``: the fixed-q UKF baseline); see the
+    module docstring. Tracker interface of :mod:`dsp.gnss.trackers`."""
+
+    def __init__(self, ctx, arith="float64", *, adaptive: bool = True, epsilon: float = 1.027,
+                 beta: float = 2.0, kappa: float = 0.0, alpha_per_s: float = 0.1, q0: float = 5.0,
+                 P0=None, r_mode: str = "cn0", slave: str = "block", eq414: str = "plausible",
+                 block_epochs: int = 500, Pq0: float | None = None, Qq: float | None = None,
+                 loop_bn_hz: float = 10.0, loop_xi: float = 0.707, dll_bn_hz: float = 1.0,
+                 amplitude: float | None = None, data_wipe: bool = True, form: str = "closed",
+                 p_floor: float = 1e-12):
+        from cosim.gnss.dynamics import jerk_phi, jerk_q
+        if not (isinstance(epsilon, (int, float)) and epsilon > 0):
+            raise ValueError(f"epsilon (UT scaling) must be > 0, not {epsilon!r}")
+        if not (isinstance(beta, (int, float)) and beta >= 0):
+            raise ValueError(f"beta must be >= 0, not {beta!r}")
+        if not (isinstance(kappa, (int, float)) and N_AUG + kappa > 0):
+            raise ValueError(f"kappa must make n + kappa > 0 (n = {N_AUG}), not {kappa!r}")
+        if not (isinstance(q0, (int, float)) and math.isfinite(q0) and q0 >= 0):
+            raise ValueError(f"q0 (initial process-noise intensity) must be >= 0, not {q0!r}")
+        if not (isinstance(alpha_per_s, (int, float)) and alpha_per_s >= 0):
+            raise ValueError(f"alpha_per_s must be >= 0, not {alpha_per_s!r}")
+        if r_mode not in ("cn0", "seed"):
+            raise ValueError(f"r_mode must be 'cn0' or 'seed', not {r_mode!r}")
+        if slave not in ("block", "seed"):
+            raise ValueError(f"slave must be 'block' or 'seed', not {slave!r}")
+        if eq414 not in ("plausible", "literal"):
+            raise ValueError(f"eq414 must be 'plausible' or 'literal', not {eq414!r}")
+        if form not in ("closed", "generic"):
+            raise ValueError(f"form must be 'closed' or 'generic', not {form!r}")
+        if isinstance(block_epochs, bool) or not isinstance(block_epochs, int) or block_epochs < 2:
+            raise ValueError(f"block_epochs must be an integer >= 2, not {block_epochs!r}")
+        loop_bn_hz, loop_xi = _check_pos("loop_bn_hz", loop_bn_hz), _check_pos("loop_xi", loop_xi)
+        if isinstance(arith, str):
+            if arith not in ("float64", "float32"):
+                raise ValueError(f"arith must be 'float64', 'float32' or an AukfFormats, not {arith!r}")
+            self.mode, self.formats = (0 if arith == "float64" else 1), None
+        elif isinstance(arith, AukfFormats):
+            self.mode, self.formats = 2, arith
+        elif getattr(arith, "fixed", None) is False:          # loops_fixed.FLOAT
+            self.mode, self.formats = 0, None
+        elif getattr(arith, "fixed", None) is True:           # loops_fixed.FixedArith
+            self.mode, self.formats = 2, AukfFormats()
+        else:
+            raise ValueError(f"arith must be 'float64', 'float32' or an AukfFormats, not {arith!r}")
+        if form == "generic" and self.mode != 0:
+            raise ValueError("form='generic' (the generic augmented UKF) runs in float64 only")
+        self.form = form
+        T = self.T = float(ctx.T_s)
+        self.fs, self.if_hz, self.s = float(ctx.fs_hz), float(ctx.if_hz), (-1 if ctx.inverted else 1)
+        self.lat = int(ctx.latency_epochs)
+        self.d = float(ctx.spacing_chips)
+        f0 = np.atleast_1d(np.asarray(ctx.doppler0_hz, float))
+        self.shape = np.shape(ctx.doppler0_hz)
+        Bn = f0.size
+        fd0 = np.broadcast_to(np.asarray(ctx.doppler_rate0_hz_s, float), np.shape(ctx.doppler0_hz)).ravel()
+        P0 = np.diag([SEED_P0] * 4) if P0 is None else np.asarray(P0, float)
+        if P0.shape != (4, 4):
+            raise ValueError(f"P0 must be 4 x 4, not {P0.shape}")
+        check_psd("P0", P0[None])
+        cn0 = ctx.cn0_dbhz
+        if r_mode == "cn0" or amplitude is None:
+            if cn0 is None:
+                raise ValueError("cn0_dbhz must be given in the tracker context (R and the "
+                                 "amplitude are derived from it)")
+        c = 10.0 ** (float(cn0) / 10) if cn0 is not None else None
+        self.amp = float(amplitude) if amplitude is not None else math.sqrt(2 * T * c)
+        self.r = 1.0 / (2 * T * c) if r_mode == "cn0" else SEED_R
+        self.R = np.diag([self.r, self.r])
+        self.W = ut_weights(float(epsilon), float(beta), float(kappa))
+        self.ut = (float(epsilon), float(beta), float(kappa))
+        self.Phi = jerk_phi(alpha_per_s, T)
+        self.Qbar = jerk_q(alpha_per_s, 1.0, T)
+        self.x = np.zeros((Bn, 4))
+        self.x[:, 1] = TWO_PI * f0
+        self.x[:, 2] = TWO_PI * fd0
+        self.P = np.broadcast_to(P0, (Bn, 4, 4)).copy()
+        self.pfloor = float(p_floor)
+        if self.mode == 2:
+            fm = self.formats
+            for name, v in (("theta", 0.0), ("w0", self.x[:, 1]), ("w1", self.x[:, 2]),
+                            ("P", P0), ("y", 4.0), ("q", q0)):
+                big = float(np.max(np.abs(v)))
+                f = getattr(fm, name)
+                if big > f.max_value:
+                    raise ValueError(f"formats too narrow: AukfFormats.{name} {f} holds "
+                                     f"+-{f.max_value:g}, not {big:g}")
+            if 2.0 ** -fm.P.frac > 0.01 * float(np.min(np.diag(P0))):
+                raise ValueError(f"formats too narrow: AukfFormats.P {fm.P} resolves "
+                                 f"{2.0 ** -fm.P.frac:g}, not 1 % of min diag P0")
+            self._fm = fm.table()
+        else:
+            self._fm = np.zeros((9, 2))
+        self.ev = np.zeros((Bn, 3), np.int64)
+        self.adaptive, self.slave, self.eq414 = bool(adaptive), slave, eq414
+        self.M = int(block_epochs)
+        if slave == "seed":
+            self.Pq0 = 1e-8 if Pq0 is None else float(Pq0)
+            self.Qq = 1e-10 if Qq is None else float(Qq)
+            self.Rq = 1e-8
+        else:   # the block slave estimates ln q (it cannot collapse to q <= 0)
+            if q0 <= 0:
+                raise ValueError(f"q0 must be > 0 for the block slave (it estimates ln q), not {q0!r}")
+            self.Pq0 = 1.0 if Pq0 is None else float(Pq0)
+            self.Qq = 0.01 if Qq is None else float(Qq)
+        self.q0 = float(q0)
+        self.qhat = np.full(Bn, float(q0))
+        self.Pq = np.full(Bn, self.Pq0)
+        self.log = slave == "block"
+        self.lq = np.full(Bn, math.log(q0) if q0 > 0 else 0.0)
+        self.q_traj = [self.qhat.copy()]
+        self.k = 0
+        self.w2_start = self.x[:, 3].copy()
+        self.qmin = 1e-4 * max(q0, 1e-3)
+        # loop filter (RECEIVERS.md): bilinear 2nd order, K0 Kd = 1
+        wn = 2.0 * loop_bn_hz / (loop_xi + 1.0 / (4 * loop_xi))
+        wt = wn * T
+        den = 4 + 4 * loop_xi * wt + wt * wt
+        self.C1, self.C2 = 8 * loop_xi * wt / den, 4 * wt * wt / den
+        self.acc = np.zeros(Bn)
+        self.kd = 4.0 * dll_bn_hz
+        self.data_wipe = bool(data_wipe)
+        self.queue = [f0.copy() for _ in range(self.lat + 1)]   # [in force now, next, ...]
+        self.nb_i = np.zeros(Bn)
+        self.nb_q = np.zeros(Bn)
+        self.bad_blocks = np.zeros(Bn, np.int64)
+        self.diverged = np.zeros(Bn, bool)
+        self._started = False
+
+    # -- helpers -----------------------------------------------------------------------
+    def _fixed_word(self, f_hz):
+        return np.rint(f_hz * 2.0 ** WORD_BITS / self.fs).astype(np.int64)
+
+    def doppler_hz(self):
+        return (self.x[:, 1] / TWO_PI).reshape(self.shape)
+
+    def _slave_predict(self):
+        if self.eq414 == "literal":
+            self.Pq = np.full_like(self.Pq, self.Qq)
+        else:
+            self.Pq = self.Pq + self.Qq
+
+    def _slave_update(self, z, h_of_q, Rq):
+        """Scalar UKF on q (3 sigma points, the master's UT parameters with L = 1)."""
+        eps, beta, kappa = self.ut
+        wm, wc, cL = sigma_weights(1, eps, beta, kappa)
+        sq = np.sqrt(cL * np.maximum(self.Pq, 0.0))
+        c0 = self.lq if self.log else self.qhat
+        X = np.stack([c0, c0 + sq, c0 - sq], axis=1)
+        Q = np.exp(X) if self.log else np.maximum(X, self.qmin)
+        Z = h_of_q(Q)                                           # (B, 3, m)
+        zp = np.einsum("j,bjm->bm", wm, Z)
+        dz = Z - zp[:, None, :]
+        dq = X - c0[:, None]
+        S = np.einsum("j,bjm,bjn->bmn", wc, dz, dz) + Rq
+        Pqz = np.einsum("j,bj,bjm->bm", wc, dq, dz)
+        K = np.linalg.solve(S, Pqz[..., None])[..., 0]
+        new = c0 + np.einsum("bm,bm->b", K, z - zp)
+        if self.log:
+            self.lq = np.clip(new, math.log(self.qmin), math.log(1e6))
+            self.qhat = np.exp(self.lq)
+        else:
+            self.qhat = np.maximum(new, self.qmin)
+        self.Pq = np.maximum(self.Pq - np.einsum("bm,bmn,bn->b", K, S, K), 0.0)
+        if self.mode == 2:
+            f = self.formats.q
+            self.qhat = np.clip(np.floor(self.qhat * 2.0 ** f.frac + 0.5) * 2.0 ** -f.frac, 0, f.max_value)
+
+    # -- one dump ------------------------------------------------------------------------
+    def step(self, ie, qe, ip, qp, il, ql):
+        T = self.T
+        f_now = self.queue[0]
+        ipf = np.asarray(ip, float).ravel() / self.amp
+        qpf = self.s * np.asarray(qp, float).ravel() / self.amp
+        B = ipf.size
+        if self.adaptive and (self.slave == "seed" or self.k % self.M == 0):
+            self._slave_predict()
+        # NCO advance from the previous midpoint to this one: f of the last epoch and this
+        dphi = np.zeros(B) if not self._started else TWO_PI * T * (self._f_prev + f_now) / 2
+        # predicted residual (for the data wipe)
+        th_pred = self.Phi[0] @ self.x.T - dphi if self._started else self.x[:, 0]
+        if self.data_wipe:
+            sgn = np.where(ipf * np.cos(th_pred) + qpf * np.sin(th_pred) < 0, -1.0, 1.0)
+        else:
+            sgn = np.ones(B)
+        y = np.stack([sgn * ipf, sgn * qpf], axis=1)
+        ok = np.isfinite(y).all(axis=1)
+        y = np.where(ok[:, None], y, 0.0)
+        if self.adaptive and self.slave == "seed":
+            p11_base = (self.Phi @ self.P @ self.Phi.T)[:, 0, 0] if self._started else self.P[:, 0, 0]
+        nu = np.zeros((B, 2))
+        if self.form == "generic":
+            if self._started:
+                xp = self.x @ self.Phi.T
+                xp[:, 0] -= dphi
+                Pp = self.Phi @ self.P @ self.Phi.T + self.qhat[:, None, None] * self.Qbar
+            else:
+                xp, Pp = self.x, self.P
+            self.x, self.P, _ = master_update_generic(xp, Pp, y, self.R, 1.0, *self.ut)
+        else:
+            _master_kernel(self.x, self.P, np.ascontiguousarray(y), ok, dphi, self.qhat, self.Phi,
+                           self.Qbar, self.R, 1.0, self.W, self.pfloor, self.mode, self._fm, self.ev, nu,
+                           self._started)
+        self._started = True
+        self.k += 1
+        if self.adaptive:
+            if self.slave == "seed":
+                def h(Qs):
+                    p11 = p11_base[:, None] + Qs * self.Qbar[0, 0]
+                    out = np.empty(Qs.shape + (2,))
+                    _pyy_diag_kernel(np.ascontiguousarray(p11), np.ascontiguousarray(th_pred), 1.0,
+                                     self.W, self.R, out)
+                    return out
+                self._slave_update(nu * nu, h, np.eye(2) * self.Rq)
+            elif self.k % self.M == 0:
+                s = self.Phi[3, 3] ** self.M
+                z = (self.x[:, 3] - s * self.w2_start) ** 2
+                lg, ta, tb = block_table(self.Phi, self.Qbar, self.r, self.M)
+                lq = np.clip(np.log(self.qhat), lg[0], lg[-1])
+                a, b = np.interp(lq, lg, ta), np.interp(lq, lg, tb)
+                hq = a * self.qhat + b
+                self._slave_update(z[:, None], lambda Qs: (a[:, None] * Qs + b[:, None])[..., None],
+                                   (2 * hq * hq)[:, None, None])
+                self.w2_start = self.x[:, 3].copy()
+                self.q_traj.append(self.qhat.copy())
+        # lock indicator / divergence
+        self.nb_i += y[:, 0]
+        self.nb_q += y[:, 1]
+        if self.k % 20 == 0:
+            pli = (self.nb_i ** 2 - self.nb_q ** 2) / np.maximum(self.nb_i ** 2 + self.nb_q ** 2, 1e-300)
+            if self.k > 100:
+                self.bad_blocks = np.where(pli < 0, self.bad_blocks + 1, 0)
+                self.diverged |= self.bad_blocks >= 3
+            self.nb_i[:] = 0
+            self.nb_q[:] = 0
+        self.diverged |= ~np.isfinite(self.x).all(axis=1)
+        # loop filter -> NCO for epoch k + 1 + latency
+        e = self.x[:, 0] / TWO_PI
+        self.acc = self.acc + e
+        tau_ahead = (0.5 + self.lat + 0.5) * T       # from this midpoint to the target's
+        w0p = self.x[:, 1] + tau_ahead * self.x[:, 2] + tau_ahead ** 2 / 2 * self.x[:, 3]
+        f = w0p / TWO_PI + (self.C1 * e + self.C2 * self.acc) / T
+        f = np.where(np.isfinite(f), f, f_now)
+        tau = dll_nelp(np.asarray(ie, float).ravel(), np.asarray(qe, float).ravel(),
+                       np.asarray(il, float).ravel(), np.asarray(ql, float).ravel(), self.d)
+        if self.mode == 2:
+            tq = np.floor(tau * 2.0 ** DISC_CODE.frac + 0.5) * 2.0 ** -DISC_CODE.frac
+            cw = self._fixed_word(self.if_hz + self.s * f)
+            kw = self._fixed_word(CHIP_RATE_HZ + f / 1540.0 + self.kd * tq)
+            f = (cw * self.fs / 2.0 ** WORD_BITS - self.if_hz) * self.s     # Doppler in force
+            out = (cw.reshape(self.shape), kw.reshape(self.shape))
+        else:
+            out = ((self.if_hz + self.s * f).reshape(self.shape),
+                   (CHIP_RATE_HZ + f / 1540.0 + self.kd * tau).reshape(self.shape))
+        self._f_prev = f_now
+        self.queue.pop(0)
+        self.queue.append(f)
+        return out
+
+    def frequencies_hz(self, out):
+        if self.mode != 2:
+            return out
+        cw, kw = out
+        return cw * self.fs / 2.0 ** WORD_BITS, kw * self.fs / 2.0 ** WORD_BITS
+
+    def counts(self) -> dict:
+        return {n: int(self.ev[:, i].sum()) for i, n in enumerate(EVENTS)}
+
+    def report(self) -> dict:
+        tr = np.array(self.q_traj)                    # (blocks + 1, B)
+        return {"q_hat": {"final": self.qhat.reshape(self.shape).tolist(),
+                          "median_final": float(np.median(self.qhat)),
+                          "trajectory_median": np.median(tr, axis=1).tolist(),
+                          "trajectory_p10": np.percentile(tr, 10, axis=1).tolist(),
+                          "trajectory_p90": np.percentile(tr, 90, axis=1).tolist()},
+                "diverged": self.diverged.reshape(self.shape).tolist(),
+                "diverged_count": int(self.diverged.sum()),
+                "events": self.counts()}
+
+
+def _make_aukf(ctx, arith, **opts):
+    return AukfTracker(ctx, arith, adaptive=True, **opts)
+
+
+def _make_ukf(ctx, arith, **opts):
+    return AukfTracker(ctx, arith, adaptive=False, **opts)
+
+
+register_tracker("aukf", _make_aukf, "seed-002 master-slave adaptive UKF (jerk model, I/Q)")
+register_tracker("ukf", _make_ukf, "seed-002 master UKF with fixed q (baseline)")
