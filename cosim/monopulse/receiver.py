@@ -61,6 +61,11 @@ def _top():
     return monopulse_top()
 
 
+def _equivalence(**kw) -> dict:
+    from .equivalence import check_monopulse_equivalence
+    return check_monopulse_equivalence(**kw)
+
+
 def _frontend():
     from hdl.monopulse.model import MonopulseFrontendParams
     return Frontend(params=MonopulseFrontendParams, component=_component, model=_model_session,
@@ -78,4 +83,5 @@ MONOPULSE = register(Receiver(
     primary=Figure("az_track_rms_deg", "azimuth tracking RMS", "deg"),
     frontend=_frontend(),
     tops={"monopulse_frontend": _top},
+    equivalence=_equivalence,
 ))
