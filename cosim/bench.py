@@ -274,9 +274,15 @@ def _gnss_tracking(out: Path, quick: bool = False, jobs: int | None = None) -> d
     return gnss_tracking(out, quick=quick)
 
 
+def _monopulse(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .monopulse.bench import bench as monopulse_bench
+    return monopulse_bench(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
-              "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking}
+              "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,
+              "monopulse": _monopulse}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

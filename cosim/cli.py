@@ -130,7 +130,6 @@ def _add_hdl(sub):
 
     p = _parser(sub, "synth", help="synthesise and place-and-route a top for ECP5 (YoWASP)")
     tops = [r.name for r in receivers() if r.tops]
-    tops += [n for n in _STANDALONE_TOPS if n not in tops]
     p.add_argument("--top", type=str.lower, default=tops[0], choices=tops, help="design")
     p.add_argument("--device", default="LFE5U-85F", help="ECP5 part")
     p.add_argument("--target-mhz", type=parse_finite, default=100.0, help="clock target (MHz)")
@@ -173,16 +172,6 @@ def _cmd_check_equivalence(a) -> int:
     return 0
 
 
-def _monopulse_top():
-    from hdl.monopulse.frontend import monopulse_top
-    return monopulse_top()
-
-
-#: Tops of front ends whose receiver entry is not registered yet (``synth --top <name>``;
-#: the registry entry's ``tops`` takes over once it exists).
-_STANDALONE_TOPS = {"monopulse": {"monopulse_frontend": _monopulse_top}}
-
-
 def hdl_blocks() -> dict:
     """Every HDL block (default-ish parameters), the GNSS channel tops (1 and 12 channels;
     they move to the GNSS registry entry's ``tops`` once it exists) and every receiver's top
@@ -210,8 +199,6 @@ def hdl_blocks() -> dict:
         "gnss_channel": lambda: gnss_top(1),
         "gnss_channel_array12": lambda: gnss_top(12),
     }
-    for tops in _STANDALONE_TOPS.values():
-        blocks.update(tops)
     for r in receivers():
         blocks.update(r.tops)
     return blocks
@@ -249,10 +236,7 @@ def _cmd_synth(a) -> int:
         check_out_dir(a.results, "--results")
     if not 0 < a.target_mhz <= 1000:
         raise ValueError(f"--target-mhz must be in (0, 1000] MHz, not {a.target_mhz:g}")
-    if a.top in _STANDALONE_TOPS and a.top not in [r.name for r in receivers()]:
-        name, make = next(iter(_STANDALONE_TOPS[a.top].items()))
-    else:
-        name, make = next(iter(get(a.top).tops.items()))
+    name, make = next(iter(get(a.top).tops.items()))
     r = synth(make(), name=name, device=a.device,
               target_mhz=a.target_mhz, out_dir=a.out, seed=a.seed)
     short = {"top": a.top, **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}

@@ -1,12 +1,13 @@
 """The monopulse entry in the receiver registry (:mod:`cosim.receivers`): ``python -m cosim
 monopulse``, its options derived from :class:`~cosim.monopulse.run.MonopulseRunConfig` (every
-default written once, there). No HDL front end, sweep or fault study is declared yet: the
-front end is being built in ``hdl/monopulse`` (the run refuses its backends until then)."""
+default written once, there), its HDL front end (:class:`hdl.monopulse.frontend.MonopulseFrontEnd`,
+the ``model`` backend :class:`~cosim.monopulse.session.MonopulseModelSession`) and its top.
+No sweep or fault study is declared yet."""
 from __future__ import annotations
 
 import dataclasses
 
-from ..receivers import Arg, Figure, Option, Receiver, config_kwargs, register
+from ..receivers import Arg, Figure, Frontend, Option, Receiver, config_kwargs, register
 from ..validate import dumps
 from .run import MonopulseRunConfig, run_monopulse
 
@@ -45,6 +46,32 @@ def cmd_monopulse(a) -> int:
     return 0
 
 
+def _component(params):
+    from hdl.monopulse.frontend import MonopulseFrontEnd
+    return MonopulseFrontEnd(params)
+
+
+def _model_session(params, **kw):
+    from .session import MonopulseModelSession
+    return MonopulseModelSession(params, **kw)
+
+
+def _top():
+    from hdl.monopulse.frontend import monopulse_top
+    return monopulse_top()
+
+
+def _equivalence(**kw) -> dict:
+    from .equivalence import check_monopulse_equivalence
+    return check_monopulse_equivalence(**kw)
+
+
+def _frontend():
+    from hdl.monopulse.model import MonopulseFrontendParams
+    return Frontend(params=MonopulseFrontendParams, component=_component, model=_model_session,
+                    verilog_name="monopulse_frontend")
+
+
 MONOPULSE = register(Receiver(
     name="monopulse",
     help="run the monopulse closed beam-steering loop and print the angle errors",
@@ -54,4 +81,7 @@ MONOPULSE = register(Receiver(
     metrics=("az_track_rms_deg", "el_track_rms_deg", "az_meas_rms_deg", "el_meas_rms_deg",
              "az_meas_over_crb", "el_meas_over_crb", "pointing_error_max_fraction"),
     primary=Figure("az_track_rms_deg", "azimuth tracking RMS", "deg"),
+    frontend=_frontend(),
+    tops={"monopulse_frontend": _top},
+    equivalence=_equivalence,
 ))

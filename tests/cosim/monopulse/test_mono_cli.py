@@ -40,9 +40,31 @@ def test_json_report(capsys):
     (["--u0", "0.8", "--v0", "0.7"], "error: initial target direction must lie in the visible "
                                       "region u^2 + v^2 < 1, not u = 0.8, v = 0.7"),
     (["--phase-bits", "0"], "error: phase_bits must be an integer in [1, 24] or None (ideal), not 0"),
-    (["--backend", "verilator"], "error: backend 'verilator' needs the monopulse HDL front end"),
+    (["--backend", "verilator"], "error: backend 'verilator': the monopulse HDL front end exists but "
+     "the closed loop is not wired to it yet"),
 ])
 def test_bad_input_exits_2_with_an_error_line(argv, msg, capsys):
     assert main(["monopulse", "--duration-s", "0.01"] + argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(msg), err
+
+
+def test_registry_declares_the_front_end_its_top_and_the_bench():
+    from cosim.bench import BENCHMARKS
+    from cosim.cli import build_parser, hdl_blocks
+    from cosim.monopulse.session import MonopulseModelSession
+    from cosim.receivers import get
+    from cosim.session import open_frontend
+    from hdl.monopulse.frontend import MonopulseFrontEnd
+    from hdl.monopulse.model import MonopulseFrontendParams
+    p = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
+                                cordic_iterations=12, angle_bits=16, fifo_depth=16)
+    r = get("monopulse")
+    assert r.frontend.verilog_name == "monopulse_frontend"
+    assert isinstance(r.frontend.component(p), MonopulseFrontEnd)
+    assert isinstance(open_frontend("model", p), MonopulseModelSession)
+    assert isinstance(hdl_blocks()["monopulse_frontend"](), MonopulseFrontEnd)
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices
+    top = next(a for a in sub["synth"]._actions if a.dest == "top")
+    assert "monopulse" in top.choices
+    assert "monopulse" in BENCHMARKS

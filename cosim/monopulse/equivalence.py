@@ -1,0 +1,116 @@
+"""Equivalence of the monopulse front end's bit-exact model, Amaranth simulation and Verilated
+Verilog (``python -m cosim check-equivalence --top monopulse``): the same seeded record through
+the three sessions (:func:`cosim.session.open_frontend`), every FIFO word and the cycle it
+leaves on compared with the model's.
+
+The record: full-scale random ADC codes on the 4 channels and random replica bits, with
+seeded register writes (channel coefficients, steering u0/v0) spread over it; the reduced
+block (:data:`EQUIV_PARAMS`: 12 snapshots of 4 samples) gives one measurement every 48
+samples so a 20,000-sample record holds about 400. ``stall=True``: the DSP ``ready`` follows
+:func:`cosim.equivalence.stall_pattern` and the FIFO holds one record (``record_words + 1`` words: records dropped, the
+overflow counter compared too)."""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
+                                 dc_word, pack_input)
+
+from ..equivalence import BACKENDS, PYSIM_MAX_SAMPLES, stall_pattern
+from .session import write_register
+
+__all__ = ["check_monopulse_equivalence", "EQUIV_PARAMS"]
+
+#: Reduced block for the check (4 samples a snapshot, 12 snapshots a block).
+EQUIV_PARAMS = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
+                                       cordic_iterations=12, angle_bits=16, fifo_depth=16)
+#: Mean cycles between two register writes of the record.
+WRITE_SPACING = 500
+
+
+def _stimulus(p, samples, seed):
+    rng = np.random.default_rng(seed)
+    lo = -(1 << (p.adc_bits - 1))
+    x = rng.integers(lo, -lo, (samples, 4))
+    chips = rng.integers(0, 2, samples)
+    n_w = max(1, samples // WRITE_SPACING)
+    cyc = np.sort(rng.choice(np.arange(1, samples + 1), min(n_w, samples), replace=False))
+    writes = []
+    for c in cyc:
+        reg = int(rng.choice([REG_COEF, REG_COEF + 1, REG_COEF + 2, REG_COEF + 3, REG_U0, REG_V0]))
+        v = (dc_word(float(rng.uniform(-0.9, 0.9)), p) if reg in (REG_U0, REG_V0) else
+             coef_word(complex(*rng.uniform(-1, 1, 2)), p))
+        writes.append((int(c), reg, v))
+    return pack_input(x, chips, p), writes
+
+
+def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: int = 1,
+                                stall: bool = False, params=None,
+                                pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                                progress: bool = False) -> dict:
+    """The keys of :func:`cosim.equivalence.check_equivalence` (``peaks``: measurement records
+    of the model; ``markers``: 0, the monopulse FIFO drops whole records and counts them in
+    ``overflow_count``, which is compared; ``dropped``: the model's overflow count)."""
+    from ..session import open_frontend
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
+    unknown = [b for b in backends if b not in BACKENDS]
+    if unknown:
+        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
+    if params is None:
+        params = replace(EQUIV_PARAMS, fifo_depth=EQUIV_PARAMS.record_words + 1) if stall else EQUIV_PARAMS
+    words, writes = _stimulus(params, int(samples), seed)
+    n_cycles = int(samples) + params.latency + 400
+    ready = stall_pattern(n_cycles, seed) if stall else np.ones(n_cycles, bool)
+
+    def run(backend):
+        t = time.perf_counter()
+        with open_frontend(backend, params) as fe:
+            for c, reg, v in writes:
+                write_register(fe, reg, v, c)
+            r = fe.step(words, ready, n_cycles=n_cycles)
+            ovf = int(fe.read("overflow_count"))
+        return np.asarray(r.words, np.int64), np.asarray(r.cycles), ovf, time.perf_counter() - t
+
+    ref_w, ref_c, ref_ovf, secs = run("model")
+    per = {"model": {"mismatches": 0, "words": int(len(ref_w)), "seconds": secs}}
+    ran, skipped = ["model"], {}
+    for name in [b for b in BACKENDS if b in backends and b != "model"]:
+        if name == "pysim" and samples > pysim_max_samples:
+            skipped["pysim"] = f"pysim runs only for samples <= {pysim_max_samples}"
+            continue
+        if name == "verilator":
+            from ..verilator import verilator_available
+            if not verilator_available():
+                from ..verilog import verilator_missing_message
+                skipped["verilator"] = verilator_missing_message()
+                continue
+        w, c, ovf, secs = run(name)
+        n = min(len(w), len(ref_w))
+        bad = int(np.count_nonzero(w[:n] != ref_w[:n]) + np.count_nonzero(c[:n] != ref_c[:n]))
+        bad += abs(len(w) - len(ref_w)) + int(ovf != ref_ovf)
+        per[name] = {"mismatches": bad, "words": int(len(w)), "seconds": secs}
+        ran.append(name)
+    compared = [f"{k} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
+                f"{v['mismatches']} mismatches" for k, v in per.items() if k != "model"]
+    total = int(sum(v["mismatches"] for v in per.values()))
+    if len(ran) < 2:
+        verdict = (f"nothing was compared: only {', '.join(ran)} ran"
+                   + "".join(f"; {k} skipped: {w}" for k, w in skipped.items()))
+    elif len(ref_w) == 0:
+        verdict = (f"nothing was compared: the {samples} samples gave no FIFO word (a record "
+                   f"every {params.snapshots * params.snapshot_decimation} "
+                   f"samples at most)")
+    elif total:
+        verdict = f"{total} mismatches ({'; '.join(compared)})"
+    else:
+        verdict = f"equivalent: {'; '.join(compared)}"
+    return {"top": "monopulse", "samples": int(samples), "mismatches": total,
+            "equivalent": bool(len(ran) >= 2 and len(ref_w) > 0 and total == 0),
+            "verdict": verdict, "compared": compared, "backends": ran, "skipped": skipped,
+            "stall": bool(stall), "seed": int(seed),
+            "peaks": int(len(ref_w) // params.record_words), "words": int(len(ref_w)),
+            "markers": 0, "dropped": ref_ovf, "per_backend": per}
