@@ -27,7 +27,9 @@ channel's are integer accumulators thousands of times larger), so by default
 (``amplitude="auto"``) it is estimated from the prompt power with the nominal C/N0:
 ``E|P|^2 = A_c^2 + 2 sigma^2 = A_c^2 (1 + 1 / (T C/N0))``, the mean of ``|P|^2`` taken over
 the epochs so far, then exponentially over ``amp_epochs`` epochs (the bit and the phase do
-not enter it). A number fixes ``A_c``.
+not enter it). A number fixes ``A_c``. ``P0`` defaults to the seed's ``1e-3 I`` (a start on the
+truth), its ``w0`` entry widened to ``(2 pi sigma)^2`` when the context gives the hand-over's
+``doppler0_sigma_hz``.
 
 Slave (scalar ``q``). Order per block (RECEIVERS.md): slave predict -> master epochs with
 ``q_hat_k|k-1`` -> slave update. **Deviation from the seed** (``slave="block"``, default):
