@@ -182,6 +182,8 @@ class GnssRunConfig:
     acq_pfa: float = field(default=1e-3, metadata={"help": "acquisition false-alarm "
                                                            "probability per search"})
     refine_ms: int = field(default=20, metadata={"help": "Doppler refinement length (ms)"})
+    handover_doppler_sigma_hz: float = field(default=3.0, metadata={
+        "help": "1-sigma error of the refined hand-over Doppler told to the tracker (Hz)"})
     compare: str | None = field(default=None, metadata={
         "help": "also run the golden chain (float) and report the differences",
         "choices": ("golden",), "case": "lower"})
@@ -213,6 +215,8 @@ class GnssRunConfig:
         check_float("acq_bin_hz", self.acq_bin_hz, 0.0, 500.0, lo_open=True, unit="Hz")
         check_float("acq_pfa", self.acq_pfa, 0.0, 1.0, lo_open=True, hi_open=True)
         check_int("refine_ms", self.refine_ms, 2, 200)
+        check_float("handover_doppler_sigma_hz", self.handover_doppler_sigma_hz, 0.0, 250.0,
+                    lo_open=True, unit="Hz")
         check_int("block_samples", self.block_samples, 1024)
         for kv in self.hdl_changes:
             if not (isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)):
@@ -290,7 +294,8 @@ def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
                          inverted=inverted, doppler0_hz=doppler_hz,
                          doppler_rate0_hz_s=0.0, cn0_dbhz=cn0_dbhz,
-                         spacing_chips=spacing_chips, latency_epochs=1)
+                         spacing_chips=spacing_chips, latency_epochs=1,
+                         doppler0_sigma_hz=run.handover_doppler_sigma_hz)
     arith = FixedArith() if arith_name == "fixed" else FLOAT
     params = inspect.signature(_TRACKERS[run.tracker][0]).parameters
     opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz") if k in params}

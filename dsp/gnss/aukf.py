@@ -18,11 +18,18 @@ sqrt(n + lambda) S[:, 0] v^T`` (``u = [cos th, sin th]``, ``v = [-sin th, cos th
 :mod:`dsp.estimation.ukf` (identity transition, zero process noise: its 21 sigma points are
 then exactly the seed's); test A1 holds them to 1e-12.
 
-Measurement: the prompt ``P = I + jQ`` divided by the amplitude ``A_c`` (from C/N0:
-``sqrt(2 T C/N0)`` for unit noise per component, the fast path's scale) so that ``A = 1`` and
+Measurement: the prompt ``P = I + jQ`` divided by the amplitude ``A_c`` so that ``A = 1`` and
 the noise variance is ``1 / (2 T C/N0)`` ("R from C/N0", default) or the seed's ``1e-9``
 (``r_mode="seed"``); the navigation bit is removed by the sign of the prompt rotated by the
-predicted residual (``data_wipe``).
+predicted residual (``data_wipe``). ``A_c`` is in the correlator's own units, which the
+tracker is not told (the fast path's correlations have unit noise per component, the HDL
+channel's are integer accumulators thousands of times larger), so by default
+(``amplitude="auto"``) it is estimated from the prompt power with the nominal C/N0:
+``E|P|^2 = A_c^2 + 2 sigma^2 = A_c^2 (1 + 1 / (T C/N0))``, the mean of ``|P|^2`` taken over
+the epochs so far, then exponentially over ``amp_epochs`` epochs (the bit and the phase do
+not enter it). A number fixes ``A_c``. ``P0`` defaults to the seed's ``1e-3 I`` (a start on the
+truth), its ``w0`` entry widened to ``(2 pi sigma)^2`` when the context gives the hand-over's
+``doppler0_sigma_hz``.
 
 Slave (scalar ``q``). Order per block (RECEIVERS.md): slave predict -> master epochs with
 ``q_hat_k|k-1`` -> slave update. **Deviation from the seed** (``slave="block"``, default):
@@ -379,7 +386,7 @@ class AukfTracker:
                  P0=None, r_mode: str = "cn0", slave: str = "block", eq414: str = "plausible",
                  block_epochs: int = 500, Pq0: float | None = None, Qq: float | None = None,
                  loop_bn_hz: float = 10.0, loop_xi: float = 0.707, dll_bn_hz: float = 1.0,
-                 amplitude: float | None = None, data_wipe: bool = True, form: str = "closed",
+                 amplitude: float | str = "auto", amp_epochs: int = 100, data_wipe: bool = True, form: str = "closed",
                  p_floor: float = 1e-12):
         from cosim.gnss.dynamics import jerk_phi, jerk_q
         if not (isinstance(epsilon, (int, float)) and epsilon > 0):
@@ -426,17 +433,33 @@ class AukfTracker:
         self.shape = np.shape(ctx.doppler0_hz)
         Bn = f0.size
         fd0 = np.broadcast_to(np.asarray(ctx.doppler_rate0_hz_s, float), np.shape(ctx.doppler0_hz)).ravel()
-        P0 = np.diag([SEED_P0] * 4) if P0 is None else np.asarray(P0, float)
+        if P0 is None:     # the seed's, widened on w0 to the hand-over Doppler's error if told
+            P0 = np.diag([SEED_P0] * 4)
+            sd = ctx.doppler0_sigma_hz
+            if sd is not None:
+                sd = _check_pos("doppler0_sigma_hz (tracker context)", sd)
+                P0[1, 1] = max(SEED_P0, (TWO_PI * sd) ** 2)
+        P0 = np.asarray(P0, float)
         if P0.shape != (4, 4):
             raise ValueError(f"P0 must be 4 x 4, not {P0.shape}")
         check_psd("P0", P0[None])
         cn0 = ctx.cn0_dbhz
-        if r_mode == "cn0" or amplitude is None:
+        auto = isinstance(amplitude, str)
+        if auto and amplitude != "auto":
+            raise ValueError(f"amplitude must be 'auto' or a number > 0, not {amplitude!r}")
+        if not auto:
+            amplitude = _check_pos("amplitude", amplitude)
+        if isinstance(amp_epochs, bool) or not isinstance(amp_epochs, int) or amp_epochs < 1:
+            raise ValueError(f"amp_epochs must be an integer >= 1, not {amp_epochs!r}")
+        if r_mode == "cn0" or auto:
             if cn0 is None:
                 raise ValueError("cn0_dbhz must be given in the tracker context (R and the "
                                  "amplitude are derived from it)")
         c = 10.0 ** (float(cn0) / 10) if cn0 is not None else None
-        self.amp = float(amplitude) if amplitude is not None else math.sqrt(2 * T * c)
+        self.amp_auto, self.amp_epochs = auto, int(amp_epochs)
+        self.amp_gain = 1.0 / (1.0 + 1.0 / (T * c)) if auto else 1.0   # A_c^2 / E|P|^2
+        self.amp = np.full(Bn, np.nan if auto else float(amplitude))
+        self.p2 = np.zeros(Bn)                   # running mean of |P|^2 (amplitude="auto")
         self.r = 1.0 / (2 * T * c) if r_mode == "cn0" else SEED_R
         self.R = np.diag([self.r, self.r])
         self.W = ut_weights(float(epsilon), float(beta), float(kappa))
@@ -542,8 +565,16 @@ class AukfTracker:
     def step(self, ie, qe, ip, qp, il, ql):
         T = self.T
         f_now = self.queue[0]
-        ipf = np.asarray(ip, float).ravel() / self.amp
-        qpf = self.s * np.asarray(qp, float).ravel() / self.amp
+        ipr = np.asarray(ip, float).ravel()
+        qpr = np.asarray(qp, float).ravel()
+        if self.amp_auto:      # A_c from the prompt power, in the correlator's units
+            p2 = ipr * ipr + qpr * qpr
+            p2 = np.where(np.isfinite(p2), p2, self.p2)
+            self.p2 = self.p2 + (p2 - self.p2) / min(self.k + 1, self.amp_epochs)
+            self.amp = np.sqrt(self.amp_gain * self.p2)
+        amp = np.where(self.amp > 0, self.amp, 1.0)
+        ipf = ipr / amp
+        qpf = self.s * qpr / amp
         B = ipf.size
         if self.adaptive and (self.slave == "seed" or self.k % self.M == 0):
             self._slave_predict()

@@ -50,6 +50,9 @@ class TrackerContext:
         Spectrum inverted (carrier = IF - Doppler).
     doppler0_hz, doppler_rate0_hz_s : float or array
         Initial Doppler and Doppler rate (from acquisition / the scenario), batch-shaped.
+    doppler0_sigma_hz : float or None
+        1-sigma error of ``doppler0_hz`` (a hand-over from acquisition), or None (the
+        tracker starts on the truth, as on the fast path).
     cn0_dbhz : float or None
         Nominal C/N0 (for trackers that derive R from it; None: the tracker's default).
     spacing_chips : float
@@ -67,6 +70,7 @@ class TrackerContext:
     inverted: bool = False
     doppler0_hz: Any = 0.0
     doppler_rate0_hz_s: Any = 0.0
+    doppler0_sigma_hz: float | None = None
     cn0_dbhz: float | None = None
     spacing_chips: float = 0.5
     latency_epochs: int = 0
