@@ -90,7 +90,7 @@ def _load_builtin():
         __import__(mod)
 
 
-BUILTIN: tuple[str, ...] = ()
+BUILTIN: tuple[str, ...] = ("dsp.ins.loops",)
 
 
 def tracker_names() -> tuple[str, ...]:
