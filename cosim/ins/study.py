@@ -55,6 +55,9 @@ class InsStudyConfig:
     dsp : str
         ``"float"`` or ``"fixed"``.
     seed : int
+    start_s, accel_g, v_max_mps : float
+        The trajectory (:class:`SeedTrajectory`; the seed's by default, smaller for short
+        runs).
     """
 
     cn0_dbhz: float = 40.0
@@ -66,6 +69,9 @@ class InsStudyConfig:
     pli_threshold: float = 0.5
     dsp: str = "float"
     seed: int = 1
+    start_s: float = 5.0
+    accel_g: float = 50.0
+    v_max_mps: float = 8300.0
 
     def __post_init__(self):
         if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
@@ -79,8 +85,8 @@ class InsStudyConfig:
 
 
 def scenario_for(cfg: InsStudyConfig):
-    tr = SeedTrajectory(duration_s=cfg.duration_s, start_s=min(5.0, cfg.duration_s / 10)) \
-        if cfg.duration_s < 150.0 else SeedTrajectory(duration_s=cfg.duration_s)
+    tr = SeedTrajectory(duration_s=cfg.duration_s, start_s=cfg.start_s, accel_g=cfg.accel_g,
+                        v_max_mps=cfg.v_max_mps)
     sc = Scenario(tr, Geometry(), cfg.oscillator, seed=cfg.seed)
     ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + 2, seed=cfg.seed)
     return sc, ins
@@ -106,7 +112,8 @@ def run_loop(loop: str, cfg: InsStudyConfig, scenario=None, keep: bool = False, 
     trk = make_tracker(loop, ctx, arith, **opts)
     r = track_fast(sc.truth_at, cfg.cn0_dbhz, n, T, shape=shape, seed=cfg.seed + 1000, tracker=trk)
     h = trk.history.arrays()
-    tm = (np.arange(n) + 1.0) * T                     # the estimate after epoch k is for its end
+    # the estimate after epoch k stands for the end of interval k (KF) or later (PLL)
+    tm = (np.arange(n) + 1.0 + getattr(trk, "doppler_offset_epochs", 0.0)) * T
     # the carrier frequency the loop sees: LOS Doppler plus the receiver clock's drift (a
     # PVT solution takes the common clock drift out; the velocity error excludes it)
     f_true = (sc.truth_at(tm + T / 2)["carrier_phase_cycles"]

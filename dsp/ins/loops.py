@@ -145,7 +145,10 @@ def _check_aiding_value(u, k):
 class KalmanCarrierLoop:
     """3rd-order Kalman carrier loop (aided or unaided) + carrier-aided DLL; a tracker
     of :mod:`dsp.gnss.trackers` (``step``, ``frequencies_hz``, ``doppler_hz``,
-    ``report``). ``history`` holds the discriminator, Doppler estimate and PLI series."""
+    ``report``). ``history`` holds the discriminator, Doppler estimate and PLI series.
+    The Doppler estimate after epoch ``k`` is the state's, at the end of interval ``k``."""
+
+    doppler_offset_epochs = 0.0
 
     def __init__(self, ctx, arith, aided: bool, cn0_dbhz: float | None = None,
                  oscillator="tcxo", q_rate: float | None = None, dll_bn_hz: float = 1.0,
@@ -248,7 +251,11 @@ def steady_state_gain(A, H, Q, R):
 
 class AidedPll:
     """Kaplan 3rd-order Costas PLL (``ChannelCore``) with the INS Doppler rate fed
-    forward into its frequency integrator."""
+    forward into its frequency integrator. Its Doppler estimate after epoch ``k`` is the
+    frequency of interval ``k + 1`` (``doppler_offset_epochs`` = 0.5: it stands for the
+    interval's midpoint)."""
+
+    doppler_offset_epochs = 0.5
 
     def __init__(self, ctx, arith, bn_hz: float = 15.0, dll_bn_hz: float = 1.0, pli_epochs: int = 10):
         from dsp.gnss.loops_fixed import T_FRAC, V1, V2, ChannelCore
@@ -270,7 +277,13 @@ class AidedPll:
 
     def step(self, ie, qe, ip, qp, il, ql):
         o, (V1, V2, T_FRAC) = self.core.o, self._fmt
-        u = np.broadcast_to(_check_aiding_value(self.aiding(self.k), self.k), self.shape)
+        # v1 after this step is the frequency of interval k+1: it moves by the rate at the
+        # boundary, the mean of the two epochs' midpoint rates
+        if self.k == 0:
+            self._u = _check_aiding_value(self.aiding(0), 0)
+        u1 = _check_aiding_value(self.aiding(self.k + 1), self.k + 1)
+        u = np.broadcast_to((self._u + u1) / 2, self.shape)
+        self._u = u1
         self.core.v1 = o.add(self.core.v1, o.mul(o.q(u, V2), self.core.KT, V2.frac + T_FRAC - V1.frac), V1)
         out = self.core.step(ie, qe, ip, qp, il, ql)
         e = self.core.e * 2.0 ** -15 if o.fixed else self.core.e
