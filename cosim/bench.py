@@ -264,8 +264,14 @@ def _suite_time(out: Path, quick: bool = False, jobs: int | None = None) -> dict
     return suite_time(out, quick=quick)
 
 
+def _ins(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .ins.bench import ins_bench
+    return ins_bench(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
-              "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time}
+              "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
+              "ins": _ins}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:
