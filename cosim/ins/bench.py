@@ -2,7 +2,7 @@
 
 ``python -m cosim bench ins`` (``cosim.bench`` entry ``ins``) writes ``results/ins.json``,
 ``results/ins.md`` and ``results/ins_fig6_7.png``: for 40 dB-Hz and 35 dB-Hz, TCXO and OCXO,
-the three loops over the seed's trajectory (150 s; ``quick``: 20 s, 4 trials), 20 Monte
+the three loops over the seed's trajectory (150 s; ``quick``: 35 s, 4 trials), 20 Monte
 Carlo trials each on the fast path, velocity-error and range-error mean/std along the line
 of sight, PLI, lock fraction, cycle slips, and epochs per second of each loop.
 """
@@ -26,7 +26,7 @@ SEED_TABLE2 = {  # std rows of the seed's Table 2 (position m, velocity m/s; x y
 def ins_bench(out: Path, quick: bool = False) -> dict:
     from cosim.bench import machine_info
     out.mkdir(parents=True, exist_ok=True)
-    dur, trials = (20.0, 4) if quick else (150.0, 20)
+    dur, trials = (35.0, 4) if quick else (150.0, 20)
     rows, series = [], {}
     t_all = time.time()
     for osc in ("ocxo", "tcxo"):
