@@ -135,7 +135,8 @@ def run_loop(loop: str, cfg: InsStudyConfig, scenario=None, keep: bool = False, 
            "phase_err_rms_deg": float(np.sqrt(np.mean(r.phase_err_cycles[s:] ** 2)) * 360),
            "pli_mean": float(pli[ps:].mean()), "pli_min": float(pli[ps:].min()),
            "lock_fraction_min": float(lockf.min()), "lock_fraction_mean": float(lockf.mean()),
-           "cycle_slips": int(cycle_slips(r.phase_err_cycles[s:]).sum())}
+           "cycle_slips": int(cycle_slips(r.phase_err_cycles[s:]).sum()),
+           "tracker": trk.report()}
     if keep:
         out["series"] = {"t_s": tm, "disc_cycles": h["disc_cycles"], "pli": pli,
                          "vel_err_mps": verr, "phase_err_cycles": r.phase_err_cycles}

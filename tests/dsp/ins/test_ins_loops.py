@@ -111,7 +111,10 @@ def test_fixed_within_bound_of_float(loop, dopp_hz=0.005, phase_deg=0.05):
         cfg = InsStudyConfig(cn0_dbhz=40.0, oscillator="ocxo", trials=3, duration_s=2.5,
                              skip_s=0.2, dsp=dsp, seed=5, start_s=0.3, accel_g=2.5,
                              v_max_mps=30.0)
-        out[dsp] = run_loop(loop, cfg, keep=True)["series"]
+        res = run_loop(loop, cfg, keep=True)
+        out[dsp] = res["series"]
+        counts = res["tracker"].get("events", res["tracker"].get("saturations"))
+        assert not any(counts.values()), counts          # no saturation or skipped update
     dd = np.abs(out["float"]["vel_err_mps"] - out["fixed"]["vel_err_mps"]).max() / 0.1903
     dp = np.abs(out["float"]["phase_err_cycles"] - out["fixed"]["phase_err_cycles"]).max() * 360
     print(loop, "fixed - float: Doppler", dd, "Hz, phase", dp, "deg")
