@@ -279,10 +279,15 @@ def _monopulse(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     return monopulse_bench(out, quick=quick)
 
 
+def _ins(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .ins.bench import ins_bench
+    return ins_bench(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
               "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,
-              "monopulse": _monopulse}
+              "monopulse": _monopulse, "ins": _ins}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

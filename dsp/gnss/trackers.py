@@ -94,7 +94,7 @@ def _load_builtin():
         __import__(mod)
 
 
-BUILTIN: tuple[str, ...] = ("dsp.gnss.aukf",)
+BUILTIN: tuple[str, ...] = ("dsp.gnss.aukf", "dsp.ins.loops")
 
 
 def tracker_names() -> tuple[str, ...]:

@@ -1,0 +1,120 @@
+"""INS error model along the seed-003 trajectory, and the INS-predicted Doppler rate.
+
+A documented simplification of strapdown navigation over 150 s (the Schuler period is
+84 min, so the gravity feedback of position error is left out: < 0.1 % of the error over
+the run): the INS's navigation-frame specific force is the true one seen through a
+misalignment ``psi(t)`` that grows from the gyro drift, plus the accelerometer bias and
+white noise,
+
+    f_ins = f - psi x f + b_a + w_a,     psi(t) = eps t + int w_g dt,     f = a + g up,
+
+so the INS acceleration error is ``da = -psi x f + b_a + w_a`` (local east-north-up,
+taken fixed along the track: the straight line spans < 1.3 km / 6378 km of arc, and the
+frame of :mod:`cosim.ins.trajectory` holds it fixed); the velocity and position errors
+are its integrals (trapezoid on the epoch grid). Seed values: gyro drift 10 deg/h on
+every axis, accelerometer bias 1 mg on every axis (RECEIVERS.md 2); noise: angle random
+walk 0.1 deg/sqrt(h) and velocity random walk 0.05 m/s/sqrt(h) by default (tactical grade;
+the seed gives none). 1 mg alone is 0.0515 Hz/s of Doppler rate on the line of sight; the
+drift's misalignment times the 50 g specific force dominates during the manoeuvre.
+
+The aiding the loops get, :meth:`InsAiding.rate_hz_s`, is the Doppler-rate formula of
+:func:`cosim.ins.trajectory.doppler_rate_hz_s` evaluated on the INS's position, velocity
+and acceleration and the satellite's (broadcast ephemeris: exact here), at the midpoint of
+each epoch.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .trajectory import G_MPS2, Scenario, doppler_rate_hz_s
+
+DEG_PER_H = math.pi / 180.0 / 3600.0
+
+
+@dataclass(frozen=True)
+class InsErrors:
+    """INS sensor errors (seed 003 values by default).
+
+    Parameters
+    ----------
+    gyro_drift_deg_h : float
+        Gyro bias on each axis (deg/h), >= 0.
+    accel_bias_mg : float
+        Accelerometer bias on each axis (milli-g), >= 0.
+    arw_deg_rt_h : float
+        Gyro angle random walk (deg/sqrt(h)), >= 0.
+    vrw_mps_rt_h : float
+        Accelerometer velocity random walk (m/s/sqrt(h)), >= 0.
+    signs : tuple of 3 floats
+        Sign (or scale) of the biases on east, north, up.
+    """
+
+    gyro_drift_deg_h: float = 10.0
+    accel_bias_mg: float = 1.0
+    arw_deg_rt_h: float = 0.1
+    vrw_mps_rt_h: float = 0.05
+    signs: tuple = (1.0, -1.0, 1.0)
+
+    def __post_init__(self):
+        for k in ("gyro_drift_deg_h", "accel_bias_mg", "arw_deg_rt_h", "vrw_mps_rt_h"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"{k} must be a finite number >= 0, not {v!r}")
+        if len(self.signs) != 3 or not all(math.isfinite(float(s)) for s in self.signs):
+            raise ValueError(f"signs must be 3 finite numbers, not {self.signs!r}")
+
+
+class InsAiding:
+    """The INS solution along a :class:`Scenario` and its Doppler-rate prediction.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    errors : InsErrors
+    T_s : float
+        Epoch (s): the aiding is given at every epoch's midpoint.
+    n_epochs : int
+    seed : int
+        Draws the sensor noise.
+    """
+
+    def __init__(self, scenario: Scenario, errors: InsErrors | None = None, T_s: float = 1e-3,
+                 n_epochs: int | None = None, seed: int = 0):
+        if not (isinstance(T_s, (int, float)) and math.isfinite(T_s) and T_s > 0):
+            raise ValueError(f"T_s must be a finite number > 0 s, not {T_s!r}")
+        self.sc, self.err, self.T = scenario, errors or InsErrors(), float(T_s)
+        n = int(round(scenario.traj.duration_s / self.T)) if n_epochs is None else int(n_epochs)
+        if n < 1:
+            raise ValueError(f"n_epochs must be >= 1, not {n}")
+        self.n = n
+        t = (np.arange(n) + 0.5) * self.T
+        self.t = t
+        Ru, Vu, Au = scenario.user(t)
+        _, e, nn, up = scenario.geom.frame()
+        C = np.stack([e, nn, up])                      # ENU -> frame rows
+        rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7,)))
+        sg = np.asarray(self.err.signs, float)
+        eps = self.err.gyro_drift_deg_h * DEG_PER_H * sg
+        arw = self.err.arw_deg_rt_h * math.pi / 180.0 / 60.0          # rad/sqrt(s)
+        vrw = self.err.vrw_mps_rt_h / 60.0                            # m/s/sqrt(s)
+        psi = eps[:, None] * t + np.cumsum(rng.standard_normal((3, n)) * arw * math.sqrt(self.T), axis=1)
+        f_enu = C @ Au + G_MPS2 * np.array([0.0, 0.0, 1.0])[:, None]
+        ba = self.err.accel_bias_mg * 1e-3 * G_MPS2 * sg
+        wa = rng.standard_normal((3, n)) * vrw / math.sqrt(self.T)
+        da_enu = -np.cross(psi.T, f_enu.T).T + ba[:, None] + wa
+        da = C.T @ da_enu
+        dv = np.concatenate([np.zeros((3, 1)), np.cumsum((da[:, 1:] + da[:, :-1]) / 2 * self.T, axis=1)], axis=1)
+        dp = np.concatenate([np.zeros((3, 1)), np.cumsum((dv[:, 1:] + dv[:, :-1]) / 2 * self.T, axis=1)], axis=1)
+        self.da, self.dv, self.dp = da, dv, dp
+        Rs, Vs, As = scenario.satellite(t)
+        self.rate = doppler_rate_hz_s(Ru + dp, Vu + dv, Au + da, Rs, Vs, As)
+        self.true_rate = doppler_rate_hz_s(Ru, Vu, Au, Rs, Vs, As)
+
+    def rate_hz_s(self, k):
+        """INS-predicted Doppler rate (Hz/s) at the midpoint of epoch ``k``."""
+        return self.rate[k]
+
+    __call__ = rate_hz_s

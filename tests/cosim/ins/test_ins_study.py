@@ -1,0 +1,34 @@
+"""Seed-003 acceptance B1-B3 (RECEIVERS.md section 2) on the fast path.
+
+The full form is the seed's trajectory (150 s, 8300 m/s, 50 g, 5 g/s), INS errors 10 deg/h
+and 1 mg, 20 Monte Carlo trials per loop, 40 dB-Hz, OCXO; the short form runs a scaled
+trajectory (1.5 g / 0.3 s ramps at 5 g/s) for 1.5 s with the same loops.
+"""
+import pytest
+
+from cosim.ins.study import InsStudyConfig, run_study
+
+
+def _check_b1_b3(r, b1_margin=0.04):
+    kf, pll, un = r["aided-kf"], r["aided-pll"], r["unaided-kf"]
+    # B1: aided KF velocity-error std <= aided PLL's and >= 4 % lower on the line of sight
+    assert kf["vel_err_std_mps"] <= (1 - b1_margin) * pll["vel_err_std_mps"], (kf, pll)
+    # B2: range-error std of the two aided loops within +-5 %
+    assert abs(kf["range_err_std_m"] / pll["range_err_std_m"] - 1) <= 0.05, (kf, pll)
+    # B3: every loop keeps lock (PLI > 0.5 in >= 99 % of the 10-ms PLI values of every trial)
+    for name, x in r.items():
+        assert x["lock_fraction_min"] >= 0.99 and x["cycle_slips"] == 0, (name, x)
+    # B3: aided discriminator RMS below unaided during the jerk segments
+    assert kf["disc_rms_jerk_deg"] < un["disc_rms_jerk_deg"], (kf, un)
+    assert pll["disc_rms_jerk_deg"] < un["disc_rms_jerk_deg"], (pll, un)
+
+
+def test_b1_b3_short():
+    cfg = InsStudyConfig(cn0_dbhz=40.0, oscillator="ocxo", trials=8, duration_s=1.5, skip_s=0.15,
+                         start_s=0.2, accel_g=1.5, v_max_mps=10.0, seed=3)
+    _check_b1_b3(run_study(cfg))
+
+
+@pytest.mark.slow
+def test_b1_b3_seed_trajectory_ocxo_40dbhz():
+    _check_b1_b3(run_study(InsStudyConfig(cn0_dbhz=40.0, oscillator="ocxo", trials=20)))
