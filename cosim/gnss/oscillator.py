@@ -17,69 +17,17 @@ Between grid points the phase is interpolated linearly. The Allan variances thes
 ``sigma_y^2(tau) = h0 / (2 tau) + 2 ln 2 h_1 + (2 pi^2 / 3) h_2 tau`` (for ``tau`` well
 above the grid step for flicker FM), are what the tests check.
 
-Tables (h0, h-1, h-2): the "typical" crystal-oscillator values of Brown & Hwang,
-*Introduction to Random Signals and Applied Kalman Filtering* (Wiley; the clock-model
-table of the GPS chapter, Table 9.2 in the 4th ed., 2012), as widely reproduced in GNSS
-receiver literature. (Seed 003 cites O'Driscoll & Lachapelle 2011 for its oscillator
-table, which is empty in the seed's text; we have not checked that paper's values.)
-
-=========  ========  ========  ========
-class      h0        h-1       h-2
-=========  ========  ========  ========
-TCXO       2e-19     7e-21     2e-20
-OCXO       2e-25     7e-25     6e-25
-=========  ========  ========  ========
-
-(Entered from that table as it is commonly quoted, not re-read from the book in this
-work: check against the book before quoting them in a publication.)
+Tables (h0, h-1, h-2) and the :class:`Oscillator` model: :mod:`dsp.gnss.oscillator` (the DSP's
+loops take their process noise from them too).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from dsp.gnss.ca_code import L1_HZ
-
-
-@dataclass(frozen=True)
-class Oscillator:
-    """Power-law coefficients of ``S_y(f)`` (1/Hz), all >= 0."""
-
-    h0: float
-    h_1: float
-    h_2: float
-    name: str = "custom"
-
-    def __post_init__(self):
-        for k in ("h0", "h_1", "h_2"):
-            v = getattr(self, k)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                    or not math.isfinite(v) or v < 0:
-                raise ValueError(f"oscillator {k} must be a finite number >= 0, not {v!r}")
-
-    def allan_variance(self, tau_s):
-        """``sigma_y^2(tau)`` of the three power laws (the continuous-time values)."""
-        tau = np.asarray(tau_s, dtype=np.float64)
-        return self.h0 / (2 * tau) + 2 * math.log(2) * self.h_1 + 2 * math.pi ** 2 / 3 * self.h_2 * tau
-
-
-#: Brown & Hwang (4th ed.) Table 9.2 "typical" values (module docstring).
-OSCILLATORS = {
-    "tcxo": Oscillator(2e-19, 7e-21, 2e-20, "tcxo"),
-    "ocxo": Oscillator(2e-25, 7e-25, 6e-25, "ocxo"),
-}
-
-
-def oscillator(spec) -> Oscillator | None:
-    """``None``, an :class:`Oscillator`, or a table name (``"tcxo"``, ``"ocxo"``)."""
-    if spec is None or isinstance(spec, Oscillator):
-        return spec
-    if isinstance(spec, str) and spec.lower() in OSCILLATORS:
-        return OSCILLATORS[spec.lower()]
-    raise ValueError(f"oscillator must be None, an Oscillator or one of "
-                     f"{sorted(OSCILLATORS)}, not {spec!r}")
+from dsp.gnss.oscillator import OSCILLATORS, Oscillator, oscillator  # noqa: F401
 
 
 def clock_error_s(osc: Oscillator, n_steps: int, step_s: float,

@@ -388,7 +388,7 @@ class AukfTracker:
                  loop_bn_hz: float = 10.0, loop_xi: float = 0.707, dll_bn_hz: float = 1.0,
                  amplitude: float | str = "auto", amp_epochs: int = 100, data_wipe: bool = True, form: str = "closed",
                  p_floor: float = 1e-12):
-        from cosim.gnss.dynamics import jerk_phi, jerk_q
+        from .jerk import jerk_phi, jerk_q
         if not (isinstance(epsilon, (int, float)) and epsilon > 0):
             raise ValueError(f"epsilon (UT scaling) must be > 0, not {epsilon!r}")
         if not (isinstance(beta, (int, float)) and beta >= 0):

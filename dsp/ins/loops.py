@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from cosim.gnss.oscillator import oscillator as _oscillator
+from dsp.gnss.oscillator import oscillator as _oscillator
 from dsp.estimation.formats import fmt, to_fixed
 from dsp.estimation.kalman import KalmanFilter, KalmanFormats
 from dsp.estimation.models import LinearGaussianModel
