@@ -105,6 +105,29 @@ def ready_window(ready, start: int, n_cycles: int) -> np.ndarray | None:
     return r
 
 
+def fifo_step(wc, w, ready, n: int, start: int, fifo_params, state):
+    """The record FIFO model (:func:`hdl.model.fifo.fifo_model_events`, its ``state``
+    carried) over cycles ``start .. start + n - 1``, for a model session's ``_step``:
+    records ``w`` written at cycles ``wc`` (all ``< start + n``), read with the session's
+    ``ready`` (``None``, bool array, :class:`ReadySchedule` or a ``DspServiceConfig``,
+    whose service segments are run one by one). Returns ``(words, cycles, state)``."""
+    from hdl.model.fifo import fifo_model_events
+    from .link import DspServiceConfig
+    if isinstance(ready, DspServiceConfig):
+        out_w, out_c = [], []
+        for a, b, sched in ready.segments(n, start):
+            i0, i1 = np.searchsorted(wc, [a, b])
+            res = fifo_model_events(wc[i0:i1], w[i0:i1], b - a, sched, fifo_params, state=state)
+            state = res.state
+            out_w.append(res.words)
+            out_c.append(res.cycles)
+        return np.concatenate(out_w), np.concatenate(out_c), state
+    rdy = ReadySchedule(period=1) if ready is None else (
+        ready if isinstance(ready, ReadySchedule) else ready_window(ready, start, n))
+    res = fifo_model_events(wc, w, n, rdy, fifo_params, state=state)
+    return res.words, res.cycles, res.state
+
+
 class FrontendSession:
     """A front end reset once and advanced step by step (see the module doc).
 

@@ -26,35 +26,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdl.model.fifo import FifoState, ReadySchedule, fifo_model_events
+from hdl.model.fifo import FifoState
 
-from ..session import FrontendSession, open_frontend, ready_window
+from ..session import FrontendSession, fifo_step, open_frontend
 
 __all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss", "BUS_PORTS"]
 
 #: The register bus ports of :class:`hdl.gnss.channel.GnssChannel`.
 BUS_PORTS = ("reg_we", "reg_addr", "reg_data")
-
-
-def fifo_step(wc, w, ready, n, start, fifo_params, state: FifoState):
-    """The FIFO model over cycles ``start .. start + n - 1``: records ``w`` written at
-    ``wc`` (all ``< start + n``), read with ``ready`` (a session's ``ready``: ``None``,
-    bool array, ReadySchedule or DspServiceConfig). Returns ``(words, cycles, state)``."""
-    from ..link import DspServiceConfig
-    if isinstance(ready, DspServiceConfig):
-        out_w, out_c = [], []
-        st = state
-        for a, b, sched in ready.segments(n, start):
-            i0, i1 = np.searchsorted(wc, [a, b])
-            res = fifo_model_events(wc[i0:i1], w[i0:i1], b - a, sched, fifo_params, state=st)
-            st = res.state
-            out_w.append(res.words)
-            out_c.append(res.cycles)
-        return np.concatenate(out_w), np.concatenate(out_c), st
-    rdy = ReadySchedule(period=1) if ready is None else (
-        ready if isinstance(ready, ReadySchedule) else ready_window(ready, start, n))
-    res = fifo_model_events(wc, w, n, rdy, fifo_params, state=state)
-    return res.words, res.cycles, res.state
 
 
 class GnssModelSession(FrontendSession):

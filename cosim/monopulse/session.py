@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdl.model.fifo import FifoState, ReadySchedule, fifo_model_events
+from hdl.model.fifo import FifoState
 
-from ..session import FrontendSession, ready_window
+from ..session import FrontendSession, fifo_step
 
 __all__ = ["MonopulseModelSession", "write_register", "BUS_PORTS"]
 
@@ -99,7 +99,6 @@ class MonopulseModelSession(FrontendSession):
 
     def _step(self, queue, ready, n, writes):
         from hdl.monopulse.model import record_to_words, unpack_input
-        from ..link import DspServiceConfig
         p = self.params
         start, stop = self.cycle, self.cycle + n
         words = queue[:n]
@@ -115,19 +114,6 @@ class MonopulseModelSession(FrontendSession):
         now = wc < stop
         self._carry_c, self._carry_w = wc[~now], w[~now]
         wc, w = wc[now], w[now]
-        if isinstance(ready, DspServiceConfig):
-            out_w, out_c = [], []
-            st = self._fifo_state
-            for a, b, sched in ready.segments(n, start):
-                i0, i1 = np.searchsorted(wc, [a, b])
-                res = fifo_model_events(wc[i0:i1], w[i0:i1], b - a, sched, p.fifo, state=st)
-                st = res.state
-                out_w.append(res.words)
-                out_c.append(res.cycles)
-            self._fifo_state = st
-            return np.concatenate(out_w), np.concatenate(out_c), x.shape[0]
-        rdy = ReadySchedule(period=1) if ready is None else (
-            ready if isinstance(ready, ReadySchedule) else ready_window(ready, start, n))
-        res = fifo_model_events(wc, w, n, rdy, p.fifo, state=self._fifo_state)
-        self._fifo_state = res.state
-        return res.words, res.cycles, x.shape[0]
+        words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, p.fifo,
+                                                    self._fifo_state)
+        return words, cycles, x.shape[0]

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdl.model.fifo import FifoState, ReadySchedule, fifo_model_events
+from hdl.model.fifo import FifoState
 
-from ..session import FrontendSession, ready_window
+from ..session import FrontendSession, fifo_step
 
 __all__ = ["TacanModelSession"]
 
@@ -80,7 +80,6 @@ class TacanModelSession(FrontendSession):
         self._changes = None
 
     def _step(self, queue, ready, n, writes):
-        from ..link import DspServiceConfig
         p = self.params
         start, stop = self.cycle, self.cycle + n
         x = queue[:n]
@@ -111,21 +110,6 @@ class TacanModelSession(FrontendSession):
         now = wc < stop
         self._carry_wc, self._carry_w = wc[~now], w[~now]
         wc, w = wc[now], w[now]
-        if isinstance(ready, DspServiceConfig):
-            out_w, out_c = [], []
-            st = self._fifo_state
-            for a, b, sched in ready.segments(n, start):
-                i0, i1 = np.searchsorted(wc, [a, b])
-                res = fifo_model_events(wc[i0:i1], w[i0:i1], b - a, sched, p.fifo, state=st)
-                st = res.state
-                out_w.append(res.words)
-                out_c.append(res.cycles)
-            self._fifo_state = st
-            words, cycles = np.concatenate(out_w), np.concatenate(out_c)
-        else:
-            rdy = ReadySchedule(period=1) if ready is None else (
-                ready if isinstance(ready, ReadySchedule) else ready_window(ready, start, n))
-            res = fifo_model_events(wc, w, n, rdy, p.fifo, state=self._fifo_state)
-            self._fifo_state = res.state
-            words, cycles = res.words, res.cycles
+        words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, p.fifo,
+                                                    self._fifo_state)
         return words, cycles, x.size
