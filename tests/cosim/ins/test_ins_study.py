@@ -32,3 +32,16 @@ def test_b1_b3_short():
 @pytest.mark.slow
 def test_b1_b3_seed_trajectory_ocxo_40dbhz():
     _check_b1_b3(run_study(InsStudyConfig(cn0_dbhz=40.0, oscillator="ocxo", trials=20)))
+
+
+def test_lock_threshold_bisection_brackets_the_loss_of_lock():
+    from cosim.ins.study import lock_threshold
+    cfg = InsStudyConfig(oscillator="ocxo", trials=2, duration_s=1.5, skip_s=0.15, start_s=0.2,
+                         accel_g=1.5, v_max_mps=10.0, seed=3)
+    r = lock_threshold("aided-kf", cfg, 10.0, 40.0, 4.0)
+    pts = r["points"]
+    assert pts[40.0]["holds"] and not pts[10.0]["holds"], pts
+    th, lo = r["threshold_dbhz"], r["fails_at_dbhz"]
+    assert pts[th]["holds"] and not pts[lo]["holds"] and 0 < th - lo <= 4.0, r
+    with pytest.raises(ValueError, match="need lo_dbhz < hi_dbhz"):
+        lock_threshold("aided-kf", cfg, 40.0, 30.0)
