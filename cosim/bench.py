@@ -281,7 +281,7 @@ def _monopulse(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
 
 def _ins(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     from .ins.bench import ins_bench
-    return ins_bench(out, quick=quick)
+    return ins_bench(out, quick=quick, jobs=jobs)
 
 
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,

@@ -28,39 +28,62 @@ SEED_TABLE2 = {  # std rows of the seed's Table 2 (position m, velocity m/s; x y
 }
 
 
-def ins_bench(out: Path, quick: bool = False) -> dict:
+def _table_point(osc: str, cn0: float, dur: float, trials: int) -> tuple[list, dict]:
+    """The three loops at one (oscillator, C/N0): Table 2 rows, the figure 6-7 series at
+    40 dB-Hz (trial 0) and each loop's cost (epochs per CPU second)."""
+    rows, series = [], {}
+    cfg = InsStudyConfig(cn0_dbhz=cn0, oscillator=osc, trials=trials, duration_s=dur)
+    scn = scenario_for(cfg)
+    for lp in LOOPS:
+        t = time.process_time()
+        r = run_loop(lp, cfg, scn, keep=(cn0 == 40.0))
+        el = time.process_time() - t
+        s = r.pop("series", None)
+        if s is not None:
+            series[(osc, lp)] = {"t": s["t_s"], "disc": s["disc_cycles"][:, 0],
+                                 "pli": s["pli"][:, 0]}
+        r["cpu_s"] = el
+        r["epochs_per_s"] = dur / 1e-3 / el
+        r["trial_epochs_per_s"] = trials * dur / 1e-3 / el
+        rows.append(r)
+    return rows, series
+
+
+def _threshold_point(osc: str, th: dict) -> list:
+    cfg = InsStudyConfig(oscillator=osc, trials=th["trials"], duration_s=th["duration_s"])
+    out = []
+    for lp in LOOPS:
+        t = time.process_time()
+        r = lock_threshold(lp, cfg, th["lo_dbhz"], th["hi_dbhz"], th["resolution_db"])
+        r.update(oscillator=osc, cpu_s=time.process_time() - t)
+        out.append(r)
+    return out
+
+
+def ins_bench(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    """The benchmark (module doc); ``jobs`` > 1 runs its points in that many processes."""
+    from concurrent.futures import ProcessPoolExecutor
+    import multiprocessing as mp
     from cosim.bench import machine_info
     out.mkdir(parents=True, exist_ok=True)
     dur, trials = (35.0, 4) if quick else (150.0, 20)
-    rows, series = [], {}
-    t_all = time.time()
-    for osc in ("ocxo", "tcxo"):
-        for cn0 in (40.0, 35.0):
-            cfg = InsStudyConfig(cn0_dbhz=cn0, oscillator=osc, trials=trials, duration_s=dur)
-            scn = scenario_for(cfg)
-            for lp in LOOPS:
-                t = time.time()
-                r = run_loop(lp, cfg, scn, keep=(cn0 == 40.0))
-                el = time.time() - t
-                s = r.pop("series", None)
-                if s is not None:
-                    series[(osc, lp)] = {"t": s["t_s"], "disc": s["disc_cycles"][:, 0],
-                                         "pli": s["pli"][:, 0]}
-                r["epochs_per_s"] = dur / 1e-3 / el
-                r["trial_epochs_per_s"] = trials * dur / 1e-3 / el
-                rows.append(r)
-    thr = []
     th = dict(THRESHOLD, duration_s=35.0, trials=2, resolution_db=4.0) if quick else THRESHOLD
-    for osc in ("ocxo", "tcxo"):
-        cfg = InsStudyConfig(oscillator=osc, trials=th["trials"], duration_s=th["duration_s"])
-        for lp in LOOPS:
-            t = time.time()
-            r = lock_threshold(lp, cfg, th["lo_dbhz"], th["hi_dbhz"], th["resolution_db"])
-            r.update(oscillator=osc, elapsed_s=time.time() - t)
-            thr.append(r)
+    t_all = time.time()
+    table = [(osc, cn0) for osc in ("ocxo", "tcxo") for cn0 in (40.0, 35.0)]
+    if jobs and jobs > 1:
+        with ProcessPoolExecutor(jobs, mp_context=mp.get_context("fork")) as ex:
+            ft = [ex.submit(_threshold_point, osc, th) for osc in ("ocxo", "tcxo")]
+            fr = [ex.submit(_table_point, osc, cn0, dur, trials) for osc, cn0 in table]
+            res = [f.result() for f in fr]
+            thr = [r for f in ft for r in f.result()]
+    else:
+        res = [_table_point(osc, cn0, dur, trials) for osc, cn0 in table]
+        thr = [r for osc in ("ocxo", "tcxo") for r in _threshold_point(osc, th)]
+    rows = [r for rr, _ in res for r in rr]
+    series = {k: v for _, ss in res for k, v in ss.items()}
     summary = {"machine": machine_info(), "duration_s": dur, "trials": trials,
-               "elapsed_s": time.time() - t_all, "rows": rows, "seed_table2_std": SEED_TABLE2,
-               "threshold_search": th, "thresholds": thr}
+               "elapsed_s": time.time() - t_all, "jobs": jobs or 1, "rows": rows,
+               "seed_table2_std": SEED_TABLE2, "threshold_search": th, "thresholds": thr}
     (out / "ins.json").write_text(json.dumps(summary, indent=1))
     _plot(out / "ins_fig6_7.png", series)
     (out / "ins.md").write_text(_md(summary))
@@ -96,7 +119,7 @@ def _md(s: dict) -> str:
     L = [f"# Seed 003: INS-aided Kalman carrier loop vs aided PLL vs unaided Kalman loop", "",
          f"`{m['command']}`, {m['date']}, {m['cpu']}, commit {m['commit']}; fast path, "
          f"{s['trials']} trials per loop, {s['duration_s']:g} s of the seed's trajectory "
-         f"(8300 m/s, 50 g, 5 g/s), INS 10 deg/h + 1 mg; {s['elapsed_s']:.0f} s in all.", "",
+         f"(8300 m/s, 50 g, 5 g/s), INS 10 deg/h + 1 mg; {s['elapsed_s']:.0f} s wall in all on {s['jobs']} process(es).", "",
          "Seed Table 2 (std rows; position m, velocity m/s, per ECEF axis, full PVT):", "",
          "| loop | pos std x y z | vel std x y z |", "|---|---|---|"]
     for lp, v in s["seed_table2_std"].items():
