@@ -97,7 +97,12 @@ class InsRunConfig:
         check_int("seed", self.seed, 0)
         check_int("pli_epochs", self.pli_epochs, 1, 1000)
         check_float("pli_threshold", self.pli_threshold, -1.0, 1.0, lo_open=True, hi_open=True)
-        self.trajectory()       # the trajectory's own checks (ramps, CSV) before any work
+        tr = self.trajectory()       # the trajectory's own checks (ramps, CSV) before any work
+        if self.trajectory_csv is not None:
+            a = tr._table()
+            if a[0, 0] > 0 or a[-1, 0] < self.duration_s + 0.05:
+                raise ValueError(f"trajectory_csv {self.trajectory_csv!r} ends at {a[-1, 0]:g} s: "
+                                 f"it must cover duration_s + 0.05 s (from t <= 0)")
 
     def trajectory(self) -> SeedTrajectory:
         return SeedTrajectory(duration_s=self.duration_s, start_s=self.start_s,
@@ -148,7 +153,7 @@ def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:
 
 def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     """One closed-loop run (module doc); the JSON-safe result (``_series`` for plots)."""
-    from cosim.gnss.run import GnssRunConfig, run_gnss
+    from cosim.gnss.run import GnssRunConfig, check_run_size, run_gnss
     from .ins_error import EpochAiding, InsAiding, InsErrors
     if not isinstance(cfg, InsRunConfig):
         raise ValueError(f"cfg must be an InsRunConfig, not {type(cfg).__name__}")
@@ -156,6 +161,7 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     traj = cfg.trajectory()
     sc = Scenario(traj, Geometry(), None, seed=cfg.seed)
     sig = ins_signal(cfg, sc)
+    check_run_size(sig, run)        # before the INS solution and the record
     ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + 20, seed=cfg.seed)
     held = {}
 
