@@ -118,29 +118,57 @@ def ins_bench(out: Path, quick: bool = False, jobs: int | None = None, *,
     return summary
 
 
-def _plot(path, series):
+def _block_mean(x, n):
+    m = len(x) // n
+    return np.asarray(x[:m * n], float).reshape(m, n).mean(axis=1)
+
+
+def _plot(path, series, segments=None):
+    """Seed figures 6-7: discriminator output (20 ms means: the 1 ms values' thermal spread,
+    ~13 deg rms at 40 dB-Hz, hides the dynamic stress) and PLI (100 ms means of the 10 ms
+    values) vs time, the three loops, OCXO and TCXO; jerk segments shaded."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(2, 2, figsize=(12, 6), sharex=True)
+    from .trajectory import SeedTrajectory
+    segs = SeedTrajectory().jerk_segments() if segments is None else segments
+    fig, ax = plt.subplots(2, 2, figsize=(13, 6.5), sharex=True)
+    colours = {"aided-kf": "tab:blue", "aided-pll": "tab:orange", "unaided-kf": "tab:green"}
     for j, osc in enumerate(("ocxo", "tcxo")):
         for lp in LOOPS:
             s = series.get((osc, lp))
             if s is None:
                 continue
-            ax[0, j].plot(s["t"], s["disc"] * 360, lw=0.3, label=lp)
-            tp = (np.arange(len(s["pli"])) + 1) * (len(s["t"]) / max(len(s["pli"]), 1)) * 1e-3
-            ax[1, j].plot(tp, s["pli"], lw=0.4, label=lp)
-        ax[0, j].set_title(f"discriminator output (deg), 40 dB-Hz, {osc.upper()} (seed fig. 6)")
-        ax[1, j].set_title(f"PLI, 10 ms sums (seed fig. 7)")
+            d = _block_mean(s["disc"], 20) * 360
+            ax[0, j].plot((np.arange(d.size) + 0.5) * 0.02, d, lw=0.5, color=colours[lp], label=lp)
+            p = _block_mean(s["pli"], 10)
+            ax[1, j].plot((np.arange(p.size) + 0.5) * 0.1, p, lw=0.6, color=colours[lp], label=lp)
+        ax[0, j].set_title(f"discriminator output, 20 ms means (deg), 40 dB-Hz, {osc.upper()} "
+                           f"(seed fig. 6)", fontsize=9)
+        ax[1, j].set_title("PLI, 100 ms means of 10 ms sums (seed fig. 7)", fontsize=9)
         ax[1, j].set_xlabel("time (s)")
         for a in ax[:, j]:
+            for t0, t1 in segs:
+                a.axvspan(t0, t1, color="0.85", zorder=0)
             a.grid(alpha=0.3)
             if a.lines:
-                a.legend(fontsize=7)
+                a.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def figures(out: Path, duration_s: float = 150.0, seed: int = 1) -> Path:
+    """Redraw :file:`ins_fig6_7.png` alone: one trial of each loop at 40 dB-Hz, OCXO and
+    TCXO, over the seed's trajectory (``python -c "from pathlib import Path; from
+    cosim.ins.bench import figures; figures(Path('results'))"``)."""
+    series = {}
+    for osc in ("ocxo", "tcxo"):
+        for lp in LOOPS:
+            series.update(_table_point(osc, 40.0, lp, duration_s, 1, {})[1])
+    path = Path(out) / "ins_fig6_7.png"
+    _plot(path, series)
+    return path
 
 
 def _md(s: dict) -> str:
