@@ -420,16 +420,24 @@ def adc_words(codes) -> np.ndarray:
     return (np.asarray(codes).astype(np.int64) - 1) >> 1
 
 
-def _boundaries(p, bus_writes, n_records, n_total):
+def _boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
     """Dump-boundary sample of the records ``1 .. n_records`` of the HDL channel, from the
     code NCO's words in force (replayed exactly: the code generator's epochs only depend on
     the code word, PRN-independent, and the slew)."""
     from hdl.gnss.model import GnssChannelModel
     # Run the bit-exact channel on zero samples with the same bus writes: its records come
-    # at the same cycles (the code NCO does not see the samples).
+    # at the same cycles (the code NCO does not see the samples). In blocks (a 150 s record
+    # is 2.5e9 samples: one array of them would not fit), until n_records are out.
     m = GnssChannelModel(p)
-    r = m.step(np.zeros(n_total, np.int64), bus_writes)
-    return r.cycles[:n_records] - p.latency
+    out, got, k = [], 0, 0
+    while got < n_records and k < n_total:
+        n = min(int(block), n_total - k)
+        r = m.step(np.zeros(n, np.int64), bus_writes if k == 0 else ())
+        out.append(r.cycles)
+        got += r.cycles.size
+        k += n
+    cyc = np.concatenate(out) if out else np.zeros(0, np.int64)
+    return cyc[:n_records] - p.latency
 
 
 def _golden_track(gen, run, hand, arith_name, tracker_extra=None):
