@@ -6,22 +6,27 @@ from __future__ import annotations
 
 from ..receivers import Arg, Figure, Frontend, Option, Receiver, config_kwargs, register
 from ..validate import dumps
-from .run import DynamicsChoice, GnssRunConfig, run_gnss
+from .run import SCENARIOS, DynamicsChoice, GnssRunConfig, run_gnss
 from .signal import GnssSignalConfig
 
 _SIG, _DYN, _RUN = GnssSignalConfig, DynamicsChoice, GnssRunConfig
 
 #: Options of ``python -m cosim gnss``.
 OPTIONS = (
-    Option(_SIG, "prn"), Option(_SIG, "cn0_dbhz", help="carrier to noise density (dB-Hz)"), Option(_SIG, "duration_s"),
+    Arg("--scenario", type=str.lower, choices=tuple(SCENARIOS), default=None,
+        help="named preset; its values fill the options not given: " + "; ".join(
+            f"{k}: {v['help']}" for k, v in SCENARIOS.items())),
+    Option(_SIG, "prn"), Option(_SIG, "cn0_dbhz", default=None,
+                                help="carrier to noise density (dB-Hz; default 45)"),
+    Option(_SIG, "duration_s"),
     Option(_SIG, "seed", help="random seed (>= 0) of the noise, data bits, dynamics"),
     Option(_SIG, "fs_hz", help="ADC sample rate = channel clock (S/s)"),
     Option(_SIG, "if_hz", help="IF (Hz), in the first Nyquist zone"),
     Option(_SIG, "adc_bits"), Option(_SIG, "code_phase_chips"),
-    Option(_DYN, "dynamics"), Option(_DYN, "jerk_g_per_s"), Option(_DYN, "jerk_start_s"),
+    Option(_DYN, "dynamics", default=None), Option(_DYN, "jerk_g_per_s"), Option(_DYN, "jerk_start_s"),
     Option(_DYN, "jerk_duration_s"),
     Option(_RUN, "tracker"), Option(_RUN, "bn_hz"), Option(_RUN, "dll_bn_hz"),
-    Option(_RUN, "backend"), Option(_RUN, "dsp"),
+    Option(_RUN, "backend"), Option(_RUN, "dsp"), Option(_RUN, "r_mode"),
     Option(_RUN, "control_latency_cycles", flag="--latency"),
     Option(_RUN, "settle_s"), Option(_RUN, "compare"),
     Arg("--json", action="store_true", help="print one JSON object"),
@@ -29,16 +34,26 @@ OPTIONS = (
 
 
 def build_configs(a) -> tuple[GnssSignalConfig, GnssRunConfig]:
-    """The signal and run configurations of parsed options (ValueError if refused)."""
+    """The signal and run configurations of parsed options (ValueError if refused); a
+    ``--scenario`` fills the options left unset."""
+    if getattr(a, "scenario", None):
+        for k, v in SCENARIOS[a.scenario]["options"].items():
+            if getattr(a, k) is None:
+                setattr(a, k, v)
     sig = _SIG(**config_kwargs(a, OPTIONS, _SIG))
     sig = _DYN(**config_kwargs(a, OPTIONS, _DYN)).apply(sig)
-    return sig, _RUN(**config_kwargs(a, OPTIONS, _RUN))
+    run = config_kwargs(a, OPTIONS, _RUN)
+    if getattr(a, "scenario", None):
+        run = {**SCENARIOS[a.scenario].get("run", {}), **run}
+    return sig, _RUN(**run)
 
 
 def cmd_gnss(a) -> int:
     sig, run = build_configs(a)
     r = run_gnss(sig, run)
     r.pop("_series", None)
+    if a.scenario:
+        r["scenario"] = {"name": a.scenario, **SCENARIOS[a.scenario]}
     if a.json:
         print(dumps(r))
         return 0
@@ -57,6 +72,10 @@ def cmd_gnss(a) -> int:
     if "vs_golden_phase_rms_deg" in r:
         print(f"vs golden (float chain): phase {r['vs_golden_phase_rms_deg']:.3f} deg rms, "
               f"Doppler {r['vs_golden_doppler_rms_hz']:.4f} Hz rms")
+    if r["q_hat"] is not None:
+        q = r["q_hat"]
+        print(f"q_hat final {q['final']:.4g} (q0 {q['q0']:g}; per {q['block_s']:g} s block "
+              f"{q['min']:.3g}..{q['max']:.3g}), diverged {r['diverged']}")
     print(f"digest {r['digest']['all']}")
     return 0
 
