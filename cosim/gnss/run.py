@@ -77,8 +77,9 @@ SCENARIOS = {
         "options": {"cn0_dbhz": 32.0, "dynamics": "seed002"},
         # an acquisition for 32 dB-Hz (the default 1 ms x 5 and 1 ms x 20 miss it):
         # 2 ms coherent (125 Hz bins) x 20 non-coherent, 40 ms Doppler refinement
+        # and the tracker started on the seed's x0 Doppler rate (w1 / 2 pi)
         "run": {"acq_coherent_ms": 2, "acq_noncoherent": 20, "acq_bin_hz": 125.0,
-                "refine_ms": 40},
+                "refine_ms": 40, "handover_doppler_rate_hz_s": 323.356 / (2 * math.pi)},
         "tracker": {"x0": [0.0, 32995.519, 323.356, 0.0], "T_s": 1e-3,
                     "P0": "diag(1e-3) (w0 widened to the hand-over Doppler's sigma)",
                     "epsilon": 1.027, "kappa": 0.0, "beta": 2.0, "q0": 5.0,
@@ -208,6 +209,9 @@ class GnssRunConfig:
         "help": "measurement noise R of the seed-002 trackers (aukf, ukf): cn0 = 1/(2 T C/N0) "
                 "of the nominal C/N0, seed = the seed's 1e-9",
         "choices": ("cn0", "seed"), "case": "lower"})
+    handover_doppler_rate_hz_s: float = field(default=0.0, metadata={
+        "help": "Doppler rate the tracker starts on (Hz/s; acquisition does not measure it; "
+                "--scenario seed002: the seed's x0, 51.464 Hz/s)"})
     compare: str | None = field(default=None, metadata={
         "help": "also run the golden chain (float) and report the differences",
         "choices": ("golden",), "case": "lower"})
@@ -248,6 +252,8 @@ class GnssRunConfig:
         check_int("refine_ms", self.refine_ms, 2, 200)
         check_float("handover_doppler_sigma_hz", self.handover_doppler_sigma_hz, 0.0, 250.0,
                     lo_open=True, unit="Hz")
+        check_float("handover_doppler_rate_hz_s", self.handover_doppler_rate_hz_s, -1e4, 1e4,
+                    unit="Hz/s")
         check_int("block_samples", self.block_samples, 1024)
         for kv in self.hdl_changes:
             if not (isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)):
@@ -324,7 +330,7 @@ def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_
     from dsp.gnss.trackers import TrackerContext, _TRACKERS, make_tracker
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
                          inverted=inverted, doppler0_hz=doppler_hz,
-                         doppler_rate0_hz_s=0.0, cn0_dbhz=cn0_dbhz,
+                         doppler_rate0_hz_s=run.handover_doppler_rate_hz_s, cn0_dbhz=cn0_dbhz,
                          spacing_chips=spacing_chips, latency_epochs=1,
                          doppler0_sigma_hz=run.handover_doppler_sigma_hz)
     arith = FixedArith() if arith_name == "fixed" else FLOAT

@@ -29,7 +29,10 @@ channel's are integer accumulators thousands of times larger), so by default
 the epochs so far, then exponentially over ``amp_epochs`` epochs (the bit and the phase do
 not enter it). A number fixes ``A_c``. ``P0`` defaults to the seed's ``1e-3 I`` (a start on the
 truth), its ``w0`` entry widened to ``(2 pi sigma)^2`` when the context gives the hand-over's
-``doppler0_sigma_hz``.
+``doppler0_sigma_hz``. The initial Doppler rate is the context's ``doppler_rate0_hz_s``
+(the HDL run: ``GnssRunConfig.handover_doppler_rate_hz_s``, the seed's x0 rate under
+``--scenario seed002``; started on rate 0 with the seed's ``P0`` the seed's own 1 g drove
+the 32 dB-Hz loop off lock, 175 slips, and widening ``P0[w1]`` to 100 (Hz/s)^2 did too).
 
 Slave (scalar ``q``). Order per block (RECEIVERS.md): slave predict -> master epochs with
 ``q_hat_k|k-1`` -> slave update. **Deviation from the seed** (``slave="block"``, default):
@@ -58,8 +61,8 @@ Loop: ``f_next = w0_pred / 2 pi + (C1 e + C2 sum e) / T`` with ``e = theta_hat /
 
 Divergence (``report()["diverged"]``, per trial), any of: (1) the narrow-band lock indicator
 of the data-wiped prompt summed over blocks of 20 epochs, ``((sum I)^2 - (sum Q)^2) /
-((sum I)^2 + (sum Q)^2)``, below 0 in 3 consecutive blocks after the first 100 epochs (a
-phase loss); (2) a frequency loss, which (1) misses: the per-epoch data wipe folds a
+((sum I)^2 + (sum Q)^2)``, below 0 in 3 consecutive blocks after the first 100 epochs and
+after a block above 0.5 (a phase loss; not the pull-in after a hand-over); (2) a frequency loss, which (1) misses: the per-epoch data wipe folds a
 residual rotating at tens of Hz into the half plane of the prediction, so the wiped sums stay
 "locked" (a 28 dB-Hz run drifted to 92 Hz unflagged). Over each second (``NBW_WINDOW``
 epochs) the ratio of narrow-band power (``|sum P|^2`` of the *raw* prompt over
@@ -98,6 +101,9 @@ SEED_X0 = (0.0, 32995.519, 323.356, 0.0)
 SEED_P0 = 1e-3
 SEED_R = 1e-9
 EVENTS = ("chol_fail", "s_not_pd", "saturations")
+#: P0[theta] after a hand-over: the carrier phase is unknown, uniform over the Costas
+#: half-cycle: (pi / 2)^2 / 3 rad^2.
+HANDOVER_P_THETA = (np.pi / 2) ** 2 / 3
 #: Divergence, frequency test (module docstring): narrow-band (NBW_EPOCHS-epoch coherent
 #: sums of the raw prompt) over wide-band power, over NBW_WINDOW epochs.
 NBW_EPOCHS = 10
@@ -472,6 +478,7 @@ class AukfTracker:
             if sd is not None:
                 sd = _check_pos("doppler0_sigma_hz (tracker context)", sd)
                 P0[1, 1] = max(SEED_P0, (TWO_PI * sd) ** 2)
+                P0[0, 0] = HANDOVER_P_THETA
         P0 = np.asarray(P0, float)
         if P0.shape != (4, 4):
             raise ValueError(f"P0 must be 4 x 4, not {P0.shape}")
@@ -562,6 +569,10 @@ class AukfTracker:
         self.nbw_nb = np.zeros(Bn)
         self.nbw_wb = np.zeros(Bn)
         self.nbw_ratio = np.full(Bn, np.nan)
+        self.nbw_hist = []                       # lowest ratio over the trials, per window
+        self.div_freq = np.zeros(Bn, bool)
+        self.div_phase = np.zeros(Bn, bool)
+        self.was_locked = np.zeros(Bn, bool)
         if c is not None:
             L, snr = NBW_EPOCHS, T * c               # normalised: A = 1, 2 sigma^2 = 1/(T C/N0)
             eta = 1.0 - ((L - 1) / 20) * 0.5 * (1.0 - np.mean((L - 2.0 * np.arange(1, L)) ** 2) / L ** 2)
@@ -692,14 +703,18 @@ class AukfTracker:
                 self.nbw_w[:] = 0
             if self.k % NBW_WINDOW == 0:
                 self.nbw_ratio = self.nbw_nb / np.maximum(self.nbw_wb, 1e-300)
-                self.diverged |= self.nbw_ratio < self.nbw_limit
+                self.nbw_hist.append(float(np.min(self.nbw_ratio)))
+                self.div_freq |= self.nbw_ratio < self.nbw_limit
+                self.diverged |= self.div_freq
                 self.nbw_nb[:] = 0
                 self.nbw_wb[:] = 0
         if self.k % 20 == 0:
             pli = (self.nb_i ** 2 - self.nb_q ** 2) / np.maximum(self.nb_i ** 2 + self.nb_q ** 2, 1e-300)
-            if self.k > 100:
-                self.bad_blocks = np.where(pli < 0, self.bad_blocks + 1, 0)
-                self.diverged |= self.bad_blocks >= 3
+            self.was_locked |= pli > 0.5
+            if self.k > 100:     # a loss needs a lock first (not the pull-in after a hand-over)
+                self.bad_blocks = np.where((pli < 0) & self.was_locked, self.bad_blocks + 1, 0)
+                self.div_phase |= self.bad_blocks >= 3
+                self.diverged |= self.div_phase
             self.nb_i[:] = 0
             self.nb_q[:] = 0
         self.diverged |= ~np.isfinite(self.x).all(axis=1)
@@ -745,6 +760,10 @@ class AukfTracker:
                 "diverged": self.diverged.reshape(self.shape).tolist(),
                 "diverged_count": int(self.diverged.sum()),
                 "events": self.counts(),
+                "lock_tests": {"phase_loss_count": int(self.div_phase.sum()),
+                               "frequency_loss_count": int(self.div_freq.sum()),
+                               "nbw_ratio_min_per_s": self.nbw_hist,
+                               "nbw_ratio_in_lock": self.nbw_lock, "nbw_limit": self.nbw_limit},
                 "params": {"adaptive": self.adaptive, "epsilon": self.ut[0], "beta": self.ut[1],
                            "kappa": self.ut[2], "q0": self.q0, "R": self.r,
                            "P0_diag": np.diag(self.P0).tolist(), "T_s": self.T,
