@@ -105,7 +105,7 @@ class DynamicsChoice:
 
     dynamics: str = field(default="static", metadata={
         "help": "line-of-sight dynamics: static, seed002 (1000 m/s, 1 g), seed002-jerk "
-                "(plus a jerk segment), seed002-process (Singer jerk process, q 5)",
+                "(plus a jerk segment), seed002-process (Singer jerk process, q 5); default static",
         "choices": DYNAMICS, "case": "lower"})
     jerk_g_per_s: float = field(default=5.0, metadata={
         "help": "jerk of the seed002-jerk segment (g/s)"})
