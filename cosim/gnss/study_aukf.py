@@ -98,30 +98,6 @@ def study(q_factors=(0.1, 1.0, 10.0), cn0s=(32.0, 36.0, 40.0), **kw) -> list:
     return [run_point(f * Q0, c, **kw) for c in cn0s for f in q_factors]
 
 
-if __name__ == "__main__":   # python -m cosim.gnss.study_aukf [n_runs]
-    import json
-    import sys
-    nr = int(sys.argv[1]) if len(sys.argv) > 1 else 100
-    for p in study(n_runs=nr, cn0s=(32.0,) if len(sys.argv) > 2 else (32.0, 36.0, 40.0)):
-        print(json.dumps(p), flush=True)
-
-
-def markdown_table(points) -> str:
-    """The study's table (one row per tracker and point) as Markdown."""
-    rows = ["| C/N0 dB-Hz | q_true / q0 | tracker | Doppler RMSE Hz | phase RMSE cyc | slips | lost | "
-            "diverged | median q_hat |", "|---|---|---|---|---|---|---|---|---|"]
-    for p in points:
-        for t in ("aukf", "ukf", "pll3"):
-            if t not in p:
-                continue
-            r = p[t]
-            qh = "-" if r["q_hat_median_final"] is None else f"{r['q_hat_median_final']:.3g}"
-            dv = "-" if r["diverged"] is None else str(r["diverged"])
-            rows.append(f"| {p['cn0_dbhz']:g} | {p['q_true'] / Q0:g} | {t} | {r['doppler_rmse_hz']:.4f} | "
-                        f"{r['phase_rmse_cyc']:.4f} | {r['cycle_slips']} | {r['lost']}/{p['n_runs']} | {dv} | {qh} |")
-    return "\n".join(rows) + "\n"
-
-
 def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_runs: int = 20,
                        duration_s: float = 10.0, seed: int = 1):
     """The seed's figure 3 as a plot: RMS over runs of the Doppler-estimate error vs time,
