@@ -284,10 +284,15 @@ def _ins(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     return ins_bench(out, quick=quick)
 
 
+def _aukf(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gnss.study_aukf import bench as aukf_bench
+    return aukf_bench(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
               "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,
-              "monopulse": _monopulse, "ins": _ins}
+              "monopulse": _monopulse, "ins": _ins, "aukf": _aukf}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:
