@@ -14,7 +14,7 @@ import numpy as np
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       reference_advances, wrap_deg)
-from .decode import REF_MAIN, DecoderConfig, decode
+from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .standard import burst_offsets
 
@@ -79,6 +79,13 @@ class ReceiverConfig:
     flag_gated: int = 1
     flag_sector_deg: float = 12.0
     flag_noise_ratio: float = 0.5
+    #: Rotation-rate tracking: the beacon's rotation rate is estimated from the references
+    #: known so far (:func:`dsp.tacan.decode.rotation_track`: the 135 Hz grid's period over
+    #: the latest 2 s, once they span ``rotation_span_s``), and the Kalman model and the
+    #: bearing's phase advances turn at it (15 Hz exactly on a nominal beacon: the
+    #: estimate's resolution is 1e-5). False: 15 Hz assumed.
+    track_rotation: bool = True
+    rotation_span_s: float = 0.2
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -89,6 +96,10 @@ class ReceiverConfig:
         if not 0 < float(self.flag_sector_deg) <= 20:
             raise ValueError(f"flag_sector_deg must be in (0, 20] (half a fine-phase sector), "
                              f"not {self.flag_sector_deg!r}")
+        if not isinstance(self.track_rotation, bool):
+            raise ValueError(f"track_rotation must be True or False, not {self.track_rotation!r}")
+        if not 0 < float(self.rotation_span_s) <= 10:
+            raise ValueError(f"rotation_span_s must be in (0, 10] s, not {self.rotation_span_s!r}")
         if not float(self.flag_noise_ratio) > 0:
             raise ValueError(f"flag_noise_ratio must be > 0, not {self.flag_noise_ratio!r}")
         if not isinstance(self.kalman, (KalmanConfig, KalmanFixedConfig)):
@@ -110,6 +121,7 @@ class ReceiverState:
     last_main_s: float | None = None
     last_t_s: float | None = None
     last_tick: int | None = None
+    recent_refs_s: np.ndarray = field(default_factory=lambda: np.empty(0))  # rate tracker input
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
@@ -190,7 +202,16 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     ref_done = dec.ref_done_s[ref_order]
     ref_t = dec.ref_times_s[ref_order]
     ref_k = dec.ref_kinds[ref_order]
-    w15, w135 = TWO_PI * F15, TWO_PI * F135
+    dcfg = cfg.decoder or DecoderConfig(mode=cfg.mode)
+    if cfg.track_rotation:
+        # known before this block, then each reference in the order it becomes known
+        prior = state.recent_refs_s
+        rates = rotation_track(np.concatenate([prior, ref_t]), dcfg.tol_s,
+                               int(dcfg.min_grid_refs), float(cfg.rotation_span_s))[prior.size:]
+        state.recent_refs_s = np.concatenate([prior, ref_t])[-4 * int(2.0 * F135):]
+    else:
+        rates = np.full(n_ref, F15)
+    out_f = []
     # Segments of pulses between the moments a reference burst becomes known.
     if ticks is not None:
         tk = ticks.astype(np.int64)[sel]
@@ -206,6 +227,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         if stop > k:
             kf.run(dts[k:stop], ym[:, k:stop], None if r_mult is None else r_mult[k:stop])
             k = stop
+        if rates[r] != kf.rotation_hz:       # the rate known once this reference is
+            kf.set_rotation(rates[r])
+        f_rot = kf.rotation_hz
         if k == 0:
             continue
         last_t = tm[k - 1]
@@ -225,10 +249,11 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
             out_x.append(kf.x.copy())
             out_dt.append((int(tk[k - 1]) - int(round(last_main * t_hz)),
                            int(tk[k - 1]) - int(round(T * t_hz))))
+            out_f.append(f_rot)
             continue
         a, b, m1, m2, _ = kf.phases()
-        coarse = w15 * (last_t - last_main) - a
-        fine9 = w135 * (last_t - T) - b
+        coarse = TWO_PI * f_rot * (last_t - last_main) - a
+        fine9 = TWO_PI * (9 * f_rot) * (last_t - T) - b
         out_b.append(np.degrees(combine_coarse_fine(coarse, fine9, m1 * m1, 81.0 * m2 * m2)))
         out_c.append(np.degrees(coarse % TWO_PI))
     if k < tm.size:
@@ -242,7 +267,12 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     ok = np.stack(out_ok, axis=1) if M else np.zeros((B, 0), bool)
     if integer_bearing and M:
         dt = np.array(out_dt, dtype=np.int64)
-        adv15, adv135 = reference_advances(dt[:, 0], dt[:, 1], kf.tick_hz)
+        fr = np.array(out_f)
+        adv15, adv135 = np.empty(M, np.int64), np.empty(M, np.int64)
+        for f in np.unique(fr):              # one pair of frequency words per rate
+            m = fr == f
+            adv15[m], adv135[m] = reference_advances(dt[m, 0], dt[m, 1], kf.tick_hz,
+                                                     rotation_hz=float(f))
         sb = bearing_from_state(np.stack(out_x), cfg.kalman.x, adv15[:, None], adv135[:, None],
                                 adv_bits=ANGLE_BITS)
         out_b = list(bangle_to_deg(sb.bearing))
