@@ -221,13 +221,16 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     ref_t, kinds, scores, done = ref_t[o], kinds[o], scores[o], done[o]
     # The block's rotation rate (the 135 Hz grid's period; exactly 15 Hz on a nominal beacon,
     # see RATE_QUANTUM): the grid the references are snapped to and fitted with.
-    f_rot = f_est = estimate_rotation(ref_t, cfg.tol_s, int(cfg.min_grid_refs))
+    f_rot = estimate_rotation(ref_t, cfg.tol_s, int(cfg.min_grid_refs))
     if f_rot is None:
         p_med = _period_median(ref_t) if ref_t.size >= cfg.min_grid_refs else None
         f_rot = quantize_rotation(1.0 / (9.0 * p_med)) if p_med is not None else F15
     ref_t, on_grid = _snap_to_grid(ref_t, kinds, cfg, 1.0 / (9.0 * f_rot))
     n_off = int(np.count_nonzero(~on_grid))
     ref_t, kinds, scores, done = ref_t[on_grid], kinds[on_grid], scores[on_grid], done[on_grid]
+    # again on the snapped references (the raw ones may hold too many mis-aligned bursts)
+    f_est = estimate_rotation(ref_t, cfg.tol_s, int(cfg.min_grid_refs))
+    f_rot = f_rot if f_est is None else f_est
     info = {}
     if cfg.infer_main:
         ref_t, kinds, scores, done, used, info = _infer_main(t, ref_t, kinds, scores, done,
@@ -327,15 +330,26 @@ def estimate_rotation(ref_t: np.ndarray, tol: float, min_refs: int,
 
 
 def rotation_track(ref_t, tol: float, min_refs: int, min_span_s: float,
-                   window_s: float = 2.0) -> np.ndarray:
+                   window_s: float = 2.0, prior_rate: float | None = None):
     """Causal rotation-rate estimate after each reference of ``ref_t`` (given in the order
     the references become known): :func:`estimate_rotation` of the references known so
     far that lie within ``window_s`` of the newest (a tracker: it follows a slowly changing
     rate, and the cost per reference stays bounded), holding the latest estimate (``F15``
-    before the first) when they do not suffice."""
+    before the first) when they do not suffice. ``prior_rate`` (an earlier block's
+    estimate, None: none yet) is held until the first estimate.
+
+    Returns
+    -------
+    (rates, confirmed) : float array, bool array
+        The rate after each reference and whether an estimate exists by then (the
+        reference timing is *confirmed*: a 135 Hz grid through ``min_refs`` references
+        spanning ``min_span_s``; the receiver flags its bearings until then).
+    """
     ref_t = np.asarray(ref_t, dtype=np.float64)
     out = np.empty(ref_t.size)
-    f = F15
+    conf = np.zeros(ref_t.size, bool)
+    f = F15 if prior_rate is None else float(prior_rate)
+    have = prior_rate is not None
     known = []
     for i in range(ref_t.size):
         known.append(ref_t[i])
@@ -345,9 +359,9 @@ def rotation_track(ref_t, tol: float, min_refs: int, min_span_s: float,
         w = w[w >= w.max() - window_s]
         e = estimate_rotation(w, tol, min_refs, min_span_s)
         if e is not None:
-            f = e
-        out[i] = f
-    return out
+            f, have = e, True
+        out[i], conf[i] = f, have
+    return out, conf
 
 
 def _fit_grid(ref_t: np.ndarray, period: float, tol: float, min_refs: int):

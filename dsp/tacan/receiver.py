@@ -39,6 +39,21 @@ class BearingTrack:
     events: dict = field(default_factory=dict)  # DSP core event counters, name -> (B,)
     state: "ReceiverState | None" = None        # to continue with the next block
     valid: np.ndarray | None = None  # (B, M) fit for use: not flagged (see ReceiverConfig)
+    produced_s: np.ndarray | None = None  # (M,) when each bearing became available (the
+    #: reference known and the pulses up to it filtered; >= times_s)
+
+    def first_valid_s(self) -> np.ndarray:
+        """Per trial: when the first valid (not flagged) bearing became available (s from
+        the start of the record; NaN: none) -- the time to first bearing."""
+        B = self.bearing_deg.shape[0]
+        out = np.full(B, np.nan)
+        if self.valid is None or self.produced_s is None or not self.produced_s.size:
+            return out
+        for b in range(B):
+            i = np.flatnonzero(self.valid[b])
+            if i.size:
+                out[b] = float(self.produced_s[i[0]])
+        return out
 
 
 @dataclass(frozen=True)
@@ -67,7 +82,11 @@ class ReceiverConfig:
     #:   ~9 deg down to -3 dB SNR);
     #: * the estimated amplitude noise ``sqrt(r)`` exceeds ``flag_noise_ratio`` times the
     #:   pulse level ``dc``: the filter has fitted something that is not the signal (its
-    #:   ``r`` estimate grows from the misfit; ~0.44 at -3 dB SNR in normal operation).
+    #:   ``r`` estimate grows from the misfit; ~0.44 at -3 dB SNR in normal operation);
+    #: * the reference timing is not confirmed yet: no rotation-rate estimate so far (with
+    #:   ``track_rotation``; a 135 Hz grid through ``DecoderConfig.min_grid_refs`` references
+    #:   spanning ``rotation_span_s``). Main references inferred by the rotation-slot
+    #:   detector give no bearing at all before its declaration.
     #:
     #: Input beyond the DSP's input range is never measured (``KalmanConfig.input_limit``)
     #: and flags the bearings while it lasts. Known limit: garbage *within* the range that
@@ -81,11 +100,12 @@ class ReceiverConfig:
     flag_noise_ratio: float = 0.5
     #: Rotation-rate tracking: the beacon's rotation rate is estimated from the references
     #: known so far (:func:`dsp.tacan.decode.rotation_track`: the 135 Hz grid's period over
-    #: the latest 2 s, once they span ``rotation_span_s``), and the Kalman model and the
+    #: the latest 2 s, once they span ``rotation_span_s``: early, so that little of the fit
+    #: is made at a wrong rate), and the Kalman model and the
     #: bearing's phase advances turn at it (15 Hz exactly on a nominal beacon: the
     #: estimate's resolution is 1e-5). False: 15 Hz assumed.
     track_rotation: bool = True
-    rotation_span_s: float = 0.2
+    rotation_span_s: float = 0.05
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -122,6 +142,7 @@ class ReceiverState:
     last_t_s: float | None = None
     last_tick: int | None = None
     recent_refs_s: np.ndarray = field(default_factory=lambda: np.empty(0))  # rate tracker input
+    rotation_hz: float | None = None   # the rate tracker's latest estimate (None: none yet)
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
@@ -206,11 +227,16 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     if cfg.track_rotation:
         # known before this block, then each reference in the order it becomes known
         prior = state.recent_refs_s
-        rates = rotation_track(np.concatenate([prior, ref_t]), dcfg.tol_s,
-                               int(dcfg.min_grid_refs), float(cfg.rotation_span_s))[prior.size:]
+        rates, confirmed = rotation_track(np.concatenate([prior, ref_t]), dcfg.tol_s,
+                                          int(dcfg.min_grid_refs), float(cfg.rotation_span_s),
+                                          prior_rate=state.rotation_hz)
+        rates, confirmed = rates[prior.size:], confirmed[prior.size:]
         state.recent_refs_s = np.concatenate([prior, ref_t])[-4 * int(2.0 * F135):]
+        if confirmed.any():
+            state.rotation_hz = float(rates[-1])
     else:
-        rates = np.full(n_ref, F15)
+        rates, confirmed = np.full(n_ref, F15), np.ones(n_ref, bool)
+    out_done = []
     out_f = []
     # Segments of pulses between the moments a reference burst becomes known.
     if ticks is not None:
@@ -240,9 +266,10 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
             continue
         out_t.append(T)
         out_k.append(ref_k[r])
+        out_done.append(max(float(ref_done[r]), float(last_t)))
         n_up, n_gated, noise = kf.health()
         out_ok.append((n_up >= kf.kalman.warmup) & (n_gated < cfg.flag_gated)
-                      & (noise <= cfg.flag_noise_ratio))
+                      & (noise <= cfg.flag_noise_ratio) & bool(confirmed[r]))
         if integer_bearing:
             # the fixed-point DSP: integer state, integer tick differences (see below)
             t_hz = kf.tick_hz
@@ -291,7 +318,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
         events={**kf.events, "invalid_bearings": n_invalid, "flagged_bearings": n_flagged},
-        state=state, valid=ok)
+        state=state, valid=ok, produced_s=np.array(out_done))
 
 
 def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):
