@@ -36,7 +36,7 @@ OPTIONS = (
     Option(_SIG, "bearing_deg"), Option(_SIG, "snr_db"), Option(_SIG, "duration_s"),
     Option(_SIG, "seed"), Option(_SIG, "mode"), Option(_SIG, "mod_15"),
     Option(_SIG, "mod_135"), Option(_SIG, "fs_hz"), Option(_SIG, "if_hz"),
-    Option(_SIG, "adc_bits"),
+    Option(_SIG, "adc_bits"), Option(_SIG, "rotation_hz"),
     Option(KalmanConfig, "memory_s", help="Kalman filter memory (s)"),
     Option(_RUN, "settle_s"), Option(_RUN, "backend"), Option(_RUN, "dsp"),
     Option(_RUN, "compare"),
