@@ -37,6 +37,14 @@ reports no bearing before it. False references: on noise alone no grid forms (to
 references on one 135 Hz grid: ``min_grid_refs``); a beacon of the other mode gives no
 template a lead. A record where the mains are all decoded (>= 5 dB) is left as it was.
 
+Rotation rate: the beacon's antenna may turn slightly off 15 Hz (the references then lie
+on a grid of period ``1 / (9 f)``). The grid's period is estimated from the decoded
+references (:func:`estimate_rotation`: median of the gaps, then a least-squares grid with
+indices counted gap by gap, so a beacon 5 % off still fits) and rounded to
+:data:`RATE_QUANTUM` (a nominal beacon gives exactly 15 Hz). The block's estimate sets the
+grid of :func:`_snap_to_grid` and of the rotation-slot detector; the receiver tracks the rate
+causally (:func:`rotation_track`) for its Kalman model and phase advances.
+
 ``min_fraction`` = 0.5 lets the main burst be found when the references sit in the envelope
 trough at low SNR (bearing 90 deg: half the trough pulses fall under the detection
 threshold at 6 dB). It cannot create main bursts from random pairs: those are at least
