@@ -50,6 +50,7 @@ bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in RE
 	$(PY) -m cosim bench estimation
 	$(PY) -m cosim bench dsp-hour
 	$(PY) -m cosim bench tacan-accuracy
+	$(PY) -m cosim bench tacan-robustness
 
 # A study's report, tables and plots are copied to results/ (shown in README.md); its
 # per-point cache stays under build/.

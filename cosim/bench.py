@@ -75,17 +75,63 @@ def machine_info() -> dict:
 
 def _one_run(kw: dict) -> dict:
     from .tacan.run import TacanRunConfig, run_tacan
-    from .tacan.signal import TacanSignalConfig
-    sig = TacanSignalConfig(**kw)
+    from .tacan.signal import Multipath, TacanSignalConfig
+    kw = dict(kw)
+    echo = kw.pop("multipath", None)
+    sig = TacanSignalConfig(**kw, multipath=None if echo is None else Multipath(**echo))
     try:
         r = run_tacan(TacanRunConfig(signal=sig, backend="golden"))
         r["locked"] = True
     except RuntimeError:  # no reference decoded: the receiver has no bearing (counted)
         r = {"locked": False, "snr_db": kw["snr_db"], "rmse_deg": None, "mean_error_deg": None,
-             "max_abs_error_deg": None, "gated": 0, "reinit": 0}
+             "max_abs_error_deg": None, "gated": 0, "reinit": 0, "first_valid_bearing_s": None,
+             "rotation_hz": None}
     r.pop("elapsed_s", None)
     r["bearing_deg"] = kw["bearing_deg"]
     return r
+
+
+def _pool(rows: list, key: str = "rmse_deg") -> dict:
+    """RMSE (root of the mean square over the trials), mean error and worst error of the
+    locked trials among ``rows``, and the median time to the first valid bearing."""
+    ok = [r for r in rows if r["locked"] and r["rmse_deg"] is not None]
+    ttfb = [r["first_valid_bearing_s"] for r in rows if r.get("first_valid_bearing_s") is not None]
+    out = {"trials": len(rows), "locked": len(ok), "rmse_deg": None, "mean_error_deg": None,
+           "max_abs_error_deg": None,
+           "first_valid_bearing_s": float(np.median(ttfb)) if ttfb else None,
+           "valid_trials": len(ttfb)}
+    if ok:
+        out.update(rmse_deg=float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in ok]))),
+                   mean_error_deg=float(np.mean([r["mean_error_deg"] for r in ok])),
+                   max_abs_error_deg=float(max(r["max_abs_error_deg"] for r in ok)))
+    return out
+
+
+#: Rotation-rate offsets (relative) and echoes of the robustness table (10 dB, golden chain).
+ROBUST_ROTATIONS = (0.0, 0.005, -0.005, 0.01, -0.01)
+ROBUST_ECHO_PHASES = (0.0, 1.5708, 3.1416)
+
+
+def _robustness(quick: bool, jobs) -> list:
+    """Bias at 10 dB, 90 and 270 deg: beacon rotating 0.5 % and 1 % off 15 Hz, and a -6 dB
+    echo 2 us late (same bearing; carrier phases 0, 90, 180 deg)."""
+    seeds = 1 if quick else 2
+    cases = [("rotation", {"rotation_hz": 15.0 * (1 + e)}, f"rotation {100 * e:+.1f} %")
+             for e in ROBUST_ROTATIONS]
+    cases += [("echo", {"multipath": {"delay_s": 2e-6, "rel_amplitude": 10 ** (-6 / 20),
+                                      "phase_rad": ph}},
+               f"echo -6 dB, 2 us, phase {round(ph * 57.29578):d} deg")
+              for ph in (ROBUST_ECHO_PHASES[:1] if quick else ROBUST_ECHO_PHASES)]
+    items = [dict(bearing_deg=b, snr_db=10.0, duration_s=3.0, seed=200 + k, **kw)
+             for _, kw, _ in cases for b in (90.0, 270.0) for k in range(seeds)]
+    runs = _map(jobs, _one_run, items, "robustness (10 dB)")
+    rows = []
+    for i, (kind, kw, label) in enumerate(cases):
+        for j, b in enumerate((90.0, 270.0)):
+            rs = runs[(2 * i + j) * seeds:(2 * i + j + 1) * seeds]
+            rows.append({"case": label, "kind": kind, "bearing_deg": b, **_pool(rs),
+                         "rotation_hz_est": [r.get("rotation_hz") for r in rs]})
+    return rows
 
 
 def _map(jobs, fn, items, desc):
@@ -103,7 +149,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     from .tacan.signal import TacanSignalConfig, pulse_observations
 
     t_start = time.perf_counter()
-    snrs = [0, 10, 20] if quick else list(range(0, 21, 2))
+    snrs = [-3, 0, 3, 10, 20] if quick else [-3, 0, 2, 3, 4] + list(range(6, 21, 2))
     trials = 1 if quick else 2
     duration = 2.0 if quick else 3.0
     items = [dict(bearing_deg=b, snr_db=float(s), duration_s=duration, seed=100 + k)
@@ -116,15 +162,9 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
         for b in (90.0, 270.0):
             rs = [r for r in runs if r["snr_db"] == s and r["bearing_deg"] == b]
             ok = [r for r in rs if r["locked"]]
-            row = {"snr_db": s, "bearing_deg": b, "trials": len(rs), "locked": len(ok),
-                   "rmse_deg": None, "mean_error_deg": None, "max_abs_error_deg": None,
-                   "crb_deg": crb, "rmse_over_crb": None,
+            row = {"snr_db": s, "bearing_deg": b, **_pool(rs), "crb_deg": crb,
                    "gated": int(sum(r["gated"] for r in rs)), "reinit": int(sum(r["reinit"] for r in rs))}
-            if ok:
-                rmse = float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in ok])))
-                row.update(rmse_deg=rmse, rmse_over_crb=rmse / crb,
-                           mean_error_deg=float(np.mean([r["mean_error_deg"] for r in ok])),
-                           max_abs_error_deg=float(max(r["max_abs_error_deg"] for r in ok)))
+            row["rmse_over_crb"] = row["rmse_deg"] / crb if ok else None
             snr_rows.append(row)
 
     step = 15 if quick else 2
@@ -136,6 +176,23 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                  "mean_error_deg": r["mean_error_deg"], "max_abs_error_deg": r["max_abs_error_deg"]}
                 for r in sweep]
     locked = [r for r in brg_rows if r["locked"]]
+
+    # 0 dB, every bearing (2 deg steps): a bearing, no sector slip, RMSE within 2x the bound.
+    step0 = 30 if quick else 2
+    b0 = np.arange(0, 360, step0, dtype=float)
+    crb0 = crb_deg(TacanSignalConfig(snr_db=0.0).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
+    sweep0 = _map(jobs, _one_run, [dict(bearing_deg=float(b), snr_db=0.0, duration_s=2.0,
+                                        seed=3000 + int(b)) for b in b0], "bearing sweep (IF, 0 dB)")
+    rows0 = [{"bearing_deg": r["bearing_deg"], "locked": r["locked"], "rmse_deg": r["rmse_deg"],
+              "mean_error_deg": r["mean_error_deg"], "max_abs_error_deg": r["max_abs_error_deg"],
+              "first_valid_bearing_s": r.get("first_valid_bearing_s")} for r in sweep0]
+    p0 = _pool(sweep0)
+    sweep_0db = {**p0, "bearings": int(b0.size), "step_deg": step0, "duration_s": 2.0,
+                 "crb_deg": crb0,
+                 "rmse_over_crb": p0["rmse_deg"] / crb0 if p0["rmse_deg"] is not None else None,
+                 "within_2x_crb": int(sum(r["rmse_deg"] <= 2 * crb0 for r in rows0 if r["locked"])),
+                 "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in rows0 if r["locked"]))}
+    robust = _robustness(quick, jobs)
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.
     pl_rows = []
@@ -167,9 +224,12 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                                   "max_abs_error_deg": worst_if,
                                   "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in locked))},
         "bearing_sweep_pulse_level": pl_rows,
+        "bearing_sweep_if_0db": sweep_0db,
+        "robustness_10db": robust,
     }
     out.mkdir(parents=True, exist_ok=True)
-    (out / "tacan_accuracy.json").write_text(json.dumps({**summary, "bearing_sweep_rows": brg_rows}, indent=1))
+    (out / "tacan_accuracy.json").write_text(json.dumps({**summary, "bearing_sweep_rows": brg_rows,
+                                                         "bearing_sweep_0db_rows": rows0}, indent=1))
     with open(out / "tacan_accuracy_snr.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(snr_rows[0]))
         w.writeheader()
@@ -219,13 +279,15 @@ def _accuracy_markdown(s: dict) -> str:
     m = s["machine"]
     lines = [f"TACAN bearing accuracy, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
              f"commit {m['commit']}, {s['elapsed_s']:.0f} s)", "",
-             "| SNR dB | bearing | locked | RMSE deg | mean err deg | max err deg | CRB deg | RMSE/CRB |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| SNR dB | bearing | locked | RMSE deg | mean err deg | max err deg | CRB deg | RMSE/CRB "
+             "| first valid bearing s (median) |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
     for r in s["snr_sweep"]:
         lines.append(f"| {r['snr_db']:g} | {r['bearing_deg']:g} | {r['locked']}/{r['trials']} | "
                      f"{f(r['rmse_deg'], '.3f')} | {f(r['mean_error_deg'], '+.3f')} | "
-                     f"{f(r['max_abs_error_deg'], '.3f')} | {r['crb_deg']:.3f} | {f(r['rmse_over_crb'], '.2f')} |")
+                     f"{f(r['max_abs_error_deg'], '.3f')} | {r['crb_deg']:.3f} | {f(r['rmse_over_crb'], '.2f')} "
+                     f"| {f(r['first_valid_bearing_s'], '.2f')} |")
     b = s["bearing_sweep_if_10db"]
     lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB (IF chain, "
               f"{b['duration_s']:g} s each, {b['locked']}/{b['bearings']} locked): "
@@ -236,7 +298,48 @@ def _accuracy_markdown(s: dict) -> str:
     for r in s["bearing_sweep_pulse_level"]:
         lines.append(f"| {r['snr_db']:g} | {r['bearings']} x {r['seeds']} | {r['rmse_deg']:.3f} | "
                      f"{r['max_abs_error_deg']:.3f} | {r['crb_deg']:.3f} |")
+    z = s.get("bearing_sweep_if_0db")
+    if z is not None:
+        lines += ["", f"Every bearing 0-359 deg in {z['step_deg']} deg steps at 0 dB (IF chain, "
+                  f"{z['duration_s']:g} s each): a bearing at {z['locked']}/{z['bearings']}, "
+                  f"RMSE {f(z['rmse_deg'], '.3f')} deg ({f(z['rmse_over_crb'], '.2f')} x the bound "
+                  f"{z['crb_deg']:.3f}), within 2x the bound at {z['within_2x_crb']}, mean error "
+                  f"{f(z['mean_error_deg'], '+.3f')} deg, worst {f(z['max_abs_error_deg'], '.3f')} deg, "
+                  f"sector slips {z['sector_slips']}, first valid bearing (median) "
+                  f"{f(z['first_valid_bearing_s'], '.2f')} s."]
+    if s.get("robustness_10db"):
+        lines += _robustness_markdown(s["robustness_10db"])
     return "\n".join(lines) + "\n"
+
+
+def _robustness_markdown(rows) -> list:
+    f = lambda v, fmt: "-" if v is None else format(v, fmt)
+    out = ["", "Robustness at 10 dB (IF chain, golden, 3 s; the bias is the mean error over "
+           "the trials after settling):", "",
+           "| case | bearing | locked | mean error deg | RMSE deg | max err deg | rotation estimated Hz |",
+           "|---|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        est = sorted({round(v, 5) for v in r["rotation_hz_est"] if v is not None})
+        out.append(f"| {r['case']} | {r['bearing_deg']:g} | {r['locked']}/{r['trials']} | "
+                   f"{f(r['mean_error_deg'], '+.3f')} | "
+                   f"{f(r['rmse_deg'], '.3f')} | {f(r['max_abs_error_deg'], '.3f')} | "
+                   f"{', '.join(format(v, '.5f') for v in est) or '-'} |")
+    return out
+
+
+def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    """The robustness table of ``tacan-accuracy`` alone (rotation off 15 Hz, echo)."""
+    t_start = time.perf_counter()
+    rows = _robustness(quick, jobs)
+    summary = {"benchmark": "tacan-robustness", "machine": machine_info(), "quick": quick,
+               "elapsed_s": time.perf_counter() - t_start, "robustness_10db": rows}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tacan_robustness.json").write_text(json.dumps(summary, indent=1))
+    m = summary["machine"]
+    head = [f"TACAN bearing robustness, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
+            f"commit {m['commit']}, {summary['elapsed_s']:.0f} s)"]
+    (out / "tacan_robustness.md").write_text("\n".join(head + _robustness_markdown(rows)) + "\n")
+    return summary
 
 
 def _dsp_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
@@ -284,10 +387,16 @@ def _ins(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     return ins_bench(out, quick=quick, jobs=jobs)
 
 
-BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
+def _aukf(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gnss.study_aukf import bench as aukf_bench
+    return aukf_bench(out, quick=quick)
+
+
+BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "tacan-robustness": tacan_robustness,
+              "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
               "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,
-              "monopulse": _monopulse, "ins": _ins}
+              "monopulse": _monopulse, "ins": _ins, "aukf": _aukf}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

@@ -4,24 +4,32 @@
 channel's front end for :func:`cosim.session.open_frontend`, and its HDL top."""
 from __future__ import annotations
 
-from ..receivers import Arg, Figure, Frontend, Option, Receiver, config_kwargs, register
-from ..validate import dumps
-from .run import DynamicsChoice, GnssRunConfig, run_gnss
+from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
+                         parse_int, register)
+from ..studies.sweep import SweepConfig
+from ..validate import check_jobs, check_out_dir, dumps
+from .study import SWEEP_MODEL
+from .run import SCENARIOS, DynamicsChoice, GnssRunConfig, run_gnss
 from .signal import GnssSignalConfig
 
 _SIG, _DYN, _RUN = GnssSignalConfig, DynamicsChoice, GnssRunConfig
 
 #: Options of ``python -m cosim gnss``.
 OPTIONS = (
-    Option(_SIG, "prn"), Option(_SIG, "cn0_dbhz", help="carrier to noise density (dB-Hz)"), Option(_SIG, "duration_s"),
+    Arg("--scenario", type=str.lower, choices=tuple(SCENARIOS), default=None,
+        help="named preset; its values fill the options not given: " + "; ".join(
+            f"{k}: {v['help']}" for k, v in SCENARIOS.items())),
+    Option(_SIG, "prn"), Option(_SIG, "cn0_dbhz", default=None,
+                                help="carrier to noise density (dB-Hz; default 45)"),
+    Option(_SIG, "duration_s"),
     Option(_SIG, "seed", help="random seed (>= 0) of the noise, data bits, dynamics"),
     Option(_SIG, "fs_hz", help="ADC sample rate = channel clock (S/s)"),
     Option(_SIG, "if_hz", help="IF (Hz), in the first Nyquist zone"),
     Option(_SIG, "adc_bits"), Option(_SIG, "code_phase_chips"),
-    Option(_DYN, "dynamics"), Option(_DYN, "jerk_g_per_s"), Option(_DYN, "jerk_start_s"),
+    Option(_DYN, "dynamics", default=None), Option(_DYN, "jerk_g_per_s"), Option(_DYN, "jerk_start_s"),
     Option(_DYN, "jerk_duration_s"),
     Option(_RUN, "tracker"), Option(_RUN, "bn_hz"), Option(_RUN, "dll_bn_hz"),
-    Option(_RUN, "backend"), Option(_RUN, "dsp"),
+    Option(_RUN, "backend"), Option(_RUN, "dsp"), Option(_RUN, "r_mode"),
     Option(_RUN, "control_latency_cycles", flag="--latency"),
     Option(_RUN, "settle_s"), Option(_RUN, "compare"),
     Arg("--json", action="store_true", help="print one JSON object"),
@@ -29,16 +37,77 @@ OPTIONS = (
 
 
 def build_configs(a) -> tuple[GnssSignalConfig, GnssRunConfig]:
-    """The signal and run configurations of parsed options (ValueError if refused)."""
+    """The signal and run configurations of parsed options (ValueError if refused); a
+    ``--scenario`` fills the options left unset."""
+    if getattr(a, "scenario", None):
+        for k, v in SCENARIOS[a.scenario]["options"].items():
+            if getattr(a, k) is None:
+                setattr(a, k, v)
     sig = _SIG(**config_kwargs(a, OPTIONS, _SIG))
     sig = _DYN(**config_kwargs(a, OPTIONS, _DYN)).apply(sig)
-    return sig, _RUN(**config_kwargs(a, OPTIONS, _RUN))
+    run = config_kwargs(a, OPTIONS, _RUN)
+    if getattr(a, "scenario", None):
+        run = {**SCENARIOS[a.scenario].get("run", {}), **run}
+    return sig, _RUN(**run)
+
+
+# -- sweep gnss: the AUKF core's word lengths (cosim/gnss/study.py) --------------------------
+_SW = SweepConfig
+
+SWEEP_OPTIONS = (
+    Arg("--param", action="append", default=[], metavar="NAME=VALUES",
+        help="swept width of an AUKF core format, e.g. dsp.P=28:48:4, dsp.gain=16:32:4 "
+             "(repeatable; default dsp.P=28:48:4)"),
+    Arg("--cn0-dbhz", default=None, help="C/N0 values (dB-Hz; a:b:step or a list; default 32)"),
+    Option(_SW, "design", choices=("grid", "oat"), case="lower",
+           help="grid: every combination; oat: one parameter at a time (the others at their "
+                "largest value)"),
+    Option(_SW, "trials", help="Monte Carlo records per C/N0"),
+    Option(_SW, "duration_s", help="record length (s)"),
+    Option(_SW, "seed", help="base seed (>= 0)"),
+    Option(_SW, "target_rel", flag="--target",
+           help="proposal target: phase RMSE within (1 + target) of the float64 AUKF (fraction)"),
+    Arg("--no-confirm", action="store_true", help="skip the confirming re-run"),
+    Arg("--out", default="build/studies/sweep_gnss", help="output directory"),
+    Arg("--jobs", type=parse_int, default=None,
+        help="worker processes, 1 .. the cores (default: all cores)"),
+    Arg("--json", action="store_true", help="print one JSON object"),
+)
+
+
+def cmd_sweep(a) -> int:
+    from ..studies.sweep import check_points, parse_param, parse_values, study
+    if a.seed < 0:
+        raise ValueError(f"--seed must be >= 0, not {a.seed}")
+    params = tuple(parse_param(t, "gnss") for t in a.param)
+    cn0 = (32.0,) if a.cn0_dbhz is None else parse_values(a.cn0_dbhz, "--cn0-dbhz")
+    if not all(isinstance(v, (int, float)) for v in cn0):
+        raise ValueError(f"--cn0-dbhz takes numbers (dB-Hz), not {a.cn0_dbhz!r}")
+    check_out_dir(a.out, "--out")
+    cfg = SweepConfig(receiver="gnss", params=params, snr_db=tuple(float(v) for v in cn0),
+                      recheck=0, **config_kwargs(a, SWEEP_OPTIONS, SweepConfig))
+    check_points(cfg)
+    s = study(cfg, a.out, jobs=check_jobs(a.jobs), confirm_proposal=not a.no_confirm,
+              progress=not a.json)
+    conf = s.get("confirmation") or {}
+    if a.json:
+        print(dumps({k: s[k] for k in ("proposal", "elapsed_s", "n_points")} |
+                    {"confirmed": conf.get("confirmed"), "confirmed_params": conf.get("params"),
+                     "report": f"{a.out}/report.md"}))
+    else:
+        print(f"{s['n_points']} points in {s['elapsed_s']:.0f} s; report: {a.out}/report.md")
+        print(f"proposal: {s['proposal']}")
+        if conf:
+            print(f"confirmed: {conf['confirmed']}" + (f" with {conf['params']}" if conf.get("params") else ""))
+    return 0
 
 
 def cmd_gnss(a) -> int:
     sig, run = build_configs(a)
     r = run_gnss(sig, run)
     r.pop("_series", None)
+    if a.scenario:
+        r["scenario"] = {"name": a.scenario, **SCENARIOS[a.scenario]}
     if a.json:
         print(dumps(r))
         return 0
@@ -57,6 +126,10 @@ def cmd_gnss(a) -> int:
     if "vs_golden_phase_rms_deg" in r:
         print(f"vs golden (float chain): phase {r['vs_golden_phase_rms_deg']:.3f} deg rms, "
               f"Doppler {r['vs_golden_doppler_rms_hz']:.4f} Hz rms")
+    if r["q_hat"] is not None:
+        q = r["q_hat"]
+        print(f"q_hat final {q['final']:.4g} (q0 {q['q0']:g}; per {q['block_s']:g} s block "
+              f"{q['min']:.3g}..{q['max']:.3g}), diverged {r['diverged']}")
     print(f"digest {r['digest']['all']}")
     return 0
 
@@ -90,4 +163,7 @@ GNSS = register(Receiver(
              "lock_fraction"),
     primary=Figure("phase_rmse_deg", "carrier phase RMSE", "deg"),
     frontend=_frontend(),
+    sweep=Study("word-length sweep of the fixed-point seed-002 AUKF core on the fast path "
+                "(paired with the float64 AUKF), proposal and its confirmation", SWEEP_OPTIONS,
+                cmd_sweep, model=SWEEP_MODEL),
     tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)}))

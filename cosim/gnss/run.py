@@ -51,7 +51,7 @@ from ..validate import check_float, check_int, check_memory
 from .signal import GnssSignalConfig, GnssSignalGenerator
 
 __all__ = ["GnssRunConfig", "DynamicsChoice", "run_gnss", "closed_loop", "ClosedLoop",
-           "handover_writes", "adc_words", "BACKENDS", "DSP_MODES",
+           "handover_writes", "adc_words", "BACKENDS", "DSP_MODES", "SCENARIOS", "tracker_report",
            "SKIP_RECORDS", "DYNAMICS"]
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
@@ -65,6 +65,27 @@ CYCLES_PER_S = {"pysim": 2e3, "verilator": 2e6}
 MAX_WALL_S = 3600.0
 #: NCO word width the trackers write (dsp.gnss.loops_fixed.WORD_BITS).
 WORD_BITS = 32
+
+
+#: Named scenarios of ``python -m cosim gnss --scenario NAME``: the options each sets (an
+#: option given on the command line wins) and, under ``"tracker"``, what the seed fixes
+#: that the trackers take as their defaults (written into the run's JSON).
+SCENARIOS = {
+    "seed002": {
+        "help": "seed 002 (RECEIVERS.md section 1): the x0 dynamics (1000 m/s, 1 g), "
+                "32 dB-Hz, T = 1 ms",
+        "options": {"cn0_dbhz": 32.0, "dynamics": "seed002"},
+        # an acquisition for 32 dB-Hz (the default 1 ms x 5 and 1 ms x 20 miss it):
+        # 2 ms coherent (125 Hz bins) x 20 non-coherent, 40 ms Doppler refinement
+        # and the tracker started on the seed's x0 Doppler rate (w1 / 2 pi)
+        "run": {"acq_coherent_ms": 2, "acq_noncoherent": 20, "acq_bin_hz": 125.0,
+                "refine_ms": 40, "handover_doppler_rate_hz_s": 323.356 / (2 * math.pi)},
+        "tracker": {"x0": [0.0, 32995.519, 323.356, 0.0], "T_s": 1e-3,
+                    "P0": "diag(1e-3) (w0 widened to the hand-over Doppler's sigma)",
+                    "epsilon": 1.027, "kappa": 0.0, "beta": 2.0, "q0": 5.0,
+                    "R": "1/(2 T C/N0) (--r-mode cn0) or 1e-9 (--r-mode seed)"},
+    },
+}
 
 
 @dataclass(frozen=True)
@@ -84,7 +105,7 @@ class DynamicsChoice:
 
     dynamics: str = field(default="static", metadata={
         "help": "line-of-sight dynamics: static, seed002 (1000 m/s, 1 g), seed002-jerk "
-                "(plus a jerk segment), seed002-process (Singer jerk process, q 5)",
+                "(plus a jerk segment), seed002-process (Singer jerk process, q 5); default static",
         "choices": DYNAMICS, "case": "lower"})
     jerk_g_per_s: float = field(default=5.0, metadata={
         "help": "jerk of the seed002-jerk segment (g/s)"})
@@ -184,6 +205,13 @@ class GnssRunConfig:
     refine_ms: int = field(default=20, metadata={"help": "Doppler refinement length (ms)"})
     handover_doppler_sigma_hz: float = field(default=3.0, metadata={
         "help": "1-sigma error of the refined hand-over Doppler told to the tracker (Hz)"})
+    r_mode: str = field(default="cn0", metadata={
+        "help": "measurement noise R of the seed-002 trackers (aukf, ukf): cn0 = 1/(2 T C/N0) "
+                "of the nominal C/N0, seed = the seed's 1e-9",
+        "choices": ("cn0", "seed"), "case": "lower"})
+    handover_doppler_rate_hz_s: float = field(default=0.0, metadata={
+        "help": "Doppler rate the tracker starts on (Hz/s; acquisition does not measure it; "
+                "--scenario seed002: the seed's x0, 51.464 Hz/s)"})
     compare: str | None = field(default=None, metadata={
         "help": "also run the golden chain (float) and report the differences",
         "choices": ("golden",), "case": "lower"})
@@ -199,6 +227,13 @@ class GnssRunConfig:
                              f"{self.backend!r}")
         if self.dsp not in DSP_MODES:
             raise ValueError(f"dsp must be float or fixed, not {self.dsp!r}")
+        if self.r_mode not in ("cn0", "seed"):
+            raise ValueError(f"r_mode must be cn0 or seed, not {self.r_mode!r}")
+        if self.r_mode != "cn0":
+            from dsp.gnss.trackers import _TRACKERS
+            if "r_mode" not in inspect.signature(_TRACKERS[self.tracker][0]).parameters:
+                raise ValueError(f"r_mode {self.r_mode} applies to the seed-002 trackers "
+                                 f"(aukf, ukf), not {self.tracker}")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         check_float("bn_hz", self.bn_hz, 0.0, 100.0, lo_open=True, unit="Hz")
@@ -217,6 +252,8 @@ class GnssRunConfig:
         check_int("refine_ms", self.refine_ms, 2, 200)
         check_float("handover_doppler_sigma_hz", self.handover_doppler_sigma_hz, 0.0, 250.0,
                     lo_open=True, unit="Hz")
+        check_float("handover_doppler_rate_hz_s", self.handover_doppler_rate_hz_s, -1e4, 1e4,
+                    unit="Hz/s")
         check_int("block_samples", self.block_samples, 1024)
         for kv in self.hdl_changes:
             if not (isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)):
@@ -293,12 +330,12 @@ def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_
     from dsp.gnss.trackers import TrackerContext, _TRACKERS, make_tracker
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
                          inverted=inverted, doppler0_hz=doppler_hz,
-                         doppler_rate0_hz_s=0.0, cn0_dbhz=cn0_dbhz,
+                         doppler_rate0_hz_s=run.handover_doppler_rate_hz_s, cn0_dbhz=cn0_dbhz,
                          spacing_chips=spacing_chips, latency_epochs=1,
                          doppler0_sigma_hz=run.handover_doppler_sigma_hz)
     arith = FixedArith() if arith_name == "fixed" else FLOAT
     params = inspect.signature(_TRACKERS[run.tracker][0]).parameters
-    opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz") if k in params}
+    opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz", "r_mode") if k in params}
     if extra is not None:       # (TrackerContext changes, tracker options) of the caller
         ctx = replace(ctx, **extra[0])
         opts.update(extra[1])
@@ -518,6 +555,28 @@ def _score(gen, track: _Tracking, n_b, settle_s):
     return out
 
 
+def tracker_report(tracker) -> dict:
+    """The tracker's own figures for the JSON: ``q_hat`` (final value, per-block trajectory
+    of one stream, the slave's block length) and ``diverged`` (its own loss-of-lock rule) of
+    the seed-002 trackers, None for trackers without them, plus the rest of ``report()``
+    under ``tracker_report``."""
+    rep = tracker.report() if hasattr(tracker, "report") else {}
+    out = {"q_hat": None, "diverged": None}
+    if "q_hat" in rep:
+        q = rep["q_hat"]
+        prm = rep.get("params", {})
+        out["q_hat"] = {"final": q["median_final"], "q0": prm.get("q0"),
+                        "block_s": prm.get("block_s"), "trajectory": q["trajectory_median"],
+                        "min": min(q["trajectory_median"]), "max": max(q["trajectory_median"]),
+                        "adaptive": prm.get("adaptive")}
+    if "diverged" in rep:
+        d = rep["diverged"]
+        out["diverged"] = bool(np.any(d))
+    if rep:
+        out["tracker_report"] = {k: v for k, v in rep.items() if k not in ("q_hat", "diverged")}
+    return out
+
+
 def check_run_size(sig: GnssSignalConfig, run: GnssRunConfig) -> None:
     """Refuse, before work, a record the machine cannot hold or a cycle-accurate run that
     would take hours (the message names the option)."""
@@ -581,6 +640,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     score = _score(gen, track, n_b, run.settle_s)
     series = score.pop("_series")
     result.update(score)
+    result.update(tracker_report(track.tracker))
     h = hashlib.sha256("".join(f"{k}={v};" for k, v in sorted(digest.items())).encode())
     digest["all"] = h.hexdigest()[:16]
     result["digest"] = digest

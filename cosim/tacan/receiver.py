@@ -36,7 +36,7 @@ OPTIONS = (
     Option(_SIG, "bearing_deg"), Option(_SIG, "snr_db"), Option(_SIG, "duration_s"),
     Option(_SIG, "seed"), Option(_SIG, "mode"), Option(_SIG, "mod_15"),
     Option(_SIG, "mod_135"), Option(_SIG, "fs_hz"), Option(_SIG, "if_hz"),
-    Option(_SIG, "adc_bits"),
+    Option(_SIG, "adc_bits"), Option(_SIG, "rotation_hz"),
     Option(KalmanConfig, "memory_s", help="Kalman filter memory (s)"),
     Option(_RUN, "settle_s"), Option(_RUN, "backend"), Option(_RUN, "dsp"),
     Option(_RUN, "compare"),
@@ -179,6 +179,9 @@ def cmd_tacan(a) -> int:
         else:
             print(f"  no bearing scored (the run ends before the filter has settled, "
                   f"{r['settle_s']:g} s)")
+        print(f"  first valid bearing at {_num(r['first_valid_bearing_s'], '.3f', 'none')} s; "
+              f"rotation rate {_num(r['rotation_hz'], '.4f', 'not established')} Hz "
+              f"(from the reference timing)")
         print(f"  {r['n_peaks']} peaks, {r['n_measurements']} measurements, {r['n_updates']} Kalman updates, "
               f"{r['n_main_refs']} main + {r['n_aux_refs']} aux references, {r['gated']} gated, "
               f"{r['reinit']} re-initialisations, {r['adc_clipped']} ADC samples clipped")

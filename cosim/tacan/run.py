@@ -341,6 +341,10 @@ def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: flo
     return float(np.sqrt(np.mean(d ** 2))), int(ok.sum())
 
 
+def _finite_or_none(v) -> float | None:
+    return float(v) if math.isfinite(float(v)) else None
+
+
 def _digest(*arrays) -> str:
     h = hashlib.sha256()
     for a in arrays:
@@ -437,6 +441,8 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         "n_main_refs": int(track.n_main_refs),
         "n_aux_refs": int(track.n_aux_refs),
         "refs_off_grid": int(track.n_refs_off_grid),
+        "first_valid_bearing_s": _finite_or_none(track.first_valid_s()[0]),
+        "rotation_hz": track.state.rotation_hz if track.state is not None else None,
         "gated": int(track.gated[0]),
         "reinit": int(track.reinit[0]),
         "adc_clipped": int(s.truth.n_clipped),

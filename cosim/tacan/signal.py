@@ -157,6 +157,9 @@ class TacanSignalConfig:
     identity_on_s: float = 0.125
     identity_period_s: float = 0.5
     multipath: Multipath | None = None
+    rotation_hz: float = field(default=F15, metadata={
+        "help": "antenna rotation rate (Hz; 15 nominal, 14.25..15.75 accepted); the fine "
+                "(135 Hz) component and the reference bursts follow it"})
 
     def __post_init__(self):
         def finite(name):
@@ -198,6 +201,9 @@ class TacanSignalConfig:
             raise ValueError(f"first_main_ref_s must be >= 0, not {self.first_main_ref_s}")
         if finite("min_pair_gap_s") <= 0:
             raise ValueError(f"min_pair_gap_s must be > 0, not {self.min_pair_gap_s}")
+        if not 0.95 * F15 <= finite("rotation_hz") <= 1.05 * F15:
+            raise ValueError(f"rotation_hz must be within 5 % of {F15:g} Hz "
+                             f"({0.95 * F15:g}..{1.05 * F15:g}), not {self.rotation_hz!r}")
         if finite("ref_guard_s") < 0:
             raise ValueError(f"ref_guard_s must be >= 0, not {self.ref_guard_s}")
         # Bandpass sampling: the occupied band must sit inside one Nyquist zone.
@@ -287,8 +293,9 @@ def envelope_gain(t_s, cfg: TacanSignalConfig, t_main_s: float, bearing_deg: flo
     """The bearing modulation ``1 + A sin(...) + B sin(...)`` at times ``t_s`` (convention above)."""
     th = math.radians(cfg.bearing_deg if bearing_deg is None else bearing_deg)
     dt = np.asarray(t_s, dtype=np.float64) - t_main_s
-    return (1.0 + cfg.mod_15 * np.sin(2 * np.pi * F15 * dt - th)
-            + cfg.mod_135 * np.sin(2 * np.pi * F135 * dt - 9 * th))
+    f = float(cfg.rotation_hz)
+    return (1.0 + cfg.mod_15 * np.sin(2 * np.pi * f * dt - th)
+            + cfg.mod_135 * np.sin(2 * np.pi * (9 * f) * dt - 9 * th))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -314,10 +321,11 @@ def pulse_schedule(cfg: TacanSignalConfig, rng: np.random.Generator | None = Non
     aux_off = burst_offsets(cfg.mode, "aux")
     pair = pair_spacing_s(cfg.mode)
 
-    n_lo = math.floor(-cfg.first_main_ref_s * F15) - 1
-    n_hi = math.ceil((T - cfg.first_main_ref_s) * F15) + 1
-    mains = cfg.first_main_ref_s + np.arange(n_lo, n_hi + 1) / F15
-    auxs = (mains[:, None] + np.arange(1, 9)[None, :] / F135).ravel()
+    f_rot = float(cfg.rotation_hz)
+    n_lo = math.floor(-cfg.first_main_ref_s * f_rot) - 1
+    n_hi = math.ceil((T - cfg.first_main_ref_s) * f_rot) + 1
+    mains = cfg.first_main_ref_s + np.arange(n_lo, n_hi + 1) / f_rot
+    auxs = (mains[:, None] + np.arange(1, 9)[None, :] / (9 * f_rot)).ravel()
 
     def keep(starts, offs):
         ok = (starts - margin >= 0) & (starts + offs[-1] + margin <= T)
@@ -363,7 +371,7 @@ def pulse_schedule(cfg: TacanSignalConfig, rng: np.random.Generator | None = Non
         free.append((cur, end))
     free = [(lo, hi) for lo, hi in free if hi > lo]
 
-    ref_pulses_per_s = F15 * main_off.size + (F135 - F15) * aux_off.size
+    ref_pulses_per_s = f_rot * main_off.size + 8 * f_rot * aux_off.size
     n_target = cfg.pairs_per_s * 2 * T - ref_pulses_per_s * T - 2 * ident_t.size
     n_random = max(0, int(round(n_target / 2)))
     lengths = np.array([hi - lo for lo, hi in free])

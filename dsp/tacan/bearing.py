@@ -218,7 +218,8 @@ def phase_advance(dt_ticks, word: int, phase_bits: int = PHASE_BITS) -> np.ndarr
 
 
 def reference_advances(dt_main_ticks, dt_ref_ticks, tick_hz: float, *,
-                       angle_bits: int = ANGLE_BITS, phase_bits: int = PHASE_BITS):
+                       angle_bits: int = ANGLE_BITS, phase_bits: int = PHASE_BITS,
+                       rotation_hz: float = F15_HZ):
     """The 15 Hz advance since the main reference and the 135 Hz advance since the latest
     reference, as binary angles of ``angle_bits``.
 
@@ -229,13 +230,17 @@ def reference_advances(dt_main_ticks, dt_ref_ticks, tick_hz: float, *,
     ----------
     dt_main_ticks, dt_ref_ticks : array_like of int
         ``t_last - t_main`` and ``t_last - t_ref`` in ticks of ``tick_hz``.
+    rotation_hz : float
+        The beacon's rotation rate (the 15 Hz component; the fine one at nine times it),
+        as the Kalman core turns at (:meth:`dsp.tacan.kalman.EnvelopeKalman.set_rotation`).
 
     Returns
     -------
     (adv15, adv135) : int64 arrays
     """
-    a15 = phase_advance(dt_main_ticks, freq_word(F15_HZ, tick_hz, phase_bits), phase_bits)
-    a135 = phase_advance(dt_ref_ticks, freq_word(F135_HZ, tick_hz, phase_bits), phase_bits)
+    f = float(rotation_hz)
+    a15 = phase_advance(dt_main_ticks, freq_word(f, tick_hz, phase_bits), phase_bits)
+    a135 = phase_advance(dt_ref_ticks, freq_word(9 * f, tick_hz, phase_bits), phase_bits)
     return reduce_bangle(a15, phase_bits, angle_bits), reduce_bangle(a135, phase_bits, angle_bits)
 
 

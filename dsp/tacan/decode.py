@@ -37,6 +37,14 @@ reports no bearing before it. False references: on noise alone no grid forms (to
 references on one 135 Hz grid: ``min_grid_refs``); a beacon of the other mode gives no
 template a lead. A record where the mains are all decoded (>= 5 dB) is left as it was.
 
+Rotation rate: the beacon's antenna may turn slightly off 15 Hz (the references then lie
+on a grid of period ``1 / (9 f)``). The grid's period is estimated from the decoded
+references (:func:`estimate_rotation`: median of the gaps, then a least-squares grid with
+indices counted gap by gap, so a beacon 5 % off still fits) and rounded to
+:data:`RATE_QUANTUM` (a nominal beacon gives exactly 15 Hz). The block's estimate sets the
+grid of :func:`_snap_to_grid` and of the rotation-slot detector; the receiver tracks the rate
+causally (:func:`rotation_track`) for its Kalman model and phase advances.
+
 ``min_fraction`` = 0.5 lets the main burst be found when the references sit in the envelope
 trough at low SNR (bearing 90 deg: half the trough pulses fall under the detection
 threshold at 6 dB). It cannot create main bursts from random pairs: those are at least
@@ -49,7 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dsp.jit import njit_cached
-from .standard import burst_offsets, pair_spacing_s
+from .standard import F15, F135, burst_offsets, pair_spacing_s
 
 REF_MAIN, REF_AUX = 1, 2
 
@@ -102,7 +110,7 @@ class Decoded:
     n_inferred_main: int = 0   # main references placed by the rotation-slot detector
     n_main_off_slot: int = 0   # decoded main bursts outside the declared slot (dropped)
     main_slot_s: float | None = None   # when the main slot was declared (None: never/not needed)
-    rotation_hz: float | None = None   # beacon rotation rate from the fitted 135 Hz grid
+    rotation_hz: float | None = None   # beacon rotation rate of the block (estimate_rotation)
 
 
 def _match(t: np.ndarray, targets: np.ndarray, tol: float):
@@ -219,20 +227,30 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     done = np.concatenate([tm + main_off[-1], ta + aux_off[-1]])
     o = np.argsort(ref_t, kind="stable")
     ref_t, kinds, scores, done = ref_t[o], kinds[o], scores[o], done[o]
-    ref_t, on_grid = _snap_to_grid(ref_t, kinds, cfg)
+    # The block's rotation rate (the 135 Hz grid's period; exactly 15 Hz on a nominal beacon,
+    # see RATE_QUANTUM): the grid the references are snapped to and fitted with.
+    f_rot = estimate_rotation(ref_t, cfg.tol_s, int(cfg.min_grid_refs))
+    if f_rot is None:
+        p_med = _period_median(ref_t) if ref_t.size >= cfg.min_grid_refs else None
+        f_rot = quantize_rotation(1.0 / (9.0 * p_med)) if p_med is not None else F15
+    ref_t, on_grid = _snap_to_grid(ref_t, kinds, cfg, 1.0 / (9.0 * f_rot))
     n_off = int(np.count_nonzero(~on_grid))
     ref_t, kinds, scores, done = ref_t[on_grid], kinds[on_grid], scores[on_grid], done[on_grid]
+    # again on the snapped references (the raw ones may hold too many mis-aligned bursts)
+    f_est = estimate_rotation(ref_t, cfg.tol_s, int(cfg.min_grid_refs))
+    f_rot = f_rot if f_est is None else f_est
     info = {}
     if cfg.infer_main:
         ref_t, kinds, scores, done, used, info = _infer_main(t, ref_t, kinds, scores, done,
-                                                              main_off, aux_off, cfg)
+                                                              main_off, aux_off, cfg, f_rot)
         um = um | used
 
     pair = pair_spacing_s(cfg.mode)
     _, fwd = _match(t, t + pair, cfg.tol_s)
     _, back = _match(t, t - pair, cfg.tol_s)
     mask = um | ua | fwd | back
-    return Decoded(ref_t, kinds, scores, done, mask, n_off, n_wrong_mode=n_wrong_mode, **info)
+    return Decoded(ref_t, kinds, scores, done, mask, n_off, n_wrong_mode=n_wrong_mode,
+                   rotation_hz=f_est, **info)
 
 
 def _mode_check(t, tm, sm, cfg: DecoderConfig):
@@ -259,15 +277,113 @@ def _mode_check(t, tm, sm, cfg: DecoderConfig):
     return tm[keep], sm[keep], int(np.count_nonzero(~keep))
 
 
+#: Resolution of the rotation-rate estimate, relative to 15 Hz (0.15 mHz). The estimate is
+#: rounded to it, so a nominal beacon -- whose estimate is within ~1e-6 of 15 Hz after a
+#: fifth of a second of references -- gives exactly 15 Hz (the DSP's words and bits are
+#: then those of the nominal rate), and the rounding leaves at most 5e-6 of rate error:
+#: a filter lag of ~0.007 deg (the lag is ~2 pi df memory_s in the 135 Hz phase, / 9).
+RATE_QUANTUM = 1e-5
+#: Rotation rates the estimator accepts (relative deviation from 15 Hz); the generator's range.
+RATE_RANGE = 0.05
+
+
+def quantize_rotation(f_hz: float) -> float:
+    """A rotation-rate estimate rounded to :data:`RATE_QUANTUM` steps of 15 Hz (exactly
+    ``F15`` on the nominal step) and clipped to ``F15 (1 +- RATE_RANGE)``."""
+    k = round((float(f_hz) / F15 - 1.0) / RATE_QUANTUM)
+    kmax = round(RATE_RANGE / RATE_QUANTUM)
+    k = max(-kmax, min(kmax, k))
+    return F15 * (1.0 + k * RATE_QUANTUM) if k else F15
+
+
+def _grid_index(ref_t: np.ndarray, period: float) -> np.ndarray:
+    """Grid index of each (time-sorted) reference, counted gap by gap from the first: a
+    gap of ``k`` periods is read right while ``k`` times the period's error stays below half
+    a period (a beacon 5 % off 15 Hz: gaps up to 9 periods), where indices from one origin
+    (``(t - t0) / p``) slip after ``1 / (2 x error)`` periods."""
+    if ref_t.size == 0:
+        return np.empty(0, np.int64)
+    return np.concatenate([[0], np.cumsum(np.rint(np.diff(ref_t) / period))]).astype(np.int64)
+
+
+def _period_median(ref_t: np.ndarray) -> float | None:
+    """Robust 135 Hz period from the gaps between consecutive references: the median of
+    ``gap / k`` over gaps of ``k`` = 1..8 nominal periods (None: fewer than 3 such gaps)."""
+    p0 = 1.0 / F135
+    d = np.diff(ref_t)
+    k = np.rint(d / p0)
+    ok = (k >= 1) & (k <= 8)
+    if np.count_nonzero(ok) < 3:
+        return None
+    p = float(np.median(d[ok] / k[ok]))
+    return p if abs(p / p0 - 1.0) <= RATE_RANGE else None
+
+
+def estimate_rotation(ref_t: np.ndarray, tol: float, min_refs: int,
+                      min_span_s: float = 0.0) -> float | None:
+    """Rotation rate (Hz, :func:`quantize_rotation`) from reference times: a robust median
+    period, then the least-squares grid (:func:`_fit_grid`) through them. None when there
+    are fewer than ``min_refs`` references, they span less than ``min_span_s``, or no
+    grid holds 80 % of them."""
+    t = np.sort(np.asarray(ref_t, dtype=np.float64))
+    if t.size < max(int(min_refs), 3) or t[-1] - t[0] < min_span_s:
+        return None
+    p = _period_median(t)
+    if p is None:
+        return None
+    fit = _fit_grid(t, p, tol, int(min_refs))
+    if fit is None:
+        return None
+    return quantize_rotation(1.0 / (9.0 * fit[1]))
+
+
+def rotation_track(ref_t, tol: float, min_refs: int, min_span_s: float,
+                   window_s: float = 2.0, prior_rate: float | None = None):
+    """Causal rotation-rate estimate after each reference of ``ref_t`` (given in the order
+    the references become known): :func:`estimate_rotation` of the references known so
+    far that lie within ``window_s`` of the newest (a tracker: it follows a slowly changing
+    rate, and the cost per reference stays bounded), holding the latest estimate (``F15``
+    before the first) when they do not suffice. ``prior_rate`` (an earlier block's
+    estimate, None: none yet) is held until the first estimate.
+
+    Returns
+    -------
+    (rates, confirmed) : float array, bool array
+        The rate after each reference and whether an estimate exists by then (the
+        reference timing is *confirmed*: a 135 Hz grid through ``min_refs`` references
+        spanning ``min_span_s``; the receiver flags its bearings until then).
+    """
+    ref_t = np.asarray(ref_t, dtype=np.float64)
+    out = np.empty(ref_t.size)
+    conf = np.zeros(ref_t.size, bool)
+    f = F15 if prior_rate is None else float(prior_rate)
+    have = prior_rate is not None
+    known = []
+    for i in range(ref_t.size):
+        known.append(ref_t[i])
+        if len(known) > 4 * int(window_s * F135):
+            known = known[-int(window_s * F135) * 2:]
+        w = np.asarray(known)
+        w = w[w >= w.max() - window_s]
+        e = estimate_rotation(w, tol, min_refs, min_span_s)
+        if e is not None:
+            f, have = e, True
+        out[i], conf[i] = f, have
+    return out, conf
+
+
 def _fit_grid(ref_t: np.ndarray, period: float, tol: float, min_refs: int):
-    """Least-squares 135 Hz grid ``t = a + p n`` through the references: indices from the
-    nominal period, then refitted twice on the references within ``tol`` of the grid (a
-    burst mis-aligned by a code step does not pull it). None when fewer than ``min_refs``
-    references, or fewer than 80 % of them, lie on one grid."""
+    """Least-squares 135 Hz grid ``t = a + p n`` through the (time-sorted) references:
+    indices counted gap by gap with ``period`` (:func:`_grid_index`), then refitted twice on
+    the references within ``tol`` of the grid (a burst mis-aligned by a code step does not
+    pull it). None when fewer than ``min_refs`` references, or fewer than 80 % of them,
+    lie on one grid."""
     a, p = float(ref_t[0]), period
     inl = np.ones(ref_t.size, bool)
-    for _ in range(3):
-        n = np.rint((ref_t - a) / p)
+    n = _grid_index(ref_t, p)
+    for it in range(3):
+        if it:
+            n = np.rint((ref_t - a) / p)
         A = np.stack([np.ones(np.count_nonzero(inl)), n[inl]], axis=1)
         (a, p), *_ = np.linalg.lstsq(A, ref_t[inl], rcond=None)
         n = np.rint((ref_t - a) / p)
@@ -279,18 +395,19 @@ def _fit_grid(ref_t: np.ndarray, period: float, tol: float, min_refs: int):
     return float(a), float(p), np.rint((ref_t - a) / p).astype(np.int64)
 
 
-def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderConfig):
+def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderConfig,
+                f_rot: float = F15):
     """The rotation-slot detector (module docstring). Returns the references, the peaks the
     inferred bursts matched, and the counts for :class:`Decoded`."""
     none = np.zeros(t.size, bool)
-    n_rot = t.size and (t[-1] - t[0]) * 15.0
+    n_rot = t.size and (t[-1] - t[0]) * f_rot
     if ref_t.size < cfg.min_grid_refs or n_rot < cfg.min_rotations:
         return ref_t, kinds, scores, done, none, {}
     # A record whose main bursts were all decoded needs no inference.
     main_n = np.count_nonzero(kinds == REF_MAIN)
     if main_n >= np.floor(n_rot) - 1 and main_n >= cfg.min_rotations:
         return ref_t, kinds, scores, done, none, {}
-    fit = _fit_grid(ref_t, 1.0 / 135.0, cfg.tol_s, int(cfg.min_grid_refs))
+    fit = _fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
     if fit is None:
         return ref_t, kinds, scores, done, none, {}
     a, p, n_ref = fit
@@ -324,7 +441,7 @@ def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderCo
                 and pulses[order[-1]] >= cfg.min_slot_pulses):
             declared = (int(order[-1]), int(n_all[m][-1]))
             break
-    info = {"rotation_hz": float(1.0 / (9.0 * p))}
+    info = {}
     if declared is None:
         return ref_t, kinds, scores, done, none, info
     s_main, n_decl = declared
@@ -361,11 +478,11 @@ _CODE_STEPS = {("X", REF_MAIN): 30e-6, ("X", REF_AUX): 12e-6,
                ("Y", REF_MAIN): 30e-6, ("Y", REF_AUX): 15e-6}
 
 
-def _snap_to_grid(ref_t: np.ndarray, kinds: np.ndarray, cfg: DecoderConfig, half: int = 8):
+def _snap_to_grid(ref_t: np.ndarray, kinds: np.ndarray, cfg: DecoderConfig,
+                  period: float = 1.0 / F135, half: int = 8):
     ok = np.ones(ref_t.size, bool)
     if ref_t.size < 3:
         return ref_t, ok
-    period = 1.0 / 135.0
     dev = (ref_t - ref_t[0] + period / 2) % period - period / 2
     out = ref_t.copy()
     for i in range(ref_t.size):

@@ -531,6 +531,7 @@ class EnvelopeKalman:
         else:
             raise ValueError(f"cfg must be a KalmanConfig or KalmanFixedConfig, not {cfg!r}")
         self.cfg = cfg
+        self._rotation_hz = F15
         if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
             raise ValueError(f"batch must be an integer >= 1, not {batch!r}")
         self.batch = int(batch)
@@ -549,6 +550,26 @@ class EnvelopeKalman:
     @property
     def arithmetic(self) -> str:
         return "float" if self.fixed is None else "fixed"
+
+    @property
+    def rotation_hz(self) -> float:
+        """The rotation rate the transition model turns at (``F15`` unless set)."""
+        return self._rotation_hz
+
+    def set_rotation(self, f_hz: float) -> None:
+        """Turn the transition model at the beacon's rotation rate ``f_hz`` (its 15 Hz
+        component) and ``9 f_hz`` (135 Hz) from the next step on: the fixed core's two
+        40-bit frequency words (``round(f 2**40 / tick_hz)``, as for 15 Hz) or the float
+        angular rates. ``F15`` gives exactly the nominal constants."""
+        f = float(f_hz)
+        if not (math.isfinite(f) and 0.9 * F15 <= f <= 1.1 * F15):
+            raise ValueError(f"rotation rate must be within 10 % of {F15:g} Hz, not {f_hz!r}")
+        if self.fixed is None:
+            self._cv[0], self._cv[1] = 2 * math.pi * f, 2 * math.pi * (9 * f)
+        else:
+            scale = 2.0 ** PHASE_BITS / self.tick_hz
+            self._cv[0], self._cv[1] = int(round(f * scale)), int(round(9 * f * scale))
+        self._rotation_hz = f
 
     def reset(self) -> None:
         """Back to the prior (keeps r, events and the time residual)."""

@@ -14,7 +14,7 @@ import numpy as np
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       reference_advances, wrap_deg)
-from .decode import REF_MAIN, DecoderConfig, decode
+from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .standard import burst_offsets
 
@@ -39,6 +39,21 @@ class BearingTrack:
     events: dict = field(default_factory=dict)  # DSP core event counters, name -> (B,)
     state: "ReceiverState | None" = None        # to continue with the next block
     valid: np.ndarray | None = None  # (B, M) fit for use: not flagged (see ReceiverConfig)
+    produced_s: np.ndarray | None = None  # (M,) when each bearing became available (the
+    #: reference known and the pulses up to it filtered; >= times_s)
+
+    def first_valid_s(self) -> np.ndarray:
+        """Per trial: when the first valid (not flagged) bearing became available (s from
+        the start of the record; NaN: none) -- the time to first bearing."""
+        B = self.bearing_deg.shape[0]
+        out = np.full(B, np.nan)
+        if self.valid is None or self.produced_s is None or not self.produced_s.size:
+            return out
+        for b in range(B):
+            i = np.flatnonzero(self.valid[b])
+            if i.size:
+                out[b] = float(self.produced_s[i[0]])
+        return out
 
 
 @dataclass(frozen=True)
@@ -67,7 +82,11 @@ class ReceiverConfig:
     #:   ~9 deg down to -3 dB SNR);
     #: * the estimated amplitude noise ``sqrt(r)`` exceeds ``flag_noise_ratio`` times the
     #:   pulse level ``dc``: the filter has fitted something that is not the signal (its
-    #:   ``r`` estimate grows from the misfit; ~0.44 at -3 dB SNR in normal operation).
+    #:   ``r`` estimate grows from the misfit; ~0.44 at -3 dB SNR in normal operation);
+    #: * the reference timing is not confirmed yet: no rotation-rate estimate so far (with
+    #:   ``track_rotation``; a 135 Hz grid through ``DecoderConfig.min_grid_refs`` references
+    #:   spanning ``rotation_span_s``). Main references inferred by the rotation-slot
+    #:   detector give no bearing at all before its declaration.
     #:
     #: Input beyond the DSP's input range is never measured (``KalmanConfig.input_limit``)
     #: and flags the bearings while it lasts. Known limit: garbage *within* the range that
@@ -79,6 +98,14 @@ class ReceiverConfig:
     flag_gated: int = 1
     flag_sector_deg: float = 12.0
     flag_noise_ratio: float = 0.5
+    #: Rotation-rate tracking: the beacon's rotation rate is estimated from the references
+    #: known so far (:func:`dsp.tacan.decode.rotation_track`: the 135 Hz grid's period over
+    #: the latest 2 s, once they span ``rotation_span_s``: early, so that little of the fit
+    #: is made at a wrong rate), and the Kalman model and the
+    #: bearing's phase advances turn at it (15 Hz exactly on a nominal beacon: the
+    #: estimate's resolution is 1e-5). False: 15 Hz assumed.
+    track_rotation: bool = True
+    rotation_span_s: float = 0.05
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -89,6 +116,10 @@ class ReceiverConfig:
         if not 0 < float(self.flag_sector_deg) <= 20:
             raise ValueError(f"flag_sector_deg must be in (0, 20] (half a fine-phase sector), "
                              f"not {self.flag_sector_deg!r}")
+        if not isinstance(self.track_rotation, bool):
+            raise ValueError(f"track_rotation must be True or False, not {self.track_rotation!r}")
+        if not 0 < float(self.rotation_span_s) <= 10:
+            raise ValueError(f"rotation_span_s must be in (0, 10] s, not {self.rotation_span_s!r}")
         if not float(self.flag_noise_ratio) > 0:
             raise ValueError(f"flag_noise_ratio must be > 0, not {self.flag_noise_ratio!r}")
         if not isinstance(self.kalman, (KalmanConfig, KalmanFixedConfig)):
@@ -110,6 +141,8 @@ class ReceiverState:
     last_main_s: float | None = None
     last_t_s: float | None = None
     last_tick: int | None = None
+    recent_refs_s: np.ndarray = field(default_factory=lambda: np.empty(0))  # rate tracker input
+    rotation_hz: float | None = None   # the rate tracker's latest estimate (None: none yet)
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
@@ -190,7 +223,21 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     ref_done = dec.ref_done_s[ref_order]
     ref_t = dec.ref_times_s[ref_order]
     ref_k = dec.ref_kinds[ref_order]
-    w15, w135 = TWO_PI * F15, TWO_PI * F135
+    dcfg = cfg.decoder or DecoderConfig(mode=cfg.mode)
+    if cfg.track_rotation:
+        # known before this block, then each reference in the order it becomes known
+        prior = state.recent_refs_s
+        rates, confirmed = rotation_track(np.concatenate([prior, ref_t]), dcfg.tol_s,
+                                          int(dcfg.min_grid_refs), float(cfg.rotation_span_s),
+                                          prior_rate=state.rotation_hz)
+        rates, confirmed = rates[prior.size:], confirmed[prior.size:]
+        state.recent_refs_s = np.concatenate([prior, ref_t])[-4 * int(2.0 * F135):]
+        if confirmed.any():
+            state.rotation_hz = float(rates[-1])
+    else:
+        rates, confirmed = np.full(n_ref, F15), np.ones(n_ref, bool)
+    out_done = []
+    out_f = []
     # Segments of pulses between the moments a reference burst becomes known.
     if ticks is not None:
         tk = ticks.astype(np.int64)[sel]
@@ -206,6 +253,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         if stop > k:
             kf.run(dts[k:stop], ym[:, k:stop], None if r_mult is None else r_mult[k:stop])
             k = stop
+        if rates[r] != kf.rotation_hz:       # the rate known once this reference is
+            kf.set_rotation(rates[r])
+        f_rot = kf.rotation_hz
         if k == 0:
             continue
         last_t = tm[k - 1]
@@ -216,19 +266,21 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
             continue
         out_t.append(T)
         out_k.append(ref_k[r])
+        out_done.append(max(float(ref_done[r]), float(last_t)))
         n_up, n_gated, noise = kf.health()
         out_ok.append((n_up >= kf.kalman.warmup) & (n_gated < cfg.flag_gated)
-                      & (noise <= cfg.flag_noise_ratio))
+                      & (noise <= cfg.flag_noise_ratio) & bool(confirmed[r]))
         if integer_bearing:
             # the fixed-point DSP: integer state, integer tick differences (see below)
             t_hz = kf.tick_hz
             out_x.append(kf.x.copy())
             out_dt.append((int(tk[k - 1]) - int(round(last_main * t_hz)),
                            int(tk[k - 1]) - int(round(T * t_hz))))
+            out_f.append(f_rot)
             continue
         a, b, m1, m2, _ = kf.phases()
-        coarse = w15 * (last_t - last_main) - a
-        fine9 = w135 * (last_t - T) - b
+        coarse = TWO_PI * f_rot * (last_t - last_main) - a
+        fine9 = TWO_PI * (9 * f_rot) * (last_t - T) - b
         out_b.append(np.degrees(combine_coarse_fine(coarse, fine9, m1 * m1, 81.0 * m2 * m2)))
         out_c.append(np.degrees(coarse % TWO_PI))
     if k < tm.size:
@@ -242,7 +294,12 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     ok = np.stack(out_ok, axis=1) if M else np.zeros((B, 0), bool)
     if integer_bearing and M:
         dt = np.array(out_dt, dtype=np.int64)
-        adv15, adv135 = reference_advances(dt[:, 0], dt[:, 1], kf.tick_hz)
+        fr = np.array(out_f)
+        adv15, adv135 = np.empty(M, np.int64), np.empty(M, np.int64)
+        for f in np.unique(fr):              # one pair of frequency words per rate
+            m = fr == f
+            adv15[m], adv135[m] = reference_advances(dt[m, 0], dt[m, 1], kf.tick_hz,
+                                                     rotation_hz=float(f))
         sb = bearing_from_state(np.stack(out_x), cfg.kalman.x, adv15[:, None], adv135[:, None],
                                 adv_bits=ANGLE_BITS)
         out_b = list(bangle_to_deg(sb.bearing))
@@ -261,7 +318,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
         events={**kf.events, "invalid_bearings": n_invalid, "flagged_bearings": n_flagged},
-        state=state, valid=ok)
+        state=state, valid=ok, produced_s=np.array(out_done))
 
 
 def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):

@@ -30,7 +30,7 @@ def _point(factor):
 @pytest.mark.parametrize("factor", [10.0, 0.1])
 def test_a2_100_runs(factor):
     """A2: AUKF Doppler RMSE < fixed-q UKF's (100 runs x 10 s, 32 dB-Hz, seed 1).
-    Measured: 10 q0 0.0750 vs 0.0962 Hz; 0.1 q0 0.0337 vs 0.0372 Hz."""
+    Measured (results/aukf.md): 10 q0 0.0742 vs 0.0960 Hz; 0.1 q0 0.0333 vs 0.0372 Hz."""
     p = _point(factor)
     a, u = p["aukf"], p["ukf"]
     assert a["doppler_rmse_hz"] < u["doppler_rmse_hz"], (a["doppler_rmse_hz"], u["doppler_rmse_hz"])
@@ -41,10 +41,19 @@ def test_a2_100_runs(factor):
 @pytest.mark.parametrize("factor", [
     10.0,
     pytest.param(0.1, marks=pytest.mark.xfail(strict=True, reason=(
-        "A4 fails at q_true = 0.1 q0: median final q_hat 1.71 (x3.4 of 0.5) after 10 s; "
-        "the block slave converges downwards too slowly (20 blocks of 0.5 s)"))),
+        "A4 fails at q_true = 0.1 q0: median final q_hat 1.55 (x3.1 of 0.5) after 10 s; "
+        "the slave's measurement carries ~1.3 nats^2 on ln q in 10 s against the prior's 1, "
+        "so the posterior keeps ~45 % of ln 10 (docs/aukf.md)"))),
 ])
 def test_a4_100_runs(factor):
-    """A4: median final q_hat within x2 of q_true (measured: 59.3 at 10 q0)."""
+    """A4: median final q_hat within x2 of q_true (measured: 49.9 at 10 q0)."""
     q = _point(factor)["aukf"]["q_hat_median_final"]
     assert factor * Q0 / 2 <= q <= 2 * factor * Q0, q
+
+
+@pytest.mark.slow
+def test_a3_100_runs():
+    """A3: q_true = q0: AUKF Doppler RMSE <= 1.1 x the UKF's (measured 0.0466 vs 0.0456 Hz)."""
+    p = _point(1.0)
+    a, u = p["aukf"]["doppler_rmse_hz"], p["ukf"]["doppler_rmse_hz"]
+    assert a <= 1.1 * u, (a, u)

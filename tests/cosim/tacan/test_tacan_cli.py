@@ -26,6 +26,7 @@ def test_cli_readable_summary(capsys):
     assert main(["tacan", "--duration-s", "1.5", "--snr-db", "20", "--bearing-deg", "10"]) == 0
     out = capsys.readouterr().out
     assert "bearing: true 10.000 deg" in out and "RMSE" in out and "Cramer-Rao" in out
+    assert "first valid bearing at 0.0" in out and "rotation rate 15.0000 Hz" in out
 
 
 @pytest.mark.parametrize("args, message", [
@@ -34,6 +35,7 @@ def test_cli_readable_summary(capsys):
     (["--mod-15", "1.5"], "modulation depths must satisfy"),
     (["--duration-s", "0"], "duration_s must be > 0, not 0.0"),
     (["--duration-s", "0.5"], "leaves no time after the filter settles"),
+    (["--rotation-hz", "17"], "rotation_hz must be within 5 % of 15 Hz (14.25..15.75), not 17.0"),
 ])
 def test_cli_errors_go_to_stderr_with_nonzero_exit(capsys, args, message):
     rc = main(["tacan", "--json"] + args)
