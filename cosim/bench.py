@@ -384,7 +384,7 @@ def _monopulse(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
 
 def _ins(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     from .ins.bench import ins_bench
-    return ins_bench(out, quick=quick)
+    return ins_bench(out, quick=quick, jobs=jobs)
 
 
 def _aukf(out: Path, quick: bool = False, jobs: int | None = None) -> dict:

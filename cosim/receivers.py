@@ -34,7 +34,8 @@ __all__ = ["Receiver", "Study", "Figure", "Frontend", "SweepModel", "FaultModel"
            "get", "receivers", "frontend_for", "add_options", "config_kwargs", "BUILTIN"]
 
 #: Entry modules of the receivers shipped with the toolkit (importing one registers it).
-BUILTIN = ("cosim.tacan.receiver", "cosim.gnss.receiver", "cosim.monopulse.receiver")
+BUILTIN = ("cosim.tacan.receiver", "cosim.gnss.receiver", "cosim.monopulse.receiver",
+           "cosim.ins.receiver")
 
 _REGISTRY: dict[str, "Receiver"] = {}
 _MISSING = dataclasses.MISSING

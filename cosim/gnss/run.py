@@ -325,7 +325,7 @@ def handover_writes(p, doppler_hz: float, code_phase_chips: float, inverted: boo
 
 
 def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_hz: float,
-                  spacing_chips: float, arith_name: str):
+                  spacing_chips: float, arith_name: str, extra: tuple | None = None):
     from dsp.gnss.loops_fixed import FLOAT, FixedArith
     from dsp.gnss.trackers import TrackerContext, _TRACKERS, make_tracker
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
@@ -336,6 +336,9 @@ def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_
     arith = FixedArith() if arith_name == "fixed" else FLOAT
     params = inspect.signature(_TRACKERS[run.tracker][0]).parameters
     opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz", "r_mode") if k in params}
+    if extra is not None:       # (TrackerContext changes, tracker options) of the caller
+        ctx = replace(ctx, **extra[0])
+        opts.update(extra[1])
     return make_tracker(run.tracker, ctx, arith, **opts), arith
 
 
@@ -423,7 +426,8 @@ class ClosedLoop:
 
 def closed_loop(backend: str, p, run: GnssRunConfig, blocks, doppler_hz: float,
                 code_phase_chips: float, *, inverted: bool = False,
-                cn0_dbhz: float | None = None, keep_words: bool = False) -> ClosedLoop:
+                cn0_dbhz: float | None = None, keep_words: bool = False,
+                tracker_extra: tuple | None = None) -> ClosedLoop:
     """Track on channel ``p`` (a session on ``backend``) fed ``blocks`` (iterable of ADC
     word arrays, one word per cycle), started by :func:`handover_writes`, the DSP service
     and tracker of ``run``, its writes decided on the fly."""
@@ -431,7 +435,7 @@ def closed_loop(backend: str, p, run: GnssRunConfig, blocks, doppler_hz: float,
     from .session import open_gnss
     spacing = p.el_spacing_samples * CHIP_RATE_HZ / p.fs_hz
     tracker, arith = _make_tracker(run, p.fs_hz, p.if_hz, inverted, cn0_dbhz, doppler_hz,
-                                   spacing, run.dsp)
+                                   spacing, run.dsp, tracker_extra)
     track = _Tracking(tracker, arith, p, SKIP_RECORDS)
     dsp = _PipelineDsp(p, track)
     svc = run.service(p.fs_hz)
@@ -453,25 +457,34 @@ def adc_words(codes) -> np.ndarray:
     return (np.asarray(codes).astype(np.int64) - 1) >> 1
 
 
-def _boundaries(p, bus_writes, n_records, n_total):
+def _boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
     """Dump-boundary sample of the records ``1 .. n_records`` of the HDL channel, from the
     code NCO's words in force (replayed exactly: the code generator's epochs only depend on
     the code word, PRN-independent, and the slew)."""
     from hdl.gnss.model import GnssChannelModel
     # Run the bit-exact channel on zero samples with the same bus writes: its records come
-    # at the same cycles (the code NCO does not see the samples).
+    # at the same cycles (the code NCO does not see the samples). In blocks (a 150 s record
+    # is 2.5e9 samples: one array of them would not fit), until n_records are out.
     m = GnssChannelModel(p)
-    r = m.step(np.zeros(n_total, np.int64), bus_writes)
-    return r.cycles[:n_records] - p.latency
+    out, got, k = [], 0, 0
+    while got < n_records and k < n_total:
+        n = min(int(block), n_total - k)
+        r = m.step(np.zeros(n, np.int64), bus_writes if k == 0 else ())
+        out.append(r.cycles)
+        got += r.cycles.size
+        k += n
+    cyc = np.concatenate(out) if out else np.zeros(0, np.int64)
+    return cyc[:n_records] - p.latency
 
 
-def _golden_track(gen, run, hand, arith_name):
+def _golden_track(gen, run, hand, arith_name, tracker_extra=None):
     from dsp.gnss.correlator import GoldenCorrelator
     sig = gen.cfg
     p = run.hdl_params(sig)
     spacing = p.el_spacing_samples * CHIP_RATE_HZ / sig.fs_hz
     tracker, arith = _make_tracker(run, sig.fs_hz, sig.digital_if_hz, sig.spectrum_inverted,
-                                   sig.cn0_dbhz, hand["doppler_hz"], spacing, arith_name)
+                                   sig.cn0_dbhz, hand["doppler_hz"], spacing, arith_name,
+                                   tracker_extra)
     track = _Tracking(tracker, arith, p, 1)
     s = -1.0 if sig.spectrum_inverted else 1.0
     cf = sig.digital_if_hz + s * hand["doppler_hz"]
@@ -578,9 +591,14 @@ def check_run_size(sig: GnssSignalConfig, run: GnssRunConfig) -> None:
 
 
 def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
-             keep_words: bool = False) -> dict:
+             keep_words: bool = False, tracker_setup=None, keep_track: bool = False) -> dict:
     """One GNSS run end to end (module doc); returns the JSON-safe result. With
-    ``keep_words`` the result's ``_pipeline`` holds the :class:`PipelineResult` (tests)."""
+    ``keep_words`` the result's ``_pipeline`` holds the :class:`PipelineResult` (tests).
+    ``tracker_setup(gen, p, hand, backend) -> (ctx_changes, options)``, called after the
+    acquisition, adds to the tracker's :class:`~dsp.gnss.trackers.TrackerContext` (e.g. an
+    INS ``aiding``) and options (the INS-aided loops, :mod:`cosim.ins.run`); with
+    ``keep_track`` the result's ``_track`` holds the DSP's per-record observables and
+    the records' dump-boundary samples."""
     if not isinstance(signal_cfg, GnssSignalConfig):
         raise ValueError(f"signal_cfg must be a GnssSignalConfig, not "
                          f"{type(signal_cfg).__name__}")
@@ -595,11 +613,12 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
                          f"{run.settle_s:g} s")
     gen = GnssSignalGenerator(sig)
     acq, hand = _acquire(gen, run)
+    extra = None if tracker_setup is None else tracker_setup(gen, p, hand, run.backend)
     result = {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz, "duration_s": sig.duration_s,
               "tracker": run.tracker, "bn_hz": run.bn_hz, "backend": run.backend,
               "dsp": run.dsp, "acquired": acq}
     if run.backend == "golden":
-        track, n_b = _golden_track(gen, run, hand, run.dsp)
+        track, n_b = _golden_track(gen, run, hand, run.dsp, extra)
         result.update(fifo_dropped=0, dropped_reported=0)
         digest = {"dsp": track.digest()}
         pres = None
@@ -609,7 +628,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
                   for k in range(0, n, run.block_samples))
         cl = closed_loop(run.backend, p, run, blocks, hand["doppler_hz"],
                          hand["code_phase_chips"], inverted=sig.spectrum_inverted,
-                         cn0_dbhz=sig.cn0_dbhz, keep_words=keep_words)
+                         cn0_dbhz=sig.cn0_dbhz, keep_words=keep_words, tracker_extra=extra)
         track, pres, bus, rx = cl.track, cl.pipeline, cl.bus_writes, cl.rx_stats
         n_b = _boundaries(p, bus, track.n_seen, sig.n_samples)[SKIP_RECORDS:]
         result.update(fifo_dropped=int(pres.overflow_count),
@@ -639,6 +658,8 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
             (e[keep] - 0.5 * np.rint(e[keep] / 0.5)
              - np.interp(t[keep], gt, ge - 0.5 * np.rint(ge / 0.5))) ** 2)))
     result["_series"] = series
+    if keep_track:
+        result["_track"] = (track, n_b)
     if keep_words:
         result["_pipeline"] = pres
     return result

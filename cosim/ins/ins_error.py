@@ -118,3 +118,36 @@ class InsAiding:
         return self.rate[k]
 
     __call__ = rate_hz_s
+
+    def rate_at(self, t_s) -> np.ndarray:
+        """INS-predicted Doppler rate (Hz/s) at any times ``t_s`` (s) inside the epoch grid:
+        the INS errors interpolated linearly between the grid's midpoints, the formula on
+        the INS position, velocity and acceleration there."""
+        t = np.atleast_1d(np.asarray(t_s, float))
+        if not np.all(np.isfinite(t)) or t.min() < self.t[0] or t.max() > self.t[-1]:
+            raise ValueError(f"rate_at: times must lie in [{self.t[0]:g}, {self.t[-1]:g}] s "
+                             f"(the INS solution's grid), not {t.min():g}..{t.max():g}")
+        Ru, Vu, Au = self.sc.user(t)
+        Rs, Vs, As = self.sc.satellite(t)
+        e = [np.stack([np.interp(t, self.t, x[i]) for i in range(3)]) for x in (self.dp, self.dv, self.da)]
+        return doppler_rate_hz_s(Ru + e[0], Vu + e[1], Au + e[2], Rs, Vs, As)
+
+
+class EpochAiding:
+    """The INS Doppler rate per tracked epoch when the epochs are not on a uniform grid
+    (the HDL channel dumps on the received code's epochs, which drift from the receiver's
+    millisecond by the code Doppler: ~3 ms over the seed's 150 s). ``aiding(k)`` is
+    :meth:`InsAiding.rate_at` at the midpoint of epoch ``k``, ``boundaries_s[k]`` to
+    ``boundaries_s[k + 1]`` (s, receiver time); past the table it raises."""
+
+    def __init__(self, ins: InsAiding, boundaries_s):
+        b = np.asarray(boundaries_s, float)
+        if b.ndim != 1 or b.size < 2 or not np.all(np.diff(b) > 0):
+            raise ValueError("boundaries_s must be >= 2 strictly increasing times")
+        self.mid = (b[1:] + b[:-1]) / 2
+        self.rate = ins.rate_at(self.mid)
+
+    def __call__(self, k):
+        if not 0 <= k < self.rate.size:
+            raise ValueError(f"aiding asked for epoch {k}: the table holds epochs 0..{self.rate.size - 1}")
+        return self.rate[k]

@@ -147,3 +147,46 @@ def run_study(cfg: InsStudyConfig, loops=LOOPS, **opts) -> dict:
     """All loops on the same scenario; ``{loop: figures}``."""
     scn = scenario_for(cfg)
     return {lp: run_loop(lp, cfg, scn, **opts) for lp in loops}
+
+
+def holds_lock(r: dict) -> bool:
+    """The lock rule of B3 on a :func:`run_loop` result: every trial has its PLI above the
+    threshold in >= 99 % of the PLI values and no cycle slip."""
+    return r["lock_fraction_min"] >= 0.99 and r["cycle_slips"] == 0
+
+
+def lock_threshold(loop: str, cfg: InsStudyConfig, lo_dbhz: float, hi_dbhz: float,
+                   resolution_db: float = 0.5) -> dict:
+    """Lowest C/N0 at which ``loop`` holds lock (:func:`holds_lock`, every trial) through
+    ``cfg``'s trajectory, by bisection between ``lo_dbhz`` (must fail) and ``hi_dbhz``
+    (must hold), to ``resolution_db``. Every point runs on the same scenario (trajectory,
+    clock, INS) and thermal-noise seed. Returns the bracket and every point run."""
+    if not (lo_dbhz < hi_dbhz and resolution_db > 0):
+        raise ValueError(f"need lo_dbhz < hi_dbhz and resolution_db > 0, not {lo_dbhz}, "
+                         f"{hi_dbhz}, {resolution_db}")
+    from dataclasses import replace
+    scn = scenario_for(cfg)
+    points = {}
+
+    def ok(c):
+        r = run_loop(loop, replace(cfg, cn0_dbhz=float(c)), scn)
+        points[float(c)] = {"holds": holds_lock(r), "lock_fraction_min": r["lock_fraction_min"],
+                            "cycle_slips": r["cycle_slips"]}
+        return points[float(c)]["holds"]
+
+    if not ok(hi_dbhz):
+        return {"loop": loop, "threshold_dbhz": None, "note": f"no lock at {hi_dbhz} dB-Hz",
+                "points": points}
+    if ok(lo_dbhz):
+        return {"loop": loop, "threshold_dbhz": float(lo_dbhz),
+                "note": f"holds at the lower bound {lo_dbhz} dB-Hz", "points": points}
+    lo, hi = float(lo_dbhz), float(hi_dbhz)
+    while hi - lo > resolution_db:
+        mid = round((lo + hi) / 2 / 0.25) * 0.25
+        if mid in (lo, hi):
+            break
+        if ok(mid):
+            hi = mid
+        else:
+            lo = mid
+    return {"loop": loop, "threshold_dbhz": hi, "fails_at_dbhz": lo, "points": points}

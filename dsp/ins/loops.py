@@ -22,7 +22,14 @@ Process noise: the receiver clock (two-state model from h0, h-2 at L1: white pha
 Hz^2/s) plus a rate random walk ``q_r`` (Hz^2/s^3) for the line-of-sight dynamics
 (unaided: the 5 g/s jerk over 1 s, ``(J / lambda)^2``; aided: the INS rate error's drift).
 NCO: ``Delta f = x2 + T/2 (x3 + u_{k+1}) + x1/T``, which puts the predicted phase error
-at the next interval's end to 0. The filter is :class:`dsp.estimation.kalman.KalmanFilter`
+at the next interval's end to 0. With a loop latency of ``L`` epochs
+(``TrackerContext.latency_epochs``: 1 on the HDL channel, whose writes take effect at the
+next dump boundary) the step issued after epoch ``k`` is in force from interval
+``k + 1 + L``: the state is first carried over the ``L`` intervals whose steps are already
+issued (the same A, B), the control input of each prediction is the step in force then,
+and the Doppler estimate refers to the frequency in force over the interval just dumped.
+On a hand-over (``TrackerContext.doppler0_sigma_hz`` given) P0 takes the Costas phase as
+uniform (1/48 cycles^2) and the Doppler variance from the hand-over error. The filter is :class:`dsp.estimation.kalman.KalmanFilter`
 (float64 or fixed point by its :class:`KalmanFormats`); Delta f is computed from the
 filter's (real-valued) state and rounded into the ``u`` format, so the NCO follows exactly
 what the filter was told.
@@ -177,6 +184,12 @@ class KalmanCarrierLoop:
         r0 = 0.0 if self.aided else np.broadcast_to(np.asarray(ctx.doppler_rate0_hz_s, float), shape).reshape(trials)
         x0 = np.zeros((trials, 3))
         x0[:, 2] = r0 / self.D[2, 2]
+        p0_diag = tuple(p0_diag)
+        if ctx.doppler0_sigma_hz is not None:
+            # a hand-over from acquisition: the carrier phase is unknown (uniform over the
+            # Costas half cycle) and the Doppler is off by the hand-over error
+            p0_diag = (max(p0_diag[0], 1.0 / 48.0), max(p0_diag[1], float(ctx.doppler0_sigma_hz) ** 2),
+                       p0_diag[2])
         p0 = np.diag(p0_diag) / np.outer(np.diag(self.D), np.diag(self.D))
         self.fixed = bool(getattr(arith, "fixed", False))
         self.formats = (formats or KF_FORMATS) if self.fixed else None
@@ -185,6 +198,13 @@ class KalmanCarrierLoop:
         self.k = 0
         self.u = self._u(0)
         self.df = np.zeros(trials)
+        # loop latency: a step's NCO setting takes effect ``latency`` epochs later; the
+        # steps already issued but not yet in force (oldest first)
+        self.latency = int(ctx.latency_epochs)
+        if self.latency < 0:
+            raise ValueError(f"latency_epochs must be >= 0, not {ctx.latency_epochs!r}")
+        self.pending = [np.zeros(trials) for _ in range(self.latency)]
+        self.f_cmd = self.f.copy()
         self.d = float(ctx.spacing_chips)
         self.kd = 4.0 * _finite("dll_bn_hz", dll_bn_hz, 0.0)
         self.if_hz, self.s = float(ctx.if_hz), (-1 if ctx.inverted else 1)
@@ -215,14 +235,25 @@ class KalmanCarrierLoop:
         x = self.kf.run(z, uu).x[:, 0, :] @ self.D
         self._dopp = (self.f.reshape(self.trials) + x[:, 1]).reshape(self.shape)
         u_next = self._u(self.k + 1)
-        df = self._q(x[:, 1] + T / 2 * (x[:, 2] + u_next) + x[:, 0] / T)
+        # carry the state over the intervals whose NCO steps are issued but not in force
+        # (latency), then set the next free step so the predicted phase error at the end
+        # of its interval is 0
+        x1, x2, x3 = x[:, 0], x[:, 1], x[:, 2]
+        for j, d in enumerate(self.pending):
+            uj = u_next if j == 0 else self._u(self.k + 1 + j)
+            x1, x2 = x1 + T * x2 + T * T / 2 * (x3 + uj) - T * d, x2 + T * (x3 + uj) - d
+        u_free = u_next if not self.pending else self._u(self.k + 1 + self.latency)
+        df = self._q(x2 + T / 2 * (x3 + u_free) + x1 / T)
+        self.f_cmd = self.f_cmd + df.reshape(self.shape)
+        self.pending.append(df)
+        df = self.pending.pop(0)              # the step in force from the next epoch on
         self.f = self.f + df.reshape(self.shape)
         self.u, self.df = u_next, df
         self.k += 1
         tau = dll_nelp(ie, qe, il, ql, self.d)
         self.history.add(e, ip, qp, self._dopp)
-        fc = self.if_hz + self.s * self.f
-        kc = CHIP_RATE_HZ + self.f / 1540.0 + self.kd * tau
+        fc = self.if_hz + self.s * self.f_cmd
+        kc = CHIP_RATE_HZ + self.f_cmd / 1540.0 + self.kd * tau
         if not self.fixed:
             return fc, kc
         return np.rint(fc * 2.0 ** 32 / self.fs).astype(np.int64), np.rint(kc * 2.0 ** 32 / self.fs).astype(np.int64)

@@ -91,15 +91,33 @@ def test_aiding_removes_the_dynamic_stress_noise_free():
     assert res["aided-pll"] < res["unaided-kf"] / 20, res
 
 
-def _noise_free(loop, sc, ins):
+def _noise_free(loop, sc, ins, latency=0, told=None, arith=FLOAT):
     from cosim.gnss.loopsim import track_fast
     t0 = sc.truth_at(np.zeros(1))
     ctx = TrackerContext(fs_hz=16.368e6, T_s=T, doppler0_hz=t0["doppler_hz"],
-                         doppler_rate0_hz_s=t0["doppler_rate_hz_s"], cn0_dbhz=40.0, aiding=ins)
+                         doppler_rate0_hz_s=t0["doppler_rate_hz_s"], cn0_dbhz=40.0, aiding=ins,
+                         latency_epochs=latency if told is None else told)
     opts = {} if loop == "aided-pll" else {"oscillator": None}
-    trk = make_tracker(loop, ctx, FLOAT, **opts)
-    r = track_fast(sc.truth_at, None, 4000, T, shape=(1,), tracker=trk)
+    trk = make_tracker(loop, ctx, arith, **opts)
+    r = track_fast(sc.truth_at, None, 4000, T, shape=(1,), tracker=trk, latency=latency)
     return float(np.abs(r.phase_err_cycles[300:]).max())
+
+
+@pytest.mark.parametrize("latency", [1, 2])
+def test_kalman_loop_with_a_loop_latency(latency):
+    # the HDL channel's writes take effect one epoch late: the loop that knows it tracks the
+    # 5 g/s ramp noise-free as well as with no latency; told no latency, it does far worse
+    from dsp.gnss.loops_fixed import FixedArith
+    sc = Scenario(SeedTrajectory(duration_s=4.0, start_s=0.5, accel_g=5.0, v_max_mps=100.0), osc=None)
+    ins = InsAiding(sc, InsErrors(0, 0, 0, 0), T, 4004)
+    base = _noise_free("aided-kf", sc, ins)
+    for arith in (FLOAT, FixedArith()):
+        late = _noise_free("aided-kf", sc, ins, latency, arith=arith)
+        assert late < 2 * base + 2e-4, (latency, base, late)
+    blind = _noise_free("aided-kf", sc, ins, latency, told=0)
+    assert blind > 5 * (late + 1e-4), (base, late, blind)
+    un = _noise_free("unaided-kf", sc, ins, latency)
+    assert un < 0.05, un          # unaided, the loop still holds the ramp with the latency
 
 
 # stated bounds (docs/ins.md): fixed within 0.005 Hz of Doppler and 0.05 deg of phase

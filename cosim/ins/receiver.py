@@ -1,0 +1,62 @@
+"""Seed 003's entry in the receiver registry (:mod:`cosim.receivers`): ``python -m cosim
+ins`` runs one of the three carrier loops (INS-aided Kalman, aided PLL, unaided Kalman)
+over the seed's trajectory on the GNSS channel (:func:`cosim.ins.run.run_ins`); its options
+are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP fields of
+:class:`~cosim.gnss.run.GnssRunConfig`. The front end is the GNSS channel's (``gnss``)."""
+from __future__ import annotations
+
+from ..gnss.run import GnssRunConfig
+from ..receivers import Arg, Figure, Option, Receiver, config_kwargs, register
+from ..validate import dumps
+from .run import InsRunConfig, run_ins
+
+_INS, _RUN = InsRunConfig, GnssRunConfig
+
+#: Options of ``python -m cosim ins``.
+OPTIONS = (
+    Option(_INS, "loop"), Option(_INS, "cn0_dbhz"), Option(_INS, "oscillator"),
+    Option(_INS, "duration_s"), Option(_INS, "seed"), Option(_INS, "start_s"),
+    Option(_INS, "jerk_g_s"), Option(_INS, "accel_g"), Option(_INS, "v_max_mps"),
+    Option(_INS, "trajectory_csv"), Option(_INS, "pli_epochs"), Option(_INS, "pli_threshold"),
+    Option(_RUN, "backend"), Option(_RUN, "dsp"), Option(_RUN, "dll_bn_hz"),
+    Option(_RUN, "control_latency_cycles", flag="--latency"), Option(_RUN, "settle_s"),
+    Arg("--json", action="store_true", help="print one JSON object"),
+)
+
+
+def build_configs(a) -> tuple[InsRunConfig, GnssRunConfig]:
+    """The run's configurations from parsed options (ValueError if refused)."""
+    ins = _INS(**config_kwargs(a, OPTIONS, _INS))
+    return ins, _RUN(tracker=ins.loop, **config_kwargs(a, OPTIONS, _RUN))
+
+
+def cmd_ins(a) -> int:
+    ins, run = build_configs(a)
+    r = run_ins(ins, run)
+    r.pop("_series", None)
+    if a.json:
+        print(dumps(r))
+        return 0
+    osc = r["oscillator"] or "ideal clock"
+    print(f"{r['loop']}  C/N0 {r['cn0_dbhz']:g} dB-Hz  {osc}  {r['duration_s']:g} s  "
+          f"backend {r['backend']}  dsp {r['dsp']}")
+    print(f"velocity error (LOS) mean {r['vel_err_mean_mps']:+.4f} m/s, std "
+          f"{r['vel_err_std_mps']:.4f} m/s; range error mean {r['range_err_mean_m']:+.3f} m, "
+          f"std {r['range_err_std_m']:.3f} m")
+    dj = r["disc_rms_jerk_deg"]
+    print(f"PLI mean {r['pli_mean']:.3f} min {r['pli_min']:.3f}, lock "
+          f"{100 * r['lock_fraction']:.2f} % (PLI > {r['pli_threshold']:g}), cycle slips "
+          f"{r['cycle_slips']}, phase RMSE {r['phase_rmse_deg']:.2f} deg, disc RMS in jerk "
+          f"{'n/a' if dj is None else f'{dj:.2f} deg'}, FIFO dropped {r['fifo_dropped']}")
+    print(f"digest {r['digest']['all']}")
+    return 0
+
+
+INS = register(Receiver(
+    name="ins", help="seed 003: INS-aided Kalman carrier loop, aided PLL or unaided Kalman "
+                     "loop over the seed's trajectory on the GNSS channel; LOS velocity and "
+                     "range errors, PLI, lock, cycle slips",
+    config=InsRunConfig, options=OPTIONS, run=cmd_ins,
+    metrics=("vel_err_std_mps", "vel_err_mean_mps", "range_err_std_m", "range_err_mean_m",
+             "lock_fraction", "cycle_slips"),
+    primary=Figure("vel_err_std_mps", "LOS velocity error std", "m/s")))
