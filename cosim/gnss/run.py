@@ -608,6 +608,11 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     p = run.hdl_params(sig)
     run.service(sig.fs_hz)      # DspServiceConfig's own checks (window inside the period)
     check_run_size(sig, run)
+    from dsp.gnss.trackers import needs_aiding
+    if needs_aiding(run.tracker) and tracker_setup is None:
+        raise ValueError(f"tracker {run.tracker} needs an INS aiding source: run it with "
+                         f"`python -m cosim ins --loop {run.tracker}` (the seed-003 trajectory "
+                         "and INS error model)")
     if sig.duration_s <= run.settle_s:
         raise ValueError(f"duration_s {sig.duration_s:g} s leaves nothing after settle_s "
                          f"{run.settle_s:g} s")

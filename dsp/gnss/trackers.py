@@ -31,7 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["TrackerContext", "register_tracker", "make_tracker", "tracker_names"]
+__all__ = ["TrackerContext", "register_tracker", "make_tracker", "tracker_names", "needs_aiding"]
 
 
 @dataclass(frozen=True)
@@ -78,14 +78,26 @@ class TrackerContext:
 
 
 _TRACKERS: dict[str, tuple[Callable, str]] = {}
+#: names of the trackers that need ``TrackerContext.aiding`` (an external sensor)
+_NEEDS_AIDING: set[str] = set()
 
 
-def register_tracker(name: str, factory: Callable, help: str = "") -> Callable:
-    """Register ``factory(ctx, arith, **options)`` under ``name`` (unique)."""
+def register_tracker(name: str, factory: Callable, help: str = "", *,
+                     needs_aiding: bool = False) -> Callable:
+    """Register ``factory(ctx, arith, **options)`` under ``name`` (unique);
+    ``needs_aiding``: the tracker cannot run without ``TrackerContext.aiding``."""
     if name in _TRACKERS and _TRACKERS[name][0] is not factory:
         raise ValueError(f"tracker {name!r} is registered twice")
     _TRACKERS[name] = (factory, help)
+    if needs_aiding:
+        _NEEDS_AIDING.add(name)
     return factory
+
+
+def needs_aiding(name: str) -> bool:
+    """True if the tracker ``name`` needs an external aiding source (INS Doppler rate)."""
+    _load_builtin()
+    return name in _NEEDS_AIDING
 
 
 def _load_builtin():

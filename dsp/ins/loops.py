@@ -335,7 +335,9 @@ def _kf(aided):
     return make
 
 
-register_tracker("aided-kf", _kf(True), "seed-003 INS-aided 3rd-order Kalman carrier loop + DLL")
+register_tracker("aided-kf", _kf(True), "seed-003 INS-aided 3rd-order Kalman carrier loop + DLL",
+                 needs_aiding=True)
 register_tracker("unaided-kf", _kf(False), "seed-003 unaided 3rd-order Kalman carrier loop + DLL")
 register_tracker("aided-pll", lambda ctx, arith, **o: AidedPll(ctx, arith, **o),
-                 "seed-003 INS-aided 3rd-order PLL (Kaplan, Bn 15 Hz, rate feed-forward) + DLL")
+                 "seed-003 INS-aided 3rd-order PLL (Kaplan, Bn 15 Hz, rate feed-forward) + DLL",
+                 needs_aiding=True)

@@ -36,6 +36,9 @@ def test_gnss_json_has_the_issue_keys(capsys):
                                                   "the acquisition snapshot (20 ms)"),
     (["--duration-s", "0.3"], "error: duration_s 0.3 s leaves nothing after settle_s 0.5 s"),
     (["--jerk-duration-s", "0"], "error: jerk_duration_s must be a finite number > 0 s"),
+    (["--tracker", "aided-kf"], "error: tracker aided-kf needs an INS aiding source: run it "
+                                "with `python -m cosim ins --loop aided-kf`"),
+    (["--tracker", "aided-pll"], "error: tracker aided-pll needs an INS aiding source"),
 ])
 def test_bad_input_is_one_error_line_exit_2(args, msg, capsys):
     assert main(["gnss"] + args) == 2
