@@ -44,13 +44,18 @@ test: setup  ## run the whole test suite on JOBS cores (slow tests excluded: see
 test-all: setup  ## run every test on JOBS cores, slow ones included
 	$(PY) -m pytest -q -n $(JOBS)
 
-bench: setup  ## run every benchmark (~2 h); results go to results/ (shown in README.md)
+bench: setup  ## run every benchmark but suite-time (~4 h on 2 cores); results go to results/ (shown in README.md)
 	$(PY) -m cosim bench dsp-speed
 	$(PY) -m cosim bench sim-speed
 	$(PY) -m cosim bench estimation
 	$(PY) -m cosim bench dsp-hour
 	$(PY) -m cosim bench tacan-accuracy
 	$(PY) -m cosim bench tacan-robustness
+	$(PY) -m cosim bench gnss-speed
+	$(PY) -m cosim bench gnss-tracking
+	$(PY) -m cosim bench aukf
+	$(PY) -m cosim bench ins --jobs 2
+	$(PY) -m cosim bench monopulse
 
 # A study's report, tables and plots are copied to results/ (shown in README.md); its
 # per-point cache stays under build/.
