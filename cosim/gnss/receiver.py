@@ -90,4 +90,5 @@ GNSS = register(Receiver(
              "lock_fraction"),
     primary=Figure("phase_rmse_deg", "carrier phase RMSE", "deg"),
     frontend=_frontend(),
-    tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)}))
+    tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)},
+    array_top=_top))

@@ -150,9 +150,16 @@ class GnssCorrelator(wiring.Component):
         carr_f = Signal(PB, init=cw)
 
         # -- code NCO and C/A generator ----------------------------------------------------
-        code_acc = Signal(CB)
+        # Registered for timing (same behaviour as the model's ``acc += code_freq``): ``s``
+        # holds ``acc + cf`` of the current state (its carry is the chip advance), and
+        # ``hold == 0``, ``chip == 1022`` and ``gen_k == K - 1`` are flags kept with their
+        # counters, so the boundary decision is a few gates from registers and the 32-bit
+        # adders (both next sums, with the old and the new code word) run in parallel to it.
+        s = Signal(CB + 1, init=kw)
         chip = Signal(range(1023))
+        chip_last = Signal()
         hold = Signal(SB)
+        hold_zero = Signal(init=1)
         gen_ep = Signal()
         gen_first = Signal()
         code_epoch = Signal(CB)
@@ -160,32 +167,36 @@ class GnssCorrelator(wiring.Component):
         bit_e = ca.chip
         m.d.comb += ca.prn.eq(prn)
 
-        s = Signal(CB + 1)
-        m.d.comb += s.eq(code_acc + cf)
+        s_keep = Signal(CB + 1)
+        s_new = Signal(CB + 1)
+        m.d.comb += [s_keep.eq(s[:CB] + cf), s_new.eq(s[:CB] + sh_code)]
         advance = Signal()
         wrap = Signal()
         boundary = Signal()
-        m.d.comb += [advance.eq(valid & (hold == 0) & s[CB]),
-                     wrap.eq(advance & (chip == 1022))]
+        m.d.comb += [advance.eq(valid & hold_zero & s[CB]),
+                     wrap.eq(advance & chip_last)]
         if K > 1:
             gen_k = Signal(range(K))
-            m.d.comb += boundary.eq(wrap & (gen_k == K - 1))
+            gen_k_last = Signal()
+            m.d.comb += boundary.eq(wrap & gen_k_last)
             with m.If(wrap):
-                m.d.sync += gen_k.eq(Mux(gen_k == K - 1, 0, gen_k + 1))
+                m.d.sync += [gen_k.eq(Mux(gen_k_last, 0, gen_k + 1)),
+                             gen_k_last.eq(~gen_k_last & (gen_k == K - 2))]
         else:
             m.d.comb += boundary.eq(wrap)
 
         with m.If(valid):
             m.d.sync += [gen_ep.eq(wrap), gen_first.eq(boundary)]
-            with m.If(hold != 0):
-                m.d.sync += hold.eq(hold - 1)
+            with m.If(~hold_zero):
+                m.d.sync += [hold.eq(hold - 1), hold_zero.eq(hold == 1)]
             with m.Else():
-                m.d.sync += code_acc.eq(s[:CB])
+                m.d.sync += s.eq(s_keep)
             with m.If(advance):
-                m.d.sync += chip.eq(Mux(chip == 1022, 0, chip + 1))
+                m.d.sync += [chip.eq(Mux(chip_last, 0, chip + 1)), chip_last.eq(chip == 1021)]
         m.d.comb += [ca.step.eq(advance), ca.restart.eq(wrap)]
         with m.If(boundary):
             m.d.sync += [cf.eq(sh_code), prn.eq(sh_prn), hold.eq(Mux(slew_pend, sh_slew, 0)),
+                         hold_zero.eq(~slew_pend | (sh_slew == 0)), s.eq(s_new),
                          slew_pend.eq(0), pend_carr.eq(sh_carr), code_epoch.eq(s[:CB])]
         # Bus writes after the latch: a write in the boundary cycle waits for the next one.
         # (Separate Ifs, not a Switch: the export of a Switch over all 4 addresses leaves
