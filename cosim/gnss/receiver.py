@@ -76,6 +76,11 @@ def _top(channels: int = 1):
     return gnss_top(channels)
 
 
+def _equivalence(**kw) -> dict:
+    from .equivalence import check_gnss_equivalence
+    return check_gnss_equivalence(**kw)
+
+
 def _frontend():
     from hdl.gnss.model import GnssChannelParams
     return Frontend(params=GnssChannelParams, component=_component, model=_model_session,
@@ -91,4 +96,5 @@ GNSS = register(Receiver(
     primary=Figure("phase_rmse_deg", "carrier phase RMSE", "deg"),
     frontend=_frontend(),
     tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)},
-    array_top=_top))
+    array_top=_top,
+    equivalence=_equivalence))
