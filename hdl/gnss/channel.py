@@ -9,7 +9,8 @@ file builds it. Pipeline of one sample (input cycle ``c``):
 * ``c .. c+5``: carrier NCO (:class:`hdl.nco.Nco`, phase port), the ADC word delayed
   alongside; ``c+5 .. c+9``: real mixer (:class:`hdl.mixer.Mixer`); replica bits and
   epoch flags delayed 9 cycles;
-* ``c+9``: accumulators (a dump loads the record registers); ``c+10``: record valid.
+* ``c+9``: the six replica products ``+-I``, ``+-Q`` (registered); ``c+10``: accumulators
+  (a dump loads the record registers); ``c+11``: record valid.
 """
 from __future__ import annotations
 
@@ -253,7 +254,8 @@ class GnssCorrelator(wiring.Component):
             flags = r
         f_e, f_p, f_l, f_ep, f_first = (flags[k] for k in range(5))
 
-        # -- integrate and dump --------------------------------------------------------------
+        # -- replica products (registered: the negation's carry chain and the accumulator's
+        # are not in one cycle), then integrate and dump ------------------------------------
         W = p.acc_width
         iv, qv = mixer.o.payload.i, mixer.o.payload.q
         accs = {n: Signal(signed(W), name=f"acc_{n}") for n in ACC_FIELDS}
@@ -261,16 +263,18 @@ class GnssCorrelator(wiring.Component):
         for arm, bit in (("e", f_e), ("p", f_p), ("l", f_l)):
             for comp, v in (("i", iv), ("q", qv)):
                 t = Signal(signed(p.iq_width + 1), name=f"t_{comp}{arm}")
-                m.d.comb += t.eq(Mux(bit, -v, v))
+                m.d.sync += t.eq(Mux(bit, -v, v))
                 terms[comp + arm] = t
+        t_valid, t_ep, t_first = Signal(), Signal(), Signal()
+        m.d.sync += [t_valid.eq(mixer.o.valid), t_ep.eq(f_ep), t_first.eq(f_first)]
         epoch = Signal(p.epoch_bits)
         rec = Signal(self.layout)
         rec_valid = Signal()
         m.d.sync += rec_valid.eq(0)
-        with m.If(mixer.o.valid):
-            with m.If(f_ep):
+        with m.If(t_valid):
+            with m.If(t_ep):
                 m.d.sync += epoch.eq(epoch + 1)
-            with m.If(f_first):
+            with m.If(t_first):
                 m.d.sync += [getattr(rec, n).eq(accs[n]) for n in ACC_FIELDS]
                 m.d.sync += [rec.epoch.eq(epoch + 1), rec.carr_phase.eq(carr_at),
                              rec.code_phase.eq(code_at), rec_valid.eq(1)]
