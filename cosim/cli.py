@@ -137,8 +137,8 @@ def _add_hdl(sub):
     p.add_argument("--seed", type=int, default=1, help="nextpnr seed")
     p.add_argument("--channels", type=parse_int, default=1,
                    help="channels on one input stream (receivers with an array top: gnss)")
-    p.add_argument("--timeout-s", type=parse_finite, default=1800.0,
-                   help="limit for each tool run (s)")
+    p.add_argument("--timeout-min", type=parse_finite, default=30.0,
+                   help="limit for each tool run (yosys, nextpnr) in minutes")
     p.add_argument("--results", default=None,
                    help="also write the figures with machine/date/command to "
                         "DIR/synth_<top>.json (DIR/synth_<top>_<N>ch.json for --channels N > 1)")
@@ -242,8 +242,8 @@ def _cmd_synth(a) -> int:
         check_out_dir(a.results, "--results")
     if not 0 < a.target_mhz <= 1000:
         raise ValueError(f"--target-mhz must be in (0, 1000] MHz, not {a.target_mhz:g}")
-    if not a.timeout_s > 0:
-        raise ValueError(f"--timeout-s must be > 0, not {a.timeout_s:g}")
+    if not 0 < a.timeout_min <= 24 * 60:
+        raise ValueError(f"--timeout-min must be in (0, 1440] minutes, not {a.timeout_min:g}")
     rx = get(a.top)
     name, make = next(iter(rx.tops.items()))
     if a.channels != 1:
@@ -256,7 +256,7 @@ def _cmd_synth(a) -> int:
         top = make()
     t0 = time.time()
     r = synth(top, name=name, device=a.device, target_mhz=a.target_mhz, out_dir=a.out,
-              seed=a.seed, timeout_s=a.timeout_s)
+              seed=a.seed, timeout_s=60 * a.timeout_min)
     wall_s = time.time() - t0
     short = {"top": a.top, "channels": a.channels,
              **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}

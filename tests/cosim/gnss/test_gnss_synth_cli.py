@@ -28,7 +28,8 @@ def test_registry_builds_the_array_top():
      "error: GNSS channel array needs channels in [1, 64], not 0"),
     (["--top", "gnss", "--channels", "65"],
      "error: GNSS channel array needs channels in [1, 64], not 65"),
-    (["--top", "gnss", "--timeout-s", "0"], "error: --timeout-s must be > 0, not 0"),
+    (["--top", "gnss", "--timeout-min", "0"],
+     "error: --timeout-min must be in (0, 1440] minutes, not 0"),
 ])
 def test_bad_arguments_refused_before_work(argv, msg, capsys, monkeypatch, tmp_path):
     import cosim.synth as synth_mod
