@@ -8,7 +8,9 @@ IO: the design's ports are left unconstrained and nextpnr places them on free pi
 while the ports fit the package (CABGA381: 365 user IO on the 85F); a top level with wider ports
 needs a wrapper that registers/serialises them before it can be placed (not done here).
 ``fmax_mhz`` is nextpnr's achieved frequency of the ``sync`` clock (register to register; paths
-from and to unconstrained pins do not limit it).
+from and to unconstrained pins do not limit it). A run that misses the target still reports
+(``--timing-allow-fail``; nextpnr 0.11 otherwise exits 1 with no result): ``timing_met``
+says whether it was met.
 """
 from __future__ import annotations
 
@@ -127,7 +129,8 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
     (work / "synth.ys").write_text(script)
     _run([yosys, "-q", "-l", "yosys.log", "synth.ys"], work / "yosys.out", work, timeout_s)
     _run([nextpnr, DEVICES[device], "--package", package, "--json", f"{name}.json",
-          "--report", "report.json", "--freq", f"{target_mhz:g}", "--seed", str(seed)],
+          "--report", "report.json", "--freq", f"{target_mhz:g}", "--seed", str(seed),
+          "--timing-allow-fail"],
          work / "nextpnr.log", work, timeout_s)
 
     report = json.loads((work / "report.json").read_text())
