@@ -135,8 +135,13 @@ def _add_hdl(sub):
     p.add_argument("--target-mhz", type=parse_finite, default=100.0, help="clock target (MHz)")
     p.add_argument("--out", default="build/synth", help="output directory")
     p.add_argument("--seed", type=int, default=1, help="nextpnr seed")
+    p.add_argument("--channels", type=parse_int, default=1,
+                   help="channels on one input stream (receivers with an array top: gnss)")
+    p.add_argument("--timeout-min", type=parse_finite, default=30.0,
+                   help="limit for each tool run (yosys, nextpnr) in minutes")
     p.add_argument("--results", default=None,
-                   help="also write the figures with machine/date/command to DIR/synth_<top>.json")
+                   help="also write the figures with machine/date/command to "
+                        "DIR/synth_<top>.json (DIR/synth_<top>_<N>ch.json for --channels N > 1)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_synth)
 
@@ -230,27 +235,45 @@ def _cmd_verilog(a) -> int:
 
 
 def _cmd_synth(a) -> int:
-    from .synth import synth
+    import time
+    from .synth import synth, tool_versions
     check_out_dir(a.out, "--out")
     if a.results is not None:
         check_out_dir(a.results, "--results")
     if not 0 < a.target_mhz <= 1000:
         raise ValueError(f"--target-mhz must be in (0, 1000] MHz, not {a.target_mhz:g}")
-    name, make = next(iter(get(a.top).tops.items()))
-    r = synth(make(), name=name, device=a.device,
-              target_mhz=a.target_mhz, out_dir=a.out, seed=a.seed)
-    short = {"top": a.top, **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
+    if not 0 < a.timeout_min <= 24 * 60:
+        raise ValueError(f"--timeout-min must be in (0, 1440] minutes, not {a.timeout_min:g}")
+    rx = get(a.top)
+    name, make = next(iter(rx.tops.items()))
+    if a.channels != 1:
+        if rx.array_top is None:
+            raise ValueError(f"--channels: the {a.top} top has no multi-channel array "
+                             f"(only --channels 1), not {a.channels}")
+        top = rx.array_top(a.channels)      # refuses a count it cannot build, before work
+        name = f"{name}_array{a.channels}"
+    else:
+        top = make()
+    t0 = time.time()
+    r = synth(top, name=name, device=a.device, target_mhz=a.target_mhz, out_dir=a.out,
+              seed=a.seed, timeout_s=60 * a.timeout_min)
+    wall_s = time.time() - t0
+    short = {"top": a.top, "channels": a.channels,
+             **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
     if a.results:
         from pathlib import Path
         from .bench import machine_info
         Path(a.results).mkdir(parents=True, exist_ok=True)
         rec = {**short, "device": r["device"], "target_mhz": r["target_mhz"],
-               "timing_met": r["timing_met"], "seed": a.seed, "machine": machine_info()}
-        (Path(a.results) / f"synth_{a.top}.json").write_text(dumps(rec, indent=1) + "\n")
+               "timing_met": r["timing_met"], "seed": a.seed, "wall_s": round(wall_s, 1),
+               "tools": tool_versions(), "machine": machine_info()}
+        suffix = f"_{a.channels}ch" if a.channels != 1 else ""
+        (Path(a.results) / f"synth_{a.top}{suffix}.json").write_text(dumps(rec, indent=1) + "\n")
     if a.json:
         print(dumps(short))
     else:
-        print(f"{a.top} on {r['device']}: {r['lut4']} LUT4, {r['ff']} FF, {r['mult18']} MULT18, "
+        chans = f" x{a.channels}" if a.channels != 1 else ""
+        print(f"{a.top}{chans} on {r['device']}: {r['lut4']} LUT4, {r['ff']} FF, {r['mult18']} MULT18, "
               f"{r['bram']} DP16KD, Fmax {r['fmax_mhz']:.1f} MHz "
               f"(target {r['target_mhz']:g}: {'met' if r['timing_met'] else 'MISSED'})")
     return 0

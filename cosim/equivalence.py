@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-__all__ = ["check_equivalence", "check_record_size", "PYSIM_MAX_SAMPLES", "TOPS"]
+__all__ = ["check_equivalence", "check_record_size", "compare_backends", "PYSIM_MAX_SAMPLES", "TOPS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
@@ -180,3 +180,56 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         "dropped": int(ref.dropped.sum()),
         "per_backend": per,
     }
+
+
+def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall: bool,
+                     empty_hint: str, record_words: int = 1,
+                     pysim_max_samples: int = PYSIM_MAX_SAMPLES) -> dict:
+    """The comparison and verdict of a session-based check (a receiver's
+    ``Receiver.equivalence``): ``run(backend) -> (words, cycles, overflow_count, seconds)``
+    for the same stimulus on each backend; the model is the reference, every FIFO word, its
+    cycle and the overflow counter are compared. ``pysim`` is skipped above
+    ``pysim_max_samples``, ``verilator`` when it is not installed (both noted).
+    ``empty_hint`` ends the verdict when the model gave no word. Returns the keys of
+    :func:`check_equivalence` (``peaks``: the model's records, ``markers``: 0,
+    ``dropped``: the model's overflow count)."""
+    unknown = [b for b in backends if b not in BACKENDS]
+    if unknown:
+        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
+    ref_w, ref_c, ref_ovf, secs = run("model")
+    per = {"model": {"mismatches": 0, "words": int(len(ref_w)), "seconds": secs}}
+    ran, skipped = ["model"], {}
+    for name in [b for b in BACKENDS if b in backends and b != "model"]:
+        if name == "pysim" and samples > pysim_max_samples:
+            skipped["pysim"] = f"pysim runs only for samples <= {pysim_max_samples}"
+            continue
+        if name == "verilator":
+            from .verilator import verilator_available
+            if not verilator_available():
+                from .verilog import verilator_missing_message
+                skipped["verilator"] = verilator_missing_message()
+                continue
+        w, c, ovf, secs = run(name)
+        n = min(len(w), len(ref_w))
+        bad = int(np.count_nonzero(w[:n] != ref_w[:n]) + np.count_nonzero(c[:n] != ref_c[:n]))
+        bad += abs(len(w) - len(ref_w)) + int(ovf != ref_ovf)
+        per[name] = {"mismatches": bad, "words": int(len(w)), "seconds": secs}
+        ran.append(name)
+    compared = [f"{k} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
+                f"{v['mismatches']} mismatches" for k, v in per.items() if k != "model"]
+    total = int(sum(v["mismatches"] for v in per.values()))
+    if len(ran) < 2:
+        verdict = (f"nothing was compared: only {', '.join(ran)} ran"
+                   + "".join(f"; {k} skipped: {w}" for k, w in skipped.items()))
+    elif len(ref_w) == 0:
+        verdict = f"nothing was compared: the {samples} samples gave no FIFO word ({empty_hint})"
+    elif total:
+        verdict = f"{total} mismatches ({'; '.join(compared)})"
+    else:
+        verdict = f"equivalent: {'; '.join(compared)}"
+    return {"top": top, "samples": int(samples), "mismatches": total,
+            "equivalent": bool(len(ran) >= 2 and len(ref_w) > 0 and total == 0),
+            "verdict": verdict, "compared": compared, "backends": ran, "skipped": skipped,
+            "stall": bool(stall), "seed": int(seed),
+            "peaks": int(len(ref_w) // record_words), "words": int(len(ref_w)),
+            "markers": 0, "dropped": int(ref_ovf), "per_backend": per}

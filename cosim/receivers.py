@@ -323,6 +323,10 @@ class Receiver:
     tops : dict, optional
         Verilog module name -> a function building the top with default parameters
         (``verilog`` exports and lints each; ``synth --top <name>`` synthesises the first).
+    array_top : callable, optional
+        ``array_top(channels)`` -> a top of ``channels`` channels on one input stream
+        (``synth --top <name> --channels N``, Verilog name ``<first top>_array<N>``); it
+        refuses a channel count it cannot build (ValueError).
     equivalence : callable, optional
         ``equivalence(samples=, backends=, seed=, stall=, progress=) -> dict`` for
         ``check-equivalence --top <name>`` (the keys of
@@ -344,6 +348,7 @@ class Receiver:
     primary: Figure
     frontend: Frontend | None = None
     tops: dict = field(default_factory=dict)
+    array_top: Callable[[int], Any] | None = None
     equivalence: Callable[..., dict] | None = None
     sweep: Study | None = None
     faults: Study | None = None

@@ -2,7 +2,7 @@
 
 Model (one coherent interval of ``T`` s, batched over any leading axes = trials)::
 
-    X = sigma sqrt(2 (C/N0) T) d R(tau - o_X) / sqrt(R(0)) sinc(df T) exp(j 2 pi dphi) + n_X
+    X = sigma sqrt(2 eta (C/N0) T) d R(tau - o_X) / sqrt(R(0)) sinc(df T) exp(j 2 pi dphi) + n_X
 
 for ``X`` in E, P, L with replica offsets ``o_E = +d/2, o_P = 0, o_L = -d/2`` (the golden
 correlator's convention, ``dsp.gnss.correlator``), where
@@ -21,6 +21,14 @@ correlator's convention, ``dsp.gnss.correlator``), where
   plus ``|tau| R[1]``, ``R[1]`` the code's one-chip autocorrelation: -1/1023, -65/1023 or
   +63/1023 for the Gold codes), which is what the IF path actually correlates with;
 * ``d`` is the navigation bit (+1/-1);
+* ``eta`` is the correlation efficiency of the IF path's ADC (:func:`adc_efficiency`; 1
+  without an ADC, ``adc_bits=None``): the generator's ``b``-bit mid-rise quantiser at its
+  AGC step (``cosim.gnss.signal.agc_step_sigma``) on noise-dominated samples passes the
+  signal with gain ``g`` and white noise of variance ``Var Q(n)``, so the post-correlation
+  SNR is multiplied by ``eta = g^2 sigma^2 / Var Q(n)`` (Bussgang; the theory and the
+  Gaussian cell sums are :mod:`cosim.studies.adc_loss`): 2 bits at Max's step 0.8812
+  (0.549 dB), 1 bit ``2/pi`` (1.961 dB). The quantised noise stays white, so the E/P/L
+  noise correlation is the replicas' overlap as without the ADC;
 * ``sigma`` is the rms of each real noise component (1 by default); the noise is complex
   Gaussian, I and Q independent and identically distributed, and across E, P, L each
   component has the correlation ``rho(o_X - o_Y) = R(o_X - o_Y) / R(0)``: with the
@@ -28,7 +36,7 @@ correlator's convention, ``dsp.gnss.correlator``), where
   E-L: ``1 - d``). Noise is independent from one interval to the next.
 
 With ``sigma = 1`` the post-correlation SNR is ``|P|^2 / (2 sigma^2) = (C/N0) T R(tau)^2 /
-R(0) sinc^2`` (C/N0 as defined in ``cosim.gnss.signal``).
+R(0) sinc^2`` (C/N0 as defined in ``cosim.gnss.signal``), times ``eta`` with an ADC.
 """
 from __future__ import annotations
 
@@ -38,6 +46,26 @@ from dataclasses import dataclass
 import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, ca_code_levels, check_prn
+
+
+def adc_efficiency(adc_bits: int | None,
+                   agc_full_scale_sigma: float | None = None) -> float:
+    """``eta``: the post-correlation SNR factor of the IF path's ``adc_bits``-bit ADC at the
+    generator's AGC step (module docstring; weak-signal limit); 1.0 for ``None`` (no ADC).
+    ``-10 log10(eta)`` is the quantisation loss in dB (0.549 dB at 2 bits)."""
+    if adc_bits is None:
+        return 1.0
+    from cosim.studies.adc_loss import quantizer_efficiency
+    from .signal import agc_step_sigma
+    b = adc_bits
+    if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or not 1 <= b <= 16:
+        raise ValueError(f"adc_bits must be None (no ADC) or an integer in [1, 16], not {b!r}")
+    if agc_full_scale_sigma is not None and not (
+            isinstance(agc_full_scale_sigma, (int, float, np.integer, np.floating))
+            and math.isfinite(agc_full_scale_sigma) and agc_full_scale_sigma > 0):
+        raise ValueError(f"agc_full_scale_sigma must be > 0, not {agc_full_scale_sigma!r}")
+    return quantizer_efficiency(int(b), agc_step_sigma(int(b), agc_full_scale_sigma),
+                                quantizer="mid_rise")
 
 
 def _code_acf(prn: int) -> np.ndarray:
@@ -108,11 +136,16 @@ def correlate_fast(cn0_dbhz, phase_err_cycles=0.0, freq_err_hz=0.0, code_err_chi
                    nav_bit=1.0, T_s: float = 1e-3, spacing_chips: float = 0.5,
                    bandwidth_hz: float | None = None, sigma: float = 1.0,
                    rng: np.random.Generator | None = None, shape=None,
-                   prn: int | None = None) -> FastCorrelations:
+                   prn: int | None = None, adc_bits: int | None = None,
+                   agc_full_scale_sigma: float | None = None) -> FastCorrelations:
     """Draw E/P/L for every interval; inputs broadcast together (and with ``shape``).
 
-    ``cn0_dbhz=None`` gives the noise-free correlations.
+    ``cn0_dbhz=None`` gives the noise-free correlations. ``adc_bits`` (and
+    ``agc_full_scale_sigma``, as in ``GnssSignalConfig``): the IF path's ADC, whose
+    quantisation loss scales the signal by ``sqrt(eta)`` (:func:`adc_efficiency`);
+    None: no ADC.
     """
+    eta = adc_efficiency(adc_bits, agc_full_scale_sigma)
     if not (math.isfinite(T_s) and T_s > 0):
         raise ValueError(f"T_s must be > 0 s, not {T_s!r}")
     d = float(spacing_chips)
@@ -129,7 +162,7 @@ def correlate_fast(cn0_dbhz, phase_err_cycles=0.0, freq_err_hz=0.0, code_err_chi
     if cn0_dbhz is None:
         amp = np.ones(full)
     else:
-        amp = sigma * np.sqrt(2 * 10 ** (cn0 / 10) * T_s)
+        amp = sigma * np.sqrt(2 * eta * 10 ** (cn0 / 10) * T_s)
     common = amp * bit * np.sinc(df * T_s) * np.exp(2j * np.pi * dphi) / math.sqrt(r0)
     h = d / 2
     sig = [common * code_correlation(tau - o, bandwidth_hz, prn) for o in (h, 0.0, -h)]

@@ -43,14 +43,17 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
                latency: int = 0, costas: bool = True, fll_bn_hz: float | None = None,
                shape=(), seed: int = 0, phase0_err_cycles=0.0, freq0_err_hz=0.0,
                code0_err_chips=0.0, arith=None, fs_hz: float = 16.368e6,
-               tracker=None) -> FastTrackResult:
+               tracker=None, adc_bits: int | None = None) -> FastTrackResult:
     """Run the channel closed loop on the fast path; batch shape = broadcast of
     ``cn0_dbhz`` and ``shape``. Starts on the truth (plus the given initial errors), with
     the PLL's rate state on the true Doppler rate (as after pull-in). ``arith``
     (``dsp.gnss.loops_fixed.FLOAT`` or a ``FixedArith``) runs the one-source
     ``ChannelCore`` instead (no FLL), its NCO words turned back into Hz at ``fs_hz``.
     ``tracker``: a name registered in :mod:`dsp.gnss.trackers` (built for this run's
-    context, in ``arith``, default float) or a tracker object; it replaces the PLL."""
+    context, in ``arith``, default float) or a tracker object; it replaces the PLL.
+    ``adc_bits``: the IF path's ADC whose quantisation loss the fast path applies
+    (:func:`cosim.gnss.fastpath.adc_efficiency`); None (default): ``cn0_dbhz`` is the C/N0
+    the correlator sees."""
     rng = np.random.default_rng(seed)
     batch = np.broadcast_shapes(np.shape(cn0_dbhz), tuple(shape))
     t = np.arange(n_epochs + 1) * T_s
@@ -94,7 +97,7 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
         tau = chm[k] - (chi + cr * T_s / 2)
         E[k], DF[k], TAU[k], FD[k] = e, df, tau, f
         x = correlate_fast(cn0_dbhz, e, df, tau, m["nav_bit"][k], T_s, spacing_chips,
-                           rng=rng, shape=batch)
+                           rng=rng, shape=batch, adc_bits=adc_bits)
         phi = phi + f * T_s
         chi = chi + cr * T_s
         fc, kc = update(x.early.real, x.early.imag, x.prompt.real, x.prompt.imag,

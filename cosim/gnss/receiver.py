@@ -149,6 +149,11 @@ def _top(channels: int = 1):
     return gnss_top(channels)
 
 
+def _equivalence(**kw) -> dict:
+    from .equivalence import check_gnss_equivalence
+    return check_gnss_equivalence(**kw)
+
+
 def _frontend():
     from hdl.gnss.model import GnssChannelParams
     return Frontend(params=GnssChannelParams, component=_component, model=_model_session,
@@ -166,4 +171,6 @@ GNSS = register(Receiver(
     sweep=Study("word-length sweep of the fixed-point seed-002 AUKF core on the fast path "
                 "(paired with the float64 AUKF), proposal and its confirmation", SWEEP_OPTIONS,
                 cmd_sweep, model=SWEEP_MODEL),
-    tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)}))
+    tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)},
+    array_top=_top,
+    equivalence=_equivalence))

@@ -76,6 +76,20 @@ STREAM_NOISE, STREAM_NAV, STREAM_DYNAMICS, STREAM_OSC = 0, 1, 2, 3
 MAX_STEP_SIGMA = {2: 0.9957, 3: 0.5860, 4: 0.3352, 5: 0.1881}
 
 
+def agc_step_sigma(adc_bits: int, agc_full_scale_sigma: float | None = None) -> float:
+    """The AGC's quantiser step ``Delta`` in units of the input rms (module docstring):
+    Max's minimum-MSE step for 2-5 bits, full scale at 4 sigma from 6 bits on, any step for
+    1 bit (the sign; 1 returned), or full scale at ``agc_full_scale_sigma``."""
+    b = adc_bits
+    if agc_full_scale_sigma is not None:
+        return agc_full_scale_sigma / 2 ** (b - 1)
+    if b == 1:
+        return 1.0
+    if b in MAX_STEP_SIGMA:
+        return MAX_STEP_SIGMA[b]
+    return 4.0 / 2 ** (b - 1)
+
+
 @njit_cached(nogil=True)
 def _if_kernel(n0, f_ratio, sign, phase0, chip0, chips_per_sample, motion, phi, code, bits,
                bit0, sigma, noise, amp, out):
@@ -256,14 +270,7 @@ class GnssSignalConfig:
     def adc_step(self) -> float:
         """The AGC's quantiser step ``Delta`` (same units as the analog input)."""
         sig_in = math.sqrt(self.noise_sigma ** 2 + (0.5 if self.signal_present else 0.0))
-        b = self.adc_bits
-        if self.agc_full_scale_sigma is not None:
-            return self.agc_full_scale_sigma * sig_in / 2 ** (b - 1)
-        if b == 1:
-            return sig_in
-        if b in MAX_STEP_SIGMA:
-            return MAX_STEP_SIGMA[b] * sig_in
-        return 4.0 * sig_in / 2 ** (b - 1)
+        return agc_step_sigma(self.adc_bits, self.agc_full_scale_sigma) * sig_in
 
     def replace(self, **changes) -> "GnssSignalConfig":
         d = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -4,10 +4,14 @@ their clock process noise from it; the signal generator's phase noise
 (:mod:`cosim.gnss.oscillator`) draws from it.
 
 Tables (h0, h-1, h-2): the "typical" crystal-oscillator values of Brown & Hwang,
-*Introduction to Random Signals and Applied Kalman Filtering* (Wiley; the clock-model
-table of the GPS chapter, Table 9.2 in the 4th ed., 2012), as widely reproduced in GNSS
-receiver literature. (Seed 003 cites O'Driscoll & Lachapelle 2011 for its oscillator
-table, which is empty in the seed's text; we have not checked that paper's values.)
+*Introduction to Random Signals and Applied Kalman Filtering*, 4th ed. (Wiley, 2012),
+section 9.3, p. 327 (Table 9.2, the clock models of the GPS chapter): "tcxo" is the book's
+(low-quality) temperature-compensated crystal, "ocxo" its oven-controlled crystal. The
+same values, with that citation, are in independent open-source GNSS code (navtools'
+clock models, Auburn GAVLab; D. Sturdivant's sturdr ``clock.hpp``), which also lists the
+book's high-quality TCXO (2e-21, 1e-22, 2e-20), rubidium (2e-22, 4.5e-26, 1e-30) and
+cesium (2e-22, 5e-27, 1.5e-33) rows. (Seed 003 cites O'Driscoll & Lachapelle 2011 for its
+oscillator table, which is empty in the seed's text; we have not checked that paper.)
 
 =========  ========  ========  ========
 class      h0        h-1       h-2
@@ -16,8 +20,11 @@ TCXO       2e-19     7e-21     2e-20
 OCXO       2e-25     7e-25     6e-25
 =========  ========  ========  ========
 
-(Entered from that table as it is commonly quoted, not re-read from the book in this
-work: check against the book before quoting them in a publication.)
+(Checked here against those two code bases, not against a copy of the book: confirm in the
+book before quoting them in a publication.) What the generator draws from them -- the Allan
+variance ``h0 / (2 tau) + 2 ln2 h-1 + (2 pi^2 / 3) h-2 tau`` and the frequency-noise PSD
+``h0 + h-1 / f + h-2 / f^2`` of each table -- is tested in
+``tests/cosim/gnss/test_gnss_oscillator.py``.
 """
 from __future__ import annotations
 
@@ -51,7 +58,7 @@ class Oscillator:
         return self.h0 / (2 * tau) + 2 * math.log(2) * self.h_1 + 2 * math.pi ** 2 / 3 * self.h_2 * tau
 
 
-#: Brown & Hwang (4th ed.) Table 9.2 "typical" values (module docstring).
+#: Brown & Hwang (4th ed., 2012) section 9.3, p. 327, Table 9.2 values (module docstring).
 OSCILLATORS = {
     "tcxo": Oscillator(2e-19, 7e-21, 2e-20, "tcxo"),
     "ocxo": Oscillator(2e-25, 7e-25, 6e-25, "ocxo"),

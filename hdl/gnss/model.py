@@ -285,8 +285,8 @@ class GnssChannelParams:
     @property
     def latency(self) -> int:
         """Cycles from the input cycle of a dump's first sample to its record at the FIFO
-        input: carrier NCO, mixer, accumulator, record register."""
-        return self.nco.latency + self.mixer.latency + 1
+        input: carrier NCO, mixer, replica-product register, accumulator/record register."""
+        return self.nco.latency + self.mixer.latency + 2
 
     # -- register values -------------------------------------------------------------------
     def carr_word(self, f_hz: float) -> int:

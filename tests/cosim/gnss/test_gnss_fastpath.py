@@ -5,7 +5,8 @@ import pytest
 
 from cosim.gnss import agreement
 from cosim.gnss import dynamics as dy
-from cosim.gnss.fastpath import code_correlation, correlate_fast, epoch_errors, noise_correlation
+from cosim.gnss.fastpath import (adc_efficiency, code_correlation, correlate_fast, epoch_errors,
+                                 noise_correlation)
 from cosim.gnss.signal import GnssSignalConfig, GnssSignalGenerator
 from dsp.gnss.ca_code import CHIP_RATE_HZ, ca_code_levels
 
@@ -77,15 +78,48 @@ def test_epoch_errors_from_the_generator_truth():
     assert set(np.unique(bit)) <= {-1.0, 1.0}
 
 
+def test_adc_quantisation_efficiency():
+    """The IF path's ADC at its AGC step: 2 bits 0.8812 (0.549 dB: Max's step 0.9957 sigma),
+    1 bit 2/pi (1.961 dB), vanishing with more bits; no ADC: 1."""
+    assert adc_efficiency(None) == 1.0
+    assert adc_efficiency(2) == pytest.approx(0.8812, abs=1e-4)
+    assert -10 * np.log10(adc_efficiency(2)) == pytest.approx(0.549, abs=1e-3)
+    assert adc_efficiency(1) == pytest.approx(2 / np.pi, rel=1e-12)
+    effs = [adc_efficiency(b) for b in range(1, 17)]
+    assert all(a < b for a, b in zip(effs[:5], effs[1:6])) and 1 - effs[-1] < 1e-4
+    # A full scale far from the AGC's costs more (the agc_full_scale_sigma override).
+    assert adc_efficiency(2, agc_full_scale_sigma=4.0) < adc_efficiency(2) - 0.05
+    with pytest.raises(ValueError, match=r"adc_bits must be None \(no ADC\) or an integer in "
+                                         r"\[1, 16\], not 0"):
+        adc_efficiency(0)
+    with pytest.raises(ValueError, match=r"adc_bits must be None \(no ADC\) or an integer in "
+                                         r"\[1, 16\], not 2.0"):
+        correlate_fast(40.0, adc_bits=2.0)
+    with pytest.raises(ValueError, match=r"agc_full_scale_sigma must be > 0, not -1"):
+        adc_efficiency(2, agc_full_scale_sigma=-1)
+
+
+def test_adc_bits_scale_the_signal_not_the_noise():
+    kw = dict(rng=np.random.default_rng(3), shape=(200_000,))
+    g = correlate_fast(40.0, 0.0, 0.0, 0.0, 1.0, adc_bits=2, **kw)
+    a = np.sqrt(2 * 1e4 * 1e-3 * adc_efficiency(2))
+    assert np.mean(g.prompt).real == pytest.approx(a, rel=3e-3)
+    assert np.var(g.prompt.real) == pytest.approx(1.0, rel=0.01)
+
+
 # --- against the IF path ------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def agree():
-    # 2 s of IF (2000 epochs) + 1 s noise-only, 16-bit ADC, 40 dB-Hz, tau 0.125 chip,
-    # 0.05 cycle, Doppler 1250 Hz; ~10-15 s on a loaded 2-core machine.
+    # 2 s of IF (2000 epochs) + 1 s noise-only at the generator's default 2-bit ADC (the
+    # fast path told the same word length: 0.549 dB), 40 dB-Hz, tau 0.125 chip, 0.05 cycle,
+    # Doppler 1250 Hz; ~10-15 s on a loaded 2-core machine.
     return agreement.compare()
 
 
 def test_if_vs_fast_cn0_within_half_a_db(agree):
+    # the IF path at the generator's default ADC, the fast path told the same
+    assert agree["adc_bits"] == agree["fast_adc_bits"] == GnssSignalConfig().adc_bits == 2
+    assert agree["adc_loss_db"] == pytest.approx(0.549, abs=1e-3)
     assert abs(agree["cn0_diff_db"]) < 0.5
     assert abs(agree["cn0_if_dbhz"] - agree["cn0_expected_dbhz"]) < 0.5
     assert abs(agree["cn0_fast_dbhz"] - agree["cn0_expected_dbhz"]) < 0.5
@@ -104,6 +138,18 @@ def test_if_noise_correlation_matches_the_model(agree):
     # ... and it tells the PRN's own correlation (0.765 / 0.531) from the triangle's (0.75 / 0.5).
     tri = np.asarray(noise_correlation(0.5))
     assert np.max(np.abs(np.asarray(agree["noise_corr_if"]) - tri)) > 0.02
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bits", [1, 2])
+def test_fast_path_without_the_adc_loss_disagrees(bits):
+    """The check can fail: the fast path not told of the ADC is off by the loss (1.96 dB at
+    1 bit, 0.55 at 2) and its discriminator variances by > 10 %; told of it, it agrees."""
+    off = agreement.compare(adc_bits=bits, fast_adc_bits=None)
+    assert off["cn0_diff_db"] < -0.5 and off["dll_var_ratio"] > 1.15, off
+    on = agreement.compare(adc_bits=bits)
+    assert abs(on["cn0_diff_db"]) < 0.5
+    assert abs(on["dll_var_ratio"] - 1) < 0.10 and abs(on["atan_var_ratio"] - 1) < 0.10, on
 
 
 @pytest.mark.slow

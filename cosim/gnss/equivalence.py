@@ -1,0 +1,121 @@
+"""Equivalence of the GNSS channel's bit-exact model, Amaranth simulation and Verilated
+Verilog (``python -m cosim check-equivalence --top gnss``): one seeded GPS L1 C/A record with
+register writes through the three sessions (:func:`cosim.gnss.session.open_gnss`), every
+FIFO word, the cycle it leaves on and the overflow counter compared with the model's
+(:func:`cosim.equivalence.compare_backends`).
+
+The record: PRN 7 at 45 dB-Hz, 2-bit ADC, 900 m/s closing with 10 m/s^2, from the signal
+generator (:mod:`cosim.gnss.signal`) at a reduced rate (:data:`EQUIV_PARAMS`: 5.115 MS/s,
+IF fs/4, 5115 samples per code period, so pysim runs a few periods in seconds). The writes:
+the hand-over of the true Doppler and code phase (carrier word, code word, slew), then
+seeded writes from the third code period on, every :data:`WRITE_SPACING` cycles on average:
+carrier words within +-300 Hz of the true Doppler, code words within +-20 Hz, slews of 0-4
+samples, and PRN changes (another PRN, then back to 7), so every register and the double
+buffering are exercised on a signal that correlates (the prompt on the peak, E = L).
+``stall=True``: the DSP ``ready`` follows :func:`cosim.equivalence.stall_pattern` and the
+FIFO holds one record (``record_words + 1`` words: records dropped, the counter compared).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
+from hdl.gnss.model import GnssChannelParams
+
+from ..equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
+
+__all__ = ["check_gnss_equivalence", "gnss_equivalence_stimulus", "EQUIV_PARAMS", "EQUIV_PRN"]
+
+#: Reduced rate for the check: 5 samples per chip, IF fs/4, 0.4-chip early-late spacing.
+EQUIV_PARAMS = GnssChannelParams(fs_hz=5.115e6, if_hz=5.115e6 / 4, el_spacing_samples=2,
+                                 slew_bits=13, fifo_depth=64)
+#: The satellite in the record.
+EQUIV_PRN = 7
+#: Mean cycles between two seeded register writes.
+WRITE_SPACING = 1500
+#: Cycles run after the last sample (the last record leaves the pipeline and the FIFO).
+FLUSH_CYCLES = 400
+
+
+def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int):
+    """``(adc_words, writes)``: the record's ADC words and its register writes
+    ``(cycle, register name, value)``, in cycle order."""
+    from .dynamics import PolynomialProfile
+    from .run import adc_words, handover_writes
+    from .signal import GnssSignalConfig, generate
+    rng = np.random.default_rng(seed)
+    code0 = float(rng.uniform(0, 1023))
+    cfg = GnssSignalConfig(prn=EQUIV_PRN, if_hz=params.if_hz, fs_hz=params.fs_hz,
+                           adc_bits=params.adc_bits, cn0_dbhz=45.0,
+                           duration_s=(samples + 1) / params.fs_hz,
+                           dynamics=PolynomialProfile(range_rate_mps=-900.0,
+                                                      range_accel_mps2=10.0),
+                           code_phase_chips=code0, seed=seed)
+    x = adc_words(generate(cfg).samples[:samples])
+    doppler = 900.0 * L1_HZ / 299_792_458.0
+    writes = handover_writes(params, doppler, code0, cfg.spectrum_inverted)
+    writes = [(0, "prn", EQUIV_PRN)] + [(c + 1, r, v) for c, r, v in writes]
+    # The hand-over takes effect at the first dump boundary and its slew during the second
+    # code period: the seeded writes start after it, so the third record is on the peak.
+    first = 2 * round(params.fs_hz * 1e-3)
+    n_w = max(0, (samples - first) // WRITE_SPACING)
+    cycles = np.sort(rng.choice(np.arange(first, samples), n_w, replace=False)) if n_w else []
+    other = False
+    for c in cycles:
+        reg = ("carr_freq", "code_freq", "slew", "prn")[int(rng.integers(0, 4))]
+        if reg == "carr_freq":
+            v = params.carr_word(params.if_hz + doppler + float(rng.uniform(-300, 300)))
+        elif reg == "code_freq":
+            v = params.code_word(CHIP_RATE_HZ * (1 + doppler / L1_HZ)
+                                 + float(rng.uniform(-20, 20)))
+        elif reg == "slew":
+            v = int(rng.integers(0, 5))
+        else:
+            v = EQUIV_PRN if other else int(rng.choice([n for n in range(1, 33)
+                                                        if n != EQUIV_PRN]))
+            other = not other
+        writes.append((int(c), reg, int(v)))
+    return x, writes
+
+
+def check_gnss_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: int = 1,
+                           stall: bool = False, params: GnssChannelParams | None = None,
+                           pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                           progress: bool = False) -> dict:
+    """The keys of :func:`cosim.equivalence.check_equivalence` (``peaks``: the model's
+    records; ``dropped``: its overflow count) for the GNSS channel (module doc)."""
+    from .session import open_gnss
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
+    unknown = [b for b in backends if b not in BACKENDS]
+    if unknown:
+        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
+    if params is None:
+        params = EQUIV_PARAMS
+        if stall:
+            params = replace(params, fifo_depth=params.fifo.record_words + 1)
+    if not isinstance(params, GnssChannelParams) or params.channel_bits:
+        raise ValueError(f"params must be a single-channel GnssChannelParams, not {params!r}")
+    samples = int(samples)
+    x, writes = gnss_equivalence_stimulus(params, samples, seed)
+    n_cycles = samples + params.latency + params.fifo.record_words + FLUSH_CYCLES
+    ready = stall_pattern(n_cycles, seed) if stall else np.ones(n_cycles, bool)
+
+    def run(backend):
+        t = time.perf_counter()
+        with open_gnss(backend, params) as fe:
+            for c, reg, v in writes:
+                fe.write(reg, v, cycle=c)
+            r = fe.step(x, ready, n_cycles=n_cycles)
+            ovf = int(fe.read("overflow_count"))
+        return (np.asarray(r.words, np.int64), np.asarray(r.cycles, np.int64), ovf,
+                time.perf_counter() - t)
+
+    return compare_backends("gnss", samples, backends, run, seed=seed, stall=stall,
+                            record_words=params.fifo.record_words,
+                            pysim_max_samples=pysim_max_samples,
+                            empty_hint=f"a record every {round(params.fs_hz / 1e3)} "
+                                       f"samples, one code period")
