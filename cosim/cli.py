@@ -178,15 +178,13 @@ def _cmd_check_equivalence(a) -> int:
 
 
 def hdl_blocks() -> dict:
-    """Every HDL block (default-ish parameters), the GNSS channel tops (1 and 12 channels;
-    they move to the GNSS registry entry's ``tops`` once it exists) and every receiver's top
-    (its registry entry's ``tops``), by Verilog module name."""
+    """Every HDL block (default-ish parameters) and every receiver's top (its registry
+    entry's ``tops``), by Verilog module name."""
     from hdl.cic import Cic
     from hdl.ddc import Ddc
     from hdl.envelope import Envelope
     from hdl.fifo import DspFifo
     from hdl.fir import Fir
-    from hdl.gnss.channel import gnss_top
     from hdl.mixer import Mixer
     from hdl.tacan.model import TacanFrontendParams
     from hdl.nco import Nco
@@ -201,8 +199,6 @@ def hdl_blocks() -> dict:
         "envelope": lambda: Envelope(p.envelope),
         "peak": lambda: PeakSearch(p.peak),
         "fifo": lambda: DspFifo(p.fifo),
-        "gnss_channel": lambda: gnss_top(1),
-        "gnss_channel_array12": lambda: gnss_top(12),
     }
     for r in receivers():
         blocks.update(r.tops)
