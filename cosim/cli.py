@@ -135,6 +135,8 @@ def _add_hdl(sub):
     p.add_argument("--target-mhz", type=parse_finite, default=100.0, help="clock target (MHz)")
     p.add_argument("--out", default="build/synth", help="output directory")
     p.add_argument("--seed", type=int, default=1, help="nextpnr seed")
+    p.add_argument("--timeout-min", type=parse_finite, default=30.0,
+                   help="limit for each tool run (yosys, nextpnr) in minutes")
     p.add_argument("--results", default=None,
                    help="also write the figures with machine/date/command to DIR/synth_<top>.json")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -236,9 +238,12 @@ def _cmd_synth(a) -> int:
         check_out_dir(a.results, "--results")
     if not 0 < a.target_mhz <= 1000:
         raise ValueError(f"--target-mhz must be in (0, 1000] MHz, not {a.target_mhz:g}")
+    if not 0 < a.timeout_min <= 24 * 60:
+        raise ValueError(f"--timeout-min must be in (0, 1440] minutes, not {a.timeout_min:g}")
     name, make = next(iter(get(a.top).tops.items()))
     r = synth(make(), name=name, device=a.device,
-              target_mhz=a.target_mhz, out_dir=a.out, seed=a.seed)
+              target_mhz=a.target_mhz, out_dir=a.out, seed=a.seed,
+              timeout_s=60 * a.timeout_min)
     short = {"top": a.top, **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
     if a.results:
         from pathlib import Path

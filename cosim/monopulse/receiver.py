@@ -11,7 +11,8 @@ from ..receivers import Arg, Figure, Frontend, Option, Receiver, config_kwargs, 
 from ..validate import dumps
 from .run import MonopulseRunConfig, run_monopulse
 
-OPTIONS = tuple(Option(MonopulseRunConfig, f.name) for f in dataclasses.fields(MonopulseRunConfig)) \
+OPTIONS = tuple(Option(MonopulseRunConfig, f.name) for f in dataclasses.fields(MonopulseRunConfig)
+                if "help" in f.metadata) \
     + (Arg("--json", action="store_true", help="print one JSON object"),)
 
 

@@ -40,8 +40,9 @@ def test_json_report(capsys):
     (["--u0", "0.8", "--v0", "0.7"], "error: initial target direction must lie in the visible "
                                       "region u^2 + v^2 < 1, not u = 0.8, v = 0.7"),
     (["--phase-bits", "0"], "error: phase_bits must be an integer in [1, 24] or None (ideal), not 0"),
-    (["--backend", "verilator"], "error: backend 'verilator': the monopulse HDL front end exists but "
-     "the closed loop is not wired to it yet"),
+    (["--backend", "verilator", "--trials", "2"],
+     "error: the verilator backend runs one trial, not trials = 2"),
+    (["--backend", "pysim", "--duration-s", "2"], "error: pysim simulates about 2e+03 cycles/s"),
 ])
 def test_bad_input_exits_2_with_an_error_line(argv, msg, capsys):
     assert main(["monopulse", "--duration-s", "0.01"] + argv) == 2
