@@ -65,6 +65,9 @@ class MonopulseRunConfig:
     eq36: str = field(default="repaired", metadata=_h(
         "adaptive index: repaired or literal (the seed's eq. 36)",
         choices=("repaired", "literal"), case="lower"))
+    floor_scaling: str = field(default="gain", metadata=_h(
+        "adaptive noise floor: gain (tau sigma_v^2 / (1 - alpha)) or fixed (tau sigma_v^2)",
+        choices=("gain", "fixed"), case="lower"))
     sigma_a: float = field(default=2.0, metadata=_h(
         "fixed tracking index as acceleration std of the direction cosines (1/s^2)"))
     latency_blocks: int = field(default=1, metadata=_h(
@@ -194,7 +197,7 @@ class MonopulseRunConfig:
 
     def tracker_config(self) -> TrackerConfig:
         return TrackerConfig(mode=self.tracker, eq36=self.eq36, sigma_a=self.sigma_a,
-                             latency_blocks=self.latency_blocks)
+                             floor_scaling=self.floor_scaling, latency_blocks=self.latency_blocks)
 
 
 def snapshot_snr(sig: MonopulseSignalConfig) -> float:

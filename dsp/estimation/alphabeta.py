@@ -131,6 +131,10 @@ class AlphaBetaFormats(FormatTable):
         need_bits("2 (1 - r)^2", 2 * w["c"] + 1)
 
 
+#: Noise floor of the adaptive mode: ``fixed`` ``tau sigma_v^2``; ``gain`` ``tau sigma_v^2 / (1 -
+#: alpha)`` with the alpha in use (the innovation variance those gains give on noise alone).
+FLOOR_SCALINGS = ("fixed", "gain")
+
 SIGNALS = AlphaBetaFormats.signals()
 EVENTS = EventRegistry(SIGNALS, ("implausible", "s_zero", "neg_sqrt", "upsets"))
 _Z, _X, _E, _C, _S, _L = (SIGNALS.index(s) for s in ("z", "x", "e", "c", "s", "l"))
@@ -144,12 +148,13 @@ _BASE = EVENTS.base
 @njit_cached
 def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd, k0, ups, ev, xs, cs):
     """consts = [noise floor tau sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a
-    number), sigma_v / k (l), 4 (l)]."""
+    number), sigma_v / k (l), 4 (l), floor scaled by 1 / (1 - alpha) (0 or 1)]."""
     nb, n = x.shape
     T = z.shape[1]
     N = ring.shape[1]
     z0 = x[0, 0] - x[0, 0]
     floor, amin, amax, one, nw, svl, four = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5], consts[6]
+    scale = consts[7]
     xp = np.empty(n, x.dtype)
     for b in range(nb):
         eb = ev[b]
@@ -181,7 +186,10 @@ def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd
                         for j in range(N):
                             acc += ring[b, j]
                         Sm = div_q(acc, nw, 0, hf[_S], lo[_S], hi[_S], eb, _S, _EV_SZ, _BASE)
-                        dm = Sm - floor     # innovation power beyond the noise floor
+                        fl = floor
+                        if scale != z0:     # the floor of the gains in use: / (1 - alpha)
+                            fl = div_q(floor, one - c[b, 0], fr[_C], hf[_S], lo[_S], hi[_S], eb, _S, _EV_SZ, _BASE)
+                        dm = Sm - fl        # innovation power beyond the noise floor
                         if dm > z0:
                             g = sqrt_q(dm, 2 * fr[_L] - fr[_S], hf[_L], hi[_L], eb, _L, _EV_NSQ, _BASE)
                             lam = div_q(g, svl, fr[_L], hf[_L], lo[_L], hi[_L], eb, _L, _EV_SZ, _BASE)
@@ -256,8 +264,8 @@ class AlphaBetaFilter:
     def __init__(self, T_s: float, alpha: float, beta: float, gamma: float | None = None, *,
                  adaptive: bool = False, sigma_v: float | None = None, window: int = 4,
                  alpha_min: float = 0.05, alpha_max: float = 0.95, noise_floor: float = 4.0,
-                 manoeuvre_gain: float = 2.0, arithmetic="float64", trials: int = 1, x0=None,
-                 z_limit: float | None = None):
+                 manoeuvre_gain: float = 2.0, floor_scaling: str = "fixed",
+                 arithmetic="float64", trials: int = 1, x0=None, z_limit: float | None = None):
         if not (isinstance(T_s, (int, float)) and math.isfinite(T_s) and T_s > 0):
             raise ValueError(f"T_s must be a finite number > 0, not {T_s!r}")
         check_coefficients(alpha, beta, gamma)
@@ -276,6 +284,9 @@ class AlphaBetaFilter:
             if not (isinstance(manoeuvre_gain, (int, float)) and math.isfinite(manoeuvre_gain)
                     and manoeuvre_gain > 0):
                 raise ValueError(f"manoeuvre_gain must be a finite number > 0, not {manoeuvre_gain!r}")
+            if floor_scaling not in FLOOR_SCALINGS:
+                raise ValueError(f"floor_scaling must be one of {', '.join(FLOOR_SCALINGS)}, not "
+                                 f"{floor_scaling!r}")
             if not 0.0 < alpha_min < alpha_max < 1.0:
                 raise ValueError(f"alpha limits must satisfy 0 < alpha_min < alpha_max < 1, not "
                                  f"{alpha_min!r}, {alpha_max!r}")
@@ -291,7 +302,9 @@ class AlphaBetaFilter:
         x0 = np.broadcast_to(x0, (self.trials, n)) * np.array([1.0, T_s, T_s * T_s / 2][:n])
         coef = np.array([alpha, beta, 0.0 if gamma is None else gamma / 4.0])
         sv = 1.0 if sigma_v is None else float(sigma_v)
-        consts = np.array([noise_floor * sv ** 2, alpha_min, alpha_max, 1.0, window, sv / manoeuvre_gain, 4.0])
+        scale = 1.0 if adaptive and floor_scaling == "gain" else 0.0
+        consts = np.array([noise_floor * sv ** 2, alpha_min, alpha_max, 1.0, window, sv / manoeuvre_gain, 4.0,
+                           scale])
         window = window if adaptive else 1
         self.events = EVENTS
         if self.kind == "fixed":
@@ -310,7 +323,7 @@ class AlphaBetaFilter:
             self.c = np.broadcast_to(to_fixed(coef, fm.c), (self.trials, 3)).copy()
             self.consts = np.array([to_fixed(consts[0], fm.s), to_fixed(alpha_min, fm.c),
                                     to_fixed(alpha_max, fm.c), 1 << fm.c.frac, window,
-                                    to_fixed(consts[5], fm.l), 4 << fm.l.frac], np.int64)
+                                    to_fixed(consts[5], fm.l), 4 << fm.l.frac, int(scale)], np.int64)
             dt = np.int64
         else:
             dt = np.float64 if self.kind == "float64" else np.float32

@@ -39,7 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..estimation.alphabeta import AlphaBetaFilter, AlphaBetaFormats, kalata, tracking_index
+from ..estimation.alphabeta import (FLOOR_SCALINGS, AlphaBetaFilter, AlphaBetaFormats, kalata,
+                                   tracking_index)
 from ..estimation.formats import fmt
 from .angles import direction_cosines
 
@@ -89,6 +90,10 @@ class TrackerConfig:
         "help": "innovation power (x sigma_v^2) taken as noise by the adaptive filter"})
     manoeuvre_gain: float = field(default=2.0, metadata={
         "help": "k of sigma_a T^2 = k sqrt(mean e^2 - tau sigma_v^2) (adaptive, repaired)"})
+    floor_scaling: str = field(default="gain", metadata={
+        "help": "adaptive noise floor: gain (tau sigma_v^2 / (1 - alpha), the innovation "
+                "variance of the gains in use) or fixed (tau sigma_v^2)",
+        "choices": FLOOR_SCALINGS, "case": "lower"})
     alpha_min: float = field(default=0.05, metadata={"help": "smallest adaptive alpha"})
     alpha_max: float = field(default=0.95, metadata={"help": "largest adaptive alpha"})
     latency_blocks: int = field(default=1, metadata={
@@ -103,6 +108,9 @@ class TrackerConfig:
         _int("window", self.window, 2, 64)
         _num("noise_floor", self.noise_floor, 0, lo_open=False)
         _num("manoeuvre_gain", self.manoeuvre_gain, 0)
+        if self.floor_scaling not in FLOOR_SCALINGS:
+            raise ValueError(f"floor_scaling must be one of {', '.join(FLOOR_SCALINGS)}, not "
+                             f"{self.floor_scaling!r}")
         if not (isinstance(self.alpha_min, (int, float)) and isinstance(self.alpha_max, (int, float))
                 and 0.0 < self.alpha_min < self.alpha_max < 1.0):
             raise ValueError(f"alpha limits must satisfy 0 < alpha_min < alpha_max < 1, not "
@@ -147,7 +155,8 @@ class AngleTracker:
         self.filter = AlphaBetaFilter(
             T_s, self.alpha, self.beta, adaptive=adaptive, sigma_v=sigma_v, window=config.window,
             alpha_min=config.alpha_min, alpha_max=config.alpha_max, noise_floor=tau,
-            manoeuvre_gain=k, arithmetic=arithmetic, trials=2 * trials, x0=x0, z_limit=1.0)
+            manoeuvre_gain=k, floor_scaling=config.floor_scaling, arithmetic=arithmetic,
+            trials=2 * trials, x0=x0, z_limit=1.0)
         self.kind = self.filter.kind
         self.lead = 1 + config.latency_blocks
         self.coefficients = np.broadcast_to(np.array([self.alpha, self.beta]), (2 * trials, 2)).copy()
