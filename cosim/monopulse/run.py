@@ -68,6 +68,10 @@ class MonopulseRunConfig:
     floor_scaling: str = field(default="gain", metadata=_h(
         "adaptive noise floor: gain (tau sigma_v^2 / (1 - alpha)) or fixed (tau sigma_v^2)",
         choices=("gain", "fixed"), case="lower"))
+    noise_floor: float = field(default=6.0, metadata=_h(
+        "adaptive: tau, the innovation power (x sigma_v^2) taken as noise"))
+    alpha_relax: float = field(default=1.1, metadata=_h(
+        "adaptive: 1 - alpha grows at most by this factor a step (0: no limit)"))
     sigma_a: float = field(default=2.0, metadata=_h(
         "fixed tracking index as acceleration std of the direction cosines (1/s^2)"))
     latency_blocks: int = field(default=1, metadata=_h(
@@ -124,8 +128,8 @@ class MonopulseRunConfig:
     hdl_changes: tuple = ()
 
     def __post_init__(self):
-        for name in ("snr_db", "duration_s", "sigma_a", "u0", "v0", "du_dt", "dv_dt", "accel_u",
-                     "accel_v", "manoeuvre_start_s", "manoeuvre_end_s", "gain_spread_db",
+        for name in ("snr_db", "duration_s", "sigma_a", "noise_floor", "alpha_relax", "u0", "v0",
+                     "du_dt", "dv_dt", "accel_u", "accel_v", "manoeuvre_start_s", "manoeuvre_end_s", "gain_spread_db",
                      "phase_spread_deg", "detect_db", "settle_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -197,7 +201,8 @@ class MonopulseRunConfig:
 
     def tracker_config(self) -> TrackerConfig:
         return TrackerConfig(mode=self.tracker, eq36=self.eq36, sigma_a=self.sigma_a,
-                             floor_scaling=self.floor_scaling, latency_blocks=self.latency_blocks)
+                             floor_scaling=self.floor_scaling, noise_floor=self.noise_floor,
+                             alpha_relax=self.alpha_relax, latency_blocks=self.latency_blocks)
 
 
 def snapshot_snr(sig: MonopulseSignalConfig) -> float:
