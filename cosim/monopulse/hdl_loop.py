@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,7 +47,8 @@ from dsp.monopulse.golden import beams  # noqa: F401  (the beam mapping the HDL 
 
 from .fastpath import noise_variance
 
-__all__ = ["hdl_params", "record_gain", "hdl_closed_loop", "check_hdl_timing", "check_hdl_run"]
+__all__ = ["hdl_params", "record_gain", "hdl_closed_loop", "check_hdl_timing", "check_hdl_run",
+           "FaultHooks"]
 
 #: Cycles per FIFO word the DSP's service reads (as the GNSS loop).
 CYCLES_PER_WORD = 4
@@ -108,17 +110,34 @@ def check_hdl_timing(run, p) -> None:
                          f"not {svc.batch_words}")
 
 
+@dataclass
+class FaultHooks:
+    """Bit errors injected into the HDL closed loop (the fault study): ``adc(k, codes)``
+    returns scenario block ``k``'s ADC codes (4, N D) with flips; ``fifo(words)`` the FIFO
+    words a DSP service read, with flips. With hooks the DSP does not raise on a bad record
+    (block counter or steering words not those expected): it counts it and treats the block
+    as undetected; it re-synchronises on a record whose block counter and steering words
+    both match a later block (records lost: the blocks between count as missing)."""
+
+    adc: object = None
+    fifo: object = None
+
+
 class _HdlDsp:
     """The pipeline's DSP callback: records -> the loop -> register writes."""
 
-    def __init__(self, run, sig, p, loop, cal_n, ut, vt, thr, gain):
+    def __init__(self, run, sig, p, loop, cal_n, ut, vt, thr, gain, faults=None):
         from dsp.records import RecordRxState
         self.run, self.sig, self.p, self.loop = run, sig, p, loop
         self.cal_n, self.ut, self.vt, self.thr = cal_n, ut, vt, thr
         self.gn2 = (gain * p.snapshots) ** 2
         self.nv = noise_variance(sig)
         self.rx = RecordRxState()
+        self.faults = faults
         self.n_records = 0           # records received (preamble included)
+        self.next_block = 0          # the scenario block the next record should carry
+        self.bad_records = 0
+        self.missing_blocks = 0
         self.K = loop.K
 
     def writes_for(self, st):
@@ -129,15 +148,60 @@ class _HdlDsp:
         out = [(f"coef{i + 1}", coef_word(k[i], self.p)) for i in range(4)]
         return out + [("u0", dc_word(st[0], self.p)), ("v0", dc_word(st[1], self.p))]
 
+    def _steering_words(self, f):
+        """The (u0, v0) words a record's block ran on: ``u - du(ang_a)`` (bit-exact)."""
+        p = self.p
+        (kx, sx), (ky, sy) = p.dc_coefs
+        u0 = int(f["u"] - shift_right(np.int64(f["ang_a"]) * np.int64(kx), sx, "half_up"))
+        v0 = int(f["v"] - shift_right(np.int64(f["ang_e"]) * np.int64(ky), sy, "half_up"))
+        return [x & ((1 << p.dc_bits) - 1) for x in (u0, v0)]
+
+    def _want(self, k):
+        from hdl.monopulse.model import dc_word
+        return [dc_word(x, self.p) for x in self.loop.steer[k, 0]]
+
+    def _block(self, k, f):
+        """Scenario block ``k`` measured by record fields ``f`` (None: undetected)."""
+        loop, p = self.loop, self.p
+        st = loop.steer[k, 0]
+        arr = self.sig.array
+        h0 = arr.channel_response(self.ut[k], self.vt[k], st[0], st[1])[0]
+        af2 = abs(h0 / arr.channel_gains[0]) ** 2
+        if f is None:
+            mu = mv = np.nan
+            det = False
+        else:
+            scale = 2.0 ** -p.dc_frac_bits
+            mu, mv = f["u"] * scale, f["v"] * scale
+            s = complex(f["s_re"], f["s_im"])
+            kc = arr.steering_correction(st[0], st[1]) * self.cal_n
+            var = self.gn2 * float(np.sum(np.abs(kc) ** 2 * self.nv))
+            det = abs(s) ** 2 > self.thr * var if var > 0 else abs(s) > 0
+        loop.block(k, np.array([mu]), np.array([mv]), np.array([det]), np.array([af2]))
+        self.next_block = k + 1
+        nxt = k + loop.lead
+        return self.writes_for(loop.steer[nxt, 0]) if nxt < self.K else []
+
+    def finish(self):
+        """Blocks whose record never came (fault runs): undetected."""
+        out = []
+        while self.next_block < self.K:
+            self.missing_blocks += 1
+            out += self._block(self.next_block, None)
+        return out
+
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.monopulse.model import dc_word, unpack_record
-        p, fp, loop = self.p, self.p.fifo, self.loop
+        from hdl.monopulse.model import unpack_record
+        p, fp = self.p, self.p.fifo
         if not call.words.size:
             return ()
-        b = receive_records(call.words, width=fp.width, record_words=fp.record_words,
+        words = call.words if self.faults is None or self.faults.fifo is None else \
+            self.faults.fifo(call.words)
+        b = receive_records(words, width=fp.width, record_words=fp.record_words,
                             parity=fp.parity, state=self.rx)
         out = []
+        mask = (1 << p.block_bits) - 1
         for row in b.records:
             v = 0
             for j, w in enumerate(row):
@@ -145,44 +209,55 @@ class _HdlDsp:
             f = unpack_record(v, p)
             j = self.n_records
             self.n_records += 1
-            if f["block"] != j & ((1 << p.block_bits) - 1):
-                raise RuntimeError(f"monopulse record {j} carries block {f['block']}: a record "
-                                   f"was lost (FIFO overflow?)")
-            if j == 0:
-                continue                         # the preamble (reset registers)
-            k = j - 1
+            if self.faults is None:
+                if f["block"] != j & mask:
+                    raise RuntimeError(f"monopulse record {j} carries block {f['block']}: a "
+                                       f"record was lost (FIFO overflow?)")
+                if j == 0:
+                    continue                     # the preamble (reset registers)
+                k = j - 1
+                if k >= self.K:
+                    raise RuntimeError(f"monopulse front end gave a record for block {k} of "
+                                       f"a {self.K}-block scenario")
+                got, want = self._steering_words(f), self._want(k)
+                if got != want:
+                    raise RuntimeError(
+                        f"monopulse block {k} ran on the steering words {got}, not the "
+                        f"command {want} meant for it: the DSP did not turn block {k - 2}'s "
+                        f"record around before the block boundary")
+                out += self._block(k, f)
+                continue
+            # Fault runs: validate, re-synchronise, never raise.
+            k = self.next_block
             if k >= self.K:
-                raise RuntimeError(f"monopulse front end gave a record for block {k} of a "
-                                   f"{self.K}-block scenario")
-            st = loop.steer[k, 0]
-            (kx, sx), (ky, sy) = p.dc_coefs
-            u0 = int(f["u"] - shift_right(np.int64(f["ang_a"]) * np.int64(kx), sx, "half_up"))
-            v0 = int(f["v"] - shift_right(np.int64(f["ang_e"]) * np.int64(ky), sy, "half_up"))
-            want = [dc_word(x, p) for x in st]
-            got = [x & ((1 << p.dc_bits) - 1) for x in (u0, v0)]
-            if got != want:
-                raise RuntimeError(f"monopulse block {k} ran on the steering words {got}, not "
-                                   f"the command {want} meant for it: the DSP did not turn "
-                                   f"block {k - 2}'s record around before the block boundary")
-            scale = 2.0 ** -p.dc_frac_bits
-            mu, mv = f["u"] * scale, f["v"] * scale
-            s = complex(f["s_re"], f["s_im"])
-            kc = self.sig.array.steering_correction(st[0], st[1]) * self.cal_n
-            var = self.gn2 * float(np.sum(np.abs(kc) ** 2 * self.nv))
-            det = abs(s) ** 2 > self.thr * var if var > 0 else abs(s) > 0
-            arr = self.sig.array
-            h0 = arr.channel_response(self.ut[k], self.vt[k], st[0], st[1])[0]
-            af2 = abs(h0 / arr.channel_gains[0]) ** 2
-            loop.block(k, np.array([mu]), np.array([mv]), np.array([det]), np.array([af2]))
-            nxt = k + loop.lead
-            if nxt < self.K:
-                out += self.writes_for(loop.steer[nxt, 0])
+                self.bad_records += 1
+                continue
+            if j == 0:
+                continue                                 # the preamble
+            tag = (f["block"] - 1) & mask               # the scenario block it claims
+            if tag != k & mask:
+                # one record lost: this one is block k + 1 (its steering words say so too)
+                if tag == (k + 1) & mask and k + 1 < self.K and \
+                        self._steering_words(f) == self._want(k + 1):
+                    self.missing_blocks += 1
+                    out += self._block(k, None)
+                    out += self._block(k + 1, f)
+                else:
+                    self.bad_records += 1
+                    out += self._block(k, None)
+                continue
+            if self._steering_words(f) != self._want(k):
+                self.bad_records += 1
+                out += self._block(k, None)
+                continue
+            out += self._block(k, f)
         return out
 
 
-def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr) -> dict:
+def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None = None) -> dict:
     """Run ``loop`` (one trial) on the HDL front end of ``run.backend``; fills the loop's
-    arrays and returns the FIFO/pipeline figures (``fifo_dropped``, digests, writes)."""
+    arrays and returns the FIFO/pipeline figures (``fifo_dropped``, digests, writes; with
+    ``faults``: the bad and missing records and the record receiver's counters)."""
     from hdl.monopulse.model import REG_NAMES, pack_input
     from ..pipeline import Pipeline
     from ..session import RegisterSession, open_frontend
@@ -192,7 +267,7 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr) -> dict:
     cal_n = np.asarray(cal, complex)
     cal_n = cal_n / max(1.0, float(np.max(np.abs(cal_n))))   # |k_i| <= 1: parts fit
     gain = record_gain(p, sig.adc_step)
-    dsp = _HdlDsp(run, sig, p, loop, cal_n, ut, vt, thr, gain)
+    dsp = _HdlDsp(run, sig, p, loop, cal_n, ut, vt, thr, gain, faults)
     svc = _service(run)
     K, D, N = loop.K, sig.decimation, sig.snapshots
     boundary0 = N * D - 1 + p.latency_pre
@@ -208,11 +283,17 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr) -> dict:
         for k in range(K):
             rec = generate(sig, loop.steer[k, 0], first_block=k, n_blocks=1)
             chips = np.repeat((rec.replica[0] < 0).astype(np.int64), D)
-            pipe.feed(pack_input(rec.samples.T.astype(np.int64), chips, p))
+            x = rec.samples if faults is None or faults.adc is None else faults.adc(k, rec.samples)
+            pipe.feed(pack_input(np.asarray(x).T.astype(np.int64), chips, p))
         pipe.idle(p.latency + 2 * svc.period_cycles + 64)
         res = pipe.result()
         bus = list(fe.bus_writes)
-    if dsp.n_records != K + 1:
+    extra = {}
+    if faults is not None:
+        dsp.finish()
+        extra = {"bad_records": dsp.bad_records, "missing_blocks": dsp.missing_blocks,
+                 "rx": {k: int(v) for k, v in dict(dsp.rx.stats).items()}}
+    elif dsp.n_records != K + 1:
         raise RuntimeError(f"monopulse front end gave {dsp.n_records} records for {K} blocks "
                            f"and the preamble (FIFO overflow count {res.overflow_count})")
     hb = hashlib.sha256(repr(bus).encode()).hexdigest()[:16]
@@ -222,7 +303,7 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr) -> dict:
             "digest": {"fifo_words": res.digest["words"], "fifo_cycles": res.digest["cycles"],
                        "writes": res.digest["writes"], "bus": hb},
             "records": dsp.n_records, "register_writes": len(res.writes),
-            "cycles": int(res.n_cycles), "record_gain": gain * N}
+            "cycles": int(res.n_cycles), "record_gain": gain * N, **extra}
 
 
 #: Approximate simulated cycles per second of each backend on the closed loop (measured on

@@ -126,6 +126,9 @@ class MonopulseRunConfig:
     #: Overrides of :class:`hdl.monopulse.model.MonopulseFrontendParams`, (name, value) pairs
     #: (HDL backends; studies).
     hdl_changes: tuple = ()
+    #: Total widths of the fixed-point tracker's formats, (format, width) pairs (``dsp``
+    #: fixed; integer bits kept, fraction bits change; studies).
+    dsp_changes: tuple = ()
 
     def __post_init__(self):
         for name in ("snr_db", "duration_s", "sigma_a", "noise_floor", "alpha_relax", "u0", "v0",
@@ -198,6 +201,25 @@ class MonopulseRunConfig:
         return MonopulseSignalConfig(array=self.array_config(), trajectory=self.trajectory(),
                                      snapshots=self.snapshots, snr_db=self.snr_db,
                                      adc_bits=self.adc_bits, seed=self.seed)
+
+    def dsp_formats(self):
+        """The fixed-point tracker's formats: :data:`MONOPULSE_FORMATS` with ``dsp_changes``."""
+        from dataclasses import replace
+        from dsp.fixed import FixedFormat
+        ch = {}
+        for kv in self.dsp_changes:
+            if not (isinstance(kv, tuple) and len(kv) == 2 and kv[0] in
+                    MONOPULSE_FORMATS.signals()):
+                raise ValueError(f"dsp_changes are (format, width) pairs with format in "
+                                 f"{', '.join(MONOPULSE_FORMATS.signals())}, not {kv!r}")
+            name, w = kv
+            f = getattr(MONOPULSE_FORMATS, name)
+            if isinstance(w, bool) or not isinstance(w, int) or not 2 <= w <= 62:
+                raise ValueError(f"dsp.{name} width must be an integer in [2, 62], not {w!r}")
+            ch[name] = FixedFormat(w, f.frac + (w - f.width), f.signed, f.rounding, f.overflow)
+        fm = replace(MONOPULSE_FORMATS, **ch)
+        fm.check(self.tracker_config().window)
+        return fm
 
     def tracker_config(self) -> TrackerConfig:
         return TrackerConfig(mode=self.tracker, eq36=self.eq36, sigma_a=self.sigma_a,
@@ -321,9 +343,11 @@ class _Loop:
             steer[nxt, b] = search[b].next_position()
 
 
-def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict:
+def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False, faults=None) -> dict:
     """Run the closed loop; the figures of the module docstring (angles in degrees, pointing
-    in direction cosines and as a fraction of the unambiguous offset)."""
+    in direction cosines and as a fraction of the unambiguous offset). ``faults`` (HDL
+    backends): a :class:`cosim.monopulse.hdl_loop.FaultHooks` (bit errors injected in the
+    ADC samples or the FIFO words; the DSP then counts bad records instead of raising)."""
     sig = run.signal_config()
     arr = sig.array
     dx, dy = arr.dx_wl, arr.dy_wl
@@ -355,7 +379,7 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
     rngs = [np.random.default_rng(np.random.SeedSequence(run.seed, spawn_key=(STREAM_FAST, 1, b)))
             for b in range(B)]
     carrier = np.array([r.uniform(-np.pi, np.pi) for r in rngs])
-    arith = MONOPULSE_FORMATS if run.dsp == "fixed" else "float64"
+    arith = run.dsp_formats() if run.dsp == "fixed" else "float64"
     tracker = AngleTracker(run.tracker_config(), T, sigma_v, arithmetic=arith, trials=B,
                            u0=pointing[0], v0=pointing[1])
     loop = _Loop(run, tracker, [SearchCapture(pointing, unamb) for _ in range(B)], K)
@@ -363,7 +387,7 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
     hdl = None
     if run.backend in HDL_BACKENDS:
         from .hdl_loop import hdl_closed_loop
-        hdl = hdl_closed_loop(run, sig, loop, cal, ut, vt, thr)
+        hdl = hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults=faults)
     for k in range(K if hdl is None else 0):
         st = loop.steer[k]
         if run.backend == "golden":
