@@ -37,13 +37,11 @@ sum-beam detection uses the golden noise variance times ``(G N)^2`` and the same
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from dsp.fixed import shift_right
-from dsp.monopulse.golden import beams  # noqa: F401  (the beam mapping the HDL implements)
 
 from .fastpath import noise_variance
 

@@ -132,8 +132,9 @@ class MonopulseRunConfig:
 
     def __post_init__(self):
         for name in ("snr_db", "duration_s", "sigma_a", "noise_floor", "alpha_relax", "u0", "v0",
-                     "du_dt", "dv_dt", "accel_u", "accel_v", "manoeuvre_start_s", "manoeuvre_end_s", "gain_spread_db",
-                     "phase_spread_deg", "detect_db", "settle_s"):
+                     "du_dt", "dv_dt", "accel_u", "accel_v", "manoeuvre_start_s",
+                     "manoeuvre_end_s", "gain_spread_db", "phase_spread_deg", "detect_db",
+                     "settle_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"{name} must be a finite number, not {v!r}")
