@@ -71,7 +71,8 @@ def test_sweep_rejects_a_short_cordic_and_proposes_enough_iterations(tmp_path, c
                  "--jobs", "1", "--json", "--out", str(out)] + SHORT) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["proposal"] == {"cordic_iterations": 16}
-    rows = {int(r["cordic_iterations"]): r for r in csv.DictReader(open(out / "summary.csv"))}
+    with open(out / "summary.csv") as f:
+        rows = {int(r["cordic_iterations"]): r for r in csv.DictReader(f)}
     assert float(rows[4]["ratio_to_golden"]) > 5
     assert float(rows[16]["ratio_to_golden"]) < 1.1
     assert rows[16]["locked"] == "1" and rows[16]["golden_locked"] == "1"
@@ -89,5 +90,8 @@ def test_faults_in_fifo_words_are_counted_not_crashed_on(tmp_path, capsys):
     assert rows[0.0]["flips"] == 0 and rows[0.0]["gated"] == 0 and rows[0.0]["reinit"] == 0
     assert rows[1e-4]["flips"] > 0 and rows[1e-4]["gated"] > 0      # bad records caught
     assert rows[1e-4]["rmse_deg"] < 2 * rows[0.0]["rmse_deg"]         # and tracking goes on
-    assert rows[1e-2]["rx"]["broken_records"] > 0
+    assert rows[1e-2]["flips"] > 100
+    recs = json.loads((out / "faults_fifo.json").read_text())["records"]
+    hard = next(r for r in recs if r["ber"] == 1e-2)
+    assert hard["rx"]["broken_records"] > 0 and hard["events"]["gated"] > 0
     assert (out / "faults_fifo.md").exists()
