@@ -71,3 +71,13 @@ def test_registry_declares_the_front_end_its_top_and_the_bench():
     top = next(a for a in sub["synth"]._actions if a.dest == "top")
     assert "monopulse" in top.choices
     assert "monopulse" in BENCHMARKS
+
+
+def test_synth_timeout_is_validated_before_work(capsys, tmp_path):
+    """``synth --timeout-min`` (the limit of each tool run; the monopulse front end needs more
+    than the default 30 min of nextpnr on a loaded machine) is checked before yosys runs."""
+    assert main(["synth", "--top", "monopulse", "--timeout-min", "0", "--out",
+                 str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --timeout-min must be in (0, 1440] minutes, not 0"]
+    assert not (tmp_path / "s" / "monopulse_frontend").exists()
