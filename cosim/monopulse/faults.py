@@ -101,10 +101,11 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
         rng = np.random.default_rng([fc.seed, trial, int(round(ber * 1e12)), 99])
         flips = [0]
 
-        def adc(k, codes):
-            x, wi, _ = _flip_signed(codes, run.adc_bits, ber, rng, fc.bits)
+        def adc(k, codes):      # (4, N D): flipped as one flat word array
+            c = np.asarray(codes)
+            x, wi, _ = _flip_signed(c.ravel(), run.adc_bits, ber, rng, fc.bits)
             flips[0] += int(wi.size)
-            return x
+            return x.reshape(c.shape)
 
         def fifo(words):
             w, wi, _ = flip_bits(words, p.fifo.word_width, ber, rng, fc.bits)

@@ -95,3 +95,14 @@ def test_faults_in_fifo_words_are_counted_not_crashed_on(tmp_path, capsys):
     hard = next(r for r in recs if r["ber"] == 1e-2)
     assert hard["rx"]["broken_records"] > 0 and hard["events"]["gated"] > 0
     assert (out / "faults_fifo.md").exists()
+
+
+@pytest.mark.slow
+def test_faults_in_adc_codes_run_and_degrade_gracefully(tmp_path, capsys):
+    out = tmp_path / "a"
+    assert main(["faults", "monopulse", "--target", "adc", "--ber", "1e-3", "--json",
+                 "--out", str(out)] + SHORT) == 0
+    rows = {r["ber"]: r for r in json.loads(capsys.readouterr().out)["rows"]}
+    assert all(r["exceptions"] == 0 and r["nan_bearings"] == 0 for r in rows.values())
+    # 4 channels x 12 bits x ~11.8 M samples x 1e-3
+    assert rows[1e-3]["flips"] > 1e5 and rows[1e-3]["rmse_deg"] is not None
