@@ -180,6 +180,15 @@ class _HdlDsp:
         nxt = k + loop.lead
         return self.writes_for(loop.steer[nxt, 0]) if nxt < self.K else []
 
+    def late(self, k):
+        """Block ``k`` is about to start and block ``k - 2``'s record has not come (lost in a
+        fault run): that block counts as undetected (the DSP's deadline), and block ``k``
+        runs on the registers in force, the last command (``steer[k - 1]``)."""
+        while self.next_block <= k - 2:
+            self.missing_blocks += 1
+            self._block(self.next_block, None)      # its writes would come too late
+        self.loop.steer[k] = self.loop.steer[k - 1]
+
     def finish(self):
         """Blocks whose record never came (fault runs): undetected."""
         out = []
@@ -279,6 +288,8 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
         pipe.schedule(pre)
         pipe.feed(pack_input(np.zeros((N * D, 4), np.int64), np.zeros(N * D, np.int64), p))
         for k in range(K):
+            if faults is not None and k >= 2 and dsp.next_block <= k - 2:
+                dsp.late(k)
             rec = generate(sig, loop.steer[k, 0], first_block=k, n_blocks=1)
             chips = np.repeat((rec.replica[0] < 0).astype(np.int64), D)
             x = rec.samples if faults is None or faults.adc is None else faults.adc(k, rec.samples)
