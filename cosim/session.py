@@ -45,7 +45,7 @@ from amaranth.hdl import Value
 from dsp.fixed import check_int as _int
 from hdl.model.fifo import ReadySchedule
 
-__all__ = ["StepResult", "FrontendSession", "PysimSession", "ready_window", "open_frontend", "open_stream_session", "FRONTEND_TYPES",
+__all__ = ["StepResult", "FrontendSession", "PysimSession", "ready_window", "open_frontend", "open_stream_session", "RegisterSession", "FRONTEND_TYPES",
            "BACKENDS"]
 
 BACKENDS = ("model", "pysim", "verilator")
@@ -249,6 +249,76 @@ class FrontendSession:
 
 
 # -- Amaranth simulation ------------------------------------------------------------------------
+class RegisterSession(FrontendSession):
+    """Register-level writes on a front end with a ``reg_we``, ``reg_addr``, ``reg_data``
+    bus (any backend): a write of register ``name`` taking effect at cycle ``e`` is the bus
+    pulse ``reg_we = 1`` with its address and data at bus cycle ``b = max(e, previous b +
+    1)`` and ``reg_we = 0`` at ``b + 1`` (the bus takes one write per cycle, so two
+    registers written for the same cycle go out on consecutive cycles, in the order
+    written). Each value is checked by ``params.check_write(address, value)`` when written.
+
+    Parameters
+    ----------
+    inner : FrontendSession
+        A fresh session of the front end (model, pysim or verilator); this session owns it
+        (closing this closes it).
+    params
+        The front end's parameters (its ``check_write``).
+    names : dict
+        Register name -> bus address.
+    what : str
+        The front end's name in error messages.
+    """
+
+    def __init__(self, inner: FrontendSession, params, names: dict, what: str = "front-end"):
+        if not isinstance(inner, FrontendSession):
+            raise ValueError(f"inner must be a FrontendSession, not {type(inner).__name__}")
+        if inner.cycle != 0:
+            raise ValueError(f"the inner session must be fresh (at cycle 0), not at "
+                             f"{inner.cycle}")
+        super().__init__()
+        self.inner = inner
+        self.params = params
+        self.names = dict(names)
+        self.what = what
+        self.backend = inner.backend
+        self._next_bus = 0
+        #: Bus writes ``(bus cycle, address, value)`` made, in order.
+        self.bus_writes: list[tuple[int, int, int]] = []
+
+    def _check_port(self, port) -> None:
+        if port not in self.names:
+            raise KeyError(f"{self.what} registers are {', '.join(self.names)}, not {port!r}")
+
+    def write(self, port: str, value: int, cycle: int | None = None) -> int:
+        self._check_port(port)
+        self.params.check_write(self.names[port], int(value))
+        return super().write(port, value, cycle)
+
+    def _step(self, queue, ready, n, writes):
+        for c, reg, v in writes:
+            b = max(int(c), self._next_bus)
+            a = self.names[reg]
+            self.inner.write("reg_addr", a, cycle=b)
+            self.inner.write("reg_data", int(v), cycle=b)
+            self.inner.write("reg_we", 1, cycle=b)
+            self.inner.write("reg_we", 0, cycle=b + 1)
+            self.bus_writes.append((b, a, int(v)))
+            self._next_bus = b + 1
+        x = queue[:n]
+        r = self.inner.step(x, ready, n_cycles=n)
+        if r.in_accepted != x.size:
+            raise RuntimeError(f"internal: the {self.what} always-ready input took "
+                               f"{r.in_accepted} of {x.size} samples")
+        return r.words, r.cycles, r.in_accepted
+
+    def _read(self, port):
+        return self.inner.read(port)
+
+    def _close(self):
+        self.inner.close()
+
+
 class PysimSession(FrontendSession):
     """A stream component in one ``amaranth.sim`` simulator, kept running across steps.
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from hdl.model.fifo import FifoState
 
-from ..session import FrontendSession, fifo_step, open_frontend
+from ..session import FrontendSession, RegisterSession, fifo_step, open_frontend
 
 __all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss", "BUS_PORTS"]
 
@@ -133,9 +133,10 @@ class GnssModelSession(FrontendSession):
         return words, cycles, x.size
 
 
-class GnssRegisterSession(FrontendSession):
+class GnssRegisterSession(RegisterSession):
     """Register-level writes (``carr_freq``, ``code_freq``, ``prn``, ``slew``) on a GNSS
-    channel session of any backend, as bus pulses (module doc).
+    channel session of any backend, as bus pulses (module doc;
+    :class:`cosim.session.RegisterSession`).
 
     Parameters
     ----------
@@ -146,53 +147,8 @@ class GnssRegisterSession(FrontendSession):
     """
 
     def __init__(self, inner: FrontendSession, params):
-        if not isinstance(inner, FrontendSession):
-            raise ValueError(f"inner must be a FrontendSession, not {type(inner).__name__}")
-        if inner.cycle != 0:
-            raise ValueError(f"the inner session must be fresh (at cycle 0), not at "
-                             f"{inner.cycle}")
-        super().__init__()
-        self.inner = inner
-        self.params = params
-        self.backend = inner.backend
-        self._next_bus = 0
-        #: Bus writes ``(bus cycle, address, value)`` made, in order.
-        self.bus_writes: list[tuple[int, int, int]] = []
-
-    def _check_port(self, port) -> None:
         from hdl.gnss.model import REG_NAMES
-        if port not in REG_NAMES:
-            raise KeyError(f"GNSS registers are {', '.join(REG_NAMES)}, not {port!r}")
-
-    def write(self, port: str, value: int, cycle: int | None = None) -> int:
-        from hdl.gnss.model import REG_NAMES
-        self._check_port(port)
-        self.params.check_write(REG_NAMES[port], int(value))
-        return super().write(port, value, cycle)
-
-    def _step(self, queue, ready, n, writes):
-        from hdl.gnss.model import REG_NAMES
-        for c, reg, v in writes:
-            b = max(int(c), self._next_bus)
-            a = REG_NAMES[reg]
-            self.inner.write("reg_addr", a, cycle=b)
-            self.inner.write("reg_data", int(v), cycle=b)
-            self.inner.write("reg_we", 1, cycle=b)
-            self.inner.write("reg_we", 0, cycle=b + 1)
-            self.bus_writes.append((b, a, int(v)))
-            self._next_bus = b + 1
-        x = queue[:n]
-        r = self.inner.step(x, ready, n_cycles=n)
-        if r.in_accepted != x.size:
-            raise RuntimeError(f"internal: the channel's always-ready input took "
-                               f"{r.in_accepted} of {x.size} samples")
-        return r.words, r.cycles, r.in_accepted
-
-    def _read(self, port):
-        return self.inner.read(port)
-
-    def _close(self):
-        self.inner.close()
+        super().__init__(inner, params, REG_NAMES, "GNSS")
 
 
 def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:

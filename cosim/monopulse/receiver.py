@@ -1,17 +1,26 @@
 """The monopulse entry in the receiver registry (:mod:`cosim.receivers`): ``python -m cosim
 monopulse``, its options derived from :class:`~cosim.monopulse.run.MonopulseRunConfig` (every
 default written once, there), its HDL front end (:class:`hdl.monopulse.frontend.MonopulseFrontEnd`,
-the ``model`` backend :class:`~cosim.monopulse.session.MonopulseModelSession`) and its top.
-No sweep or fault study is declared yet."""
+the ``model`` backend :class:`~cosim.monopulse.session.MonopulseModelSession`), its top, and
+its studies (``sweep monopulse``: :mod:`cosim.monopulse.study`; ``faults monopulse``:
+:mod:`cosim.monopulse.faults`) on the generic engines."""
 from __future__ import annotations
 
 import dataclasses
 
-from ..receivers import Arg, Figure, Frontend, Option, Receiver, config_kwargs, register
-from ..validate import dumps
-from .run import MonopulseRunConfig, run_monopulse
+import sys
 
-OPTIONS = tuple(Option(MonopulseRunConfig, f.name) for f in dataclasses.fields(MonopulseRunConfig)) \
+from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
+                         parse_finite, parse_int, register)
+from ..studies.faults import FaultConfig
+from ..studies.sweep import SweepConfig
+from ..validate import check_out_dir, dumps
+from .faults import FAULT_MODEL, TARGETS
+from .run import MonopulseRunConfig, run_monopulse
+from .study import SWEEP_MODEL
+
+OPTIONS = tuple(Option(MonopulseRunConfig, f.name) for f in dataclasses.fields(MonopulseRunConfig)
+                if "help" in f.metadata) \
     + (Arg("--json", action="store_true", help="print one JSON object"),)
 
 
@@ -43,6 +52,131 @@ def cmd_monopulse(a) -> int:
           f"{c['bias_after']['el_deg']:+.4f} deg")
     print(f"  fifo_dropped {r['fifo_dropped']} ({r['fifo']}); digest "
           f"{r['digest']['steering_and_measurements']}")
+    return 0
+
+
+# -- the studies (sweep / faults monopulse): record options with the monopulse defaults -----
+def _study_record_args(duration, memory, trials, snr):
+    return (Arg("--duration-s", type=parse_finite, default=duration,
+                help="record length (s; the HDL loop runs ~0.7 M ADC samples/s)"),
+            Arg("--memory-s", type=parse_finite, default=memory,
+                help="the scored window starts at 2 x this (s)"),
+            Arg("--trials", type=parse_int, default=trials, help="records per point"),
+            Arg("--seed", type=parse_int, default=0, help="base seed (>= 0)"),
+            snr)
+
+
+def _record_kwargs(a) -> dict:
+    if a.seed < 0:
+        raise ValueError(f"--seed must be >= 0, not {a.seed}")
+    return dict(duration_s=a.duration_s, memory_s=a.memory_s, trials=a.trials, seed=a.seed)
+
+
+_SW = SweepConfig
+SWEEP_OPTIONS = (
+    Arg("--param", action="append", default=[], metavar="NAME=VALUES",
+        help="swept parameter, e.g. cordic_iterations=8:20:4, adc_bits=4,8,12, "
+             "cordic_in_bits=8,12,16, corr_out_bits=12,18, dsp.x=32,40 (repeatable; "
+             "default cordic_iterations=8,12,16,20)"),
+    *_study_record_args(0.25, 0.05, 2, Arg("--snr-db", default="-8",
+                                              help="SNR values (dB; a:b:step or a list)")),
+    Option(_SW, "design", choices=("grid", "oat"), case="lower",
+           help="grid: every combination; oat: one parameter at a time"),
+    Arg("--recheck", type=parse_int, default=0,
+        help="points re-checked on a cycle-accurate backend (their first blocks: same FIFO "
+             "words, writes and DSP bits as the model)"),
+    Option(_SW, "recheck_backend", default=None, choices=("auto", "pysim", "verilator"),
+           case="lower", help="auto: Verilator when installed, else pysim (default auto)"),
+    Option(_SW, "target_rel", flag="--target",
+           help="proposal target: tracking RMS within (1 + target) of the float golden"),
+    Arg("--no-confirm", action="store_true", help="skip the confirming re-run"),
+    Arg("--out", default="build/studies/sweep_monopulse", help="output directory"),
+    Arg("--jobs", type=parse_int, default=None,
+        help="worker processes, 1 .. the cores (default: all cores)"),
+    Arg("--json", action="store_true", help="print one JSON object"),
+)
+
+
+def cmd_sweep(a) -> int:
+    from ..studies.sweep import check_points, parse_param, parse_values, study
+    from ..validate import check_jobs
+    if a.recheck < 0:
+        raise ValueError(f"--recheck must be >= 0 (points re-checked), not {a.recheck}")
+    if a.recheck == 0 and a.recheck_backend is not None:
+        raise ValueError("--recheck-backend sets the re-checks, but --recheck 0 runs none")
+    params = tuple(parse_param(t, "monopulse") for t in a.param) or None
+    snrs = parse_values(a.snr_db, "--snr-db")
+    if not all(isinstance(v, (int, float)) for v in snrs):
+        raise ValueError(f"--snr-db takes numbers (dB), not {a.snr_db!r}")
+    jobs = check_jobs(a.jobs)
+    check_out_dir(a.out, "--out")
+    kw = config_kwargs(a, SWEEP_OPTIONS, SweepConfig)
+    cfg = SweepConfig(receiver="monopulse", snr_db=tuple(float(v) for v in snrs),
+                      recheck=a.recheck, **({"params": params} if params else {}),
+                      **_record_kwargs(a), **kw)
+    check_points(cfg)
+    s = study(cfg, a.out, jobs=jobs, confirm_proposal=not a.no_confirm, progress=not a.json)
+    if a.json:
+        print(dumps({k: s[k] for k in ("proposal", "elapsed_s", "n_points", "rechecks")} |
+                    {"confirmed": (s.get("confirmation") or {}).get("confirmed"),
+                     "report": f"{a.out}/report.md"}))
+    else:
+        print(f"{s['n_points']} points in {s['elapsed_s']:.0f} s; report: {a.out}/report.md")
+        print(f"proposal: {s['proposal']}")
+    bad = [c for c in s.get("rechecks", []) if c.get("same_bits") is False]
+    if bad:
+        print(f"error: {len(bad)} cycle-accurate re-check(s) gave other bits than the model: "
+              f"{[c['combo'] for c in bad]}", file=sys.stderr)
+        return 1
+    return 0
+
+
+FAULT_OPTIONS = (
+    Option(FaultConfig, "target", choices=TARGETS, case="lower", help="where the bits flip"),
+    Arg("--ber", default="1e-6:1e-3",
+        help="bit error rates (per bit): lo:hi (every decade) or a comma list"),
+    Arg("--bits", default=None,
+        help="only these bit positions (comma list, 0 = LSB; default: every bit)"),
+    *_study_record_args(0.2, 0.02, 1, Arg("--snr-db", type=parse_finite, default=-8.0,
+                                             help="SNR per subarray (dB)")),
+    Arg("--out", default="build/studies/faults_monopulse", help="output directory"),
+    Arg("--json", action="store_true", help="print one JSON object"),
+)
+
+
+def cmd_faults(a) -> int:
+    from ..studies.faults import parse_ber, report_stem, run_faults
+    bits = None
+    if a.bits:
+        try:
+            bits = tuple(int(b) for b in a.bits.split(","))
+        except ValueError:
+            raise ValueError(f"--bits takes a comma list of bit positions, not "
+                             f"{a.bits!r}") from None
+    check_out_dir(a.out, "--out")
+    fc = FaultConfig(receiver="monopulse", bits=bits, ber=parse_ber(a.ber), snr_db=a.snr_db,
+                     **_record_kwargs(a), **config_kwargs(a, FAULT_OPTIONS, FaultConfig))
+    s = run_faults(fc, a.out, progress=not a.json)
+    if a.json:
+        print(dumps({"target": a.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
+                     "report": f"{a.out}/{report_stem(fc)}.md"}, default=str))
+    else:
+        print(f"{len(s['rows'])} bit error rates x {a.trials} trials in {s['elapsed_s']:.0f} s")
+        for r in s["rows"]:
+            f_ = (lambda v, spec: "-" if v is None else format(v, spec))
+            print(f"  BER {r['ber']:g}: {r['flips']} flips, azimuth tracking RMS "
+                  f"{f_(r['rmse_deg'], '.4f')} deg, worst {f_(r['max_abs_error_deg'], '.3f')} "
+                  f"deg, lost tracks {r['reinit']}, bad records {r['gated']}, exceptions "
+                  f"{r['exceptions']}")
+        print(f"report: {a.out}/{report_stem(fc)}.md")
+    exc = sum(r["exceptions"] for r in s["rows"])
+    nan = sum(r["nan_bearings"] for r in s["rows"])
+    if exc or nan:
+        first = next((r["exception"] for r in s.get("records", []) if r.get("exception")), "")
+        print(f"error: the receiver must give no exception and no NaN track; got {exc} "
+              f"exception(s), {nan} NaN estimate(s)" + (f" (first: {first})" if first else ""),
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -84,4 +218,9 @@ MONOPULSE = register(Receiver(
     frontend=_frontend(),
     tops={"monopulse_frontend": _top},
     equivalence=_equivalence,
+    sweep=Study("word-length sweep of the closed loop on the bit-exact front end (ADC bits, "
+                "CORDIC, accumulator and tracker widths) against the float golden",
+                SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),
+    faults=Study("bit-error study: flip bits in the ADC samples or the FIFO words of the "
+                 "closed loop", FAULT_OPTIONS, cmd_faults, model=FAULT_MODEL),
 ))

@@ -65,6 +65,13 @@ class MonopulseRunConfig:
     eq36: str = field(default="repaired", metadata=_h(
         "adaptive index: repaired or literal (the seed's eq. 36)",
         choices=("repaired", "literal"), case="lower"))
+    floor_scaling: str = field(default="gain", metadata=_h(
+        "adaptive noise floor: gain (tau sigma_v^2 / (1 - alpha)) or fixed (tau sigma_v^2)",
+        choices=("gain", "fixed"), case="lower"))
+    noise_floor: float = field(default=6.0, metadata=_h(
+        "adaptive: tau, the innovation power (x sigma_v^2) taken as noise"))
+    alpha_relax: float = field(default=1.1, metadata=_h(
+        "adaptive: 1 - alpha grows at most by this factor a step (0: no limit)"))
     sigma_a: float = field(default=2.0, metadata=_h(
         "fixed tracking index as acceleration std of the direction cosines (1/s^2)"))
     latency_blocks: int = field(default=1, metadata=_h(
@@ -106,11 +113,28 @@ class MonopulseRunConfig:
         "sum-beam detection threshold over its noise power (dB)"))
     miss_limit: int = field(default=3, metadata=_h("undetected blocks in a row = lost track"))
     settle_s: float = field(default=0.1, metadata=_h("start of the scored window (s)"))
+    service_period_cycles: int = field(default=20_000, metadata=_h(
+        "HDL backends: the DSP's FIFO service period (cycles)"))
+    service_latency_cycles: int = field(default=200, metadata=_h(
+        "HDL backends: interrupt latency before the DSP reads (cycles)"))
+    service_batch_words: int = field(default=16, metadata=_h(
+        "HDL backends: FIFO words the DSP reads per service at most"))
+    compute_cycles: int = field(default=200, metadata=_h(
+        "HDL backends: DSP processing cycles from its read window to its writes"))
+    control_latency_cycles: int = field(default=40, metadata=_h(
+        "HDL backends: cycles from the DSP issuing a register write to the register holding it"))
+    #: Overrides of :class:`hdl.monopulse.model.MonopulseFrontendParams`, (name, value) pairs
+    #: (HDL backends; studies).
+    hdl_changes: tuple = ()
+    #: Total widths of the fixed-point tracker's formats, (format, width) pairs (``dsp``
+    #: fixed; integer bits kept, fraction bits change; studies).
+    dsp_changes: tuple = ()
 
     def __post_init__(self):
-        for name in ("snr_db", "duration_s", "sigma_a", "u0", "v0", "du_dt", "dv_dt", "accel_u",
-                     "accel_v", "manoeuvre_start_s", "manoeuvre_end_s", "gain_spread_db",
-                     "phase_spread_deg", "detect_db", "settle_s"):
+        for name in ("snr_db", "duration_s", "sigma_a", "noise_floor", "alpha_relax", "u0", "v0",
+                     "du_dt", "dv_dt", "accel_u", "accel_v", "manoeuvre_start_s",
+                     "manoeuvre_end_s", "gain_spread_db", "phase_spread_deg", "detect_db",
+                     "settle_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"{name} must be a finite number, not {v!r}")
@@ -124,8 +148,13 @@ class MonopulseRunConfig:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {self.backend!r}")
         if self.dsp not in ("float", "fixed"):
             raise ValueError(f"dsp must be float or fixed, not {self.dsp!r}")
-        if self.backend == "golden" and self.trials != 1:
-            raise ValueError(f"the golden backend runs one trial, not trials = {self.trials}")
+        if self.backend in ("golden",) + HDL_BACKENDS and self.trials != 1:
+            raise ValueError(f"the {self.backend} backend runs one trial, not trials = "
+                             f"{self.trials}")
+        if self.backend in HDL_BACKENDS and self.latency_blocks != 1:
+            raise ValueError(f"the HDL front end's steering registers take effect at the next "
+                             f"block boundary (latency_blocks 1), not latency_blocks = "
+                             f"{self.latency_blocks}")
         if self.accel_u or self.accel_v:
             if not 0 <= self.manoeuvre_start_s < self.manoeuvre_end_s:
                 raise ValueError(f"a manoeuvre needs 0 <= manoeuvre_start_s < manoeuvre_end_s, "
@@ -142,6 +171,9 @@ class MonopulseRunConfig:
         if self.pointing is not None:
             from .array import check_visible
             check_visible(*self.pointing, "guided pointing")
+        if self.backend in HDL_BACKENDS:
+            from .hdl_loop import check_hdl_run
+            check_hdl_run(self, sig)
 
     @property
     def pointing(self):
@@ -171,22 +203,29 @@ class MonopulseRunConfig:
                                      snapshots=self.snapshots, snr_db=self.snr_db,
                                      adc_bits=self.adc_bits, seed=self.seed)
 
+    def dsp_formats(self):
+        """The fixed-point tracker's formats: :data:`MONOPULSE_FORMATS` with ``dsp_changes``."""
+        from dataclasses import replace
+        from dsp.fixed import FixedFormat
+        ch = {}
+        for kv in self.dsp_changes:
+            if not (isinstance(kv, tuple) and len(kv) == 2 and kv[0] in
+                    MONOPULSE_FORMATS.signals()):
+                raise ValueError(f"dsp_changes are (format, width) pairs with format in "
+                                 f"{', '.join(MONOPULSE_FORMATS.signals())}, not {kv!r}")
+            name, w = kv
+            f = getattr(MONOPULSE_FORMATS, name)
+            if isinstance(w, bool) or not isinstance(w, int) or not 2 <= w <= 62:
+                raise ValueError(f"dsp.{name} width must be an integer in [2, 62], not {w!r}")
+            ch[name] = FixedFormat(w, f.frac + (w - f.width), f.signed, f.rounding, f.overflow)
+        fm = replace(MONOPULSE_FORMATS, **ch)
+        fm.check(self.tracker_config().window)
+        return fm
+
     def tracker_config(self) -> TrackerConfig:
         return TrackerConfig(mode=self.tracker, eq36=self.eq36, sigma_a=self.sigma_a,
-                             latency_blocks=self.latency_blocks)
-
-
-def _hdl_frontend(run: MonopulseRunConfig):
-    """Hook for the HDL front end (``hdl/monopulse``): open its session here and feed the loop
-    its FIFO records instead of the fast path's outputs."""
-    try:
-        import hdl.monopulse.model  # noqa: F401
-    except ImportError:
-        raise ValueError(f"backend {run.backend!r} needs the monopulse HDL front end "
-                         f"(hdl/monopulse), which is not built yet: use --backend fast or "
-                         f"golden") from None
-    raise ValueError(f"backend {run.backend!r}: the monopulse HDL front end exists but the "
-                     f"closed loop is not wired to it yet: use --backend fast or golden")
+                             floor_scaling=self.floor_scaling, noise_floor=self.noise_floor,
+                             alpha_relax=self.alpha_relax, latency_blocks=self.latency_blocks)
 
 
 def snapshot_snr(sig: MonopulseSignalConfig) -> float:
@@ -235,11 +274,81 @@ def _mean(x):
     return float(np.mean(x)) if x.size else float("nan")
 
 
-def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict:
+class _Loop:
+    """The closed loop's DSP state over K blocks of B trials (the module doc): each
+    :meth:`block` takes block ``k``'s measurement at the steering ``steer[k]`` and decides
+    the steering of block ``k + lead`` (search, capture, tracking; lost-track events)."""
+
+    def __init__(self, run, tracker, search, K):
+        B = run.trials
+        self.run, self.tracker, self.search, self.K = run, tracker, search, K
+        self.lead = lead = tracker.lead
+        self.mode = np.full(B, SEARCH)
+        self.misses = np.zeros(B, int)
+        self.capture_block = np.full(B, -1)
+        self.steer = np.empty((K + lead, B, 2))
+        for k in range(min(lead, K)):
+            for b in range(B):
+                self.steer[k, b] = search[b].next_position()
+        self.meas = np.full((K, B, 2), np.nan)
+        self.est = np.full((K, B, 2), np.nan)
+        self.modes = np.empty((K, B), int)
+        self.af2s = np.empty((K, B))
+        self.lost = 0
+        self.acquired = np.full(B, -1)
+
+    def block(self, k, mu, mv, det, af2) -> None:
+        """Block ``k`` measured ``(mu, mv)`` (B,), detected ``det`` (B,), ``|AF|^2`` (B,)
+        (for the CRB): update the tracker and decide ``steer[k + lead]``."""
+        run, tracker, search = self.run, self.tracker, self.search
+        B = run.trials
+        mode, misses, steer = self.mode, self.misses, self.steer
+        st = steer[k]
+        self.af2s[k] = af2
+        self.meas[k, :, 0], self.meas[k, :, 1] = mu, mv
+        self.modes[k] = mode
+        tracking = mode == TRACK
+        misses[:] = np.where(tracking & ~det, misses + 1, 0)
+        fu, fv = tracker.update(mu, mv, valid=tracking & det)
+        self.est[k, :, 0] = np.where(tracking, fu, np.nan)
+        self.est[k, :, 1] = np.where(tracking, fv, np.nan)
+        cu, cv = tracker.command()
+        nxt = k + self.lead
+        for b in range(B):
+            if mode[b] == TRACK:
+                if misses[b] >= run.miss_limit:
+                    self.lost += 1
+                    mode[b] = SEARCH
+                    search[b].guide(cu[b], cv[b])
+                    misses[b] = 0
+                else:
+                    steer[nxt, b] = (cu[b], cv[b])
+                    continue
+            if mode[b] == CAPTURE and k == self.capture_block[b]:
+                if search[b].confirmed(st[b], (mu[b], mv[b]), det[b]):
+                    mode[b] = TRACK
+                    self.acquired[b] = k if self.acquired[b] < 0 else self.acquired[b]
+                    tracker.reset(np.arange(B) == b, mu[b], mv[b])
+                    pu, pv = tracker.command()
+                    steer[nxt, b] = (pu[b], pv[b])
+                    continue
+                mode[b] = SEARCH
+            if mode[b] == SEARCH and det[b] and self.modes[k, b] == SEARCH:
+                mode[b] = CAPTURE
+                self.capture_block[b] = nxt
+                steer[nxt, b] = (mu[b], mv[b]) if mu[b] ** 2 + mv[b] ** 2 < 1 else st[b]
+                continue
+            if mode[b] == CAPTURE:
+                steer[nxt, b] = steer[nxt - 1, b] if nxt > k + 1 else st[b]
+                continue
+            steer[nxt, b] = search[b].next_position()
+
+
+def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False, faults=None) -> dict:
     """Run the closed loop; the figures of the module docstring (angles in degrees, pointing
-    in direction cosines and as a fraction of the unambiguous offset)."""
-    if run.backend in HDL_BACKENDS:
-        _hdl_frontend(run)
+    in direction cosines and as a fraction of the unambiguous offset). ``faults`` (HDL
+    backends): a :class:`cosim.monopulse.hdl_loop.FaultHooks` (bit errors injected in the
+    ADC samples or the FIFO words; the DSP then counts bad records instead of raising)."""
     sig = run.signal_config()
     arr = sig.array
     dx, dy = arr.dx_wl, arr.dy_wl
@@ -271,28 +380,17 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
     rngs = [np.random.default_rng(np.random.SeedSequence(run.seed, spawn_key=(STREAM_FAST, 1, b)))
             for b in range(B)]
     carrier = np.array([r.uniform(-np.pi, np.pi) for r in rngs])
-    arith = MONOPULSE_FORMATS if run.dsp == "fixed" else "float64"
+    arith = run.dsp_formats() if run.dsp == "fixed" else "float64"
     tracker = AngleTracker(run.tracker_config(), T, sigma_v, arithmetic=arith, trials=B,
                            u0=pointing[0], v0=pointing[1])
-    lead = tracker.lead
-    search = [SearchCapture(pointing, unamb) for _ in range(B)]
-    mode = np.full(B, SEARCH)
-    misses = np.zeros(B, int)
-    capture_block = np.full(B, -1)
-    steer = np.empty((K + lead, B, 2))
-    for k in range(min(lead, K)):
-        for b in range(B):
-            steer[k, b] = search[b].next_position()
+    loop = _Loop(run, tracker, [SearchCapture(pointing, unamb) for _ in range(B)], K)
     thr = 10 ** (run.detect_db / 10)
-    gabs2 = np.abs(arr.channel_gains) ** 2
-    meas = np.full((K, B, 2), np.nan)
-    est = np.full((K, B, 2), np.nan)
-    modes = np.empty((K, B), int)
-    af2s = np.empty((K, B))
-    lost = 0
-    acquired = np.full(B, -1)
-    for k in range(K):
-        st = steer[k]
+    hdl = None
+    if run.backend in HDL_BACKENDS:
+        from .hdl_loop import hdl_closed_loop
+        hdl = hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults=faults)
+    for k in range(K if hdl is None else 0):
+        st = loop.steer[k]
         if run.backend == "golden":
             rec = generate(sig, st[0], first_block=k, n_blocks=1)
             kc = arr.steering_correction(st[:, 0], st[:, 1]) * cal
@@ -301,48 +399,14 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
             _, af2, kc = block_outputs(sig, st, ut[k], vt[k], cal, carrier, rngs, noise=False)
         else:
             s, af2, kc = block_outputs(sig, st, ut[k], vt[k], cal, carrier, rngs)
-        af2s[k] = af2
         ssum = beams(s)[0]
         var_sum = np.sum(np.abs(kc) ** 2 * noise_variance(sig), axis=1)
         det = np.abs(ssum) ** 2 > thr * np.maximum(var_sum, 1e-300) if np.any(var_sum > 0) \
             else np.abs(ssum) > 0
         mu, mv = measure_uv(s, st, dx, dy)
-        meas[k, :, 0], meas[k, :, 1] = mu, mv
-        modes[k] = mode
-        tracking = mode == TRACK
-        misses = np.where(tracking & ~det, misses + 1, 0)
-        fu, fv = tracker.update(mu, mv, valid=tracking & det)
-        est[k, :, 0], est[k, :, 1] = np.where(tracking, fu, np.nan), np.where(tracking, fv, np.nan)
-        cu, cv = tracker.command()
-        nxt = k + lead
-        for b in range(B):
-            if mode[b] == TRACK:
-                if misses[b] >= run.miss_limit:
-                    lost += 1
-                    mode[b] = SEARCH
-                    search[b].guide(cu[b], cv[b])
-                    misses[b] = 0
-                else:
-                    steer[nxt, b] = (cu[b], cv[b])
-                    continue
-            if mode[b] == CAPTURE and k == capture_block[b]:
-                if search[b].confirmed(st[b], (mu[b], mv[b]), det[b]):
-                    mode[b] = TRACK
-                    acquired[b] = k if acquired[b] < 0 else acquired[b]
-                    tracker.reset(np.arange(B) == b, mu[b], mv[b])
-                    pu, pv = tracker.command()
-                    steer[nxt, b] = (pu[b], pv[b])
-                    continue
-                mode[b] = SEARCH
-            if mode[b] == SEARCH and det[b] and modes[k, b] == SEARCH:
-                mode[b] = CAPTURE
-                capture_block[b] = nxt
-                steer[nxt, b] = (mu[b], mv[b]) if mu[b] ** 2 + mv[b] ** 2 < 1 else st[b]
-                continue
-            if mode[b] == CAPTURE:
-                steer[nxt, b] = steer[nxt - 1, b] if nxt > k + 1 else st[b]
-                continue
-            steer[nxt, b] = search[b].next_position()
+        loop.block(k, mu, mv, det, af2)
+    steer, meas, est, modes, af2s = loop.steer, loop.meas, loop.est, loop.modes, loop.af2s
+    search, acquired, lost = loop.search, loop.acquired, loop.lost
     # Figures over the scored window, tracking blocks only.
     scored = (tc >= run.settle_s)[:, None] & (modes == TRACK)
     truth = np.stack([np.broadcast_to(ut[:, None], (K, B)), np.broadcast_to(vt[:, None], (K, B))], -1)
@@ -389,6 +453,9 @@ def run_monopulse(run: MonopulseRunConfig, *, keep_series: bool = False) -> dict
     for a in (steer[:K], meas, modes):
         dg.update(np.ascontiguousarray(a).tobytes())
     r["digest"] = {"steering_and_measurements": dg.hexdigest()[:16]}
+    if hdl is not None:
+        r["digest"].update(hdl.pop("digest"))
+        r.update(hdl)
     if keep_series:
         r["series"] = {"t_s": tc, "truth": truth, "meas": meas, "est": est, "steer": steer[:K],
                        "modes": modes, "scored": scored}

@@ -29,6 +29,20 @@ s; mean (one division) -> s; minus the floor (exact); ``sqrt`` -> l; ``/ (sigma_
 l; ``sqrt(l^2 + 8 l)`` -> l; ``4 / (4 + l + sqrt)`` -> c; ``1 - r^2`` -> c; clip; ``sqrt(1 -
 alpha)`` -> c; ``2 d^2`` -> c.
 
+Two options against the positive feedback of a fixed floor (measured on the monopulse
+manoeuvre scenario of ``tests/dsp/monopulse/test_mono_tracker.py``): a high alpha inflates
+the innovation itself (its variance on noise alone is ``sigma_v^2 / (1 - alpha)`` for a
+Kalata pair), so with the fixed floor one noisy window raises alpha and the raised alpha
+keeps the innovation above the floor: after a manoeuvre, or after a chi-square outlier in a
+quiet track, the filter stays agile and noisy. ``floor_scaling="gain"`` divides the floor by
+``1 - alpha`` of the gains in use (fixed point: ``floor / (1 - alpha)``, one division, the
+denominator's low fraction bits dropped so the shifted floor fits 62 bits); alone, it makes
+alpha flip between its limits step by step (each jump to a high alpha kicks the velocity
+state, whose error then raises the innovation again), so ``alpha_relax`` lets ``1 - alpha``
+grow by at most that factor a step (``al >= 1 - relax (1 - alpha_prev)``, fixed point: one
+product, rounded to c). Both off by default here (the library's behaviour is unchanged);
+the monopulse tracker turns them on.
+
 Formats (:class:`AlphaBetaFormats`): z measurement, x state (all three per-sample
 components), e innovation, c coefficients (alpha, beta, gamma/4 and the adaptive
 intermediates), s squared innovations, their mean and the noise floor, l the tracking
@@ -44,6 +58,7 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from .events import EventRegistry
+from ..qops import rs
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
 from .ops import align, div_q, flip, sqrt_q, store
 
@@ -111,6 +126,11 @@ class AlphaBetaFormats(FormatTable):
     def __post_init__(self):
         self.validate()
 
+    def floor_drop_bits(self) -> int:
+        """Fraction bits of ``1 - alpha`` dropped in ``floor / (1 - alpha)`` (the floor
+        moves up by the rest, staying within 62 bits)."""
+        return max(0, self.c.frac - (62 - self.s.width))
+
     def check(self, window: int) -> None:
         r = self.fracs()
         w = {s: getattr(self, s).width for s in self.signals()}
@@ -129,7 +149,13 @@ class AlphaBetaFormats(FormatTable):
         need_bits("1 - r^2", 2 * w["c"] + 1)
         need_bits("sqrt(1 - alpha)", w["c"] + r["c"])
         need_bits("2 (1 - r)^2", 2 * w["c"] + 1)
+        need_bits("floor / (1 - alpha)", w["s"] + r["c"] - self.floor_drop_bits())
+        need_bits("1 - (1 - alpha) relax", 2 * w["c"] + 1)
 
+
+#: Noise floor of the adaptive mode: ``fixed`` ``tau sigma_v^2``; ``gain`` ``tau sigma_v^2 / (1 -
+#: alpha)`` with the alpha in use (the innovation variance those gains give on noise alone).
+FLOOR_SCALINGS = ("fixed", "gain")
 
 SIGNALS = AlphaBetaFormats.signals()
 EVENTS = EventRegistry(SIGNALS, ("implausible", "s_zero", "neg_sqrt", "upsets"))
@@ -144,12 +170,16 @@ _BASE = EVENTS.base
 @njit_cached
 def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd, k0, ups, ev, xs, cs):
     """consts = [noise floor tau sigma_v^2 (s), alpha_min (c), alpha_max (c), one (c), window (as a
-    number), sigma_v / k (l), 4 (l)]."""
+    number), sigma_v / k (l), 4 (l), floor scaled by 1 / (1 - alpha) (0 or 1), alpha_relax (c)]."""
     nb, n = x.shape
     T = z.shape[1]
     N = ring.shape[1]
     z0 = x[0, 0] - x[0, 0]
     floor, amin, amax, one, nw, svl, four = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5], consts[6]
+    scale, grow = consts[7], consts[8]
+    # floor / (1 - alpha): the numerator moves up at most to 62 bits, the denominator drops
+    # the fraction bits that do not fit (floor_drop_bits)
+    kd = max(0, fr[_C] - (62 - wd[_S]))
     xp = np.empty(n, x.dtype)
     for b in range(nb):
         eb = ev[b]
@@ -181,7 +211,11 @@ def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd
                         for j in range(N):
                             acc += ring[b, j]
                         Sm = div_q(acc, nw, 0, hf[_S], lo[_S], hi[_S], eb, _S, _EV_SZ, _BASE)
-                        dm = Sm - floor     # innovation power beyond the noise floor
+                        fl = floor
+                        if scale != z0:     # the floor of the gains in use: / (1 - alpha)
+                            den = rs(one - c[b, 0], kd, False)
+                            fl = div_q(floor, den, fr[_C] - kd, hf[_S], lo[_S], hi[_S], eb, _S, _EV_SZ, _BASE)
+                        dm = Sm - fl        # innovation power beyond the noise floor
                         if dm > z0:
                             g = sqrt_q(dm, 2 * fr[_L] - fr[_S], hf[_L], hi[_L], eb, _L, _EV_NSQ, _BASE)
                             lam = div_q(g, svl, fr[_L], hf[_L], lo[_L], hi[_L], eb, _L, _EV_SZ, _BASE)
@@ -194,6 +228,11 @@ def _ab_kernel(x, c, z, zok, adapt, ring, rpos, rcnt, consts, fr, lo, hi, hf, wd
                             al = store(align(one, fr[_C]) - rk * rk, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _BASE)
                         else:  # no manoeuvre
                             al = amin
+                        if grow != z0:      # (1 - alpha) grows at most by ``grow`` a step
+                            lim = align(one, fr[_C]) - (one - c[b, 0]) * grow
+                            lim = store(lim, fr[_C], hf[_C], lo[_C], hi[_C], eb, _C, _BASE)
+                            if al < lim:
+                                al = lim
                         if al < amin:
                             al = amin
                         if al > amax:
@@ -243,6 +282,13 @@ class AlphaBetaFilter:
         ``tau``: innovation power ``tau sigma_v^2`` taken as noise, not manoeuvre.
     manoeuvre_gain : float
         ``k`` of ``sigma_a T^2 = k sqrt(mean e^2 - tau sigma_v^2)``.
+    floor_scaling : {"fixed", "gain"}
+        The noise floor ``tau sigma_v^2`` as is, or divided by ``1 - alpha`` of the gains in
+        use (the innovation variance a Kalata pair gives on measurement noise alone; see the
+        module doc).
+    alpha_relax : float
+        0: alpha follows the estimate at once; in (1, 2): ``1 - alpha`` grows at most by this
+        factor a step (alpha falls back gradually after a manoeuvre).
     alpha_min, alpha_max : float
         Limits of the adaptive alpha.
     arithmetic : {"float64", "float32"} or AlphaBetaFormats
@@ -256,8 +302,8 @@ class AlphaBetaFilter:
     def __init__(self, T_s: float, alpha: float, beta: float, gamma: float | None = None, *,
                  adaptive: bool = False, sigma_v: float | None = None, window: int = 4,
                  alpha_min: float = 0.05, alpha_max: float = 0.95, noise_floor: float = 4.0,
-                 manoeuvre_gain: float = 2.0, arithmetic="float64", trials: int = 1, x0=None,
-                 z_limit: float | None = None):
+                 manoeuvre_gain: float = 2.0, floor_scaling: str = "fixed", alpha_relax: float = 0.0,
+                 arithmetic="float64", trials: int = 1, x0=None, z_limit: float | None = None):
         if not (isinstance(T_s, (int, float)) and math.isfinite(T_s) and T_s > 0):
             raise ValueError(f"T_s must be a finite number > 0, not {T_s!r}")
         check_coefficients(alpha, beta, gamma)
@@ -276,6 +322,12 @@ class AlphaBetaFilter:
             if not (isinstance(manoeuvre_gain, (int, float)) and math.isfinite(manoeuvre_gain)
                     and manoeuvre_gain > 0):
                 raise ValueError(f"manoeuvre_gain must be a finite number > 0, not {manoeuvre_gain!r}")
+            if isinstance(alpha_relax, bool) or not isinstance(alpha_relax, (int, float)) or not (
+                    alpha_relax == 0 or 1 < alpha_relax < 2):
+                raise ValueError(f"alpha_relax must be 0 (no limit) or in (1, 2), not {alpha_relax!r}")
+            if floor_scaling not in FLOOR_SCALINGS:
+                raise ValueError(f"floor_scaling must be one of {', '.join(FLOOR_SCALINGS)}, not "
+                                 f"{floor_scaling!r}")
             if not 0.0 < alpha_min < alpha_max < 1.0:
                 raise ValueError(f"alpha limits must satisfy 0 < alpha_min < alpha_max < 1, not "
                                  f"{alpha_min!r}, {alpha_max!r}")
@@ -291,7 +343,9 @@ class AlphaBetaFilter:
         x0 = np.broadcast_to(x0, (self.trials, n)) * np.array([1.0, T_s, T_s * T_s / 2][:n])
         coef = np.array([alpha, beta, 0.0 if gamma is None else gamma / 4.0])
         sv = 1.0 if sigma_v is None else float(sigma_v)
-        consts = np.array([noise_floor * sv ** 2, alpha_min, alpha_max, 1.0, window, sv / manoeuvre_gain, 4.0])
+        scale = 1.0 if adaptive and floor_scaling == "gain" else 0.0
+        consts = np.array([noise_floor * sv ** 2, alpha_min, alpha_max, 1.0, window, sv / manoeuvre_gain, 4.0,
+                           scale, alpha_relax])
         window = window if adaptive else 1
         self.events = EVENTS
         if self.kind == "fixed":
@@ -302,6 +356,7 @@ class AlphaBetaFilter:
             fits("coefficients", coef, fm.c)
             fits("noise_floor sigma_v^2", consts[:1], fm.s)
             fits("sigma_v / manoeuvre_gain", consts[5:6], fm.l)
+            fits("alpha_relax", consts[8:9], fm.c)
             if adaptive and to_fixed(consts[5], fm.l) < 1:
                 raise ValueError(f"format too narrow for sigma_v / manoeuvre_gain = {consts[5]:g}: "
                                  f"below one LSB of {fm.l}")
@@ -310,7 +365,8 @@ class AlphaBetaFilter:
             self.c = np.broadcast_to(to_fixed(coef, fm.c), (self.trials, 3)).copy()
             self.consts = np.array([to_fixed(consts[0], fm.s), to_fixed(alpha_min, fm.c),
                                     to_fixed(alpha_max, fm.c), 1 << fm.c.frac, window,
-                                    to_fixed(consts[5], fm.l), 4 << fm.l.frac], np.int64)
+                                    to_fixed(consts[5], fm.l), 4 << fm.l.frac, int(scale),
+                                    to_fixed(alpha_relax, fm.c)], np.int64)
             dt = np.int64
         else:
             dt = np.float64 if self.kind == "float64" else np.float32
@@ -404,4 +460,4 @@ class AlphaBetaFilter:
 
 
 __all__ = ["AlphaBetaFilter", "AlphaBetaFormats", "AlphaBetaRun", "check_coefficients", "kalata",
-           "steady_state_gains", "tracking_index"]
+           "steady_state_gains", "tracking_index", "FLOOR_SCALINGS"]

@@ -103,11 +103,14 @@ from hdl.model.mixer import MixerModel, MixerParams
 from hdl.model.nco import NcoModel, NcoParams, nco_freq_word
 
 __all__ = ["MonopulseFrontendParams", "MonopulseFrontendModel", "MonopulseRecords",
-           "REG_COEF", "REG_U0", "REG_V0", "BEAMS", "pack_input", "pack_record",
+           "REG_COEF", "REG_U0", "REG_V0", "REG_NAMES", "BEAMS", "pack_input", "pack_record",
            "unpack_record", "record_to_words", "coef_word", "dc_word", "hadamard_channels"]
 
 #: Register addresses.
 REG_COEF, REG_U0, REG_V0 = 0, 4, 5
+#: Register names (the DSP's view, :class:`cosim.session.RegisterSession`) -> addresses.
+REG_NAMES = {"coef1": REG_COEF, "coef2": REG_COEF + 1, "coef3": REG_COEF + 2,
+             "coef4": REG_COEF + 3, "u0": REG_U0, "v0": REG_V0}
 #: Accumulated beam fields of the record, in order.
 BEAMS = ("s", "da", "de", "dd")
 _ACC_FIELDS = tuple(f"{b}_{c}" for b in BEAMS for c in ("re", "im"))

@@ -40,8 +40,9 @@ def test_json_report(capsys):
     (["--u0", "0.8", "--v0", "0.7"], "error: initial target direction must lie in the visible "
                                       "region u^2 + v^2 < 1, not u = 0.8, v = 0.7"),
     (["--phase-bits", "0"], "error: phase_bits must be an integer in [1, 24] or None (ideal), not 0"),
-    (["--backend", "verilator"], "error: backend 'verilator': the monopulse HDL front end exists but "
-     "the closed loop is not wired to it yet"),
+    (["--backend", "verilator", "--trials", "2"],
+     "error: the verilator backend runs one trial, not trials = 2"),
+    (["--backend", "pysim", "--duration-s", "2"], "error: pysim simulates about 2e+03 cycles/s"),
 ])
 def test_bad_input_exits_2_with_an_error_line(argv, msg, capsys):
     assert main(["monopulse", "--duration-s", "0.01"] + argv) == 2
@@ -70,3 +71,13 @@ def test_registry_declares_the_front_end_its_top_and_the_bench():
     top = next(a for a in sub["synth"]._actions if a.dest == "top")
     assert "monopulse" in top.choices
     assert "monopulse" in BENCHMARKS
+
+
+def test_synth_timeout_is_validated_before_work(capsys, tmp_path):
+    """``synth --timeout-min`` (the limit of each tool run; the monopulse front end needs more
+    than the default 30 min of nextpnr on a loaded machine) is checked before yosys runs."""
+    assert main(["synth", "--top", "monopulse", "--timeout-min", "0", "--out",
+                 str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --timeout-min must be in (0, 1440] minutes, not 0"]
+    assert not (tmp_path / "s" / "monopulse_frontend").exists()

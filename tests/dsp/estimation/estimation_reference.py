@@ -221,9 +221,10 @@ class AlphaBetaRef:
     """The alpha-beta(-gamma) tracker of :mod:`dsp.estimation.alphabeta` step by step
     (per-sample units); ``ar`` an :class:`IntArith` or :class:`F32Arith`."""
 
-    def __init__(self, ar, x, c, consts, window, adaptive):
+    def __init__(self, ar, x, c, consts, window, adaptive, scale=False, relax=None, kd=0):
         self.ar, self.x, self.c = ar, list(x), list(c)
         self.floor, self.amin, self.amax, self.one, self.nw, self.svl, self.four = consts
+        self.scale, self.relax, self.kd = scale, relax, kd     # floor / (1 - alpha); relax (c)
         self.ring, self.pos, self.cnt = [ar.zero] * window, 0, 0
         self.adaptive = adaptive
 
@@ -247,7 +248,14 @@ class AlphaBetaRef:
                 for v in self.ring:
                     acc += v
                 Sm = ar.div(acc, self.nw, "s")
-                dm = Sm - self.floor
+                fl = self.floor
+                if self.scale:
+                    if isinstance(fl, int):
+                        den = (self.one - self.c[0]) >> self.kd
+                        fl = ar.div(fl << (fr("c") - self.kd), den, "s")
+                    else:
+                        fl = ar.div(fl, self.one - self.c[0], "s")
+                dm = Sm - fl
                 if dm > 0:
                     if isinstance(dm, int):
                         g = ar.sqrt(dm << (2 * fr("l") - fr("s")), "l")
@@ -264,9 +272,16 @@ class AlphaBetaRef:
                         sq = ar.sqrt(lam * lam + l8, "l")
                         rk = ar.div(self.four, self.four + lam + sq, "c")
                         al = self.one - rk * rk
-                    al = min(max(al, self.amin), self.amax)
                 else:
                     al = self.amin
+                if self.relax is not None:
+                    if isinstance(al, int):
+                        lim = ar.store((self.one << fr("c")) - (self.one - self.c[0]) * self.relax,
+                                       fr("c"), "c")
+                    else:
+                        lim = self.one - (self.one - self.c[0]) * self.relax
+                    al = max(al, lim)
+                al = min(max(al, self.amin), self.amax)
                 v = self.one - al
                 rr = ar.sqrt(v << fr("c") if isinstance(v, int) else v, "c")
                 d = self.one - rr

@@ -9,7 +9,7 @@ import pytest
 
 from dsp.estimation import (AlphaBetaFilter, AlphaBetaFormats, KalmanFilter, kalata,
                             steady_state_gains, tracking_index, white_acceleration)
-from dsp.estimation.formats import to_fixed
+from dsp.estimation.formats import fmt, to_fixed
 
 from estimation_reference import AlphaBetaRef, F32Arith, IntArith
 
@@ -250,3 +250,61 @@ def test_adaptive_fixed_point_on_the_manoeuvre_bit_exact_and_close_to_float():
             got = np.round(run.x[b, k] * np.array([1.0, 1.0]) * 2.0 ** fm.x.frac).astype(np.int64)
             assert got.tolist() == ref.x, (b, k)
             assert int(round(run.coefficients[b, k, 0] * 2.0 ** fm.c.frac)) == ref.c[0]
+
+
+@pytest.mark.parametrize("fm", [AlphaBetaFormats(), AlphaBetaFormats(s=fmt(48, 32))])
+def test_gain_scaled_floor_and_relax_bit_exact_against_unbounded_integers(fm):
+    """``floor_scaling="gain"`` (floor / (1 - alpha), the denominator's low bits dropped when
+    the shifted floor would pass 62 bits: the second format) and ``alpha_relax``, against the
+    step-by-step reference; alpha does move (not stuck at a limit)."""
+    T_s, sv = 0.01, 0.1
+    z = _track(800, T_s, 3, sv)
+    z[300:340] += np.linspace(0, 3, 40)          # a manoeuvre: alpha rises, then relaxes
+    f = AlphaBetaFilter(T_s, 0.3, 0.05, adaptive=True, sigma_v=sv, window=4, arithmetic=fm,
+                        floor_scaling="gain", alpha_relax=1.1, noise_floor=6.0)
+    run = f.run(z)
+    ar = IntArith(fm)
+    q = lambda v, s: int(to_fixed(v, getattr(fm, s)))
+    ref = AlphaBetaRef(ar, [0, 0], [q(0.3, "c"), q(0.05, "c"), 0],
+                       (q(6 * sv ** 2, "s"), q(0.05, "c"), q(0.95, "c"), 1 << fm.c.frac, 4,
+                        q(sv / 2, "l"), 4 << fm.l.frac), 4, True, scale=True,
+                       relax=q(1.1, "c"), kd=fm.floor_drop_bits())
+    alphas = []
+    for k in range(len(z)):
+        ref.step(q(z[k], "z"))
+        alphas.append(ref.c[0])
+    np.testing.assert_array_equal(f.x[0], ref.x)
+    np.testing.assert_array_equal(f.c[0, :2], ref.c[:2])
+    a = run.coefficients[0, :, 0]
+    assert a.max() > 0.5 and a[-1] < 0.1
+    # relaxing: 1 - alpha grows by at most 1.1 (+ rounding) a step
+    assert np.all((1 - a[1:]) <= 1.1 * (1 - a[:-1]) + 1e-6)
+    assert {s: run.events[f"sat_{s}"] for s in fm.signals()} == ar.sat
+    assert (fm.floor_drop_bits() > 0) == (fm.s.width == 48)
+
+
+def test_gain_scaled_floor_and_relax_float32_bit_exact():
+    T_s, sv = 0.01, 0.1
+    z = _track(600, T_s, 4, sv)
+    z[300:340] += np.linspace(0, 3, 40)
+    f = AlphaBetaFilter(T_s, 0.3, 0.05, adaptive=True, sigma_v=sv, arithmetic="float32",
+                        floor_scaling="gain", alpha_relax=1.1, noise_floor=6.0)
+    run = f.run(z)
+    f32 = np.float32
+    ref = AlphaBetaRef(F32Arith(), [f32(0), f32(0)], [f32(0.3), f32(0.05), f32(0)],
+                       (f32(6 * sv ** 2), f32(0.05), f32(0.95), f32(1), f32(4), f32(sv / 2),
+                        f32(4)), 4, True, scale=True, relax=f32(1.1))
+    unit = np.array([1.0, 1.0 / T_s])
+    for k in range(len(z)):
+        ref.step(f32(z[k]))
+        np.testing.assert_array_equal(run.x[0, k], np.array(ref.x, np.float32).astype(float) * unit)
+
+
+@pytest.mark.parametrize("kw,msg", [
+    (dict(floor_scaling="innovation"), "floor_scaling must be one of fixed, gain, not 'innovation'"),
+    (dict(alpha_relax=1.0), "alpha_relax must be 0 (no limit) or in (1, 2), not 1.0"),
+    (dict(alpha_relax=-0.5), "alpha_relax must be 0 (no limit) or in (1, 2), not -0.5"),
+])
+def test_adaptive_options_bad_input(kw, msg):
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        AlphaBetaFilter(0.01, 0.3, 0.05, adaptive=True, sigma_v=0.1, **kw)

@@ -60,11 +60,30 @@ def test_c4_adaptive_lags_less_in_a_manoeuvre_and_is_quieter_when_quiet():
     err = {n: _track(c, zu, zv)[0][0] - u for n, c in (("low", low), ("high", high), ("ada", ada))}
     man = slice(310, 460)            # inside and just after the manoeuvre (300..420)
     quiet = slice(150, 300)          # settled, before it
+    after = slice(500, 700)          # quiet again after it
     lag = {n: np.mean(np.abs(e[:, man])) for n, e in err.items()}
     rms = {n: np.sqrt(np.mean(e[:, quiet] ** 2)) for n, e in err.items()}
+    rms2 = {n: np.sqrt(np.mean(e[:, after] ** 2)) for n, e in err.items()}
     assert lag["ada"] < 0.5 * lag["low"], (lag, rms)
     assert rms["ada"] < 0.9 * rms["high"], (lag, rms)
-    assert rms["low"] < rms["ada"] and lag["high"] < lag["ada"], (lag, rms)   # the trade-off is real
+    assert rms["low"] < rms["high"] and lag["high"] < lag["low"], (lag, rms)   # a real trade-off
+    # and the adaptive filter does not stay agile when quiet (the fixed 4 sigma_v^2 floor did:
+    # 5.8e-4 before and 6.7e-4 after the manoeuvre, near the high-index filter; measured now
+    # 1.5e-4 and 1.9e-4, the low-index filter's 1.6e-4 and 3.1e-4)
+    assert rms["ada"] < 1.2 * rms["low"] and rms2["ada"] < 1.2 * rms2["low"], (rms, rms2)
+    assert rms2["ada"] < 0.5 * rms2["high"], rms2
+
+
+def test_c4_fixed_floor_stays_agile_when_quiet():
+    """The previous adaptive form (fixed floor 4 sigma_v^2, alpha free to fall at once) keeps
+    a high alpha in the quiet windows: the reason for the gain-scaled floor and the relax."""
+    u, v, zu, zv = _scenario(seed=41)
+    old = TrackerConfig(mode="adaptive", floor_scaling="fixed", noise_floor=4.0, alpha_relax=0)
+    low = TrackerConfig(mode="fixed", sigma_a=2.0)
+    e_old = _track(old, zu, zv)[0][0] - u
+    e_low = _track(low, zu, zv)[0][0] - u
+    q = slice(150, 300)
+    assert np.sqrt(np.mean(e_old[:, q] ** 2)) > 2 * np.sqrt(np.mean(e_low[:, q] ** 2))
 
 
 def test_literal_eq36_never_leaves_alpha_min():
