@@ -19,7 +19,7 @@ import numpy as np
 from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
                                  dc_word, pack_input)
 
-from ..equivalence import BACKENDS, PYSIM_MAX_SAMPLES, stall_pattern
+from ..equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
 from .session import write_register
 
 __all__ = ["check_monopulse_equivalence", "EQUIV_PARAMS"]
@@ -75,42 +75,9 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
             ovf = int(fe.read("overflow_count"))
         return np.asarray(r.words, np.int64), np.asarray(r.cycles), ovf, time.perf_counter() - t
 
-    ref_w, ref_c, ref_ovf, secs = run("model")
-    per = {"model": {"mismatches": 0, "words": int(len(ref_w)), "seconds": secs}}
-    ran, skipped = ["model"], {}
-    for name in [b for b in BACKENDS if b in backends and b != "model"]:
-        if name == "pysim" and samples > pysim_max_samples:
-            skipped["pysim"] = f"pysim runs only for samples <= {pysim_max_samples}"
-            continue
-        if name == "verilator":
-            from ..verilator import verilator_available
-            if not verilator_available():
-                from ..verilog import verilator_missing_message
-                skipped["verilator"] = verilator_missing_message()
-                continue
-        w, c, ovf, secs = run(name)
-        n = min(len(w), len(ref_w))
-        bad = int(np.count_nonzero(w[:n] != ref_w[:n]) + np.count_nonzero(c[:n] != ref_c[:n]))
-        bad += abs(len(w) - len(ref_w)) + int(ovf != ref_ovf)
-        per[name] = {"mismatches": bad, "words": int(len(w)), "seconds": secs}
-        ran.append(name)
-    compared = [f"{k} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
-                f"{v['mismatches']} mismatches" for k, v in per.items() if k != "model"]
-    total = int(sum(v["mismatches"] for v in per.values()))
-    if len(ran) < 2:
-        verdict = (f"nothing was compared: only {', '.join(ran)} ran"
-                   + "".join(f"; {k} skipped: {w}" for k, w in skipped.items()))
-    elif len(ref_w) == 0:
-        verdict = (f"nothing was compared: the {samples} samples gave no FIFO word (a record "
-                   f"every {params.snapshots * params.snapshot_decimation} "
-                   f"samples at most)")
-    elif total:
-        verdict = f"{total} mismatches ({'; '.join(compared)})"
-    else:
-        verdict = f"equivalent: {'; '.join(compared)}"
-    return {"top": "monopulse", "samples": int(samples), "mismatches": total,
-            "equivalent": bool(len(ran) >= 2 and len(ref_w) > 0 and total == 0),
-            "verdict": verdict, "compared": compared, "backends": ran, "skipped": skipped,
-            "stall": bool(stall), "seed": int(seed),
-            "peaks": int(len(ref_w) // params.record_words), "words": int(len(ref_w)),
-            "markers": 0, "dropped": ref_ovf, "per_backend": per}
+    return compare_backends("monopulse", int(samples), backends, run, seed=seed, stall=stall,
+                            record_words=params.record_words,
+                            pysim_max_samples=pysim_max_samples,
+                            empty_hint=f"a record every "
+                                       f"{params.snapshots * params.snapshot_decimation} "
+                                       f"samples at most")

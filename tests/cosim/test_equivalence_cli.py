@@ -85,6 +85,7 @@ def test_synth_command(capsys, tmp_path):
     rc = main(["synth", "--top", "tacan", "--out", str(tmp_path), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
-    assert set(out) == {"top", "lut4", "ff", "mult18", "bram", "fmax_mhz"}
+    assert set(out) == {"top", "channels", "lut4", "ff", "mult18", "bram", "fmax_mhz"}
+    assert out["channels"] == 1
     assert out["mult18"] > 0 and out["bram"] > 0
     assert out["fmax_mhz"] >= 100
