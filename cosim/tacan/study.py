@@ -58,7 +58,11 @@ def trial_signal(cfg, snr_db: float, trial: int, adc_bits: int = 12):
     from .signal import TacanSignalConfig
     rng = np.random.default_rng([cfg.seed, trial, 7919])
     bearing = float(np.round(rng.uniform(0, 360), 3))
-    seed = int(np.random.default_rng([cfg.seed, trial, int(round(snr_db * 1000))]).integers(1 << 31))
+    # SeedSequence entropy must be non-negative: a negative SNR gets a key of its own length
+    # (no collision with a positive one); SNR >= 0 keeps the seeds of the published studies
+    milli = int(round(snr_db * 1000))
+    key = [cfg.seed, trial, milli] if milli >= 0 else [cfg.seed, trial, -milli, 1]
+    seed = int(np.random.default_rng(key).integers(1 << 31))
     return TacanSignalConfig(snr_db=float(snr_db), duration_s=cfg.duration_s, seed=seed,
                              bearing_deg=bearing, adc_bits=adc_bits)
 

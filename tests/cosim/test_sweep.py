@@ -221,3 +221,16 @@ def test_confirmation_widens_every_parameter_until_it_holds(monkeypatch, tmp_pat
            "golden_reinit": 0, "dsp_events": {}, "ratio_to_golden": 1.07,
            "ratio_ci95": [1.0, 1.1]}
     assert sw._passes(row, 0.05) and not sw._confirms(row, 0.05)
+
+
+def test_trial_signal_seeds_are_deterministic_and_distinct_for_negative_snr():
+    """A negative SNR (below the noise floor) gets its own seed instead of a SeedSequence
+    error; an SNR >= 0 keeps the seed of the published studies."""
+    from types import SimpleNamespace
+
+    from cosim.tacan.study import trial_signal
+    cfg = SimpleNamespace(seed=1, duration_s=1.0)
+    seeds = {snr: trial_signal(cfg, snr, 0).seed for snr in (-3.0, -0.5, 0.0, 0.5, 3.0)}
+    assert len(set(seeds.values())) == 5
+    assert trial_signal(cfg, -3.0, 0).seed == seeds[-3.0]
+    assert seeds[3.0] == int(np.random.default_rng([1, 0, 3000]).integers(1 << 31))
