@@ -66,12 +66,24 @@ def tool_versions() -> dict:
 
 
 def _run(cmd: list[str], log_path: Path, cwd: Path, timeout: float) -> None:
-    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
-    log_path.write_text(proc.stdout + proc.stderr)
-    if proc.returncode != 0:
-        tail = "\n".join((proc.stdout + proc.stderr).splitlines()[-30:])
-        raise RuntimeError(f"{Path(cmd[0]).name} failed (exit {proc.returncode}); "
-                           f"full log in {log_path}:\n{tail}")
+    """Run one tool with its output streamed to ``log_path`` (so a long place-and-route can be
+    watched while it runs); a non-zero exit or a run over ``timeout`` seconds is a
+    ``RuntimeError`` naming the tool, the limit and the log."""
+    tool = Path(cmd[0]).name
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, cwd=cwd, stdout=log, stderr=subprocess.STDOUT, text=True)
+        try:
+            rc = proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            last = log_path.read_text(errors="replace").strip().splitlines()[-1:] or [""]
+            raise RuntimeError(f"{tool} did not finish within {timeout / 60:g} min (stopped); "
+                               f"raise the limit (synth --timeout-min); last log line: "
+                               f"{last[0][:200]!r}; full log in {log_path}") from None
+    if rc != 0:
+        tail = "\n".join(log_path.read_text(errors="replace").splitlines()[-30:])
+        raise RuntimeError(f"{tool} failed (exit {rc}); full log in {log_path}:\n{tail}")
 
 
 def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CABGA381",

@@ -55,3 +55,23 @@ def test_bad_arguments_and_missing_tools(monkeypatch):
     with pytest.raises(RuntimeError, match=r"YoWASP yosys/nextpnr-ecp5 not found: .*pip install"):
         synth(dut, name="x")
     Fragment.get(dut, None)  # used, so Amaranth does not warn
+
+
+def test_tool_timeout_is_a_clear_error(tmp_path):
+    """A tool over its limit is stopped and reported in one RuntimeError (was a
+    subprocess.TimeoutExpired traceback after a 70-minute nextpnr run); the log is kept."""
+    import sys
+    log = tmp_path / "tool.log"
+    cmd = [sys.executable, "-c", "import time; print('placing', flush=True); time.sleep(30)"]
+    with pytest.raises(RuntimeError, match=r"did not finish within .* min .*--timeout-min.*"
+                                           r"'placing'.*tool\.log"):
+        synth_mod._run(cmd, log, tmp_path, timeout=1.5)
+    assert "placing" in log.read_text()
+
+
+def test_tool_failure_names_exit_and_log(tmp_path):
+    import sys
+    log = tmp_path / "tool.log"
+    cmd = [sys.executable, "-c", "import sys; print('no such cell'); sys.exit(3)"]
+    with pytest.raises(RuntimeError, match=r"(?s)failed \(exit 3\).*no such cell"):
+        synth_mod._run(cmd, log, tmp_path, timeout=60)
