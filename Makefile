@@ -54,6 +54,7 @@ bench: setup  ## run every benchmark but suite-time (~4 h on 2 cores); results g
 	$(PY) -m cosim bench gnss-speed
 	$(PY) -m cosim bench gnss-tracking
 	$(PY) -m cosim bench aukf
+	$(PY) -m cosim bench aukf-convergence
 	$(PY) -m cosim bench ins --jobs 2
 	$(PY) -m cosim bench monopulse
 

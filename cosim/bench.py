@@ -392,11 +392,17 @@ def _aukf(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     return aukf_bench(out, quick=quick)
 
 
+def _aukf_convergence(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gnss.study_aukf import bench_convergence
+    return bench_convergence(out, quick=quick)
+
+
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "tacan-robustness": tacan_robustness,
               "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
               "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,
-              "monopulse": _monopulse, "ins": _ins, "aukf": _aukf}
+              "monopulse": _monopulse, "ins": _ins, "aukf": _aukf,
+              "aukf-convergence": _aukf_convergence}
 
 
 def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:

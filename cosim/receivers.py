@@ -279,6 +279,12 @@ class FaultModel:
         the scores); never raises. ``cache`` is shared by the runs of one trial.
     cpu_s_per_record_s : float
         CPU seconds a run costs per second of record (the up-front size check).
+    quantity : str
+        What the scores measure, in the report's words (``"bearing"``; its NaN column).
+    plot_title : str
+        The plot's subject (``"TACAN bearing"``: "<plot_title> vs bit errors in <target>").
+    scores_note : str
+        The report's paragraph saying what the columns are for this receiver.
     """
 
     targets: tuple
@@ -287,6 +293,14 @@ class FaultModel:
     word_width: Callable[[Any], int]
     record: Callable[..., dict]
     cpu_s_per_record_s: float = 1.5
+    quantity: str = "bearing"
+    plot_title: str = "TACAN bearing"
+    scores_note: str = (
+        "Every bearing after settling: RMSE, worst error, disturbed (error > {disturbed_deg:g} "
+        "deg) and the longest disturbance. Integrity: flagged (the receiver's warning flag: "
+        "filter warming up, latest inputs rejected, ambiguous fine sector or implausible noise "
+        "estimate), misleading (disturbed and *not* flagged) and the errors of the unflagged "
+        "bearings.")
 
 
 @dataclass(frozen=True)

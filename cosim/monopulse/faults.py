@@ -126,4 +126,15 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
 #: What :mod:`cosim.studies.faults` needs of the monopulse receiver.
 FAULT_MODEL = FaultModel(targets=TARGETS, check=check, check_size=check_size,
                          word_width=word_width, record=record,
-                         cpu_s_per_record_s=CPU_S_PER_RECORD_S)
+                         cpu_s_per_record_s=CPU_S_PER_RECORD_S,
+                         quantity="azimuth tracking estimate",
+                         plot_title="Monopulse azimuth tracking",
+                         scores_note=(
+                             "Scores over the tracking blocks after settling: RMSE and worst "
+                             "error of the azimuth tracking estimate (deg); disturbed = the "
+                             "share of tracking blocks whose pointing error passes half the "
+                             "unambiguous offset, and the longest such run (s); re-inits = "
+                             "lost-track events (the search restarted); gated = FIFO records "
+                             "the DSP rejected (block counter or steering words not the ones "
+                             "it sent). The tracker raises no integrity flag, so the flagged, "
+                             "misleading and unflagged columns are '-'."))

@@ -245,6 +245,7 @@ def _max_of(recs, key):
 
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
+    model = fault_model(fc.receiver)
     stem = report_stem(fc)
     from cosim.validate import dumps
     (out / f"{stem}.json").write_text(dumps(s, indent=1, default=str))
@@ -269,8 +270,8 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     if base and base["rmse_deg"]:
         ax.axhline(base["rmse_deg"], color="k", ls=":", label="no bit errors (RMSE)")
     ax.set_xlabel(f"bit error rate ({fc.target})")
-    ax.set_ylabel("bearing error (deg)")
-    ax.set_title(f"TACAN bearing vs bit errors in {fc.target} (SNR {fc.snr_db:g} dB)")
+    ax.set_ylabel(f"{model.quantity} error (deg)")
+    ax.set_title(f"{model.plot_title} vs bit errors in {fc.target} (SNR {fc.snr_db:g} dB)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -286,12 +287,8 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
              + (", FIFO words with an even-parity bit (checked by the DSP)" if fc.fifo_parity
                 else "") + ".", "",
              f"![{stem}.png]({stem}.png)", "",
-             f"Every bearing after settling: RMSE, worst error, disturbed (error > "
-             f"{fc.disturbed_deg:g} deg) and the longest disturbance. Integrity: flagged (the "
-             "receiver's warning flag: filter warming up, latest inputs rejected, ambiguous "
-             "fine sector or implausible noise estimate), misleading (disturbed and *not* "
-             "flagged) and the errors of the unflagged bearings.", "",
-             "| BER | flips | exceptions | NaN bearings | RMSE deg | worst deg | disturbed | "
+             model.scores_note.format(disturbed_deg=fc.disturbed_deg), "",
+             f"| BER | flips | exceptions | NaN {model.quantity}s | RMSE deg | worst deg | disturbed | "
              "longest disturbance s | flagged | misleading | unflagged RMSE deg | "
              "unflagged worst deg | re-inits | gated | saturations |",
              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]

@@ -37,18 +37,30 @@ def test_a2_100_runs(factor):
     assert a["diverged"] == 0 and u["diverged"] == 0
 
 
+_LONG = {}
+
+
+def _long_point(factor):
+    """100 runs x 60 s (the run length A4 is judged at: docs/aukf.md, results/aukf_convergence.md)."""
+    if factor not in _LONG:
+        _LONG[factor] = run_point(factor * Q0, 32.0, trackers=("aukf", "ukf"), n_runs=100,
+                                  duration_s=60.0, seed=1)
+    return _LONG[factor]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("factor", [
-    10.0,
-    pytest.param(0.1, marks=pytest.mark.xfail(strict=True, reason=(
-        "A4 fails at q_true = 0.1 q0: median final q_hat 1.55 (x3.1 of 0.5) after 10 s; "
-        "the slave's measurement carries ~1.3 nats^2 on ln q in 10 s against the prior's 1, "
-        "so the posterior keeps ~45 % of ln 10 (docs/aukf.md)"))),
-])
+@pytest.mark.parametrize("factor", [0.1, 1.0, 10.0])
 def test_a4_100_runs(factor):
-    """A4: median final q_hat within x2 of q_true (measured: 49.9 at 10 q0)."""
-    q = _point(factor)["aukf"]["q_hat_median_final"]
+    """A4: median final q_hat within x2 of q_true at the end of a 60 s run (100 runs,
+    32 dB-Hz); A2/A3 hold on the same runs. Measured: 0.1 q0 0.500 (truth 0.5), q0 4.51,
+    10 q0 47.6. After 10 s the 0.1 q0 median is still 1.55 (x3.1: the slave's information
+    on ln q accrues at ~0.065 nats^2 per block against the prior's 1)."""
+    p = _long_point(factor)
+    q = p["aukf"]["q_hat_median_final"]
     assert factor * Q0 / 2 <= q <= 2 * factor * Q0, q
+    a, u = p["aukf"]["doppler_rmse_hz"], p["ukf"]["doppler_rmse_hz"]
+    assert (a <= 1.1 * u) if factor == 1.0 else (a < u), (a, u)
+    assert p["aukf"]["diverged"] == 0 and p["aukf"]["cycle_slips"] == 0
 
 
 @pytest.mark.slow
