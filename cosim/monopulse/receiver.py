@@ -145,39 +145,19 @@ FAULT_OPTIONS = (
 
 
 def cmd_faults(a) -> int:
-    from ..studies.faults import parse_ber, report_stem, run_faults
-    bits = None
-    if a.bits:
-        try:
-            bits = tuple(int(b) for b in a.bits.split(","))
-        except ValueError:
-            raise ValueError(f"--bits takes a comma list of bit positions, not "
-                             f"{a.bits!r}") from None
+    from ..studies.faults import finish, parse_ber, parse_bits, run_faults
+    bits = parse_bits(a.bits)
     check_out_dir(a.out, "--out")
     fc = FaultConfig(receiver="monopulse", bits=bits, ber=parse_ber(a.ber), snr_db=a.snr_db,
                      **_record_kwargs(a), **config_kwargs(a, FAULT_OPTIONS, FaultConfig))
     s = run_faults(fc, a.out, progress=not a.json)
-    if a.json:
-        print(dumps({"target": a.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
-                     "report": f"{a.out}/{report_stem(fc)}.md"}, default=str))
-    else:
-        print(f"{len(s['rows'])} bit error rates x {a.trials} trials in {s['elapsed_s']:.0f} s")
-        for r in s["rows"]:
-            f_ = (lambda v, spec: "-" if v is None else format(v, spec))
-            print(f"  BER {r['ber']:g}: {r['flips']} flips, azimuth tracking RMS "
-                  f"{f_(r['rmse_deg'], '.4f')} deg, worst {f_(r['max_abs_error_deg'], '.3f')} "
-                  f"deg, lost tracks {r['reinit']}, bad records {r['gated']}, exceptions "
-                  f"{r['exceptions']}")
-        print(f"report: {a.out}/{report_stem(fc)}.md")
-    exc = sum(r["exceptions"] for r in s["rows"])
-    nan = sum(r["nan_bearings"] for r in s["rows"])
-    if exc or nan:
-        first = next((r["exception"] for r in s.get("records", []) if r.get("exception")), "")
-        print(f"error: the receiver must give no exception and no NaN track; got {exc} "
-              f"exception(s), {nan} NaN estimate(s)" + (f" (first: {first})" if first else ""),
-              file=sys.stderr)
-        return 1
-    return 0
+
+    def row(r):
+        f_ = (lambda v, spec: "-" if v is None else format(v, spec))
+        return (f"{r['flips']} flips, azimuth tracking RMS {f_(r['rmse_deg'], '.4f')} deg, "
+                f"worst {f_(r['max_abs_error_deg'], '.3f')} deg, lost tracks {r['reinit']}, "
+                f"bad records {r['gated']}, exceptions {r['exceptions']}")
+    return finish(a, fc, s, row)
 
 
 def _component(params):

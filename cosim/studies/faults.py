@@ -55,6 +55,42 @@ def fault_model(receiver: str):
     return r.faults.model
 
 
+def parse_bits(spec: str | None) -> tuple[int, ...] | None:
+    """``--bits``: ``"0,3,7"`` -> ``(0, 3, 7)``; None or empty -> None (every bit)."""
+    if not spec:
+        return None
+    try:
+        return tuple(int(b) for b in spec.split(","))
+    except ValueError:
+        raise ValueError(f"--bits takes a comma list of bit positions, not {spec!r}") from None
+
+
+def finish(a, fc: "FaultConfig", s: dict, row_text) -> int:
+    """The end of every ``faults <receiver>`` command: print the rows (``--json``: one JSON
+    object; otherwise ``row_text(row)`` per BER) and the report's path; exit 1 when any run
+    raised or gave a NaN estimate (the receiver must give neither)."""
+    import sys
+    from cosim.validate import dumps
+    if a.json:
+        print(dumps({"target": fc.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
+                     "report": f"{a.out}/{report_stem(fc)}.md"}, default=str))
+    else:
+        print(f"{len(s['rows'])} bit error rates x {fc.trials} trials in {s['elapsed_s']:.0f} s")
+        for r in s["rows"]:
+            print(f"  BER {r['ber']:g}: {row_text(r)}")
+        print(f"report: {a.out}/{report_stem(fc)}.md")
+    q = fault_model(fc.receiver).quantity
+    exc = sum(r["exceptions"] for r in s["rows"])
+    nan = sum(r["nan_bearings"] for r in s["rows"])
+    if exc or nan:
+        first = next((r["exception"] for r in s.get("records", []) if r.get("exception")), "")
+        print(f"error: the receiver must give no exception and no NaN {q}; got {exc} "
+              f"exception(s), {nan} NaN {q}(s)" + (f" (first: {first})" if first else ""),
+              file=sys.stderr)
+        return 1
+    return 0
+
+
 def parse_ber(spec: str) -> tuple[float, ...]:
     """``"1e-6:1e-3"`` -> decades 1e-6, 1e-5, 1e-4, 1e-3; or a comma list."""
     spec = spec.strip()

@@ -319,7 +319,7 @@ FAULT_OPTIONS = (
 
 
 def cmd_faults(a) -> int:
-    from ..studies.faults import parse_ber, report_stem, run_faults
+    from ..studies.faults import finish, parse_ber, parse_bits, run_faults
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
     if a.target != "register":
@@ -328,38 +328,19 @@ def cmd_faults(a) -> int:
         if given:
             raise ValueError(f"{', '.join(given)} only affect(s) --target register, not "
                              f"--target {a.target}")
-    bits = None
-    if a.bits:
-        try:
-            bits = tuple(int(b) for b in a.bits.split(","))
-        except ValueError:
-            raise ValueError(f"--bits takes a comma list of bit positions, not {a.bits!r}") from None
+    bits = parse_bits(a.bits)
     check_out_dir(a.out, "--out")
     ber = {} if a.ber is None else {"ber": parse_ber(a.ber)}
     fc = FaultConfig(bits=bits, **ber,
                      **config_kwargs(a, FAULT_OPTIONS, FaultConfig))
     s = run_faults(fc, a.out, progress=not a.json)
-    if a.json:
-        print(dumps({"target": a.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
-                     "report": f"{a.out}/{report_stem(fc)}.md"}, default=str))
-    else:
-        print(f"{len(s['rows'])} bit error rates x {a.trials} trials in {s['elapsed_s']:.0f} s")
-        for r in s["rows"]:
-            rm = "-" if r["rmse_deg"] is None else f"{r['rmse_deg']:.3f}"
-            mx = "-" if r["max_abs_error_deg"] is None else f"{r['max_abs_error_deg']:.3f}"
-            print(f"  BER {r['ber']:g}: {r['flips']} flips, RMSE {rm} deg, worst {mx} deg, "
-                  f"NaN {r['nan_bearings']}, exceptions {r['exceptions']}, "
-                  f"re-inits {r['reinit']}")
-        print(f"report: {a.out}/{report_stem(fc)}.md")
-    exc = sum(r["exceptions"] for r in s["rows"])
-    nan = sum(r["nan_bearings"] for r in s["rows"])
-    if exc or nan:
-        first = next((r["exception"] for r in s.get("records", []) if r.get("exception")), "")
-        print(f"error: the receiver must give no exception and no NaN bearing; got {exc} "
-              f"exception(s), {nan} NaN bearing(s)" + (f" (first: {first})" if first else ""),
-              file=sys.stderr)
-        return 1
-    return 0
+
+    def row(r):
+        rm = "-" if r["rmse_deg"] is None else f"{r['rmse_deg']:.3f}"
+        mx = "-" if r["max_abs_error_deg"] is None else f"{r['max_abs_error_deg']:.3f}"
+        return (f"{r['flips']} flips, RMSE {rm} deg, worst {mx} deg, NaN {r['nan_bearings']}, "
+                f"exceptions {r['exceptions']}, re-inits {r['reinit']}")
+    return finish(a, fc, s, row)
 
 
 # -- the entry -----------------------------------------------------------------------------

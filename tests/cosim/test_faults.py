@@ -167,3 +167,22 @@ def test_register_upsets_in_the_compiled_rtl_equal_the_model(tmp_path):
     assert rm["flips"] == rv["flips"] > 0
     for k in ("rmse_deg", "max_abs_error_deg", "n_bearings", "events"):
         assert rm[k] == rv[k], k
+
+
+def test_report_words_come_from_the_receiver(tmp_path):
+    """The generic report names what the receiver measures: TACAN's bearing, the monopulse
+    azimuth tracking estimate (it said "TACAN bearing" and "NaN bearings" for both)."""
+    from cosim.studies.faults import FaultConfig, _write
+    from cosim.bench import machine_info
+    row = {"ber": 0.0, "trials": 1, "exceptions": 0, "nan_bearings": 0, "flips": 0,
+           "rmse_deg": 0.05, "max_abs_error_deg": 0.1, "disturbed_fraction": 0.0,
+           "longest_disturbance_s": 0.0, "flagged_fraction": None, "misleading_fraction": None,
+           "valid_rmse_deg": None, "valid_max_abs_error_deg": None, "reinit": 0, "gated": 0,
+           "p_neg": 0, "saturations": 0, "rx": {}}
+    s = {"machine": machine_info(), "elapsed_s": 1.0, "rows": [row]}
+    for rx, want, not_want in (("monopulse", "NaN azimuth tracking estimates", "bearing"),
+                               ("tacan", "NaN bearings", "azimuth")):
+        fc = FaultConfig(receiver=rx, target="fifo", duration_s=0.3, memory_s=0.05, snr_db=10)
+        _write(fc, s, tmp_path / rx)
+        md = (tmp_path / rx / "faults_fifo.md").read_text()
+        assert want in md and not_want not in md.lower(), md
