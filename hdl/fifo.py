@@ -85,6 +85,9 @@ class DspFifo(wiring.Component):
         hold = Signal(unsigned(p.in_width))
         hold_left = Signal(range(n + 1))
         pending = Signal(unsigned(p.width))
+        # pending != 0, kept in a register of its own (set wherever pending is): the 48-bit
+        # compare was on the critical path of the monopulse record FIFO.
+        pend_nz = Signal()
         ovf = Signal(unsigned(p.count_width))
         drop = Signal()
         marker_drop = Signal()      # the marker is written and the record dropped (n > 1)
@@ -93,11 +96,12 @@ class DspFifo(wiring.Component):
         if n == 1:
             fits = fifo.w_rdy
         else:
-            # Free memory words: SyncFIFOBuffered's level counts its output register too.
-            used = Signal(range(p.depth + 1))
-            m.d.comb += used.eq(fifo.level - fifo.r_rdy)
+            # Free memory words: SyncFIFOBuffered's level counts its output register too, so
+            # the memory holds level - r_rdy words; "level - r_rdy <= K" without the
+            # subtraction (level >= r_rdy always).
+            k = p.depth - 1 - n
             fits = Signal()
-            m.d.comb += fits.eq(used <= p.depth - 1 - n)
+            m.d.comb += fits.eq((fifo.level <= k) | (fifo.r_rdy & (fifo.level == k + 1)))
         start_tag = TAG_START if n > 1 else TAG_DATA
 
         def put(payload, tag):
@@ -113,17 +117,17 @@ class DspFifo(wiring.Component):
                 else:
                     put(hold[:W], Mux(hold_left == n, Const(TAG_START, 2), Const(TAG_DATA, 2)))
                     m.d[wd] += hold.eq(hold >> W)
-                with m.If(iv & (hold_left == 1) & (pending == 0) & fits):
+                with m.If(iv & (hold_left == 1) & ~pend_nz & fits):
                     m.d[wd] += [hold.eq(word), hold_left.eq(n)]
                 with m.Else():
                     m.d[wd] += hold_left.eq(hold_left - 1)
                     m.d.comb += drop.eq(iv)
             with m.Else():
                 m.d.comb += drop.eq(iv)
-        with m.Elif(pending != 0):
+        with m.Elif(pend_nz):
             with m.If(fifo.w_rdy):
                 put(pending, TAG_MARKER)
-                m.d[wd] += pending.eq(0)
+                m.d[wd] += [pending.eq(0), pend_nz.eq(0)]
                 with m.If(iv):
                     with m.If(fits):
                         m.d[wd] += [hold_left.eq(n), hold.eq(word)]
@@ -141,10 +145,10 @@ class DspFifo(wiring.Component):
 
         with m.If(drop):
             with m.If(marker_drop):
-                m.d[wd] += pending.eq(1)
+                m.d[wd] += [pending.eq(1), pend_nz.eq(1)]
             # Otherwise pending is not cleared in a cycle that drops.
             with m.Elif(pending != p.marker_max):
-                m.d[wd] += pending.eq(pending + 1)
+                m.d[wd] += [pending.eq(pending + 1), pend_nz.eq(1)]
             with m.If(ovf != p.count_max):
                 m.d[wd] += ovf.eq(ovf + 1)
 
