@@ -116,9 +116,8 @@ class DspFifo(wiring.Component):
                     put(hold[:W], TAG_DATA)
                 else:
                     put(hold[:W], Mux(hold_left == n, Const(TAG_START, 2), Const(TAG_DATA, 2)))
-                    m.d[wd] += hold.eq(hold >> W)
                 with m.If(iv & (hold_left == 1) & ~pend_nz & fits):
-                    m.d[wd] += [hold.eq(word), hold_left.eq(n)]
+                    m.d[wd] += hold_left.eq(n)
                 with m.Else():
                     m.d[wd] += hold_left.eq(hold_left - 1)
                     m.d.comb += drop.eq(iv)
@@ -130,7 +129,7 @@ class DspFifo(wiring.Component):
                 m.d[wd] += [pending.eq(0), pend_nz.eq(0)]
                 with m.If(iv):
                     with m.If(fits):
-                        m.d[wd] += [hold_left.eq(n), hold.eq(word)]
+                        m.d[wd] += hold_left.eq(n)
                     with m.Else():
                         m.d.comb += [drop.eq(1), marker_drop.eq(1)]
             with m.Else():
@@ -139,9 +138,25 @@ class DspFifo(wiring.Component):
             with m.If(fits):
                 put(word[:W], start_tag)
                 if n > 1:
-                    m.d[wd] += [hold_left.eq(n - 1), hold.eq(word >> W)]
+                    m.d[wd] += hold_left.eq(n - 1)
             with m.Else():
                 m.d.comb += drop.eq(1)
+
+        # The hold register's next value does not wait for the decision above (whether the
+        # record fits, which comes through the queue level's adder): its content is read only
+        # while hold_left != 0, and wherever the decision takes the input record the register
+        # has loaded it (from the queue's point of view it is the same register). Its select
+        # fans out to every bit of a record (384 for the monopulse record), which made the
+        # fit -> hold path the critical one (77-88 MHz).
+        with m.If(hold_left == 0):
+            # a record taken now: whole behind a marker, or its words after the first
+            m.d[wd] += hold.eq(Mux(pend_nz, word, word >> W) if n > 1 else word)
+        with m.Elif(fifo.w_rdy):
+            with m.If(hold_left == 1):
+                m.d[wd] += hold.eq(word)        # the next record, if it is taken
+            if n > 1:
+                with m.Else():
+                    m.d[wd] += hold.eq(hold >> W)
 
         with m.If(drop):
             with m.If(marker_drop):
