@@ -106,12 +106,16 @@ class DspFifo(wiring.Component):
             used = self._used = Signal(range(p.depth), name="used")
             w_do = fifo.w_en & fifo.w_rdy
             r_do = (used != 0) & (~fifo.r_rdy | fifo.r_en)
-            with m.If(w_do & ~r_do):
+            inc, dec = w_do & ~r_do, r_do & ~w_do
+            with m.If(inc):
                 m.d[wd] += used.eq(used + 1)
-            with m.Elif(r_do & ~w_do):
+            with m.Elif(dec):
                 m.d[wd] += used.eq(used - 1)
-            fits = Signal()
-            m.d.comb += fits.eq(used <= k)
+            # fits == (used <= k), registered with it: its next value from compares of the
+            # current count (early) chosen by the late inc/dec, so the drop decision starts at
+            # a register (the compare in front of it was the critical path, 95.1 MHz).
+            fits = self._fits = Signal(init=1, name="fits")
+            m.d[wd] += fits.eq(Mux(inc, used < k, Mux(dec, used <= k + 1, used <= k)))
         start_tag = TAG_START if n > 1 else TAG_DATA
 
         def put(payload, tag):

@@ -315,7 +315,8 @@ def test_run_link_refuses_records():
 
 def test_used_register_tracks_the_queue_memory_every_cycle():
     """The record FIFO's fit test counts the queue memory's words in a register of its own
-    (timing); it must equal SyncFIFOBuffered's ``level - r_rdy`` at every cycle, through
+    and keeps the fit flag registered (timing); the count must equal SyncFIFOBuffered's
+    ``level - r_rdy`` and the flag ``count <= depth - 1 - record_words`` at every cycle, through
     back-to-back records, drops, markers and a stalling reader."""
     from amaranth.sim import Simulator
     p = FifoParams(width=12, depth=9, record_words=3)
@@ -334,8 +335,9 @@ def test_used_register_tracks_the_queue_memory_every_cycle():
             await ctx.tick()
             q = dut._queue
             used, level, r_rdy = ctx.get(dut._used), ctx.get(q.level), ctx.get(q.r_rdy)
-            if used != level - r_rdy:
-                bad.append((c, used, level, r_rdy))
+            fits = ctx.get(dut._fits)
+            if used != level - r_rdy or fits != (used <= p.depth - 1 - p.record_words):
+                bad.append((c, used, level, r_rdy, fits))
             seen[0] = max(seen[0], used)
 
     seen = [0]
