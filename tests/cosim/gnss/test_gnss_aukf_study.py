@@ -1,5 +1,7 @@
 """Seed-002 acceptance A2/A4 on the fast path (cosim.gnss.study_aukf): >= 100 Monte Carlo
 runs slow-marked, plus a short unmarked form."""
+import functools
+
 import numpy as np
 import pytest
 
@@ -16,14 +18,12 @@ def test_q_hat_moves_towards_q_true_short():
     assert lo["diverged"] == 0 and hi["diverged"] == 0
 
 
-_POINTS = {}
-
-
-def _point(factor):
-    if factor not in _POINTS:
-        _POINTS[factor] = run_point(factor * Q0, 32.0, trackers=("aukf", "ukf"), n_runs=100,
-                                    duration_s=10.0, seed=1)
-    return _POINTS[factor]
+@functools.lru_cache(maxsize=None)
+def _point(factor, duration_s=10.0):
+    """100 runs at 32 dB-Hz, seed 1, aukf and ukf on the same truths; A4 is judged on 60 s
+    runs (docs/aukf.md, results/aukf_convergence.md), A2/A3 on 10 s and 60 s."""
+    return run_point(factor * Q0, 32.0, trackers=("aukf", "ukf"), n_runs=100,
+                     duration_s=duration_s, seed=1)
 
 
 @pytest.mark.slow
@@ -37,17 +37,6 @@ def test_a2_100_runs(factor):
     assert a["diverged"] == 0 and u["diverged"] == 0
 
 
-_LONG = {}
-
-
-def _long_point(factor):
-    """100 runs x 60 s (the run length A4 is judged at: docs/aukf.md, results/aukf_convergence.md)."""
-    if factor not in _LONG:
-        _LONG[factor] = run_point(factor * Q0, 32.0, trackers=("aukf", "ukf"), n_runs=100,
-                                  duration_s=60.0, seed=1)
-    return _LONG[factor]
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("factor", [0.1, 1.0, 10.0])
 def test_a4_100_runs(factor):
@@ -55,7 +44,7 @@ def test_a4_100_runs(factor):
     32 dB-Hz); A2/A3 hold on the same runs. Measured: 0.1 q0 0.500 (truth 0.5), q0 4.51,
     10 q0 47.6. After 10 s the 0.1 q0 median is still 1.55 (x3.1: the slave's information
     on ln q accrues at ~0.065 nats^2 per block against the prior's 1)."""
-    p = _long_point(factor)
+    p = _point(factor, 60.0)
     q = p["aukf"]["q_hat_median_final"]
     assert factor * Q0 / 2 <= q <= 2 * factor * Q0, q
     a, u = p["aukf"]["doppler_rmse_hz"], p["ukf"]["doppler_rmse_hz"]
