@@ -81,103 +81,30 @@ class DspFifo(wiring.Component):
         m.submodules.fifo = self._queue = fifo
 
         n, W = p.record_words, p.width
-        # Hold register: one record, shifted down a word per write; hold_left words to go.
-        hold = Signal(unsigned(p.in_width))
-        hold_left = Signal(range(n + 1))
         pending = Signal(unsigned(p.width))
         # pending != 0, kept in a register of its own (set wherever pending is): the 48-bit
         # compare was on the critical path of the monopulse record FIFO.
         pend_nz = Signal()
         ovf = Signal(unsigned(p.count_width))
+        pend_nx = Signal()          # its next value
+        m.d.comb += pend_nx.eq(pend_nz)
+        m.d[wd] += pend_nz.eq(pend_nx)
         drop = Signal()
-        marker_drop = Signal()      # the marker is written and the record dropped (n > 1)
-        iv = self.i.valid
-        word = self.i.payload
+        marker_drop = Signal()      # the marker is written and the input dropped
         if n == 1:
-            fits = fifo.w_rdy
+            self._words(m, fifo, wd, pending, pend_nz, pend_nx, drop)
         else:
-            # Free memory words: SyncFIFOBuffered's level counts its output register too, so
-            # the memory holds level - r_rdy words. That count is kept here in a register of
-            # its own (the same rule as the queue's inner level: + a write, - a move to the
-            # output register), so the fit test is a compare on a register: through the
-            # queue's level adder it was the critical path of the monopulse record FIFO
-            # (89 MHz). A test checks used == level - r_rdy every cycle.
-            k = p.depth - 1 - n
-            used = self._used = Signal(range(p.depth), name="used")
-            w_do = fifo.w_en & fifo.w_rdy
-            r_do = (used != 0) & (~fifo.r_rdy | fifo.r_en)
-            inc, dec = w_do & ~r_do, r_do & ~w_do
-            with m.If(inc):
-                m.d[wd] += used.eq(used + 1)
-            with m.Elif(dec):
-                m.d[wd] += used.eq(used - 1)
-            # fits == (used <= k), registered with it: its next value from compares of the
-            # current count (early) chosen by the late inc/dec, so the drop decision starts at
-            # a register (the compare in front of it was the critical path, 95.1 MHz).
-            fits = self._fits = Signal(init=1, name="fits")
-            m.d[wd] += fits.eq(Mux(inc, used < k, Mux(dec, used <= k + 1, used <= k)))
-        start_tag = TAG_START if n > 1 else TAG_DATA
-
-        def put(payload, tag):
-            w = Cat(payload, tag if isinstance(tag, Value) else Const(tag, 2))
-            if p.parity:
-                w = Cat(w, w.xor())
-            m.d.comb += [fifo.w_en.eq(1), fifo.w_data.eq(w)]
-
-        with m.If(hold_left != 0):
-            with m.If(fifo.w_rdy):
-                if n == 1:
-                    put(hold[:W], TAG_DATA)
-                else:
-                    put(hold[:W], Mux(hold_left == n, Const(TAG_START, 2), Const(TAG_DATA, 2)))
-                with m.If(iv & (hold_left == 1) & ~pend_nz & fits):
-                    m.d[wd] += hold_left.eq(n)
-                with m.Else():
-                    m.d[wd] += hold_left.eq(hold_left - 1)
-                    m.d.comb += drop.eq(iv)
-            with m.Else():
-                m.d.comb += drop.eq(iv)
-        with m.Elif(pend_nz):
-            with m.If(fifo.w_rdy):
-                put(pending, TAG_MARKER)
-                m.d[wd] += [pending.eq(0), pend_nz.eq(0)]
-                with m.If(iv):
-                    with m.If(fits):
-                        m.d[wd] += hold_left.eq(n)
-                    with m.Else():
-                        m.d.comb += [drop.eq(1), marker_drop.eq(1)]
-            with m.Else():
-                m.d.comb += drop.eq(iv)
-        with m.Elif(iv):
-            with m.If(fits):
-                put(word[:W], start_tag)
-                if n > 1:
-                    m.d[wd] += hold_left.eq(n - 1)
-            with m.Else():
-                m.d.comb += drop.eq(1)
-
-        # The hold register's next value does not wait for the decision above (whether the
-        # record fits, which comes through the queue level's adder): its content is read only
-        # while hold_left != 0, and wherever the decision takes the input record the register
-        # has loaded it (from the queue's point of view it is the same register). Its select
-        # fans out to every bit of a record (384 for the monopulse record), which made the
-        # fit -> hold path the critical one (77-88 MHz).
-        with m.If(hold_left == 0):
-            # a record taken now: whole behind a marker, or its words after the first
-            m.d[wd] += hold.eq(Mux(pend_nz, word, word >> W) if n > 1 else word)
-        with m.Elif(fifo.w_rdy):
-            with m.If(hold_left == 1):
-                m.d[wd] += hold.eq(word)        # the next record, if it is taken
-            if n > 1:
-                with m.Else():
-                    m.d[wd] += hold.eq(hold >> W)
+            self._records(m, fifo, wd, pending, pend_nz, pend_nx, drop, marker_drop)
 
         with m.If(drop):
-            with m.If(marker_drop):
-                m.d[wd] += [pending.eq(1), pend_nz.eq(1)]
-            # Otherwise pending is not cleared in a cycle that drops.
-            with m.Elif(pending != p.marker_max):
-                m.d[wd] += [pending.eq(pending + 1), pend_nz.eq(1)]
+            # pending is not cleared in a cycle that drops, except behind a marker (n > 1)
+            with m.If(pending != p.marker_max):
+                m.d[wd] += pending.eq(pending + 1)
+                m.d.comb += pend_nx.eq(1)
+            if n > 1:
+                with m.If(marker_drop):
+                    m.d[wd] += pending.eq(1)
+                    m.d.comb += pend_nx.eq(1)
             with m.If(ovf != p.count_max):
                 m.d[wd] += ovf.eq(ovf + 1)
 
@@ -198,3 +125,129 @@ class DspFifo(wiring.Component):
         else:
             m.d.comb += self.overflow_count.eq(ovf)
         return m
+
+    def _put(self, m, fifo, payload, tag):
+        w = Cat(payload, tag if isinstance(tag, Value) else Const(tag, 2))
+        if self.params.parity:
+            w = Cat(w, w.xor())
+        m.d.comb += [fifo.w_en.eq(1), fifo.w_data.eq(w)]
+
+    def _words(self, m, fifo, wd, pending, pend_nz, pend_nx, drop):
+        """Single words (``record_words == 1``): the hold register keeps a word that waits
+        behind a marker."""
+        hold = Signal(unsigned(self.params.width))
+        hold_v = Signal()
+        iv, word = self.i.valid, self.i.payload
+        with m.If(hold_v):
+            with m.If(fifo.w_rdy):
+                self._put(m, fifo, hold, TAG_DATA)
+                with m.If(iv & ~pend_nz & fifo.w_rdy):
+                    m.d[wd] += hold.eq(word)
+                with m.Else():
+                    m.d[wd] += hold_v.eq(0)
+                    m.d.comb += drop.eq(iv)
+            with m.Else():
+                m.d.comb += drop.eq(iv)
+        with m.Elif(pend_nz):
+            with m.If(fifo.w_rdy):
+                self._put(m, fifo, pending, TAG_MARKER)
+                m.d[wd] += pending.eq(0)
+                m.d.comb += pend_nx.eq(0)
+                with m.If(iv):
+                    m.d[wd] += [hold.eq(word), hold_v.eq(1)]
+            with m.Else():
+                m.d.comb += drop.eq(iv)
+        with m.Elif(iv):
+            with m.If(fifo.w_rdy):
+                self._put(m, fifo, word, TAG_DATA)
+            with m.Else():
+                m.d.comb += drop.eq(1)
+
+    def _records(self, m, fifo, wd, pending, pend_nz, pend_nx, drop, marker_drop):
+        """Records (``record_words = n > 1``): every decision starts at a register.
+
+        A record is taken only when the queue memory can take all of its words and, when a
+        word (the last of the previous record, or a marker) is written in the same cycle,
+        that one too; so once taken a record is written a word per cycle without a stall,
+        and ``w_rdy`` never enters the hold register's select, which fans out to every bit
+        of a record (384 for the monopulse record; it was the critical path at 89.7 MHz).
+        """
+        p = self.params
+        n, W = p.record_words, p.width
+        iv, word = self.i.valid, self.i.payload
+        cap = p.depth - 1               # memory words (SyncFIFOBuffered: + output register)
+        # Words in the queue memory (SyncFIFOBuffered's level counts its output register
+        # too: level - r_rdy), counted here with the queue's own rule (+ a write, - a move to
+        # the output register) so that the flags below are compares on a register, each
+        # registered with it: next value from compares of the current count, chosen by the
+        # late inc/dec. A test checks all of them against the queue every cycle.
+        used = self._used = Signal(range(p.depth), name="used")
+        w_do = fifo.w_en & fifo.w_rdy
+        r_do = (used != 0) & (~fifo.r_rdy | fifo.r_en)
+        inc, dec = w_do & ~r_do, r_do & ~w_do
+        with m.If(inc):
+            m.d[wd] += used.eq(used + 1)
+        with m.Elif(dec):
+            m.d[wd] += used.eq(used - 1)
+
+        def flag(name, limit):
+            """Registered ``used <= limit`` (0 <= limit < cap; constant compares written as
+            constants, which Verilator's lint flags)."""
+            after_inc = used < limit if limit > 0 else Const(0)
+            after_dec = used <= limit + 1 if limit + 1 < cap else Const(1)
+            f = Signal(init=1, name=name)
+            m.d[wd] += f.eq(Mux(inc, after_inc, Mux(dec, after_dec, used <= limit)))
+            return f
+        w_ok = self._w_ok = flag("w_ok", cap - 1)       # == fifo.w_rdy
+        fits = self._fits = flag("fits", cap - n)       # the record: n words
+        fits1 = self._fits1 = flag("fits1", cap - n - 1)    # a word now and the record
+
+        # Next values of hold_left and pend_nz, so that the hold register's selects can be
+        # registered from them.
+        hold_left = self._hold_left = Signal(range(n + 1), name="hold_left")
+        left_nx = Signal(range(n + 1))
+        m.d.comb += left_nx.eq(hold_left)
+        m.d[wd] += hold_left.eq(left_nx)
+        hold = Signal(unsigned(p.in_width))
+        with m.If(hold_left != 0):
+            # w_rdy holds here: the record was taken with room for all of it.
+            self._put(m, fifo, hold[:W], Mux(hold_left == n, Const(TAG_START, 2),
+                                             Const(TAG_DATA, 2)))
+            with m.If(iv & (hold_left == 1) & ~pend_nz & fits1):
+                m.d.comb += left_nx.eq(n)
+            with m.Else():
+                m.d.comb += [left_nx.eq(hold_left - 1), drop.eq(iv)]
+        with m.Elif(pend_nz):
+            with m.If(w_ok):
+                self._put(m, fifo, pending, TAG_MARKER)
+                m.d[wd] += pending.eq(0)
+                m.d.comb += pend_nx.eq(0)
+                with m.If(iv):
+                    with m.If(fits1):
+                        m.d.comb += left_nx.eq(n)
+                    with m.Else():
+                        m.d.comb += [drop.eq(1), marker_drop.eq(1)]
+            with m.Else():
+                m.d.comb += drop.eq(iv)
+        with m.Elif(iv):
+            with m.If(fits):
+                self._put(m, fifo, word[:W], TAG_START)
+                m.d.comb += left_nx.eq(n - 1)
+            with m.Else():
+                m.d.comb += drop.eq(1)
+
+        # The hold register: the input record whole (taken behind the last word of the
+        # previous one or behind a marker), its words after the first (taken with its first
+        # word written at once), or shifted down a word. It is read only while hold_left != 0
+        # and loads the input record whether or not it is taken. The two selects are
+        # registers (from the next hold_left / pend_nz), each driving the whole record.
+        whole = Signal(name="hold_whole")      # hold_left == 1 | (== 0 & pend_nz)
+        rest = Signal(init=1, name="hold_rest")        # hold_left == 0 & ~pend_nz
+        m.d[wd] += [whole.eq((left_nx == 1) | ((left_nx == 0) & pend_nx)),
+                    rest.eq((left_nx == 0) & ~pend_nx)]
+        with m.If(whole):
+            m.d[wd] += hold.eq(word)
+        with m.Elif(rest):
+            m.d[wd] += hold.eq(word >> W)
+        with m.Else():
+            m.d[wd] += hold.eq(hold >> W)

@@ -13,7 +13,7 @@ carrier words within +-300 Hz of the true Doppler, code words within +-20 Hz, sl
 samples, and PRN changes (another PRN, then back to 7), so every register and the double
 buffering are exercised on a signal that correlates (the prompt on the peak, E = L).
 ``stall=True``: the DSP ``ready`` follows :func:`cosim.equivalence.stall_pattern` and the
-FIFO holds one record (``record_words + 1`` words: records dropped, the counter compared).
+FIFO holds one record and a marker (``record_words + 2`` words: records dropped, the counter compared).
 """
 from __future__ import annotations
 
@@ -96,7 +96,7 @@ def check_gnss_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: in
     if params is None:
         params = EQUIV_PARAMS
         if stall:
-            params = replace(params, fifo_depth=params.fifo.record_words + 1)
+            params = replace(params, fifo_depth=params.fifo.record_words + 2)
     if not isinstance(params, GnssChannelParams) or params.channel_bits:
         raise ValueError(f"params must be a single-channel GnssChannelParams, not {params!r}")
     samples = int(samples)

@@ -7,8 +7,8 @@ The record: full-scale random ADC codes on the 4 channels and random replica bit
 seeded register writes (channel coefficients, steering u0/v0) spread over it; the reduced
 block (:data:`EQUIV_PARAMS`: 12 snapshots of 4 samples) gives one measurement every 48
 samples so a 20,000-sample record holds about 400. ``stall=True``: the DSP ``ready`` follows
-:func:`cosim.equivalence.stall_pattern` and the FIFO holds one record (``record_words + 1`` words: records dropped, the
-overflow counter compared too)."""
+:func:`cosim.equivalence.stall_pattern` and the FIFO holds one record and a marker
+(``record_words + 2`` words: records dropped, the overflow counter compared too)."""
 from __future__ import annotations
 
 import time
@@ -61,7 +61,8 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
     if unknown:
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
     if params is None:
-        params = replace(EQUIV_PARAMS, fifo_depth=EQUIV_PARAMS.record_words + 1) if stall else EQUIV_PARAMS
+        params = (replace(EQUIV_PARAMS, fifo_depth=EQUIV_PARAMS.record_words + 2) if stall
+                  else EQUIV_PARAMS)
     words, writes = _stimulus(params, int(samples), seed)
     n_cycles = int(samples) + params.latency + 400
     ready = stall_pattern(n_cycles, seed) if stall else np.ones(n_cycles, bool)

@@ -27,18 +27,21 @@ policy (the HDL and :func:`fifo_model` implement exactly this, per write-domain 
 
 1. the *hold* register (one record, written a word per cycle) has priority: if ``w_rdy``
    its next word is written; an input record that arrives in the same cycle takes its
-   place if this write empties it, no drops are pending and it fits, else it is dropped;
+   place if this write empties it, no drops are pending and it *fits behind* the word
+   written now, else it is dropped;
 2. else, if drops are pending and ``w_rdy``: the marker is written (pending cleared) and an
-   input record arriving in the same cycle goes to the hold register if it fits (else it is
-   dropped and pending becomes 1);
+   input record arriving in the same cycle goes to the hold register if it fits behind the
+   marker (else it is dropped and pending becomes 1);
 3. else an input record is taken if it fits: its first word is written, the others go to
    the hold register;
 4. otherwise an input record is dropped (pending += 1, overflow_count += 1, both
    saturating).
 
-With ``n == 1``, "fits" is ``w_rdy`` and the hold register holds one word. With ``n > 1`` a
-record is only taken when the memory holds all of it (rule 3) or all but the word that may
-wait in the hold register (rules 1-2), so once taken it is always written whole.
+With ``n == 1``, "fits" and "fits behind" are ``w_rdy`` and the hold register holds one word
+(it may wait for room). With ``n > 1`` a record fits when ``free >= n`` and fits behind a
+word written in the same cycle when ``free >= n + 1``, so once taken it is written whole, a
+word per cycle, without waiting (the HDL's hold register then never looks at ``w_rdy``: a
+timing decision). The queue must therefore hold a record and a marker: ``depth >= n + 2``.
 
 The queue is ``amaranth.lib.fifo.SyncFIFOBuffered`` (or ``AsyncFIFOBuffered``); the model
 reproduces SyncFIFOBuffered cycle by cycle (``w_rdy``, the output register, ``r_en``). Which
@@ -96,7 +99,7 @@ class FifoParams:
         Words per record (1..64; default 1, single words). With ``n > 1`` the input port is
         ``n * width`` bits wide, a record leaves as ``n`` words (the first tagged
         :data:`TAG_START`), is dropped whole, and markers count records. Synchronous FIFO
-        only, ``depth > n``.
+        only, ``depth >= n + 2`` (a record and a marker).
     """
 
     width: int = 51
@@ -128,9 +131,10 @@ class FifoParams:
             if self.asynchronous:
                 raise ValueError("FIFO records (record_words > 1) need the synchronous FIFO "
                                  "(asynchronous=False)")
-            if self.depth <= self.record_words:
-                raise ValueError(f"FIFO depth must exceed record_words ({self.record_words}) "
-                                 f"so that a record fits, not {self.depth}")
+            if self.depth < self.record_words + 2:
+                raise ValueError(f"FIFO depth must be at least record_words + 2 "
+                                 f"({self.record_words + 2}: a record and a gap marker), "
+                                 f"not {self.depth}")
 
     @property
     def in_width(self) -> int:
@@ -455,6 +459,8 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
             free = 1 - out_full
         w_rdy = free > 0
         fits = free >= nrec
+        # behind a word written this cycle (rules 1-2); records never wait in the hold
+        fits1 = free >= nrec + 1 if nrec > 1 else w_rdy
         write = False
         wv = 0
         drop = False
@@ -465,7 +471,7 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
                 wv = hold[j] | tagw[j]
                 left -= 1
                 if iv:
-                    if left == 0 and pending == 0 and fits:
+                    if left == 0 and pending == 0 and fits1:
                         for j in range(nrec):
                             hold[j] = words[k, j] & wmask
                         left = nrec
@@ -479,7 +485,7 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
                 wv = marker_tag | pending
                 pending = 0
                 if iv:
-                    if fits:
+                    if fits1:
                         for j in range(nrec):
                             hold[j] = words[k, j] & wmask
                         left = nrec

@@ -93,9 +93,9 @@ def test_pack_records_roundtrip():
 
 @pytest.mark.parametrize("p, seed", [
     (FifoParams(width=24, depth=8, record_words=3), 401),
-    (FifoParams(width=24, depth=4, record_words=3, parity=True), 402),
+    (FifoParams(width=24, depth=5, record_words=3, parity=True), 402),
     (FifoParams(width=10, depth=16, record_words=6), 403),
-    (FifoParams(width=5, depth=3, record_words=2, count_width=3), 404),
+    (FifoParams(width=5, depth=4, record_words=2, count_width=3), 404),
 ])
 def test_sim_matches_model_random(p, seed):
     """Bursty records and bursty reads; every record either whole in the output or dropped."""
@@ -277,8 +277,8 @@ def test_schedule_equals_mask():
 
 @pytest.mark.parametrize("kw, msg", [
     (dict(record_words=0), r"FIFO record_words must be an integer in \[1, 64\], not 0"),
-    (dict(record_words=3, depth=3), "FIFO depth must exceed record_words \\(3\\) so that a "
-                                    "record fits, not 3"),
+    (dict(record_words=3, depth=4), r"FIFO depth must be at least record_words \+ 2 "
+                                    r"\(5: a record and a gap marker\), not 4"),
     (dict(record_words=2, asynchronous=True),
      r"FIFO records \(record_words > 1\) need the synchronous FIFO"),
 ])
@@ -315,8 +315,9 @@ def test_run_link_refuses_records():
 
 def test_used_register_tracks_the_queue_memory_every_cycle():
     """The record FIFO's fit test counts the queue memory's words in a register of its own
-    and keeps the fit flag registered (timing); the count must equal SyncFIFOBuffered's
-    ``level - r_rdy`` and the flag ``count <= depth - 1 - record_words`` at every cycle, through
+    and keeps its flags registered (timing); the count must equal SyncFIFOBuffered's
+    ``level - r_rdy``, ``w_ok`` its ``w_rdy``, and the fit flags ``count <= depth - 1 - n``
+    and ``<= depth - 2 - n`` at every cycle, and no taken record ever waits for room, through
     back-to-back records, drops, markers and a stalling reader."""
     from amaranth.sim import Simulator
     p = FifoParams(width=12, depth=9, record_words=3)
@@ -335,15 +336,21 @@ def test_used_register_tracks_the_queue_memory_every_cycle():
             await ctx.tick()
             q = dut._queue
             used, level, r_rdy = ctx.get(dut._used), ctx.get(q.level), ctx.get(q.r_rdy)
-            fits = ctx.get(dut._fits)
-            if used != level - r_rdy or fits != (used <= p.depth - 1 - p.record_words):
-                bad.append((c, used, level, r_rdy, fits))
+            flags = (ctx.get(dut._w_ok), ctx.get(dut._fits), ctx.get(dut._fits1))
+            want = (ctx.get(q.w_rdy), used <= p.depth - 1 - p.record_words,
+                    used <= p.depth - 2 - p.record_words)
+            if used != level - r_rdy or flags != want:
+                bad.append((c, used, level, r_rdy, flags, want))
+            # a taken record is written a word per cycle: never a word waiting for room
+            if ctx.get(dut._hold_left) != 0 and not ctx.get(q.w_rdy):
+                stalled.append(c)
             seen[0] = max(seen[0], used)
 
-    seen = [0]
+    seen, stalled = [0], []
     sim = Simulator(dut)
     sim.add_clock(1e-6)
     sim.add_testbench(bench)
     sim.run()
     assert not bad, bad[:5]
+    assert not stalled, stalled[:5]
     assert seen[0] >= p.depth - 1 - p.record_words      # the queue did fill up to the fit limit
