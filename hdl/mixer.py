@@ -4,7 +4,8 @@
 Pipeline (one register per line, so each multiplier has registered inputs and output and
 maps onto an ECP5 MULT18X18D):
 
-1. inputs (the real mixer negates ``sin`` here, so ``q`` is a plain product);
+1. inputs (the real mixer negates ``sin`` here, so ``q`` is a plain product), then
+   ``input_stages - 1`` more copies of them (timing: the last can sit beside the DSP block);
 2. products;
 3. complex input only: sum / difference of the products;
 4. rounding adder, arithmetic right shift by ``drop_bits``;
@@ -73,6 +74,7 @@ class Mixer(wiring.Component):
             xi, xq = Signal(signed(a)), Signal(signed(a))
             c, s = Signal(signed(b)), Signal(signed(b))
             m.d.sync += [xi.eq(pay.x.i), xq.eq(pay.x.q), c.eq(pay.lo.cos), s.eq(pay.lo.sin)]
+            xi, xq, c, s = self._more_input_stages(m, stage, xi, xq, c, s)
             stage()
             pw = p.product_width
             pic, pqs, pqc, pis = (Signal(signed(pw), name=n) for n in ("p_ic", "p_qs", "p_qc", "p_is"))
@@ -84,6 +86,7 @@ class Mixer(wiring.Component):
             x, c = Signal(signed(a)), Signal(signed(b))
             sn = Signal(signed(b + 1))  # -sin: -(-2**(b-1)) needs b+1 bits
             m.d.sync += [x.eq(pay.x), c.eq(pay.lo.cos), sn.eq(-pay.lo.sin)]
+            x, c, sn = self._more_input_stages(m, stage, x, c, sn)
             stage()
             yi, yq = Signal(signed(p.product_width)), Signal(signed(p.product_width))
             m.d.sync += [yi.eq(x * c), yq.eq(x * sn)]
@@ -106,3 +109,12 @@ class Mixer(wiring.Component):
             self.o.payload.q.eq(fit(rq)),
         ]
         return m
+
+    def _more_input_stages(self, m, stage, *regs):
+        """``input_stages - 1`` more register copies of the input registers ``regs``."""
+        for k in range(1, self.params.input_stages):
+            stage()
+            nxt = tuple(Signal.like(r, name=f"{r.name}_p{k}") for r in regs)
+            m.d.sync += [n.eq(r) for n, r in zip(nxt, regs)]
+            regs = nxt
+        return regs

@@ -53,6 +53,11 @@ class MixerParams:
         What an out-of-range result becomes.
     headroom_bits : int
         Extra right shift (0..8): output gain ``2**-headroom_bits`` of full scale.
+    input_stages : int
+        Register stages between the input port and the multipliers (1..4; HDL Coder's
+        "input pipeline"). More than one lets place-and-route put the last one beside the
+        DSP block when the inputs come from far away (a shared NCO feeding several
+        channels); each adds a cycle of latency and nothing else.
     """
 
     in_width: int = 12
@@ -62,12 +67,14 @@ class MixerParams:
     rounding: str = "half_up"
     overflow: str = "saturate"
     headroom_bits: int = 0
+    input_stages: int = 1
 
     def __post_init__(self):
         check_width("mixer in_width", self.in_width, minimum=2, maximum=32)
         check_width("mixer lo_width", self.lo_width, minimum=2, maximum=32)
         check_width("mixer out_width", self.out_width, minimum=2, maximum=48)
         check_width("mixer headroom_bits", self.headroom_bits, minimum=0, maximum=8)
+        check_width("mixer input_stages", self.input_stages, minimum=1, maximum=4)
         if not isinstance(self.complex_input, bool):
             raise ValueError(f"mixer complex_input must be a bool, not {self.complex_input!r}")
         if self.rounding not in MIXER_ROUNDINGS:
@@ -104,9 +111,9 @@ class MixerParams:
 
     @property
     def latency(self) -> int:
-        """Cycles from an accepted input to its ``o.valid``: input, product, (complex:
-        sum,) rounding and output registers."""
-        return 5 if self.complex_input else 4
+        """Cycles from an accepted input to its ``o.valid``: input (``input_stages``),
+        product, (complex: sum,) rounding and output registers."""
+        return (5 if self.complex_input else 4) + self.input_stages - 1
 
 
 def check_int_range(name: str, v, width: int) -> np.ndarray:

@@ -89,6 +89,8 @@ def test_complex_random(rounding):
     MixerParams(headroom_bits=1, rounding="zero", overflow="wrap"),
     MixerParams(complex_input=True, in_width=5, lo_width=7, out_width=6, rounding="half_even",
                 overflow="wrap"),
+    MixerParams(input_stages=2),                                      # latency 5
+    MixerParams(complex_input=True, input_stages=4, rounding="floor"),  # latency 8
 ])
 def test_widths_and_headroom(p):
     _check(p, 1500, seed=300)
@@ -169,6 +171,7 @@ def test_scaling_properties():
     (dict(rounding="nearest"), r"mixer rounding must be one of .*'half_even'.*, not 'nearest'"),
     (dict(overflow="clip"), r"mixer overflow must be one of \('wrap', 'saturate'\), not 'clip'"),
     (dict(complex_input="yes"), r"mixer complex_input must be a bool, not 'yes'"),
+    (dict(input_stages=0), r"mixer input_stages must be an integer in \[1, 4\], not 0"),
 ])
 def test_bad_params(kwargs, match):
     with pytest.raises(ValueError, match=match):
