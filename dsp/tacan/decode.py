@@ -57,6 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dsp.jit import njit_cached
+from .acquire import AcquireConfig, acquire_references
 from .standard import F15, F135, burst_offsets, pair_spacing_s
 
 REF_MAIN, REF_AUX = 1, 2
@@ -74,6 +75,10 @@ class DecoderConfig:
     min_slot_pulses: int = 30
     min_pairs_x: int = 3
     min_grid_refs: int = 8
+    #: Integrate evidence across bursts (:mod:`dsp.tacan.acquire`) when fewer than
+    #: ``acquire_below`` of the grid's positions (9 per rotation) have a burst decoded alone.
+    acquire: bool = True
+    acquire_below: float = 0.5
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -84,6 +89,10 @@ class DecoderConfig:
             raise ValueError(f"decoder min_fraction must be in (0, 1], not {self.min_fraction}")
         if int(self.align) < 1:
             raise ValueError(f"decoder align must be >= 1, not {self.align}")
+        if not isinstance(self.acquire, bool):
+            raise ValueError(f"decoder acquire must be True or False, not {self.acquire!r}")
+        if not 0 <= self.acquire_below <= 1:
+            raise ValueError(f"decoder acquire_below must be in [0, 1], not {self.acquire_below}")
         if not 0 < self.slot_margin <= 2:
             raise ValueError(f"decoder slot_margin must be in (0, 2], not {self.slot_margin}")
         if int(self.min_rotations) < 1:
@@ -111,6 +120,7 @@ class Decoded:
     n_main_off_slot: int = 0   # decoded main bursts outside the declared slot (dropped)
     main_slot_s: float | None = None   # when the main slot was declared (None: never/not needed)
     rotation_hz: float | None = None   # beacon rotation rate of the block (estimate_rotation)
+    acquired_s: float | None = None    # grid confirmed by dsp.tacan.acquire (None: not used)
 
 
 def _match(t: np.ndarray, targets: np.ndarray, tol: float):
@@ -248,9 +258,33 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     pair = pair_spacing_s(cfg.mode)
     _, fwd = _match(t, t + pair, cfg.tol_s)
     _, back = _match(t, t - pair, cfg.tol_s)
+    n_rot = (t[-1] - t[0]) * (f_est or F15)
+    if cfg.acquire and ref_t.size < cfg.acquire_below * 9 * n_rot:
+        # Too few bursts decoded alone (near the noise floor): integrate across bursts
+        # (dsp/tacan/acquire.py). Used only when it confirms a grid and a main slot.
+        acq = acquire_references(t, cfg.mode, AcquireConfig(tol_s=cfg.tol_s))
+        if acq is not None:
+            sc = np.zeros(acq.ref_t.size, np.int64)
+            mask = _burst_peaks(t, acq.ref_t, acq.kinds, main_off, aux_off, cfg.tol_s)
+            return Decoded(acq.ref_t, acq.kinds, sc, acq.done, mask | fwd | back, n_off,
+                           n_wrong_mode=n_wrong_mode,
+                           n_inferred_main=int(np.count_nonzero(acq.kinds == REF_MAIN)),
+                           main_slot_s=acq.main_slot_s, acquired_s=acq.grid_s,
+                           rotation_hz=quantize_rotation(1.0 / (9.0 * acq.period_s)))
     mask = um | ua | fwd | back
     return Decoded(ref_t, kinds, scores, done, mask, n_off, n_wrong_mode=n_wrong_mode,
                    rotation_hz=f_est, **info)
+
+
+def _burst_peaks(t, ref_t, kinds, main_off, aux_off, tol):
+    """Peaks within ``tol`` of a pulse of the references' templates."""
+    used = np.zeros(t.size, bool)
+    for kind, off in ((REF_MAIN, main_off), (REF_AUX, aux_off)):
+        rt = ref_t[kinds == kind]
+        if rt.size:
+            idx, ok = _match(t, (rt[:, None] + off[None, :]).ravel(), tol)
+            used[idx[ok]] = True
+    return used
 
 
 def _mode_check(t, tm, sm, cfg: DecoderConfig):
