@@ -265,8 +265,12 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
         acq = acquire_references(t, cfg.mode, AcquireConfig(tol_s=cfg.tol_s))
         if acq is not None:
             sc = np.zeros(acq.ref_t.size, np.int64)
-            mask = _burst_peaks(t, acq.ref_t, acq.kinds, main_off, aux_off, cfg.tol_s)
-            return Decoded(acq.ref_t, acq.kinds, sc, acq.done, mask | fwd | back, n_off,
+            # Measurements: the pulses of pairs outside the bursts. Near the noise floor a
+            # burst's pulses are not: its template positions catch noise peaks too (their
+            # amplitudes sit at the threshold), at one 135 Hz phase (measured at 0 dB,
+            # bearing 90 deg, 8 records: RMSE 2.74 -> 0.87 deg without them).
+            mask = (fwd | back) & ~_in_bursts(t, acq.ref_t, acq.kinds, main_off, aux_off)
+            return Decoded(acq.ref_t, acq.kinds, sc, acq.done, mask, n_off,
                            n_wrong_mode=n_wrong_mode,
                            n_inferred_main=int(np.count_nonzero(acq.kinds == REF_MAIN)),
                            main_slot_s=acq.main_slot_s, acquired_s=acq.grid_s,
@@ -276,15 +280,13 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
                    rotation_hz=f_est, **info)
 
 
-def _burst_peaks(t, ref_t, kinds, main_off, aux_off, tol):
-    """Peaks within ``tol`` of a pulse of the references' templates."""
-    used = np.zeros(t.size, bool)
-    for kind, off in ((REF_MAIN, main_off), (REF_AUX, aux_off)):
-        rt = ref_t[kinds == kind]
-        if rt.size:
-            idx, ok = _match(t, (rt[:, None] + off[None, :]).ravel(), tol)
-            used[idx[ok]] = True
-    return used
+def _in_bursts(t, ref_t, kinds, main_off, aux_off):
+    """Peaks within the span of a reference burst (first to last pulse)."""
+    o = np.argsort(ref_t)
+    starts = ref_t[o]
+    ends = (ref_t + np.where(kinds == REF_MAIN, main_off[-1], aux_off[-1]))[o]
+    j = np.searchsorted(starts, t, side="right") - 1
+    return (j >= 0) & (t <= ends[np.maximum(j, 0)])
 
 
 def _mode_check(t, tm, sm, cfg: DecoderConfig):
