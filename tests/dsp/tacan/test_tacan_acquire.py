@@ -97,3 +97,21 @@ def test_slot_llr_controls_the_declaration():
     slow = acquire_references(tt, "X", AcquireConfig(slot_llr=40.0))
     assert fast is not None and slow is not None
     assert slow.main_slot_s > fast.main_slot_s
+
+
+def test_incomplete_bursts_are_not_measurements():
+    # Bursts ~40 % complete (near the noise floor): their pulses leave the measurements,
+    # the pairs outside them stay; complete bursts (high SNR) keep theirs.
+    from dsp.tacan.decode import _in_bursts
+    from dsp.tacan.standard import burst_offsets
+    tt, _, _ = _weak("X", 13, 0.45, 200.0)
+    d = decode(tt, "X", DecoderConfig(acquire=False))
+    inb = _in_bursts(tt, d.ref_times_s, d.ref_kinds, burst_offsets("X", "main"),
+                     burst_offsets("X", "aux"))
+    assert d.ref_times_s.size > 100 and inb.sum() > 1000
+    assert not np.any(d.measurement_mask & inb) and d.measurement_mask.sum() > 1000
+    keep = decode(tt, "X", DecoderConfig(acquire=False, burst_complete_min=0.0))
+    assert np.count_nonzero(keep.measurement_mask & inb) > 500
+    t, _, _, _ = pulse_schedule(TacanSignalConfig(duration_s=1.0, seed=3))
+    full = decode(t, "X")
+    assert full.measurement_mask.all()
