@@ -45,6 +45,21 @@ indices counted gap by gap, so a beacon 5 % off still fits) and rounded to
 grid of :func:`_snap_to_grid` and of the rotation-slot detector; the receiver tracks the rate
 causally (:func:`rotation_track`) for its Kalman model and phase advances.
 
+Near the noise floor (0 dB, references in the envelope trough) even the auxiliary bursts
+rarely pass ``min_fraction`` alone, so no grid forms. When fewer than ``acquire_below`` of
+the grid positions have a burst decoded alone, the references come from
+:mod:`dsp.tacan.acquire` instead: a burst-code matched detector folded on the 135 Hz grid
+(evidence summed over dozens of bursts), confirmed against the noise-peak rate (no grid on
+noise or on a beacon of the other mode), tracked through missed bursts, with the main slot
+declared by a likelihood-ratio test (see there). Its references are known from the
+declaration on, so the bearing stays unreported until the reference timing is confirmed.
+
+Measurements near the noise floor: when the decoded bursts are on average
+``burst_complete_min`` complete or less, and always on the acquisition path, the pulses
+within the bursts' spans are not amplitude measurements (a burst decodes there because noise
+lifted its pulses over the threshold, or its template positions catch noise peaks: either
+way amplitudes biased at one 135 Hz phase); the pulse pairs elsewhere are.
+
 ``min_fraction`` = 0.5 lets the main burst be found when the references sit in the envelope
 trough at low SNR (bearing 90 deg: half the trough pulses fall under the detection
 threshold at 6 dB). It cannot create main bursts from random pairs: those are at least
