@@ -143,6 +143,7 @@ class Decoded:
     main_slot_s: float | None = None   # when the main slot was declared (None: never/not needed)
     rotation_hz: float | None = None   # beacon rotation rate of the block (estimate_rotation)
     acquired_s: float | None = None    # grid confirmed by dsp.tacan.acquire (None: not used)
+    near_floor: bool = False   # near the noise floor: acquisition used or bursts incomplete
 
 
 def _match(t: np.ndarray, targets: np.ndarray, tol: float):
@@ -296,8 +297,10 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
                            n_wrong_mode=n_wrong_mode,
                            n_inferred_main=int(np.count_nonzero(acq.kinds == REF_MAIN)),
                            main_slot_s=acq.main_slot_s, acquired_s=acq.grid_s,
-                           rotation_hz=quantize_rotation(1.0 / (9.0 * acq.period_s)))
+                           rotation_hz=quantize_rotation(1.0 / (9.0 * acq.period_s)),
+                           near_floor=True)
     mask = um | ua | fwd | back
+    near_floor = False
     if ref_t.size:
         n_tpl = np.where(kinds == REF_MAIN, main_off.size, aux_off.size)
         if np.mean(scores / n_tpl) < cfg.burst_complete_min:
@@ -306,8 +309,9 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
             # Hz phase (bearing 90 deg, 3 dB, 8 records: mean error -0.23 -> -0.13 deg,
             # RMSE 0.34 -> 0.25 deg without them). The pairs outside the bursts remain.
             mask = (fwd | back) & ~_in_bursts(t, ref_t, kinds, main_off, aux_off)
+            near_floor = True
     return Decoded(ref_t, kinds, scores, done, mask, n_off, n_wrong_mode=n_wrong_mode,
-                   rotation_hz=f_est, **info)
+                   rotation_hz=f_est, near_floor=near_floor, **info)
 
 
 def _in_bursts(t, ref_t, kinds, main_off, aux_off):

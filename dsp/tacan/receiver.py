@@ -13,7 +13,7 @@ import numpy as np
 
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
-                      reference_advances, wrap_deg)
+                      deg_to_bangle, reference_advances, track_sector, wrap_deg)
 from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .standard import burst_offsets
@@ -106,6 +106,12 @@ class ReceiverConfig:
     #: estimate's resolution is 1e-5). False: 15 Hz assumed.
     track_rotation: bool = True
     rotation_span_s: float = 0.05
+    #: Near the noise floor (``Decoded.near_floor``: references acquired across bursts, or
+    #: bursts decoded incomplete) the 40 deg sector is tracked from output to output and
+    #: changed only when the coarse bearing disagrees on average
+    #: (:func:`dsp.tacan.bearing.track_sector`); elsewhere, and with False, each output
+    #: takes the sector nearest its own coarse bearing.
+    sector_track: bool = True
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -116,6 +122,8 @@ class ReceiverConfig:
         if not 0 < float(self.flag_sector_deg) <= 20:
             raise ValueError(f"flag_sector_deg must be in (0, 20] (half a fine-phase sector), "
                              f"not {self.flag_sector_deg!r}")
+        if not isinstance(self.sector_track, bool):
+            raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
         if not isinstance(self.track_rotation, bool):
             raise ValueError(f"track_rotation must be True or False, not {self.track_rotation!r}")
         if not 0 < float(self.rotation_span_s) <= 10:
@@ -143,6 +151,7 @@ class ReceiverState:
     last_tick: int | None = None
     recent_refs_s: np.ndarray = field(default_factory=lambda: np.empty(0))  # rate tracker input
     rotation_hz: float | None = None   # the rate tracker's latest estimate (None: none yet)
+    sector: tuple | None = None        # the sector tracker's state (bearing.track_sector)
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
@@ -308,6 +317,17 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ok = ok & sb.valid.T
     bearing = np.array(out_b).T.reshape(B, M) if M else np.zeros((B, 0))
     coarse = np.array(out_c).T.reshape(B, M) if M else np.zeros((B, 0))
+    if cfg.sector_track and dec.near_floor and M:
+        if integer_bearing:                      # integers only: the core's binary angles
+            tb, state.sector = track_sector(sb.bearing.T, sb.coarse.T, state.sector)
+            bearing = bangle_to_deg(tb)
+        else:                                    # the same decisions, whole sectors in float
+            bb = deg_to_bangle(bearing)
+            tb, state.sector = track_sector(bb, deg_to_bangle(coarse), state.sector)
+            half = np.int64(1) << np.int64(ANGLE_BITS - 1)
+            w = ((tb - bb + half) & ((half << np.int64(1)) - 1)) - half
+            k = (9 * w + half) >> np.int64(ANGLE_BITS)
+            bearing = (bearing + 40.0 * k) % 360.0
     ok = ok & (np.abs(wrap_deg(coarse - bearing)) <= cfg.flag_sector_deg)
     n_flagged = np.count_nonzero(~ok, axis=1).astype(np.int64)
     return BearingTrack(

@@ -115,3 +115,42 @@ def test_incomplete_bursts_are_not_measurements():
     t, _, _, _ = pulse_schedule(TacanSignalConfig(duration_s=1.0, seed=3))
     full = decode(t, "X")
     assert full.measurement_mask.all()
+
+
+def _sector_case(seed, true=100.0, M=600, start_off=0.0):
+    from dsp.tacan.bearing import deg_to_bangle
+    rng = np.random.default_rng(seed)
+    # a coarse bearing wandering by ~20 deg (as at 0 dB), a fine one within 0.3 deg
+    coarse = true + start_off + 15 * np.sin(np.arange(M) / 60) + 0.3 * np.cumsum(rng.normal(0, 1.5, M))
+    base = (true + rng.normal(0, 0.3, M)) % 40
+    cand = base[:, None] + 40 * np.arange(9)[None, :]
+    b = cand[np.arange(M), np.argmin(np.abs((cand - coarse[:, None] + 180) % 360 - 180), axis=1)]
+    return deg_to_bangle(b)[None, :], deg_to_bangle(coarse)[None, :]
+
+
+def test_sector_tracker_removes_slips():
+    from dsp.tacan.bearing import bangle_to_deg, track_sector, wrap_deg
+    b, c = _sector_case(0)
+    assert np.count_nonzero(np.abs(wrap_deg(bangle_to_deg(b[0]) - 100.0)) > 20) >= 3
+    t, _ = track_sector(b, c)
+    assert np.abs(wrap_deg(bangle_to_deg(t[0]) - 100.0)).max() < 1.5
+    # streaming: two blocks give the same as one
+    t1, st = track_sector(b[:, :250], c[:, :250])
+    t2, _ = track_sector(b[:, 250:], c[:, 250:], st)
+    np.testing.assert_array_equal(np.concatenate([t1, t2], axis=1), t)
+
+
+def test_sector_tracker_follows_a_real_sector_change():
+    # The coarse bearing is 40 deg off for the first 100 outputs (a filter converging),
+    # then right: the tracker holds the first sector, then moves once the average
+    # disagreement passes half a sector.
+    from dsp.tacan.bearing import bangle_to_deg, deg_to_bangle, track_sector, wrap_deg
+    rng = np.random.default_rng(1)
+    M = 400
+    coarse = 100.0 + np.where(np.arange(M) < 100, 40.0, 0.0) + rng.normal(0, 3, M)
+    base = (100.0 + rng.normal(0, 0.3, M)) % 40
+    cand = base[:, None] + 40 * np.arange(9)[None, :]
+    b = cand[np.arange(M), np.argmin(np.abs((cand - coarse[:, None] + 180) % 360 - 180), axis=1)]
+    t, _ = track_sector(deg_to_bangle(b)[None, :], deg_to_bangle(coarse)[None, :])
+    err = np.abs(wrap_deg(bangle_to_deg(t[0]) - 100.0))
+    assert np.all(err[:100] > 38) and err[200:].max() < 1.5
