@@ -507,7 +507,7 @@ def bearing_from_state(x, x_fmt: FixedFormat, adv15, adv135, *, adv_bits: int = 
     return StateBearing(bearing, coarse, valid, m1, m2)
 
 
-def track_sector(bearing, coarse, state=None, *, angle_bits: int = ANGLE_BITS,
+def track_sector(bearing, coarse, state=None, *, ready=None, angle_bits: int = ANGLE_BITS,
                  shift: int = 6):
     """Sector tracking near the noise floor (issue 18), in integers (binary angles).
 
@@ -527,6 +527,10 @@ def track_sector(bearing, coarse, state=None, *, angle_bits: int = ANGLE_BITS,
         Combined and coarse bearings as binary angles (outputs in time order).
     state : (tracked, e, started) arrays (B,), optional
         Carried from an earlier block.
+    ready : bool array (B, M), optional
+        Where False (the filter warming up or re-initialised: its coarse bearing can be
+        anything), the output keeps its own sector and the tracker restarts at the next
+        ready output. Default: all ready.
 
     Returns
     -------
@@ -552,7 +556,9 @@ def track_sector(bearing, coarse, state=None, *, angle_bits: int = ANGLE_BITS,
         num = k * B
         return np.where(num >= 0, (num + 4) // 9, -((-num + 4) // 9))
 
+    rd = np.ones((nb, M), bool) if ready is None else np.asarray(ready, bool)
     for i in range(M):
+        st = st & rd[:, i]
         w = wrap(tr - bb[:, i])
         m = (9 * w + half) >> np.int64(b)             # nearest sector to the previous one
         t = np.where(st, (bb[:, i] + sectors(m)) & (B - 1), bb[:, i])
@@ -561,7 +567,7 @@ def track_sector(bearing, coarse, state=None, *, angle_bits: int = ANGLE_BITS,
         k = (9 * e + half) >> np.int64(b)
         t = np.where(k != 0, (t + sectors(k)) & (B - 1), t)
         e = e - sectors(k)
-        st = np.ones(nb, bool)
+        st = rd[:, i].copy()
         tr = t
         out[:, i] = t
     return out, (tr, e, st)

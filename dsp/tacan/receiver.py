@@ -226,6 +226,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     integer_bearing = cfg.dsp == "fixed" and ticks is not None
     out_x, out_dt = [], []
     out_ok = []
+    out_ready = []                   # the sector tracker's: warmed up, timing confirmed
     last_main = state.last_main_s
     # Reference bursts become known when their last pulse has arrived.
     ref_order = np.argsort(dec.ref_done_s, kind="stable")
@@ -279,6 +280,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_up, n_gated, noise = kf.health()
         out_ok.append((n_up >= kf.kalman.warmup) & (n_gated < cfg.flag_gated)
                       & (noise <= cfg.flag_noise_ratio) & bool(confirmed[r]))
+        out_ready.append((n_up >= kf.kalman.warmup) & bool(confirmed[r]))
         if integer_bearing:
             # the fixed-point DSP: integer state, integer tick differences (see below)
             t_hz = kf.tick_hz
@@ -318,12 +320,13 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     bearing = np.array(out_b).T.reshape(B, M) if M else np.zeros((B, 0))
     coarse = np.array(out_c).T.reshape(B, M) if M else np.zeros((B, 0))
     if cfg.sector_track and dec.near_floor and M:
+        ready = np.broadcast_to(np.stack(out_ready, axis=-1), (B, M))
         if integer_bearing:                      # integers only: the core's binary angles
-            tb, state.sector = track_sector(sb.bearing.T, sb.coarse.T, state.sector)
+            tb, state.sector = track_sector(sb.bearing.T, sb.coarse.T, state.sector, ready=ready)
             bearing = bangle_to_deg(tb)
         else:                                    # the same decisions, whole sectors in float
             bb = deg_to_bangle(bearing)
-            tb, state.sector = track_sector(bb, deg_to_bangle(coarse), state.sector)
+            tb, state.sector = track_sector(bb, deg_to_bangle(coarse), state.sector, ready=ready)
             half = np.int64(1) << np.int64(ANGLE_BITS - 1)
             w = ((tb - bb + half) & ((half << np.int64(1)) - 1)) - half
             k = (9 * w + half) >> np.int64(ANGLE_BITS)

@@ -121,7 +121,8 @@ def _sector_case(seed, true=100.0, M=600, start_off=0.0):
     from dsp.tacan.bearing import deg_to_bangle
     rng = np.random.default_rng(seed)
     # a coarse bearing wandering by ~20 deg (as at 0 dB), a fine one within 0.3 deg
-    coarse = true + start_off + 15 * np.sin(np.arange(M) / 60) + 0.3 * np.cumsum(rng.normal(0, 1.5, M))
+    coarse = (true + start_off + 15 * np.sin(np.arange(M) / 60)
+              + 0.3 * np.cumsum(rng.normal(0, 1.5, M)))
     base = (true + rng.normal(0, 0.3, M)) % 40
     cand = base[:, None] + 40 * np.arange(9)[None, :]
     b = cand[np.arange(M), np.argmin(np.abs((cand - coarse[:, None] + 180) % 360 - 180), axis=1)]
