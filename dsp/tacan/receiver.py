@@ -41,6 +41,7 @@ class BearingTrack:
     valid: np.ndarray | None = None  # (B, M) fit for use: not flagged (see ReceiverConfig)
     produced_s: np.ndarray | None = None  # (M,) when each bearing became available (the
     #: reference known and the pulses up to it filtered; >= times_s)
+    coarse_sigma_deg: np.ndarray | None = None  # (B, M) the filter's coarse-bearing std (deg)
 
     def first_valid_s(self) -> np.ndarray:
         """Per trial: when the first valid (not flagged) bearing became available (s from
@@ -112,6 +113,14 @@ class ReceiverConfig:
     #: (:func:`dsp.tacan.bearing.track_sector`); elsewhere, and with False, each output
     #: takes the sector nearest its own coarse bearing.
     sector_track: bool = True
+    #: Near the noise floor (``Decoded.near_floor``) a bearing is also flagged when the
+    #: filter's own standard deviation of the coarse bearing
+    #: (:meth:`EnvelopeKalman.coarse_sigma_deg`) exceeds this: the 40 deg sector is then
+    #: uncertain (a 2-sigma margin on the 20 deg that resolve it; the filter's value is
+    #: conservative: 7-9 deg at 0 dB, where the coarse error measured 4.9 deg rms; 15-19 deg
+    #: at -3 dB, where it measured 20-39 deg and, unflagged, a record gave 15 bearings 38
+    #: deg off as valid). None: off.
+    flag_coarse_sigma_deg: float | None = 10.0
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -122,6 +131,9 @@ class ReceiverConfig:
         if not 0 < float(self.flag_sector_deg) <= 20:
             raise ValueError(f"flag_sector_deg must be in (0, 20] (half a fine-phase sector), "
                              f"not {self.flag_sector_deg!r}")
+        if self.flag_coarse_sigma_deg is not None and not float(self.flag_coarse_sigma_deg) > 0:
+            raise ValueError(f"flag_coarse_sigma_deg must be > 0 or None, not "
+                             f"{self.flag_coarse_sigma_deg!r}")
         if not isinstance(self.sector_track, bool):
             raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
         if not isinstance(self.track_rotation, bool):
@@ -227,6 +239,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     out_x, out_dt = [], []
     out_ok = []
     out_ready = []                   # the sector tracker's: warmed up, timing confirmed
+    out_sig = []                     # the coarse bearing's standard deviation (deg)
     last_main = state.last_main_s
     # Reference bursts become known when their last pulse has arrived.
     ref_order = np.argsort(dec.ref_done_s, kind="stable")
@@ -278,6 +291,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         out_k.append(ref_k[r])
         out_done.append(max(float(ref_done[r]), float(last_t)))
         n_up, n_gated, noise = kf.health()
+        out_sig.append(kf.coarse_sigma_deg())
         out_ok.append((n_up >= kf.kalman.warmup) & (n_gated < cfg.flag_gated)
                       & (noise <= cfg.flag_noise_ratio) & bool(confirmed[r]))
         out_ready.append((n_up >= kf.kalman.warmup) & bool(confirmed[r]))
@@ -332,6 +346,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
             k = (9 * w + half) >> np.int64(ANGLE_BITS)
             bearing = (bearing + 40.0 * k) % 360.0
     ok = ok & (np.abs(wrap_deg(coarse - bearing)) <= cfg.flag_sector_deg)
+    sig = np.stack(out_sig, axis=1) if M else np.zeros((B, 0))
+    if dec.near_floor and cfg.flag_coarse_sigma_deg is not None:
+        ok = ok & (sig <= cfg.flag_coarse_sigma_deg)
     n_flagged = np.count_nonzero(~ok, axis=1).astype(np.int64)
     return BearingTrack(
         times_s=np.array(out_t), ref_kinds=np.array(out_k, np.int8),
@@ -341,7 +358,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
         events={**kf.events, "invalid_bearings": n_invalid, "flagged_bearings": n_flagged},
-        state=state, valid=ok, produced_s=np.array(out_done))
+        state=state, valid=ok, produced_s=np.array(out_done),
+        coarse_sigma_deg=sig)
 
 
 def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):

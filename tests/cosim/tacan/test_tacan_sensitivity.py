@@ -52,3 +52,24 @@ def test_zero_db_other_mode_beacon_gives_no_valid_bearing():
         pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig).frontend, sig.adc_bits)
         tr = process_peaks(pk.timestamps / sig.fs_hz, pk.amplitudes, ReceiverConfig(mode="X"))
         assert not np.any(tr.valid), snr
+
+
+@pytest.mark.slow
+def test_minus_3_db_gives_no_misleading_bearing():
+    """-3 dB, 270 deg, seed 100: the references are acquired, but the coarse bearing is
+    20-60 deg off; the filter's own coarse standard deviation (15-19 deg here) flags every
+    bearing. Without that flag 15 bearings 38 deg off were valid."""
+    from cosim.tacan.signal import generate
+    from dsp.tacan.bearing import wrap_deg
+    from dsp.tacan.frontend import run_golden_frontend
+    from dsp.tacan.receiver import ReceiverConfig, process_peaks
+    sig = TacanSignalConfig(bearing_deg=270.0, snr_db=-3.0, duration_s=3.0, seed=100)
+    s = generate(sig)
+    pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig).frontend, sig.adc_bits)
+    t, a = pk.timestamps / sig.fs_hz, pk.amplitudes
+    tr = process_peaks(t, a)
+    assert tr.times_s.size > 100            # references acquired
+    err = np.abs(wrap_deg(tr.bearing_deg[0] - 270.0))
+    assert not np.any(tr.valid[0] & (err > 20))
+    off = process_peaks(t, a, ReceiverConfig(flag_coarse_sigma_deg=None))
+    assert np.any(off.valid[0] & (np.abs(wrap_deg(off.bearing_deg[0] - 270.0)) > 20))

@@ -155,3 +155,11 @@ def test_sector_tracker_follows_a_real_sector_change():
     t, _ = track_sector(deg_to_bangle(b)[None, :], deg_to_bangle(coarse)[None, :])
     err = np.abs(wrap_deg(bangle_to_deg(t[0]) - 100.0))
     assert np.all(err[:100] > 38) and err[200:].max() < 1.5
+
+
+@pytest.mark.parametrize("kw, msg", [(dict(flag_coarse_sigma_deg=0.0), "flag_coarse_sigma_deg"),
+                                     (dict(sector_track=1), "sector_track must be")])
+def test_receiver_bad_config(kw, msg):
+    from dsp.tacan.receiver import ReceiverConfig
+    with pytest.raises(ValueError, match=msg):
+        ReceiverConfig(**kw)
