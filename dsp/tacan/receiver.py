@@ -333,8 +333,14 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ok = ok & sb.valid.T
     bearing = np.array(out_b).T.reshape(B, M) if M else np.zeros((B, 0))
     coarse = np.array(out_c).T.reshape(B, M) if M else np.zeros((B, 0))
+    sig = np.stack(out_sig, axis=1) if M else np.zeros((B, 0))
     if cfg.sector_track and dec.near_floor and M:
+        # the tracker starts once the filter has warmed up, the timing is confirmed and
+        # the coarse bearing is trusted (its sigma within flag_coarse_sigma_deg): started
+        # on a converging filter's coarse bearing it held a wrong sector for ~1 s
         ready = np.broadcast_to(np.stack(out_ready, axis=-1), (B, M))
+        if cfg.flag_coarse_sigma_deg is not None:
+            ready = ready & (sig <= cfg.flag_coarse_sigma_deg)
         if integer_bearing:                      # integers only: the core's binary angles
             tb, state.sector = track_sector(sb.bearing.T, sb.coarse.T, state.sector, ready=ready)
             bearing = bangle_to_deg(tb)
@@ -346,7 +352,6 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
             k = (9 * w + half) >> np.int64(ANGLE_BITS)
             bearing = (bearing + 40.0 * k) % 360.0
     ok = ok & (np.abs(wrap_deg(coarse - bearing)) <= cfg.flag_sector_deg)
-    sig = np.stack(out_sig, axis=1) if M else np.zeros((B, 0))
     if dec.near_floor and cfg.flag_coarse_sigma_deg is not None:
         ok = ok & (sig <= cfg.flag_coarse_sigma_deg)
     n_flagged = np.count_nonzero(~ok, axis=1).astype(np.int64)
