@@ -505,3 +505,69 @@ def bearing_from_state(x, x_fmt: FixedFormat, adv15, adv135, *, adv_bits: int = 
     coarse, valid, m1, m2 = np.broadcast_arrays(coarse, valid, m1, m2)
     bearing = np.broadcast_to(bearing, coarse.shape)
     return StateBearing(bearing, coarse, valid, m1, m2)
+
+
+def track_sector(bearing, coarse, state=None, *, ready=None, angle_bits: int = ANGLE_BITS,
+                 shift: int = 6):
+    """Sector tracking near the noise floor (issue 18), in integers (binary angles).
+
+    The combination takes the 40 deg sector of the fine bearing from the coarse bearing
+    alone, output by output; near the noise floor the coarse bearing wanders by up to ~20
+    deg over the filter's memory and the sector slips by 40 deg. Here the sector is kept
+    from one output to the next (the candidate nearest the previous tracked bearing: the
+    fine bearing moves continuously) and changed only when the coarse bearing disagrees
+    with the tracked one by more than half a sector *on average*: the disagreement
+    ``d = wrap(coarse - tracked)`` is smoothed as ``e += (d - e) >> shift`` (64 outputs, ~0.5
+    s at 135 outputs/s), and when ``|e| > 20 deg`` the tracked bearing moves by the nearest
+    whole number of sectors towards the coarse one (``e`` with it).
+
+    Parameters
+    ----------
+    bearing, coarse : int arrays (B, M)
+        Combined and coarse bearings as binary angles (outputs in time order).
+    state : (tracked, e, started) arrays (B,), optional
+        Carried from an earlier block.
+    ready : bool array (B, M), optional
+        Where False (the filter warming up or re-initialised: its coarse bearing can be
+        anything), the output keeps its own sector and the tracker restarts at the next
+        ready output. Default: all ready.
+
+    Returns
+    -------
+    (tracked, state) : int64 array (B, M) and the new state. A sector is
+    ``round(k 2**angle_bits / 9)`` (not a whole number of LSBs: <= 1/2 LSB of rounding).
+    """
+    b = _angle_bits(angle_bits, 8, 40)
+    B = np.int64(1) << np.int64(b)
+    half = B >> np.int64(1)
+    bb = _int_array(bearing, "bearing") & (B - 1)
+    cc = _int_array(coarse, "coarse") & (B - 1)
+    nb, M = bb.shape
+    out = np.empty_like(bb)
+    if state is None:
+        tr, e, st = np.zeros(nb, np.int64), np.zeros(nb, np.int64), np.zeros(nb, bool)
+    else:
+        tr, e, st = (np.array(v) for v in state)
+
+    def wrap(x):
+        return ((x + half) & (B - 1)) - half
+
+    def sectors(k):                                   # round(k B / 9), any sign
+        num = k * B
+        return np.where(num >= 0, (num + 4) // 9, -((-num + 4) // 9))
+
+    rd = np.ones((nb, M), bool) if ready is None else np.asarray(ready, bool)
+    for i in range(M):
+        st = st & rd[:, i]
+        w = wrap(tr - bb[:, i])
+        m = (9 * w + half) >> np.int64(b)             # nearest sector to the previous one
+        t = np.where(st, (bb[:, i] + sectors(m)) & (B - 1), bb[:, i])
+        d = wrap(cc[:, i] - t)
+        e = np.where(st, e + ((d - e) >> np.int64(shift)), d)
+        k = (9 * e + half) >> np.int64(b)
+        t = np.where(k != 0, (t + sectors(k)) & (B - 1), t)
+        e = e - sectors(k)
+        st = rd[:, i].copy()
+        tr = t
+        out[:, i] = t
+    return out, (tr, e, st)

@@ -814,6 +814,18 @@ class EnvelopeKalman:
         np.divide(np.sqrt(np.maximum(self.r, 0.0)), dc, out=ratio, where=dc > 0)
         return self._cnt[:, 0].copy(), self._cnt[:, 1:].max(axis=1), ratio
 
+    def coarse_sigma_deg(self) -> np.ndarray:
+        """Per trial: the standard deviation of the 15 Hz phase (deg) the filter's own
+        covariance gives, ``sqrt(r (P00 + P11) / 2) / m1`` (a float readout, for monitoring
+        only; ``inf`` for ``m1 = 0``)."""
+        x = self.x_float()
+        P = self.P_float()
+        m1 = np.hypot(x[:, 0], x[:, 1])
+        v = np.maximum(self.r, 0.0) * np.maximum(P[:, 0, 0] + P[:, 1, 1], 0.0) / 2.0
+        out = np.full(self.batch, np.inf)
+        np.divide(np.degrees(np.sqrt(v)), m1, out=out, where=m1 > 0)
+        return out
+
     def x_float(self) -> np.ndarray:
         return self._to_float(self.x, "x")
 

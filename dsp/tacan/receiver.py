@@ -13,7 +13,7 @@ import numpy as np
 
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
-                      reference_advances, wrap_deg)
+                      deg_to_bangle, reference_advances, track_sector, wrap_deg)
 from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .standard import burst_offsets
@@ -41,6 +41,7 @@ class BearingTrack:
     valid: np.ndarray | None = None  # (B, M) fit for use: not flagged (see ReceiverConfig)
     produced_s: np.ndarray | None = None  # (M,) when each bearing became available (the
     #: reference known and the pulses up to it filtered; >= times_s)
+    coarse_sigma_deg: np.ndarray | None = None  # (B, M) the filter's coarse-bearing std (deg)
 
     def first_valid_s(self) -> np.ndarray:
         """Per trial: when the first valid (not flagged) bearing became available (s from
@@ -106,6 +107,20 @@ class ReceiverConfig:
     #: estimate's resolution is 1e-5). False: 15 Hz assumed.
     track_rotation: bool = True
     rotation_span_s: float = 0.05
+    #: Near the noise floor (``Decoded.near_floor``: references acquired across bursts, or
+    #: bursts decoded incomplete) the 40 deg sector is tracked from output to output and
+    #: changed only when the coarse bearing disagrees on average
+    #: (:func:`dsp.tacan.bearing.track_sector`); elsewhere, and with False, each output
+    #: takes the sector nearest its own coarse bearing.
+    sector_track: bool = True
+    #: Near the noise floor (``Decoded.near_floor``) a bearing is also flagged when the
+    #: filter's own standard deviation of the coarse bearing
+    #: (:meth:`EnvelopeKalman.coarse_sigma_deg`) exceeds this: the 40 deg sector is then
+    #: uncertain (a 2-sigma margin on the 20 deg that resolve it; the filter's value is
+    #: conservative: 7-9 deg at 0 dB, where the coarse error measured 4.9 deg rms; 15-19 deg
+    #: at -3 dB, where it measured 20-39 deg and, unflagged, a record gave 15 bearings 38
+    #: deg off as valid). None: off.
+    flag_coarse_sigma_deg: float | None = 10.0
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -116,6 +131,11 @@ class ReceiverConfig:
         if not 0 < float(self.flag_sector_deg) <= 20:
             raise ValueError(f"flag_sector_deg must be in (0, 20] (half a fine-phase sector), "
                              f"not {self.flag_sector_deg!r}")
+        if self.flag_coarse_sigma_deg is not None and not float(self.flag_coarse_sigma_deg) > 0:
+            raise ValueError(f"flag_coarse_sigma_deg must be > 0 or None, not "
+                             f"{self.flag_coarse_sigma_deg!r}")
+        if not isinstance(self.sector_track, bool):
+            raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
         if not isinstance(self.track_rotation, bool):
             raise ValueError(f"track_rotation must be True or False, not {self.track_rotation!r}")
         if not 0 < float(self.rotation_span_s) <= 10:
@@ -143,6 +163,7 @@ class ReceiverState:
     last_tick: int | None = None
     recent_refs_s: np.ndarray = field(default_factory=lambda: np.empty(0))  # rate tracker input
     rotation_hz: float | None = None   # the rate tracker's latest estimate (None: none yet)
+    sector: tuple | None = None        # the sector tracker's state (bearing.track_sector)
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
@@ -217,6 +238,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     integer_bearing = cfg.dsp == "fixed" and ticks is not None
     out_x, out_dt = [], []
     out_ok = []
+    out_ready = []                   # the sector tracker's: warmed up, timing confirmed
+    out_sig = []                     # the coarse bearing's standard deviation (deg)
     last_main = state.last_main_s
     # Reference bursts become known when their last pulse has arrived.
     ref_order = np.argsort(dec.ref_done_s, kind="stable")
@@ -268,8 +291,10 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         out_k.append(ref_k[r])
         out_done.append(max(float(ref_done[r]), float(last_t)))
         n_up, n_gated, noise = kf.health()
+        out_sig.append(kf.coarse_sigma_deg())
         out_ok.append((n_up >= kf.kalman.warmup) & (n_gated < cfg.flag_gated)
                       & (noise <= cfg.flag_noise_ratio) & bool(confirmed[r]))
+        out_ready.append((n_up >= kf.kalman.warmup) & bool(confirmed[r]))
         if integer_bearing:
             # the fixed-point DSP: integer state, integer tick differences (see below)
             t_hz = kf.tick_hz
@@ -308,7 +333,27 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ok = ok & sb.valid.T
     bearing = np.array(out_b).T.reshape(B, M) if M else np.zeros((B, 0))
     coarse = np.array(out_c).T.reshape(B, M) if M else np.zeros((B, 0))
+    sig = np.stack(out_sig, axis=1) if M else np.zeros((B, 0))
+    if cfg.sector_track and dec.near_floor and M:
+        # the tracker starts once the filter has warmed up, the timing is confirmed and
+        # the coarse bearing is trusted (its sigma within flag_coarse_sigma_deg): started
+        # on a converging filter's coarse bearing it held a wrong sector for ~1 s
+        ready = np.broadcast_to(np.stack(out_ready, axis=-1), (B, M))
+        if cfg.flag_coarse_sigma_deg is not None:
+            ready = ready & (sig <= cfg.flag_coarse_sigma_deg)
+        if integer_bearing:                      # integers only: the core's binary angles
+            tb, state.sector = track_sector(sb.bearing.T, sb.coarse.T, state.sector, ready=ready)
+            bearing = bangle_to_deg(tb)
+        else:                                    # the same decisions, whole sectors in float
+            bb = deg_to_bangle(bearing)
+            tb, state.sector = track_sector(bb, deg_to_bangle(coarse), state.sector, ready=ready)
+            half = np.int64(1) << np.int64(ANGLE_BITS - 1)
+            w = ((tb - bb + half) & ((half << np.int64(1)) - 1)) - half
+            k = (9 * w + half) >> np.int64(ANGLE_BITS)
+            bearing = (bearing + 40.0 * k) % 360.0
     ok = ok & (np.abs(wrap_deg(coarse - bearing)) <= cfg.flag_sector_deg)
+    if dec.near_floor and cfg.flag_coarse_sigma_deg is not None:
+        ok = ok & (sig <= cfg.flag_coarse_sigma_deg)
     n_flagged = np.count_nonzero(~ok, axis=1).astype(np.int64)
     return BearingTrack(
         times_s=np.array(out_t), ref_kinds=np.array(out_k, np.int8),
@@ -318,7 +363,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         n_aux_refs=int(np.sum(dec.ref_kinds != REF_MAIN)), n_refs_off_grid=dec.n_off_grid,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
         events={**kf.events, "invalid_bearings": n_invalid, "flagged_bearings": n_flagged},
-        state=state, valid=ok, produced_s=np.array(out_done))
+        state=state, valid=ok, produced_s=np.array(out_done),
+        coarse_sigma_deg=sig)
 
 
 def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):

@@ -1,0 +1,75 @@
+"""Near the noise floor on the full IF chain (issue 18): signal -> golden front end (its
+default detector, unchanged) -> float DSP, with references acquired across bursts
+(dsp/tacan/acquire.py) where no burst decodes alone."""
+import numpy as np
+import pytest
+
+from cosim.tacan.run import TacanRunConfig, run_tacan
+from cosim.tacan.signal import TacanSignalConfig
+
+
+def _run(bearing_deg, seed, snr_db=0.0, duration_s=2.0, **kw):
+    sig = TacanSignalConfig(bearing_deg=bearing_deg, snr_db=snr_db, duration_s=duration_s,
+                            seed=seed, **kw)
+    return run_tacan(TacanRunConfig(signal=sig, require_bearing=False))
+
+
+@pytest.mark.parametrize("bearing_deg", [90.0] + [pytest.param(b, marks=pytest.mark.slow)
+                                                 for b in (10.0, 170.0, 250.0, 270.0, 300.0)])
+def test_zero_db_gives_a_bearing_without_sector_slip(bearing_deg):
+    """Bearing 90 deg puts every reference in the envelope trough: before, no burst decoded
+    (0 main, 1 auxiliary in 3 s, seed 23) and no bearing; with these records, 90, 170 and
+    250 deg gave no bearing before (0 main references), 10 deg did. Now a valid bearing
+    within 1.3 s and no error beyond 5 deg (a sector slip is 40 deg; at 300 deg the coarse
+    bearing wanders past 20 deg and, without the sector tracker, 9 bearings slipped,
+    flagged; at 270 deg the filter's first coarse bearings are 170 deg off: a tracker
+    started before the filter warmed up held a wrong sector for 1.8 s). The bias left near
+    the noise floor (~1 deg at 270 deg, 0 dB) is not fixed here."""
+    r = _run(bearing_deg, 3000 + int(bearing_deg))
+    assert r["first_valid_bearing_s"] is not None and r["first_valid_bearing_s"] < 1.3
+    assert r["n_main_refs"] >= 28
+    assert r["max_abs_error_deg"] < 5.0
+
+
+@pytest.mark.slow
+def test_beacon_far_below_the_noise_gives_no_valid_bearing():
+    """-25 dB: the detector passes noise peaks only (as on noise alone); no reference grid
+    is confirmed, so no bearing is valid."""
+    r = _run(90.0, 7, snr_db=-25.0, duration_s=10.0)
+    assert r["first_valid_bearing_s"] is None
+
+
+@pytest.mark.slow
+def test_zero_db_other_mode_beacon_gives_no_valid_bearing():
+    """A Y beacon heard by the X receiver (the run's mode is the beacon's: the receiver's
+    is set apart) at 0 and 20 dB: no valid bearing."""
+    from cosim.tacan.signal import generate
+    from dsp.tacan.frontend import run_golden_frontend
+    from dsp.tacan.receiver import ReceiverConfig, process_peaks
+    for snr in (0.0, 20.0):
+        sig = TacanSignalConfig(mode="Y", bearing_deg=90.0, snr_db=snr, duration_s=4.0, seed=5)
+        s = generate(sig)
+        pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig).frontend, sig.adc_bits)
+        tr = process_peaks(pk.timestamps / sig.fs_hz, pk.amplitudes, ReceiverConfig(mode="X"))
+        assert not np.any(tr.valid), snr
+
+
+@pytest.mark.slow
+def test_minus_3_db_gives_no_misleading_bearing():
+    """-3 dB, 270 deg, seed 100: the references are acquired, but the coarse bearing is
+    20-60 deg off; the filter's own coarse standard deviation (15-19 deg here) flags every
+    bearing. Without that flag 15 bearings 38 deg off were valid."""
+    from cosim.tacan.signal import generate
+    from dsp.tacan.bearing import wrap_deg
+    from dsp.tacan.frontend import run_golden_frontend
+    from dsp.tacan.receiver import ReceiverConfig, process_peaks
+    sig = TacanSignalConfig(bearing_deg=270.0, snr_db=-3.0, duration_s=3.0, seed=100)
+    s = generate(sig)
+    pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig).frontend, sig.adc_bits)
+    t, a = pk.timestamps / sig.fs_hz, pk.amplitudes
+    tr = process_peaks(t, a)
+    assert tr.times_s.size > 100            # references acquired
+    err = np.abs(wrap_deg(tr.bearing_deg[0] - 270.0))
+    assert not np.any(tr.valid[0] & (err > 20))
+    off = process_peaks(t, a, ReceiverConfig(flag_coarse_sigma_deg=None))
+    assert np.any(off.valid[0] & (np.abs(wrap_deg(off.bearing_deg[0] - 270.0)) > 20))
