@@ -146,10 +146,11 @@ class MonopulseFrontendParams:
         Shared NCO accumulator, table address and amplitude widths.
     mixer_out_bits, mixer_rounding
         DDC mixer output width (LSB ``2**-(out-1)`` FS; never saturates) and rounding.
-    mixer_input_stages : int
-        Register stages in front of each DDC mixer's multipliers (1..4, default 2: the
-        shared NCO's LO reaches four channels' DSP blocks, and with one stage that wire and
-        the multiplier were the critical path, 97.6 MHz). Latency only.
+    mixer_input_stages, corr_input_stages : int
+        Register stages in front of the multipliers of each DDC mixer and of each channel
+        correction (1..4, default 2: the shared NCO's LO reaches four channels' DSP blocks,
+        and the snapshots reach four multipliers each; with one stage that wire and the
+        multiplier were the critical path, 97.6 and 82.9 MHz). Latency only.
     cic_stages, cic_rate, cic_out_bits, cic_rounding
         CIC decimator (default N = 1, R = 10: the chip's integrate-and-dump, the golden
         chain's low-pass). ``cic_out_bits=None``: the full Hogenauer width.
@@ -204,6 +205,7 @@ class MonopulseFrontendParams:
     corr_out_bits: int = 18
     corr_headroom_bits: int = 1
     corr_rounding: str = "half_even"
+    corr_input_stages: int = 2
     snapshots: int = 8192
     cordic_in_bits: int = 16
     cordic_iterations: int = 20
@@ -287,7 +289,8 @@ class MonopulseFrontendParams:
         b["corr"] = MixerParams(in_width=snap_w, complex_input=True,
                                 lo_width=self.corr_coef_bits, out_width=self.corr_out_bits,
                                 rounding=self.corr_rounding, overflow="saturate",
-                                headroom_bits=self.corr_headroom_bits)
+                                headroom_bits=self.corr_headroom_bits,
+                                input_stages=self.corr_input_stages)
         b["cordic"] = CordicConfig(width=2 * self.cordic_in_bits + 1,
                                    iterations=self.cordic_iterations,
                                    angle_bits=self.angle_bits, signed_angle=True)

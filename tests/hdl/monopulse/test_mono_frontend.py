@@ -148,7 +148,7 @@ def test_register_latch_at_the_block_boundary():
     (dict(corr_coef_bits=19), r"corr_coef_bits must be an integer in \[2, 18\], not 19"),
     (dict(cordic_iterations=2), r"cordic_iterations must be an integer in \[4, 32\], not 2"),
     (dict(snapshots=2),
-     r"block too short: snapshots \* snapshot_decimation = 20 cycles must be >= 43"),
+     r"block too short: snapshots \* snapshot_decimation = 20 cycles must be >= 44"),
     (dict(cic_out_bits=None, mixer_out_bits=20, cic_stages=2, cic_rate=1024,
           snapshot_decimation=1024), r"snapshot width \(decimator output\) must be <= 30 "
                                      r"bits, not 40"),
@@ -192,7 +192,8 @@ def test_widths_are_derived():
     assert p.dc_bits == 25
     assert p.record_bits == 16 + 2 * 25 + 2 * 24 + 5 + 8 * 33
     assert p.record_words == -(-p.record_bits // 48) == p.fifo.record_words
-    assert p.latency == p.ddc.latency + p.cic.latency + 5 + 2 + 10 + 20
+    assert p.corr.latency == 5 + 1                # complex mixer, 2 input stages
+    assert p.latency == p.ddc.latency + p.cic.latency + 6 + 2 + 10 + 20
     assert MonopulseFrontendParams(snapshots=8193).acc_width == 20 + 14
     k, s = p.dc_coefs[0]
     assert abs(k / 2 ** (s + p.dc_frac_bits - p.angle_bits) - 0.5) < 1e-12   # 2 / Dx, Dx = 4
