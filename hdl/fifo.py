@@ -80,7 +80,7 @@ class DspFifo(wiring.Component):
             fifo = SyncFIFOBuffered(width=p.word_width, depth=p.depth)
         m.submodules.fifo = self._queue = fifo
 
-        n, W = p.record_words, p.width
+        n = p.record_words
         pending = Signal(unsigned(p.width))
         # pending != 0, kept in a register of its own (set wherever pending is): the 48-bit
         # compare was on the critical path of the monopulse record FIFO.
@@ -150,7 +150,7 @@ class DspFifo(wiring.Component):
         with m.If(hold_v):
             with m.If(fifo.w_rdy):
                 self._put(m, fifo, hold, TAG_DATA)
-                with m.If(iv & ~pend_nz & fifo.w_rdy):
+                with m.If(iv & ~pend_nz):
                     m.d[wd] += hold.eq(word)
                 with m.Else():
                     m.d[wd] += hold_v.eq(0)
