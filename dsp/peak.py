@@ -15,7 +15,9 @@ Noise floor, in blocks of ``L = 2**block_log2`` samples (block ``b`` is
 
 * block 0: no detection (threshold = infinity); ``nu_1 = sum(e) >> block_log2``;
 * block ``b >= 1``: ``clip_b = nu_b << clip_log2``,
-  ``m_b = sum(min(e, clip_b)) >> block_log2``,
+  ``m_b = sum(min(e, clip_b)) >> block_log2`` -- or, with ``clip_to_floor``,
+  ``m_b = sum(e if e <= clip_b else nu_b) >> block_log2`` (a sample over the clip level
+  counts as the floor itself: a censored mean, see :class:`PeakParams`),
   ``nu_{b+1} = nu_b + ((m_b - nu_b) >> smooth_log2)`` (arithmetic shift = floor);
 * threshold of block ``b >= 1``: ``T_b = max(thr_min, (nu_b * thr_mult) >> thr_frac)``.
 
@@ -74,6 +76,15 @@ class PeakParams:
         Samples are clipped at ``nu << clip_log2`` before averaging (0..8).
     smooth_log2 : int
         Noise-floor smoothing ``nu += (m - nu) >> smooth_log2`` (0..16).
+    clip_to_floor : bool
+        A sample over the clip level counts as the current floor ``nu`` instead of the clip
+        level (False: ``min(e, nu << clip_log2)``). Pulses then leave the floor where it is --
+        the block mean is a censored mean of the noise -- so the threshold does not rise
+        after a burst of pulses. Measured on the TACAN golden chain at 0 dB (4 records of 3 s
+        per bearing, threshold raised 3.0 -> 3.25 to keep the noise-only false-alarm rate):
+        bearing 270 deg RMSE 1.22 -> 0.61 deg, mean error +1.08 -> +0.26 deg; 90 deg and
+        10 dB unchanged within the spread. On noise alone the floor settles ~8.5 % lower
+        than the clipped mean's (``E[e | e < 2 nu]`` against ``E[min(e, 2 nu)]``).
     thr_mult, thr_frac : int
         Threshold factor ``thr_mult * 2**-thr_frac`` times the noise floor (default 3.0).
     thr_min : int
@@ -90,6 +101,7 @@ class PeakParams:
     block_log2: int = 10
     clip_log2: int = 1
     smooth_log2: int = 2
+    clip_to_floor: bool = False
     thr_mult: int = 48
     thr_frac: int = 4
     thr_min: int = 16
@@ -103,6 +115,8 @@ class PeakParams:
         _check_int("peak block_log2", self.block_log2, 1, 20)
         _check_int("peak clip_log2", self.clip_log2, 0, 8)
         _check_int("peak smooth_log2", self.smooth_log2, 0, 16)
+        if not isinstance(self.clip_to_floor, bool):
+            raise ValueError(f"peak clip_to_floor must be True or False, not {self.clip_to_floor!r}")
         _check_int("peak thr_frac", self.thr_frac, 0, 16)
         _check_int("peak thr_mult", self.thr_mult, 1, (1 << 20) - 1)
         _check_int("peak thr_min", self.thr_min, 0, (1 << self.amp_width) - 1)
@@ -220,6 +234,12 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
 
 
 # -- numpy implementation (integer and float) -------------------------------------------------
+def _clipped(seg, clip, nu, to_floor: bool):
+    """A block's samples as the noise floor counts them: over ``clip``, the clip level or
+    (``clip_to_floor``) the floor ``nu`` itself."""
+    return np.where(seg > clip, nu, seg) if to_floor else np.minimum(seg, clip)
+
+
 def _thresholds(e, p: PeakParams, st: PeakState, is_float: bool, thr_min):
     """Per-sample threshold; updates ``st.nu``/``st.bsum`` (loop over blocks)."""
     N = e.size
@@ -239,11 +259,11 @@ def _thresholds(e, p: PeakParams, st: PeakState, is_float: bool, thr_min):
             if is_float:
                 clip = st.nu * 2.0 ** p.clip_log2
                 T[pos:pos + take] = max(thr_min, st.nu * p.thr_factor)
-                st.bsum = st.bsum + float(np.minimum(seg, clip).sum())
+                st.bsum = st.bsum + float(_clipped(seg, clip, st.nu, p.clip_to_floor).sum())
             else:
                 clip = np.int64(st.nu << p.clip_log2)
                 T[pos:pos + take] = p.threshold(st.nu)
-                st.bsum = st.bsum + int(np.minimum(seg, clip).sum())
+                st.bsum = st.bsum + int(_clipped(seg, clip, np.int64(st.nu), p.clip_to_floor).sum())
         pos += take
         n += take
         if (n & (L - 1)) == 0:  # block complete

@@ -88,7 +88,8 @@ class PeakSearch(wiring.Component):
         m.d.comb += clip.eq(nu << p.clip_log2)
 
         def contribution(e, in_blk0):
-            clipped = Mux(e > clip, clip, e)
+            # over the clip level: the clip level, or (clip_to_floor) the floor itself
+            clipped = Mux(e > clip, nu if p.clip_to_floor else clip, e)
             return Mux(in_blk0, e << p.smooth_log2, clipped)
 
         first = pos == 0

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dsp.tacan.frontend import FrontendConfig, run_golden_frontend
+from dsp.tacan.frontend import NOISE_FLOORS, FrontendConfig, run_golden_frontend
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 crb_deg, process_peaks)
@@ -105,6 +105,11 @@ class TacanRunConfig:
     fixed: KalmanFixedConfig | None = None
     settle_s: float | None = field(default=None, metadata={
         "help": "bearings before this time (s) are not scored (default 2 x --memory-s)"})
+    noise_floor: str = field(default="clipped", metadata={
+        "help": "pulse detector's noise floor: clipped mean (default) or censored mean "
+                "(pulses do not lift it; threshold 3.25x for the same noise-only false-alarm "
+                "rate; see dsp.tacan.frontend.NOISE_FLOORS)",
+        "choices": tuple(NOISE_FLOORS), "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
     service: DspServiceConfig = field(default_factory=DspServiceConfig)
@@ -132,6 +137,12 @@ class TacanRunConfig:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, not {self.backend!r}")
         if self.dsp not in DSP_MODES:
             raise ValueError(f"dsp must be one of {list(DSP_MODES)}, not {self.dsp!r}")
+        if self.noise_floor not in NOISE_FLOORS:
+            raise ValueError(f"noise_floor must be one of {list(NOISE_FLOORS)}, not "
+                             f"{self.noise_floor!r}")
+        if self.noise_floor != "clipped" and "peak" in dict(self.frontend_changes):
+            raise ValueError("noise_floor chooses the peak detector's parameters: give it or "
+                             "a 'peak' in frontend_changes, not both")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
@@ -182,7 +193,10 @@ class TacanRunConfig:
 
     @property
     def frontend(self) -> FrontendConfig:
-        return FrontendConfig.for_signal(self.signal, **dict(self.frontend_changes))
+        changes = dict(self.frontend_changes)
+        if self.noise_floor != "clipped":
+            changes["peak"] = NOISE_FLOORS[self.noise_floor]
+        return FrontendConfig.for_signal(self.signal, **changes)
 
     @property
     def hdl_params(self):
@@ -355,7 +369,8 @@ def _digest(*arrays) -> str:
 def frontend_key(run: TacanRunConfig) -> tuple:
     """What a front end's output depends on: runs with equal keys on the same samples get
     the same :class:`FrontendOutput` (the DSP side may differ)."""
-    return (run.backend, run.signal, run.frontend_changes, run.hdl_changes, run.service,
+    return (run.backend, run.signal, run.noise_floor, run.frontend_changes, run.hdl_changes,
+            run.service,
             run.control_writes, run.control_latency_cycles)
 
 

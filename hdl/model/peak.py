@@ -45,7 +45,7 @@ def peak_search(env, params: PeakParams, state: PeakState | None = None
 @njit_cached(nogil=True)
 def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
                    block_log2, clip_log2, smooth_log2, thr_mult, thr_frac, thr_min, hold, max_len,
-                   thr, amp, imax, iend):
+                   clip_to_floor, thr, amp, imax, iend):
     """The integer search, one sample at a time (the module docstring's algorithm as
     written). Writes the per-sample threshold to ``thr`` and the pulses to ``amp``/``imax``/
     ``iend`` (capacity ``len(e) // 2 + 1``: a pulse needs two samples, and one may be carried
@@ -62,8 +62,10 @@ def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
         thr[j] = T
         if b == 0:
             bsum += x
+        elif x <= clip:
+            bsum += x
         else:
-            bsum += min(x, clip)
+            bsum += nu if clip_to_floor else clip
         if not is_open:
             if x >= T:
                 is_open = True
@@ -111,7 +113,7 @@ def _search_compiled(e, p: PeakParams, state):
         e, int(st.n), int(st.nu), int(st.bsum), bool(st.open), int(st.start), int(st.pmax),
         int(st.nmax), int(st.below), int(st.length), p.block_log2, p.clip_log2,
         p.smooth_log2, p.thr_mult, p.thr_frac, p.thr_min, p.hold, p.max_len,
-        thr, amp, imax, iend)
+        bool(p.clip_to_floor), thr, amp, imax, iend)
     st.n, st.nu, st.bsum, st.open = int(n), int(nu), int(bsum), bool(is_open)
     if st.open:
         st.start, st.pmax, st.nmax = int(start), int(pmax), int(nmax)

@@ -211,7 +211,7 @@ class TacanFrontendParams:
         b["peak"] = PeakParams(amp_width=env.out_width, ts_bits=self.ts_bits,
                                ts_step=cfg.decimation, block_log2=pk.block_log2,
                                clip_log2=pk.clip_log2, smooth_log2=pk.smooth_log2,
-                               thr_mult=pk.thr_mult, thr_frac=pk.thr_frac,
+                               clip_to_floor=pk.clip_to_floor, thr_mult=pk.thr_mult, thr_frac=pk.thr_frac,
                                thr_min=min(thr_min, (1 << env.out_width) - 1),
                                hold=pk.hold, max_len=pk.max_len)
         b["fifo"] = FifoParams(width=env.out_width + self.ts_bits, depth=self.fifo_depth,

@@ -49,10 +49,12 @@ def reference_loop(e, p, *, is_float=False, thr_min=None):
             bsum += x
         elif is_float:
             T = max(tm, nu * p.thr_mult / 2 ** p.thr_frac)
-            bsum += min(x, nu * 2 ** p.clip_log2)
+            clip = nu * 2 ** p.clip_log2
+            bsum += x if x <= clip else (nu if p.clip_to_floor else clip)
         else:
             T = max(p.thr_min, (nu * p.thr_mult) >> p.thr_frac)
-            bsum += min(x, nu << p.clip_log2)
+            clip = nu << p.clip_log2
+            bsum += x if x <= clip else (nu if p.clip_to_floor else clip)
         if (n + 1) % L == 0:
             if is_float:
                 m = bsum / L
@@ -125,6 +127,7 @@ def test_sim_matches_model_realistic_quick():
     dict(block_log2=3, hold=2, max_len=7, ts_bits=8, ts_step=5),   # timestamp wraps
     dict(block_log2=6, smooth_log2=0, clip_log2=0, thr_mult=5, thr_frac=0),
     dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12),
+    dict(block_log2=5, smooth_log2=3, clip_to_floor=True, thr_mult=52),  # censored floor
 ])
 def test_sim_matches_model_variants(kw):
     p = PeakParams(**kw)
@@ -204,7 +207,8 @@ def test_reset_mid_run():
 # -- model ---------------------------------------------------------------------------------
 PARAM_SETS = [PeakParams(), SMALL, PeakParams(block_log2=3, hold=2, max_len=7),
               PeakParams(block_log2=2, hold=1, max_len=2, smooth_log2=0),
-              PeakParams(block_log2=4, max_len=20, clip_log2=0)]
+              PeakParams(block_log2=4, max_len=20, clip_log2=0),
+              PeakParams(block_log2=6, smooth_log2=4, clip_to_floor=True, thr_mult=52)]
 
 
 @pytest.mark.parametrize("k", range(len(PARAM_SETS)))
@@ -324,6 +328,7 @@ def test_model_rejects_bad_input():
     (dict(thr_mult=0), r"peak thr_mult must be an integer in \[1, 1048575\], not 0"),
     (dict(thr_min=-1), r"peak thr_min must be an integer in \[0, 524287\], not -1"),
     (dict(smooth_log2=2.0), r"peak smooth_log2 must be an integer in \[0, 16\], not 2.0"),
+    (dict(clip_to_floor=1), r"peak clip_to_floor must be True or False, not 1"),
 ])
 def test_bad_params(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -378,3 +383,44 @@ def test_verilator_matches_model_long(vl_peak):
     np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
     np.testing.assert_array_equal(res.cycles,
                                   accepted_cycles(e.size, valid)[ref.end_index] + p.latency)
+
+
+#: The censored noise floor (``clip_to_floor``) compiled with Verilator as well.
+VL_CENSORED = PeakParams(clip_to_floor=True, thr_mult=52)
+
+
+@needs_verilator
+def test_verilator_matches_model_censored_floor():
+    sim = verilator_sim(PeakSearch(VL_CENSORED), "peak_search_censored_vl")
+    p = VL_CENSORED
+    e, valid = _vl_stimulus(np.random.default_rng(242), 200_000, 0.7)
+    res = sim.run(e, in_valid=valid, flush_cycles=p.latency + 2)
+    f = unpack_fields(res.words, p.out_layout)
+    ref, _ = peak_search(e, p)
+    plain, _ = peak_search(e, PeakParams(thr_mult=52))
+    assert ref.amplitude.size > 1000
+    # the option changes the floor (else this test would not test it)
+    assert not np.array_equal(ref.thresholds, plain.thresholds)
+    np.testing.assert_array_equal(f["amplitude"], ref.amplitude)
+    np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
+    np.testing.assert_array_equal(res.cycles,
+                                  accepted_cycles(e.size, valid)[ref.end_index] + p.latency)
+
+
+def test_censored_floor_is_not_lifted_by_a_burst_of_pulses():
+    """A dense burst of strong pulses lifts the clipped-mean floor (its samples count as
+    2 nu) and so the threshold after it; the censored mean counts them as nu and stays."""
+    rng = np.random.default_rng(260)
+    n, L = 60_000, 1 << 8
+    e = np.rint(rng.rayleigh(200.0, n)).astype(np.int64)
+    burst = slice(30_000, 30_000 + L)
+    e[burst][::2] = 5000                       # every other sample of one block: pulses
+    after = slice(30_000 + L, 30_000 + 2 * L)  # the block after the burst
+    quiet = slice(20_000, 30_000)
+    rise = {}
+    for to_floor in (False, True):
+        p = PeakParams(block_log2=8, clip_to_floor=to_floor)
+        res, _ = peak_search(e, p)
+        rise[to_floor] = res.thresholds[after].mean() / res.thresholds[quiet].mean() - 1
+    assert rise[False] > 0.08                  # clipped: the burst lifts the threshold ...
+    assert abs(rise[True]) < 0.3 * rise[False]  # ... censored: much less
