@@ -34,6 +34,16 @@ Pulses (``T`` is the threshold of the sample's own block):
   sample*: the closing sample never opens a new pulse (it matters only for a ``max_len`` cut,
   a ``hold`` close is below threshold anyway).
 
+Pair-partner readout (``partner_offset = D > 0``): each pulse also carries the envelope
+``D`` samples after and before its peak, ``ahead = e[n_max + D]`` and ``behind = e[n_max - D]``
+(0 before the first sample), as ``partner = max(ahead, behind)`` and ``partner_late =
+(ahead >= behind)``. With ``D`` the pulse-pair spacing this is the amplitude of the pair's
+other pulse whether or not *it* crossed the threshold: a measurement whose noise is not the
+noise that made the detection (the peak amplitude is censored by the threshold, the
+partner's is not). The search itself is unchanged; a pulse is emitted once input sample
+``end_index + D`` has arrived (the HDL runs the search ``D`` samples behind its input, on a
+``2 D``-word delay line).
+
 The integer model (:func:`hdl.model.peak.peak_search`) is a compiled (numba) per-sample loop
 that follows the steps above as written; :func:`peak_search_numpy` is an independent vectorised
 implementation (a loop over blocks for the thresholds and over the sub-pulses of groups
@@ -93,6 +103,10 @@ class PeakParams:
         Consecutive below-threshold samples that close a pulse, >= 1.
     max_len : int
         Samples after which an open pulse is emitted anyway, > hold.
+    partner_offset : int
+        Pair-partner readout distance ``D`` in samples (0: off, else 1..4096; TACAN X mode:
+        12 us, Y mode: 30 us of envelope samples). Adds ``partner`` and ``partner_late`` to
+        each pulse (see the module doc) and delays the output by ``D`` input samples.
     """
 
     amp_width: int = 19
@@ -107,6 +121,7 @@ class PeakParams:
     thr_min: int = 16
     hold: int = 5
     max_len: int = 128
+    partner_offset: int = 0
 
     def __post_init__(self):
         check_width("peak amp_width", self.amp_width, minimum=1, maximum=40)
@@ -121,6 +136,7 @@ class PeakParams:
         _check_int("peak thr_mult", self.thr_mult, 1, (1 << 20) - 1)
         _check_int("peak thr_min", self.thr_min, 0, (1 << self.amp_width) - 1)
         _check_int("peak hold", self.hold, 1, 1 << 16)
+        _check_int("peak partner_offset", self.partner_offset, 0, 4096)
         if isinstance(self.max_len, bool) or not isinstance(self.max_len, int) \
                 or self.max_len <= self.hold or self.max_len > 1 << 20:
             raise ValueError(f"peak max_len must be an integer > hold ({self.hold}) and "
@@ -163,7 +179,10 @@ class PeakParams:
     @property
     def out_layout(self) -> list[tuple[str, int, bool]]:
         """Packed output payload, LSB first (for ``cosim.pysim.unpack_fields``)."""
-        return [("amplitude", self.amp_width, False), ("timestamp", self.ts_bits, False)]
+        out = [("amplitude", self.amp_width, False), ("timestamp", self.ts_bits, False)]
+        if self.partner_offset:
+            out += [("partner", self.amp_width, False), ("partner_late", 1, False)]
+        return out
 
     def threshold(self, nu: int) -> int:
         """Integer threshold of a block whose noise floor is ``nu``."""
@@ -195,6 +214,12 @@ class PeakState:
     nmax: int = 0
     below: int = 0
     length: int = 0
+    # pair-partner readout (partner_offset D > 0): the open pulse's ahead/behind values, the
+    # input samples seen and the last ones kept (x[n - D] .. x[n_in - 1], a tuple)
+    pa: float = 0
+    pb: float = 0
+    n_in: int = 0
+    hist: tuple = ()
 
 
 @dataclass
@@ -207,6 +232,9 @@ class PeakResult:
     index: np.ndarray
     end_index: np.ndarray
     thresholds: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: with ``partner_offset``: max(ahead, behind) and whether ahead won (empty when off)
+    partner: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    partner_late: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
 def peak_search_numpy(env, params: PeakParams, state: PeakState | None = None
@@ -216,7 +244,8 @@ def peak_search_numpy(env, params: PeakParams, state: PeakState | None = None
     env = np.asarray(env)
     if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
         raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
-    return _search(env.astype(np.int64), params, state, False, params.thr_min)
+    return search_with_partner(env.astype(np.int64), params, state,
+                               lambda c, st, a, b: _search(c, params, st, False, params.thr_min, a, b))
 
 
 def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *,
@@ -230,7 +259,34 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
     if np.isnan(env).any():
         raise ValueError("peak search input must not contain NaN")
     tm = float(params.thr_min if thr_min is None else thr_min)
-    return _search(env, params, state, True, tm)
+    return search_with_partner(env, params, state,
+                               lambda c, st, a, b: _search(c, params, st, True, tm, a, b))
+
+
+def search_with_partner(e, p: PeakParams, state: PeakState | None, run):
+    """Run ``run(centre, state, ahead, behind) -> (PeakResult, PeakState)`` (one of the
+    implementations) on a chunk of input samples ``e``. Without the pair-partner readout the
+    centre is ``e`` itself; with it (``partner_offset = D``) the centre samples are those
+    whose sample ``D`` later has arrived, ``ahead``/``behind`` their samples ``D`` after and
+    before (0 before the first), and the state keeps the input samples still needed."""
+    D = p.partner_offset
+    if not D:
+        return run(e, state, None, None)
+    st = copy.copy(state) if state is not None else PeakState()
+    hist = np.asarray(st.hist, dtype=e.dtype)
+    buf = np.concatenate([hist, e]) if hist.size else e
+    buf_start = st.n_in - hist.size                  # input index of buf[0]
+    n_in = st.n_in + e.size
+    m = st.n + np.arange(max(0, n_in - D - st.n), dtype=np.int64)
+    centre = buf[m - buf_start]
+    ahead = buf[m + D - buf_start]
+    behind = np.where(m >= D, buf[np.maximum(m - D - buf_start, 0)], 0).astype(e.dtype)
+    res, st = run(np.ascontiguousarray(centre), st, np.ascontiguousarray(ahead),
+                  np.ascontiguousarray(behind))
+    keep = max(0, st.n - D)                          # x[n - D] on is still needed
+    st.n_in = n_in
+    st.hist = tuple(buf[keep - buf_start:].tolist())
+    return res, st
 
 
 # -- numpy implementation (integer and float) -------------------------------------------------
@@ -290,10 +346,12 @@ def _segment_max(e, s, t):
     return smax, first
 
 
-def _search(e, p: PeakParams, state, is_float: bool, thr_min):
+def _search(e, p: PeakParams, state, is_float: bool, thr_min, ahead=None, behind=None):
     st = copy.copy(state) if state is not None else PeakState()
     if state is None and is_float:
         st.nu, st.bsum, st.pmax = 0.0, 0.0, 0.0
+    partner = ahead is not None
+    pa_list, pb_list = [], []
     n0 = st.n
     N = e.size
     T = _thresholds(e, p, st, is_float, thr_min)
@@ -360,18 +418,24 @@ def _search(e, p: PeakParams, state, is_float: bool, thr_min):
     if carried is not None:
         t = min(carried, N - 1)
         pmax, nmax = st.pmax, st.nmax
+        pa, pb = st.pa, st.pb
         if t >= 0:
             seg = e[:t + 1]
             j = int(np.argmax(seg))
             if seg[j] > pmax:
                 pmax, nmax = seg[j], n0 + j
+                if partner:
+                    pa, pb = ahead[j], behind[j]
         if carried < N:
             amp_list.append(np.array([pmax]))
             nmax_list.append(np.array([nmax], dtype=np.int64))
             end_list.append(np.array([n0 + carried], dtype=np.int64))
+            pa_list.append(np.array([pa]))
+            pb_list.append(np.array([pb]))
             st.open = False
         else:
             st.pmax, st.nmax = pmax, nmax
+            st.pa, st.pb = pa, pb
             st.length += N
             st.below = int(streak[-1]) if N else st.below
 
@@ -383,11 +447,16 @@ def _search(e, p: PeakParams, state, is_float: bool, thr_min):
         amp_list.append(smax[closed])
         nmax_list.append(n0 + first[closed])
         end_list.append(n0 + t_arr[closed])
+        if partner:
+            pa_list.append(ahead[first[closed]])
+            pb_list.append(behind[first[closed]])
         if not closed[-1]:
             st.open = True
             st.start = n0 + int(s_arr[-1])
             st.pmax = smax[-1].item()
             st.nmax = n0 + int(first[-1])
+            if partner:
+                st.pa, st.pb = ahead[first[-1]].item(), behind[first[-1]].item()
             st.length = N - int(s_arr[-1])
             st.below = int(streak[-1])
         else:
@@ -403,6 +472,12 @@ def _search(e, p: PeakParams, state, is_float: bool, thr_min):
     if not st.open:  # canonical closed state, so equal histories give equal states
         st.start = st.nmax = st.below = st.length = 0
         st.pmax = 0.0 if is_float else 0
+        st.pa = st.pb = 0.0 if is_float else 0
     if not is_float:
-        st.pmax = int(st.pmax)
-    return PeakResult(amplitude=amp, timestamp=ts, index=nmax, end_index=endi, thresholds=T), st
+        st.pmax, st.pa, st.pb = int(st.pmax), int(st.pa), int(st.pb)
+    res = PeakResult(amplitude=amp, timestamp=ts, index=nmax, end_index=endi, thresholds=T)
+    if partner:
+        a = np.concatenate(pa_list).astype(dt) if pa_list else np.zeros(0, dtype=dt)
+        b = np.concatenate(pb_list).astype(dt) if pb_list else np.zeros(0, dtype=dt)
+        res.partner, res.partner_late = np.maximum(a, b), a >= b
+    return res, st

@@ -20,11 +20,19 @@ The detector runs ``det_delay`` (4) cycles behind the noise path on a delay line
 threshold multiplier ``nu * thr_mult`` and the ``max(thr_min, .)`` are registered and
 ``T_{b+1}`` is ready when the detector reaches block ``b+1``; its pre-stage registers the
 comparison ``e >= T`` so the pulse logic starts from a flop. Needs ``block_log2 >= 1``.
+
+Pair-partner readout (``partner_offset = D > 0``): the input goes through a ``2 D``-word
+delay line (one memory, written at ``wp``; read at ``wp + D`` -- the sample ``D`` back, which
+the search runs on -- and at ``wp`` before the write -- the sample ``2 D`` back, the behind
+value). The current input is the ahead value. Both ride the detector's delay line and are
+kept with the pulse's max; the search starts once ``D`` samples are in (the memory is not
+reset: the behind value is 0 until ``2 D`` samples have been written since reset).
 """
 from __future__ import annotations
 
 from amaranth.hdl import Const, Module, Mux, Signal, unsigned
 from amaranth.lib import data, stream, wiring
+from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from hdl.common import check_params
@@ -53,8 +61,10 @@ class PeakSearch(wiring.Component):
     def __init__(self, params: PeakParams | None = None):
         self.params = check_params(self, PeakParams() if params is None else params, PeakParams)
         p = self.params
-        self.out_layout = data.StructLayout({"amplitude": unsigned(p.amp_width),
-                                             "timestamp": unsigned(p.ts_bits)})
+        fields = {"amplitude": unsigned(p.amp_width), "timestamp": unsigned(p.ts_bits)}
+        if p.partner_offset:
+            fields.update(partner=unsigned(p.amp_width), partner_late=unsigned(1))
+        self.out_layout = data.StructLayout(fields)
         super().__init__({
             "i": In(stream.Signature(unsigned(p.amp_width), always_ready=True)),
             "o": Out(stream.Signature(self.out_layout, always_ready=True)),
@@ -70,7 +80,32 @@ class PeakSearch(wiring.Component):
         # Input register (the noise path's compare starts from a flop).
         e_r = Signal(unsigned(aw))
         v_r = Signal()
-        m.d.sync += [e_r.eq(self.i.payload), v_r.eq(self.i.valid)]
+        D = p.partner_offset
+        if not D:
+            m.d.sync += [e_r.eq(self.i.payload), v_r.eq(self.i.valid)]
+            a_r = b_r = None
+        else:
+            # 2D-word delay line; its (registered) read data is the search's input register
+            depth = 2 * D
+            m.submodules.line = line = Memory(shape=unsigned(aw), depth=depth, init=[])
+            wr = line.write_port()
+            rd_c = line.read_port()            # x[n - D]
+            rd_b = line.read_port()            # x[n - 2D] (read before this write)
+            wp = Signal(range(depth))
+            seen = Signal(range(depth + 1))    # inputs since reset, saturating at 2D
+            a_r = Signal(unsigned(aw))
+            b_ok = Signal()
+            m.d.comb += [wr.addr.eq(wp), wr.data.eq(self.i.payload), wr.en.eq(self.i.valid),
+                         rd_c.addr.eq(Mux(wp >= D, wp - D, wp + D)), rd_b.addr.eq(wp),
+                         rd_c.en.eq(self.i.valid), rd_b.en.eq(self.i.valid),
+                         e_r.eq(rd_c.data)]
+            m.d.sync += v_r.eq(self.i.valid & (seen >= D))
+            with m.If(self.i.valid):
+                m.d.sync += [wp.eq(Mux(wp == depth - 1, 0, wp + 1)), a_r.eq(self.i.payload),
+                             b_ok.eq(seen == depth)]
+                with m.If(seen != depth):
+                    m.d.sync += seen.eq(seen + 1)
+            b_r = Mux(b_ok, rd_b.data, 0)
 
         # -- noise floor ------------------------------------------------------------------
         pos = Signal(unsigned(p.block_log2))
@@ -128,10 +163,15 @@ class PeakSearch(wiring.Component):
         # A pre-stage (det_delay - 1 cycles behind) picks the threshold and registers the
         # comparison, so the pulse logic starts from a flop.
         pe, pv = e_r, v_r
+        pa, pb = a_r, b_r
         for k in range(p.det_delay - 1):
             ne, nv = Signal(unsigned(aw), name=f"d{k}_e"), Signal(name=f"d{k}_v")
             m.d.sync += [ne.eq(pe), nv.eq(pv)]
             pe, pv = ne, nv
+            if D:
+                na, nb = Signal(unsigned(aw), name=f"d{k}_a"), Signal(unsigned(aw), name=f"d{k}_b")
+                m.d.sync += [na.eq(pa), nb.eq(pb)]
+                pa, pb = na, nb
 
         pre_pos = Signal(unsigned(p.block_log2))
         pre_first = Signal(init=1)  # the next pre-stage sample starts a block
@@ -142,6 +182,9 @@ class PeakSearch(wiring.Component):
         dv = Signal()
         above = Signal()
         m.d.sync += [de.eq(pe), dv.eq(pv), above.eq(pv & ~pre_blk0 & (pe >= t_use))]
+        if D:
+            da, db = Signal(unsigned(aw)), Signal(unsigned(aw))
+            m.d.sync += [da.eq(pa), db.eq(pb)]
         with m.If(pv):
             m.d.sync += [pre_pos.eq(pre_pos + 1), pre_first.eq(pre_pos == L - 1)]
             with m.If(pre_pos == L - 1):
@@ -167,22 +210,36 @@ class PeakSearch(wiring.Component):
         o_amp = Signal(unsigned(aw))
         o_ts = Signal(unsigned(p.ts_bits))
         m.d.sync += o_valid.eq(0)
+        if D:   # the ahead/behind values at the pulse's max
+            pa_c, pb_c = Signal(unsigned(aw)), Signal(unsigned(aw))
+            o_pa, o_pb = Signal(unsigned(aw)), Signal(unsigned(aw))
+            new_a, new_b = Mux(upd, da, pa_c), Mux(upd, db, pb_c)
         with m.If(dv):
             m.d.sync += ts.eq(ts + p.ts_step)
             with m.If(~is_open):
                 with m.If(above):
                     m.d.sync += [is_open.eq(1), pmax.eq(de), pts.eq(ts), below.eq(0),
                                  plen.eq(1)]
+                    if D:
+                        m.d.sync += [pa_c.eq(da), pb_c.eq(db)]
             with m.Else():
                 with m.If(close):
                     m.d.sync += [is_open.eq(0), o_valid.eq(1), o_amp.eq(new_max),
                                  o_ts.eq(new_ts)]
+                    if D:
+                        m.d.sync += [o_pa.eq(new_a), o_pb.eq(new_b)]
                 with m.Else():
                     m.d.sync += [pmax.eq(new_max), pts.eq(new_ts), below.eq(below_n),
                                  plen.eq(len_n)]
+                    if D:
+                        m.d.sync += [pa_c.eq(new_a), pb_c.eq(new_b)]
         m.d.comb += [
             self.o.valid.eq(o_valid),
             self.o.payload.amplitude.eq(o_amp),
             self.o.payload.timestamp.eq(o_ts),
         ]
+        if D:
+            late = o_pa >= o_pb
+            m.d.comb += [self.o.payload.partner.eq(Mux(late, o_pa, o_pb)),
+                         self.o.payload.partner_late.eq(late)]
         return m

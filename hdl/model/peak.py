@@ -13,7 +13,8 @@ import copy
 import numpy as np
 
 from dsp.jit import njit_cached
-from dsp.peak import PeakParams, PeakResult, PeakState, peak_search_float, peak_search_numpy
+from dsp.peak import (PeakParams, PeakResult, PeakState, peak_search_float, peak_search_numpy,
+                      search_with_partner)
 
 __all__ = ["PeakParams", "PeakState", "PeakResult", "peak_search", "peak_search_numpy",
            "peak_search_float"]
@@ -38,19 +39,23 @@ def peak_search(env, params: PeakParams, state: PeakState | None = None
     env = np.asarray(env)
     if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
         raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
-    return _search_compiled(np.ascontiguousarray(env, dtype=np.int64), params, state)
+    return search_with_partner(np.ascontiguousarray(env, dtype=np.int64), params, state,
+                               lambda c, st, a, b: _search_compiled(c, params, st, a, b))
 
 
 # -- implementation ------------------------------------------------------------------------
 @njit_cached(nogil=True)
 def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
                    block_log2, clip_log2, smooth_log2, thr_mult, thr_frac, thr_min, hold, max_len,
-                   clip_to_floor, thr, amp, imax, iend):
+                   clip_to_floor, ahead, behind, pa, pb, thr, amp, imax, iend, pa_out, pb_out):
     """The integer search, one sample at a time (the module docstring's algorithm as
     written). Writes the per-sample threshold to ``thr`` and the pulses to ``amp``/``imax``/
     ``iend`` (capacity ``len(e) // 2 + 1``: a pulse needs two samples, and one may be carried
-    in); returns their count and the new state."""
+    in); returns their count and the new state. With the pair-partner readout (``ahead``
+    and ``behind`` as long as ``e``, else empty) the open pulse's ``pa``/``pb`` follow its
+    max and go to ``pa_out``/``pb_out``."""
     N = e.shape[0]
+    partner = ahead.shape[0] == N and N > 0
     mask = (np.int64(1) << block_log2) - 1
     inf = np.int64(1) << np.int64(62)
     b = n >> block_log2
@@ -74,10 +79,16 @@ def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
                 nmax = n
                 below = 0
                 length = 1
+                if partner:
+                    pa = ahead[j]
+                    pb = behind[j]
         else:
             if x > pmax:
                 pmax = x
                 nmax = n
+                if partner:
+                    pa = ahead[j]
+                    pb = behind[j]
             if x >= T:
                 below = 0
             else:
@@ -87,6 +98,8 @@ def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
                 amp[cnt] = pmax
                 imax[cnt] = nmax
                 iend[cnt] = n
+                pa_out[cnt] = pa
+                pb_out[cnt] = pb
                 cnt += 1
                 is_open = False
         if (n & mask) == mask:   # block complete: new floor, threshold of the next block
@@ -97,10 +110,10 @@ def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
             T = max(thr_min, (nu * thr_mult) >> thr_frac)
             clip = nu << clip_log2
         n += 1
-    return cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length
+    return cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length, pa, pb
 
 
-def _search_compiled(e, p: PeakParams, state):
+def _search_compiled(e, p: PeakParams, state, ahead=None, behind=None):
     """:func:`_search` (integer) via :func:`_search_kernel`."""
     st = copy.copy(state) if state is not None else PeakState()
     N = e.size
@@ -109,19 +122,30 @@ def _search_compiled(e, p: PeakParams, state):
     amp = np.empty(cap, dtype=np.int64)
     imax = np.empty(cap, dtype=np.int64)
     iend = np.empty(cap, dtype=np.int64)
-    (cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length) = _search_kernel(
+    pa_out = np.zeros(cap, dtype=np.int64)
+    pb_out = np.zeros(cap, dtype=np.int64)
+    partner = ahead is not None
+    none = np.zeros(0, dtype=np.int64)
+    (cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length, pa, pb) = _search_kernel(
         e, int(st.n), int(st.nu), int(st.bsum), bool(st.open), int(st.start), int(st.pmax),
         int(st.nmax), int(st.below), int(st.length), p.block_log2, p.clip_log2,
         p.smooth_log2, p.thr_mult, p.thr_frac, p.thr_min, p.hold, p.max_len,
-        bool(p.clip_to_floor), thr, amp, imax, iend)
+        bool(p.clip_to_floor), ahead.astype(np.int64) if partner else none,
+        behind.astype(np.int64) if partner else none, int(st.pa), int(st.pb),
+        thr, amp, imax, iend, pa_out, pb_out)
     st.n, st.nu, st.bsum, st.open = int(n), int(nu), int(bsum), bool(is_open)
     if st.open:
         st.start, st.pmax, st.nmax = int(start), int(pmax), int(nmax)
         st.below, st.length = int(below), int(length)
+        st.pa, st.pb = int(pa), int(pb)
     else:  # canonical closed state, so equal histories give equal states
         st.start = st.nmax = st.below = st.length = 0
-        st.pmax = 0
+        st.pmax = st.pa = st.pb = 0
     index = imax[:cnt].copy()
     ts = (index * np.int64(p.ts_step)) & np.int64((1 << p.ts_bits) - 1)
-    return PeakResult(amplitude=amp[:cnt].copy(), timestamp=ts, index=index,
-                      end_index=iend[:cnt].copy(), thresholds=thr), st
+    res = PeakResult(amplitude=amp[:cnt].copy(), timestamp=ts, index=index,
+                     end_index=iend[:cnt].copy(), thresholds=thr)
+    if partner:
+        a, b = pa_out[:cnt], pb_out[:cnt]
+        res.partner, res.partner_late = np.maximum(a, b), a >= b
+    return res, st

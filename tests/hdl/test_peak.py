@@ -89,13 +89,19 @@ def _run_sim(p, e, in_valid=None, dut=None, **kw):
 
 
 def _check_sim(p, e, in_valid=None):
-    res, amp, ts = _run_sim(p, e, in_valid)
+    res = run_stream(PeakSearch(p), e, in_valid=in_valid, flush_cycles=p.latency + 2)
+    f = unpack_fields(res.words, p.out_layout)
     ref, _ = peak_search(e, p)
-    np.testing.assert_array_equal(amp, ref.amplitude)
-    np.testing.assert_array_equal(ts, ref.timestamp)
-    # Emitted params.latency cycles after the closing sample's input transfer.
+    np.testing.assert_array_equal(f["amplitude"], ref.amplitude)
+    np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
+    if p.partner_offset:
+        np.testing.assert_array_equal(f["partner"], ref.partner)
+        np.testing.assert_array_equal(f["partner_late"], ref.partner_late)
+    # Emitted params.latency cycles after the input transfer of the closing sample (of the
+    # sample partner_offset later with the pair-partner readout).
     in_cycles = np.arange(e.size) if in_valid is None else np.flatnonzero(in_valid)[:e.size]
-    np.testing.assert_array_equal(res.cycles, in_cycles[ref.end_index] + p.latency)
+    np.testing.assert_array_equal(res.cycles,
+                                  in_cycles[ref.end_index + p.partner_offset] + p.latency)
     return ref
 
 
@@ -128,6 +134,8 @@ def test_sim_matches_model_realistic_quick():
     dict(block_log2=6, smooth_log2=0, clip_log2=0, thr_mult=5, thr_frac=0),
     dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12),
     dict(block_log2=5, smooth_log2=3, clip_to_floor=True, thr_mult=52),  # censored floor
+    dict(block_log2=5, hold=3, max_len=24, partner_offset=7),            # pair partner
+    dict(block_log2=3, hold=2, max_len=7, partner_offset=1),
 ])
 def test_sim_matches_model_variants(kw):
     p = PeakParams(**kw)
@@ -145,6 +153,15 @@ def test_gaps_in_valid():
     # Bursty valid too: long gaps, then back to back.
     valid = np.repeat(rng.random(900) < 0.5, 10)
     _check_sim(SMALL, e, valid)
+
+
+def test_gaps_in_valid_with_partner_readout():
+    rng = np.random.default_rng(213)
+    e = realistic_envelope(rng, 3000)
+    p = PeakParams(block_log2=5, hold=3, max_len=24, partner_offset=12)
+    ref = _check_sim(p, e, rng.random(9000) < 0.35)
+    _check_sim(p, e, np.repeat(rng.random(900) < 0.5, 10))
+    assert ref.partner_late.any() and not ref.partner_late.all()
 
 
 def test_pulse_spanning_block_boundary():
@@ -202,6 +219,61 @@ def test_reset_mid_run():
                           writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)])
     np.testing.assert_array_equal(amp, np.concatenate((ref1.amplitude, ref2.amplitude)))
     np.testing.assert_array_equal(ts, np.concatenate((ref1.timestamp, ref2.timestamp)))
+
+
+@pytest.mark.parametrize("D", [5, 40])
+def test_reset_mid_run_with_partner_readout(D):
+    """After a clear the delay line's old words are not behind values: 0 until 2D new
+    samples are in (the memory itself is not reset)."""
+    p = PeakParams(block_log2=5, hold=3, max_len=24, partner_offset=D)
+    rng = np.random.default_rng(214)
+    e1 = realistic_envelope(rng, 700)
+    e1[-40 - 2 * D:] = 150  # no pulse open when the clear comes; these stay in the memory
+    e2 = realistic_envelope(rng, 900)
+    e2[33:36] = 3000        # a pulse in the first block after the clear, whose behind
+    e2[36:36 + 2 * D] = 5   # value (D = 40: before the clear) must read 0, not 150
+    ref1, st1 = peak_search(e1, p)
+    assert not st1.open
+    ref2, _ = peak_search(e2, p)
+    valid = np.concatenate((np.ones(e1.size, bool), np.zeros(30, bool)))
+    c = e1.size + 15
+    dut = WithClear(PeakSearch(p))
+    res = run_stream(dut, np.concatenate((e1, e2)), in_valid=valid, flush_cycles=p.latency + 2,
+                     writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)])
+    f = unpack_fields(res.words, p.out_layout)
+    for k in ("amplitude", "timestamp", "partner", "partner_late"):
+        np.testing.assert_array_equal(f[k], np.concatenate((getattr(ref1, k), getattr(ref2, k))))
+
+
+@pytest.mark.parametrize("D, kw", [(60, {}), (3, dict(block_log2=3, hold=2, max_len=7)),
+                                   (150, dict(block_log2=6, clip_to_floor=True))])
+def test_partner_readout_model(D, kw):
+    """The pulses are those of the search without the readout (less the ones whose sample
+    D later has not arrived); partner = max(e[n_max + D], e[n_max - D]) (0 before the
+    start); the compiled and the numpy models agree, in one run and in chunks."""
+    p = PeakParams(partner_offset=D, **kw)
+    e = realistic_envelope(np.random.default_rng(215), 30_000)
+    e[9000:9500] = 4000
+    r, _ = peak_search(e, p)
+    plain, _ = peak_search(e, PeakParams(**kw))
+    done = plain.end_index + D < e.size
+    np.testing.assert_array_equal(r.amplitude, plain.amplitude[done])
+    np.testing.assert_array_equal(r.index, plain.index[done])
+    ahead = np.concatenate([e, np.zeros(D, e.dtype)])[r.index + D]
+    behind = np.concatenate([np.zeros(D, e.dtype), e])[r.index]
+    np.testing.assert_array_equal(r.partner, np.maximum(ahead, behind))
+    np.testing.assert_array_equal(r.partner_late, ahead >= behind)
+    cuts = np.sort(np.random.default_rng(216).integers(0, e.size, 40))
+    for fn in (peak_search, peak_search_numpy):
+        st, parts = None, []
+        for c0, c1 in zip(np.r_[0, cuts], np.r_[cuts, e.size]):
+            rr, st = fn(e[c0:c1], p, st)
+            parts.append(rr)
+        for k in ("amplitude", "index", "end_index", "partner", "partner_late"):
+            np.testing.assert_array_equal(np.concatenate([getattr(x, k) for x in parts]),
+                                          getattr(r, k), err_msg=f"{fn.__name__} {k}")
+    f, _ = peak_search_float(e.astype(np.float64), p)
+    assert f.partner.size and np.all(f.partner >= 0)
 
 
 # -- model ---------------------------------------------------------------------------------
@@ -329,6 +401,7 @@ def test_model_rejects_bad_input():
     (dict(thr_min=-1), r"peak thr_min must be an integer in \[0, 524287\], not -1"),
     (dict(smooth_log2=2.0), r"peak smooth_log2 must be an integer in \[0, 16\], not 2.0"),
     (dict(clip_to_floor=1), r"peak clip_to_floor must be True or False, not 1"),
+    (dict(partner_offset=-1), r"peak partner_offset must be an integer in \[0, 4096\], not -1"),
 ])
 def test_bad_params(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -424,3 +497,22 @@ def test_censored_floor_is_not_lifted_by_a_burst_of_pulses():
         rise[to_floor] = res.thresholds[after].mean() / res.thresholds[quiet].mean() - 1
     assert rise[False] > 0.08                  # clipped: the burst lifts the threshold ...
     assert abs(rise[True]) < 0.3 * rise[False]  # ... censored: much less
+
+
+#: The pair-partner readout (TACAN X mode: 12 us of 5 MHz envelope samples) with Verilator.
+VL_PARTNER = PeakParams(partner_offset=60)
+
+
+@needs_verilator
+def test_verilator_matches_model_partner_readout():
+    sim = verilator_sim(PeakSearch(VL_PARTNER), "peak_search_partner_vl")
+    p = VL_PARTNER
+    e, valid = _vl_stimulus(np.random.default_rng(243), 200_000, 0.7)
+    res = sim.run(e, in_valid=valid, flush_cycles=p.latency + 2)
+    f = unpack_fields(res.words, p.out_layout)
+    ref, _ = peak_search(e, p)
+    assert ref.amplitude.size > 1000
+    for k in ("amplitude", "timestamp", "partner", "partner_late"):
+        np.testing.assert_array_equal(f[k], getattr(ref, k))
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
+        ref.end_index + p.partner_offset] + p.latency)
