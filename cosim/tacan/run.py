@@ -23,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -32,6 +32,8 @@ from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
+from dsp.tacan.decode import DecoderConfig
+from dsp.tacan.standard import pair_spacing_s
 from dsp.tacan.fifo_rx import receive_words
 from ..link import ControlPath, DspServiceConfig
 from .signal import TacanSignalConfig, generate
@@ -110,6 +112,12 @@ class TacanRunConfig:
                 "(pulses do not lift it; threshold 3.25x for the same noise-only false-alarm "
                 "rate; see dsp.tacan.frontend.NOISE_FLOORS)",
         "choices": tuple(NOISE_FLOORS), "case": "lower"})
+    amplitude: str = field(default="peak", metadata={
+        "help": "what the FPGA reports as a pulse's amplitude: its peak, or the envelope at "
+                "its pair partner (12 us away in X mode, 30 us in Y; not the noise that made "
+                "the detection, so not censored by the threshold near the noise floor; the "
+                "DSP then measures every pulse outside the bursts below ~1 dB)",
+        "choices": ("peak", "partner"), "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
     service: DspServiceConfig = field(default_factory=DspServiceConfig)
@@ -143,6 +151,8 @@ class TacanRunConfig:
         if self.noise_floor != "clipped" and "peak" in dict(self.frontend_changes):
             raise ValueError("noise_floor chooses the peak detector's parameters: give it or "
                              "a 'peak' in frontend_changes, not both")
+        if self.amplitude not in ("peak", "partner"):
+            raise ValueError(f"amplitude must be 'peak' or 'partner', not {self.amplitude!r}")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
@@ -196,7 +206,11 @@ class TacanRunConfig:
         changes = dict(self.frontend_changes)
         if self.noise_floor != "clipped":
             changes["peak"] = NOISE_FLOORS[self.noise_floor]
-        return FrontendConfig.for_signal(self.signal, **changes)
+        cfg = FrontendConfig.for_signal(self.signal, **changes)
+        if self.amplitude == "partner":     # the pair spacing in envelope samples
+            d = int(round(pair_spacing_s(self.signal.mode) * cfg.env_rate_hz))
+            cfg = replace(cfg, peak=replace(cfg.peak, partner_offset=d))
+        return cfg
 
     @property
     def hdl_params(self):
@@ -213,7 +227,10 @@ class TacanRunConfig:
                                      "kalman": self.kalman, "tick_hz": float(self.signal.fs_hz)})
         else:
             k = self.kalman
-        return ReceiverConfig(mode=self.signal.mode, kalman=k)
+        dec = None
+        if self.amplitude == "partner":
+            dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
+        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec)
 
 
 @dataclass
@@ -369,8 +386,8 @@ def _digest(*arrays) -> str:
 def frontend_key(run: TacanRunConfig) -> tuple:
     """What a front end's output depends on: runs with equal keys on the same samples get
     the same :class:`FrontendOutput` (the DSP side may differ)."""
-    return (run.backend, run.signal, run.noise_floor, run.frontend_changes, run.hdl_changes,
-            run.service,
+    return (run.backend, run.signal, run.noise_floor, run.amplitude, run.frontend_changes,
+            run.hdl_changes, run.service,
             run.control_writes, run.control_latency_cycles)
 
 

@@ -98,6 +98,17 @@ class DecoderConfig:
     #: decoded bursts are on average more than this complete (measured: 0.99 at 6 dB, 270
     #: deg; 0.82 at 6 dB, 90 deg; 0.58 at 3 dB, 90 deg; 0.68 at 0 dB, 270 deg).
     burst_complete_min: float = 0.7
+    #: Every pulse outside the reference bursts is a measurement, not only those of
+    #: complete pairs, when fewer than this fraction of them are paired (0: never). For
+    #: amplitudes that are the pair partner's envelope (``python -m cosim tacan --amplitude
+    #: partner``), whose noise is not the one that made the detection: a pair qualification
+    #: selects on the partner's noise again. The noise peaks among the single pulses read
+    #: noise, at a constant rate (the modulation depth is diluted, the bearing not biased).
+    #: The paired fraction measures the SNR whatever the bearing (golden chain, 2 s: 0.08 at
+    #: -3 dB, 0.31 at 0 dB, 0.50 at 2 dB, 0.59 at 3 dB, 0.80 at 6 dB, 0.91 at 10 dB); single
+    #: pulses were better at 0 dB (RMSE 0.56 / 0.62 deg against 0.83 / 1.22 at 90 / 270 deg)
+    #: and worse at 3 dB (0.46 against 0.28 at 90 deg).
+    single_pulses_below: float = 0.0
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -112,6 +123,9 @@ class DecoderConfig:
             raise ValueError(f"decoder acquire must be True or False, not {self.acquire!r}")
         if not 0 <= self.acquire_below <= 1:
             raise ValueError(f"decoder acquire_below must be in [0, 1], not {self.acquire_below}")
+        if not 0 <= self.single_pulses_below <= 1:
+            raise ValueError(f"decoder single_pulses_below must be in [0, 1], not "
+                             f"{self.single_pulses_below}")
         if not 0 <= self.burst_complete_min <= 1:
             raise ValueError(f"decoder burst_complete_min must be in [0, 1], not "
                              f"{self.burst_complete_min}")
@@ -292,7 +306,7 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
             # burst's pulses are not: its template positions catch noise peaks too (their
             # amplitudes sit at the threshold), at one 135 Hz phase (measured at 0 dB,
             # bearing 90 deg, 8 records: RMSE 2.74 -> 0.87 deg without them).
-            mask = (fwd | back) & ~_in_bursts(t, acq.ref_t, acq.kinds, main_off, aux_off)
+            mask = _measurements(t, fwd | back, acq.ref_t, acq.kinds, main_off, aux_off, cfg)
             return Decoded(acq.ref_t, acq.kinds, sc, acq.done, mask, n_off,
                            n_wrong_mode=n_wrong_mode,
                            n_inferred_main=int(np.count_nonzero(acq.kinds == REF_MAIN)),
@@ -308,10 +322,19 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
             # pulses over the threshold: its pulses' amplitudes are biased up, at one 135
             # Hz phase (bearing 90 deg, 3 dB, 8 records: mean error -0.23 -> -0.13 deg,
             # RMSE 0.34 -> 0.25 deg without them). The pairs outside the bursts remain.
-            mask = (fwd | back) & ~_in_bursts(t, ref_t, kinds, main_off, aux_off)
+            mask = _measurements(t, fwd | back, ref_t, kinds, main_off, aux_off, cfg)
             near_floor = True
     return Decoded(ref_t, kinds, scores, done, mask, n_off, n_wrong_mode=n_wrong_mode,
                    rotation_hz=f_est, near_floor=near_floor, **info)
+
+
+def _measurements(t, paired, ref_t, kinds, main_off, aux_off, cfg: DecoderConfig):
+    """Near the noise floor: the pulses outside the bursts, those of complete pairs unless
+    fewer than ``cfg.single_pulses_below`` of them are paired."""
+    out = ~_in_bursts(t, ref_t, kinds, main_off, aux_off)
+    if out.any() and np.mean(paired[out]) < cfg.single_pulses_below:
+        return out
+    return paired & out
 
 
 def _in_bursts(t, ref_t, kinds, main_off, aux_off):

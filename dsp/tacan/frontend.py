@@ -205,8 +205,11 @@ class GoldenFrontend:
         env = self.envelope(codes)
         res, self.peak_state = peak_search_float(env, self.cfg.peak, self.peak_state,
                                                  thr_min=self.cfg.thr_min_fs)
+        # with the pair-partner readout, the FPGA reports the partner's envelope as the
+        # amplitude (hdl.tacan.frontend)
+        amp = res.partner if self.cfg.peak.partner_offset else res.amplitude
         return Peaks(timestamps=np.asarray(res.index, np.int64) * self.cfg.decimation,
-                     amplitudes=np.asarray(res.amplitude, np.float64), fs_hz=self.cfg.fs_hz)
+                     amplitudes=np.asarray(amp, np.float64), fs_hz=self.cfg.fs_hz)
 
 
 def run_golden_frontend(samples: np.ndarray, cfg: FrontendConfig, adc_bits: int) -> Peaks:

@@ -4,7 +4,7 @@ Parameters, word lengths and the bit-exact model are in :mod:`hdl.tacan.model`.
 """
 from __future__ import annotations
 
-from amaranth.hdl import Module, signed, unsigned
+from amaranth.hdl import Cat, Module, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -82,7 +82,11 @@ class TacanFrontEnd(wiring.Component):
         wiring.connect(m, env.o, peak.i)
         # Adapter: the FIFO stores raw bits; the peak's struct is packed as it lays it out
         # (amplitude at the LSB), which is the documented word format.
-        m.d.comb += [fifo.i.valid.eq(peak.o.valid), fifo.i.payload.eq(peak.o.payload.as_value())]
+        if p.peak.partner_offset:   # the pair partner's envelope is the amplitude reported
+            pay = Cat(peak.o.payload.partner, peak.o.payload.timestamp)
+        else:
+            pay = peak.o.payload.as_value()
+        m.d.comb += [fifo.i.valid.eq(peak.o.valid), fifo.i.payload.eq(pay)]
         wiring.connect(m, fifo.o, wiring.flipped(self.o))
         m.d.comb += self.overflow_count.eq(fifo.overflow_count)
         return m

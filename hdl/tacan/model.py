@@ -213,7 +213,8 @@ class TacanFrontendParams:
                                clip_log2=pk.clip_log2, smooth_log2=pk.smooth_log2,
                                clip_to_floor=pk.clip_to_floor, thr_mult=pk.thr_mult, thr_frac=pk.thr_frac,
                                thr_min=min(thr_min, (1 << env.out_width) - 1),
-                               hold=pk.hold, max_len=pk.max_len)
+                               hold=pk.hold, max_len=pk.max_len,
+                               partner_offset=pk.partner_offset)
         b["fifo"] = FifoParams(width=env.out_width + self.ts_bits, depth=self.fifo_depth,
                                count_width=self.fifo_count_bits, parity=self.fifo_parity)
         if self.check_headroom:
@@ -426,9 +427,11 @@ class TacanFrontendState:
 class FrontendPeaks:
     """Peaks as the hardware reports them (before the FIFO).
 
-    amplitudes : int64 envelope LSBs; timestamps : int64 ADC ticks, unwrapped
-    (``timestamps mod 2**ts_bits`` is the hardware field); index / end_index : envelope
-    sample of the peak / of the sample that closed the pulse.
+    amplitudes : int64 envelope LSBs (the peak's, or with the pair-partner readout the
+    partner's envelope, as the FIFO word carries it); timestamps : int64 ADC ticks,
+    unwrapped (``timestamps mod 2**ts_bits`` is the hardware field); index / end_index :
+    envelope sample of the peak / whose arrival emits the pulse (the closing sample,
+    ``partner_offset`` later with the readout).
     """
 
     amplitudes: np.ndarray
@@ -644,9 +647,9 @@ class TacanFrontendModel:
             e, st = self.envelope(x[c0:c0 + self.CHUNK], st, freq_changes=changes)
             res, pk = peak_search(e, p.peak, st.peak)
             st.peak = pk
-            amps.append(res.amplitude)
+            amps.append(res.partner if p.peak.partner_offset else res.amplitude)
             idx.append(res.index)
-            end.append(res.end_index)
+            end.append(res.end_index + p.peak.partner_offset)
         index = np.concatenate(idx).astype(np.int64)
         peaks = FrontendPeaks(amplitudes=np.concatenate(amps).astype(np.int64),
                               timestamps=index * np.int64(p.peak.ts_step),

@@ -73,3 +73,20 @@ def test_minus_3_db_gives_no_misleading_bearing():
     assert not np.any(tr.valid[0] & (err > 20))
     off = process_peaks(t, a, ReceiverConfig(flag_coarse_sigma_deg=None))
     assert np.any(off.valid[0] & (np.abs(wrap_deg(off.bearing_deg[0] - 270.0)) > 20))
+
+
+@pytest.mark.slow
+def test_partner_amplitude_removes_most_of_the_zero_db_error():
+    """0 dB, 270 deg, seeds 100-101, 3 s: the detector's peak amplitudes are censored by its
+    threshold (only pulses that noise lifted over 3x the floor pass), the pair partner's
+    envelope is not. Measured: RMSE 1.86 / 1.12 deg with the peaks, 0.70 / 0.55 with the
+    partner; mean error +1.80 / +1.09 -> +0.60 / +0.46 deg."""
+    out = {}
+    for amp in ("peak", "partner"):
+        rs = [run_tacan(TacanRunConfig(signal=TacanSignalConfig(
+            bearing_deg=270.0, snr_db=0.0, duration_s=3.0, seed=k), amplitude=amp))
+            for k in (100, 101)]
+        out[amp] = (np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in rs])),
+                    np.mean([r["mean_error_deg"] for r in rs]))
+    assert out["partner"][0] < 0.5 * out["peak"][0]
+    assert abs(out["partner"][1]) < 0.6 * abs(out["peak"][1])
