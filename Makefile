@@ -51,6 +51,7 @@ bench: setup  ## run every benchmark but suite-time (~4 h on 2 cores); results g
 	$(PY) -m cosim bench dsp-hour
 	$(PY) -m cosim bench tacan-accuracy
 	$(PY) -m cosim bench tacan-robustness
+	$(PY) -m cosim bench tacan-detector
 	$(PY) -m cosim bench gnss-speed
 	$(PY) -m cosim bench gnss-tracking
 	$(PY) -m cosim bench aukf

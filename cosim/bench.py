@@ -5,6 +5,9 @@ golden front end -> Kalman DSP) versus SNR at 90 and 270 degrees, and over every
 0-359 (1 degree steps) at 10 dB, with the Cramer-Rao bound for the filter's memory; plus
 the same bearing sweep on the pulse-level fast path at 10/15/20 dB over several seeds,
 looking for 40-degree sector slips.
+
+``tacan-detector``: the pulse detector's options near the noise floor (``--amplitude
+partner``, ``--noise-floor censored``) against the default, 0-3 dB, 90 and 270 deg.
 """
 from __future__ import annotations
 
@@ -78,9 +81,10 @@ def _one_run(kw: dict) -> dict:
     from .tacan.signal import Multipath, TacanSignalConfig
     kw = dict(kw)
     echo = kw.pop("multipath", None)
+    opts = {k: kw.pop(k) for k in ("amplitude", "noise_floor") if k in kw}
     sig = TacanSignalConfig(**kw, multipath=None if echo is None else Multipath(**echo))
     try:
-        r = run_tacan(TacanRunConfig(signal=sig, backend="golden"))
+        r = run_tacan(TacanRunConfig(signal=sig, backend="golden", **opts))
         r["locked"] = True
     except RuntimeError:  # no reference decoded: the receiver has no bearing (counted)
         r = {"locked": False, "snr_db": kw["snr_db"], "rmse_deg": None, "mean_error_deg": None,
@@ -342,6 +346,60 @@ def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) ->
     return summary
 
 
+#: The detector variants of ``tacan-detector``: (label, TacanRunConfig options).
+DETECTOR_VARIANTS = (("default (peak, clipped floor)", {}),
+                     ("--amplitude partner", {"amplitude": "partner"}),
+                     ("--noise-floor censored", {"noise_floor": "censored"}),
+                     ("both", {"amplitude": "partner", "noise_floor": "censored"}))
+
+
+def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
+    """RMSE / CRB and mean error of the detector variants near the noise floor (golden
+    chain, 3 s records, the same seeds for every variant)."""
+    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.receiver import crb_deg
+    from .tacan.signal import TacanSignalConfig
+    t_start = time.perf_counter()
+    snrs = (0.0, 3.0) if quick else (0.0, 1.0, 2.0, 3.0)
+    seeds = range(100, 101 if quick else 104)
+    items = [dict(bearing_deg=b, snr_db=s, duration_s=3.0, seed=k, **opt)
+             for s in snrs for b in (90.0, 270.0) for _, opt in DETECTOR_VARIANTS for k in seeds]
+    runs = _map(jobs, _one_run, items, "detector variants")
+    n = len(seeds)
+    kc = KalmanConfig()
+    rows, i = [], 0
+    for s in snrs:
+        crb = crb_deg(TacanSignalConfig(snr_db=s).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
+        for b in (90.0, 270.0):
+            for label, opt in DETECTOR_VARIANTS:
+                p = _pool(runs[i:i + n])
+                i += n
+                rows.append({"snr_db": s, "bearing_deg": b, "variant": label, **p, "crb_deg": crb,
+                             "rmse_over_crb": p["rmse_deg"] / crb if p["rmse_deg"] is not None
+                             else None})
+    summary = {"benchmark": "tacan-detector", "machine": machine_info(), "quick": quick,
+               "elapsed_s": time.perf_counter() - t_start, "seeds": list(seeds), "rows": rows}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tacan_detector.json").write_text(json.dumps(summary, indent=1))
+    m = summary["machine"]
+    f = lambda v, fmt: "-" if v is None else format(v, fmt)
+    lines = [f"TACAN detector options near the noise floor, golden chain (`{m['command']}`, "
+             f"{m['date']}, {m['cpu']}, commit {m['commit']}, {summary['elapsed_s']:.0f} s); "
+             f"{n} records of 3 s per point (seeds {seeds[0]}-{seeds[-1]}), RMSE / CRB and mean "
+             f"error (deg) of all bearings after 1 s", "",
+             "| SNR dB | bearing | CRB deg | " + " | ".join(v for v, _ in DETECTOR_VARIANTS) + " |",
+             "|---:|---:|---:|" + "---|" * len(DETECTOR_VARIANTS)]
+    for j in range(0, len(rows), len(DETECTOR_VARIANTS)):
+        g = rows[j:j + len(DETECTOR_VARIANTS)]
+        cells = [f"{f(r['rmse_over_crb'], '.2f')}x, {f(r['mean_error_deg'], '+.2f')}"
+                 + ("" if r["locked"] == r["trials"] else f" ({r['locked']}/{r['trials']})")
+                 for r in g]
+        lines.append(f"| {g[0]['snr_db']:g} | {g[0]['bearing_deg']:g} | {g[0]['crb_deg']:.3f} | "
+                     + " | ".join(cells) + " |")
+    (out / "tacan_detector.md").write_text("\n".join(lines) + "\n")
+    return summary
+
+
 def _dsp_speed(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     from .bench_dsp import dsp_speed
     return dsp_speed(out, quick=quick)
@@ -398,6 +456,7 @@ def _aukf_convergence(out: Path, quick: bool = False, jobs: int | None = None) -
 
 
 BENCHMARKS = {"tacan-accuracy": tacan_accuracy, "tacan-robustness": tacan_robustness,
+              "tacan-detector": tacan_detector,
               "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
               "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,
