@@ -100,8 +100,12 @@ def _pool(rows: list, key: str = "rmse_deg") -> dict:
     locked trials among ``rows``, and the median time to the first valid bearing."""
     ok = [r for r in rows if r["locked"] and r["rmse_deg"] is not None]
     ttfb = [r["first_valid_bearing_s"] for r in rows if r.get("first_valid_bearing_s") is not None]
+    okv = [r for r in ok if r.get("valid_rmse_deg") is not None]
     out = {"trials": len(rows), "locked": len(ok), "rmse_deg": None, "mean_error_deg": None,
            "max_abs_error_deg": None,
+           "valid_rmse_deg": float(np.sqrt(np.mean([r["valid_rmse_deg"] ** 2 for r in okv])))
+           if okv else None,
+           "misleading_bearings": int(sum(r.get("misleading_bearings", 0) for r in ok)),
            "first_valid_bearing_s": float(np.median(ttfb)) if ttfb else None,
            "valid_trials": len(ttfb)}
     if ok:
@@ -189,13 +193,28 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                                         seed=3000 + int(b)) for b in b0], "bearing sweep (IF, 0 dB)")
     rows0 = [{"bearing_deg": r["bearing_deg"], "locked": r["locked"], "rmse_deg": r["rmse_deg"],
               "mean_error_deg": r["mean_error_deg"], "max_abs_error_deg": r["max_abs_error_deg"],
-              "first_valid_bearing_s": r.get("first_valid_bearing_s")} for r in sweep0]
+              "first_valid_bearing_s": r.get("first_valid_bearing_s"),
+              "valid_rmse_deg": r.get("valid_rmse_deg"),
+              "misleading_bearings": r.get("misleading_bearings")} for r in sweep0]
     p0 = _pool(sweep0)
     sweep_0db = {**p0, "bearings": int(b0.size), "step_deg": step0, "duration_s": 2.0,
                  "crb_deg": crb0,
                  "rmse_over_crb": p0["rmse_deg"] / crb0 if p0["rmse_deg"] is not None else None,
                  "within_2x_crb": int(sum(r["rmse_deg"] <= 2 * crb0 for r in rows0 if r["locked"])),
                  "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in rows0 if r["locked"]))}
+    # the same with the pair-partner amplitude (--amplitude partner)
+    sweep0p = _map(jobs, _one_run, [dict(bearing_deg=float(b), snr_db=0.0, duration_s=2.0,
+                                         seed=3000 + int(b), amplitude="partner") for b in b0],
+                   "bearing sweep (IF, 0 dB, --amplitude partner)")
+    p0p = _pool(sweep0p)
+    sweep_0db_partner = {**p0p, "bearings": int(b0.size), "step_deg": step0, "duration_s": 2.0,
+                         "crb_deg": crb0, "amplitude": "partner",
+                         "rmse_over_crb": p0p["rmse_deg"] / crb0 if p0p["rmse_deg"] is not None
+                         else None,
+                         "within_2x_crb": int(sum(r["rmse_deg"] <= 2 * crb0 for r in sweep0p
+                                                  if r["locked"])),
+                         "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in sweep0p
+                                                 if r["locked"]))}
     robust = _robustness(quick, jobs)
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.
@@ -229,6 +248,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                                   "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in locked))},
         "bearing_sweep_pulse_level": pl_rows,
         "bearing_sweep_if_0db": sweep_0db,
+        "bearing_sweep_if_0db_partner": sweep_0db_partner,
         "robustness_10db": robust,
     }
     out.mkdir(parents=True, exist_ok=True)
@@ -284,14 +304,15 @@ def _accuracy_markdown(s: dict) -> str:
     lines = [f"TACAN bearing accuracy, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
              f"commit {m['commit']}, {s['elapsed_s']:.0f} s)", "",
              "| SNR dB | bearing | locked | RMSE deg | mean err deg | max err deg | CRB deg | RMSE/CRB "
-             "| first valid bearing s (median) |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| first valid bearing s (median) | valid-only RMSE deg | misleading |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
     for r in s["snr_sweep"]:
         lines.append(f"| {r['snr_db']:g} | {r['bearing_deg']:g} | {r['locked']}/{r['trials']} | "
                      f"{f(r['rmse_deg'], '.3f')} | {f(r['mean_error_deg'], '+.3f')} | "
                      f"{f(r['max_abs_error_deg'], '.3f')} | {r['crb_deg']:.3f} | {f(r['rmse_over_crb'], '.2f')} "
-                     f"| {f(r['first_valid_bearing_s'], '.2f')} |")
+                     f"| {f(r['first_valid_bearing_s'], '.2f')} | {f(r.get('valid_rmse_deg'), '.3f')} "
+                     f"| {r.get('misleading_bearings', '-')} |")
     b = s["bearing_sweep_if_10db"]
     lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB (IF chain, "
               f"{b['duration_s']:g} s each, {b['locked']}/{b['bearings']} locked): "
@@ -302,15 +323,21 @@ def _accuracy_markdown(s: dict) -> str:
     for r in s["bearing_sweep_pulse_level"]:
         lines.append(f"| {r['snr_db']:g} | {r['bearings']} x {r['seeds']} | {r['rmse_deg']:.3f} | "
                      f"{r['max_abs_error_deg']:.3f} | {r['crb_deg']:.3f} |")
-    z = s.get("bearing_sweep_if_0db")
-    if z is not None:
-        lines += ["", f"Every bearing 0-359 deg in {z['step_deg']} deg steps at 0 dB (IF chain, "
-                  f"{z['duration_s']:g} s each): a bearing at {z['locked']}/{z['bearings']}, "
-                  f"RMSE {f(z['rmse_deg'], '.3f')} deg ({f(z['rmse_over_crb'], '.2f')} x the bound "
-                  f"{z['crb_deg']:.3f}), within 2x the bound at {z['within_2x_crb']}, mean error "
-                  f"{f(z['mean_error_deg'], '+.3f')} deg, worst {f(z['max_abs_error_deg'], '.3f')} deg, "
-                  f"sector slips {z['sector_slips']}, first valid bearing (median) "
-                  f"{f(z['first_valid_bearing_s'], '.2f')} s."]
+    for key, what in (("bearing_sweep_if_0db", ""),
+                      ("bearing_sweep_if_0db_partner", " with `--amplitude partner`")):
+        z = s.get(key)
+        if z is None:
+            continue
+        lines += ["", f"Every bearing 0-359 deg in {z['step_deg']} deg steps at 0 dB{what} "
+                  f"(IF chain, {z['duration_s']:g} s each): a bearing at "
+                  f"{z['locked']}/{z['bearings']}, RMSE {f(z['rmse_deg'], '.3f')} deg "
+                  f"({f(z['rmse_over_crb'], '.2f')} x the bound {z['crb_deg']:.3f}), within 2x "
+                  f"the bound at {z['within_2x_crb']}, mean error "
+                  f"{f(z['mean_error_deg'], '+.3f')} deg, worst "
+                  f"{f(z['max_abs_error_deg'], '.3f')} deg, sector slips {z['sector_slips']}, "
+                  f"first valid bearing (median) {f(z['first_valid_bearing_s'], '.2f')} s; the "
+                  f"bearings shown valid: RMSE {f(z.get('valid_rmse_deg'), '.3f')} deg, "
+                  f"misleading (valid, > 20 deg off) {z.get('misleading_bearings', '-')}."]
     if s.get("robustness_10db"):
         lines += _robustness_markdown(s["robustness_10db"])
     return "\n".join(lines) + "\n"
