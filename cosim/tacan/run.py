@@ -109,8 +109,7 @@ class TacanRunConfig:
         "help": "bearings before this time (s) are not scored (default 2 x --memory-s)"})
     noise_floor: str = field(default="clipped", metadata={
         "help": "pulse detector's noise floor: clipped mean (default) or censored mean "
-                "(pulses do not lift it; threshold 3.25x for the same noise-only false-alarm "
-                "rate; see dsp.tacan.frontend.NOISE_FLOORS)",
+                "(pulses do not lift it; threshold 3.44x; see dsp.tacan.frontend.NOISE_FLOORS)",
         "choices": tuple(NOISE_FLOORS), "case": "lower"})
     amplitude: str = field(default="peak", metadata={
         "help": "what the FPGA reports as a pulse's amplitude: its peak, or the envelope at "
