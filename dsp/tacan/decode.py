@@ -488,6 +488,23 @@ def _fit_grid(ref_t: np.ndarray, period: float, tol: float, min_refs: int):
     return float(a), float(p), np.rint((ref_t - a) / p).astype(np.int64)
 
 
+def _main_slot_vote(ref_t, kinds, cfg: DecoderConfig, f_rot: float):
+    """Decoded mains outside the 135 Hz grid slot that two thirds of them share become
+    auxiliaries (the main burst repeats once per rotation in one slot of nine). Returns the
+    kinds and how many mains were moved."""
+    fit = _fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
+    main = kinds == REF_MAIN
+    if fit is None or not main.any():
+        return kinds, 0
+    slot = fit[2] % 9
+    votes = np.bincount(slot[main], minlength=9)
+    s_main = int(np.argmax(votes))
+    if votes[s_main] < max(int(cfg.min_rotations), np.ceil(2.0 * main.sum() / 3.0)):
+        return kinds, 0
+    off = main & (slot != s_main)
+    return np.where(off, REF_AUX, kinds).astype(kinds.dtype), int(np.count_nonzero(off))
+
+
 def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderConfig,
                 f_rot: float = F15):
     """The rotation-slot detector (module docstring). Returns the references, the peaks the
@@ -496,10 +513,13 @@ def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderCo
     n_rot = t.size and (t[-1] - t[0]) * f_rot
     if ref_t.size < cfg.min_grid_refs or n_rot < cfg.min_rotations:
         return ref_t, kinds, scores, done, none, {}
-    # A record whose main bursts were all decoded needs no inference.
+    # A record whose main bursts were all decoded needs no inference -- but a decoded main
+    # off the slot most of them share is an auxiliary burst the main template took (Y mode
+    # near 0 dB: 7 of 13 pulses; kept as a main, it moved the bearing 80 deg, valid).
     main_n = np.count_nonzero(kinds == REF_MAIN)
     if main_n >= np.floor(n_rot) - 1 and main_n >= cfg.min_rotations:
-        return ref_t, kinds, scores, done, none, {}
+        kinds2, n_off_slot = _main_slot_vote(ref_t, kinds, cfg, f_rot)
+        return ref_t, kinds2, scores, done, none, {"n_main_off_slot": n_off_slot}
     fit = _fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
     if fit is None:
         return ref_t, kinds, scores, done, none, {}

@@ -82,3 +82,36 @@ def test_slot_detector_bad_config(kw, msg):
     with pytest.raises(ValueError, match=msg.replace("(", r"\(").replace(")", r"\)")
                        .replace("[", r"\[").replace("]", r"\]")):
         DecoderConfig(**kw)
+
+
+@pytest.mark.parametrize("mode", ["X", "Y"])
+def test_a_main_decoded_off_the_main_slot_becomes_an_auxiliary(mode):
+    """Every main burst decoded, plus an auxiliary burst whose pulses were copied into the
+    main code (what the main template takes near 0 dB in Y mode): it is moved to the
+    auxiliaries, the true mains stay."""
+    from dsp.tacan.standard import burst_offsets
+    cfg = TacanSignalConfig(mode=mode, duration_s=1.0, seed=41)
+    t, kinds, mains, auxs = pulse_schedule(cfg)
+    fake = auxs[(auxs > mains[5]) & (auxs < mains[6])][3]          # an auxiliary's time
+    aux_off = burst_offsets(mode, "aux")
+    drop = np.any(np.abs(t[:, None] - (fake + aux_off)[None, :]) < 1e-9, axis=1)
+    tt = np.sort(np.concatenate([t[~drop], fake + burst_offsets(mode, "main")]))
+    plain = decode(tt, mode, DecoderConfig(mode=mode, infer_main=False))
+    assert np.any(np.abs(plain.ref_times_s[plain.ref_kinds == REF_MAIN] - fake) < 1e-6)
+    d = decode(tt, mode)
+    m = d.ref_times_s[d.ref_kinds == REF_MAIN]
+    assert d.n_main_off_slot == 1 and not np.any(np.abs(m - fake) < 1e-6)
+    assert np.any(np.abs(d.ref_times_s - fake) < 1e-6)                 # kept, as an auxiliary
+    assert np.max(np.min(np.abs(m[:, None] - mains[None, :]), axis=1)) < 1e-6
+    assert m.size == mains.size
+
+
+@pytest.mark.slow
+def test_zero_db_y_mode_shows_no_misleading_bearing():
+    """Y mode, 0 dB, 270 deg, seed 100: an auxiliary burst decoded as a main (7 of 13
+    pulses) at 2.66 s moved two bearings 81 deg, both shown valid, before the main-slot
+    vote."""
+    from cosim.tacan.run import TacanRunConfig, run_tacan
+    r = run_tacan(TacanRunConfig(signal=TacanSignalConfig(mode="Y", bearing_deg=270.0,
+                                                          snr_db=0.0, seed=100)))
+    assert r["misleading_bearings"] == 0 and r["n_valid_bearings"] > 100
