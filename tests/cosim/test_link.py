@@ -4,7 +4,8 @@ import pytest
 
 from cosim.link import (DSP_PRESETS, ControlPath, DspServiceConfig, Segment, run_link,
                         unwrap_timestamps)
-from hdl.model.fifo import FifoParams, ReadySchedule, _fifo_model_reference, fifo_model
+from hdl.model.fifo import FifoParams, ReadySchedule, fifo_model
+from hdl.model.fifo_reference import fifo_model_reference
 
 
 # -- service configuration -------------------------------------------------------------------
@@ -74,7 +75,7 @@ def test_run_link_matches_the_cycle_reference(depth, stalls):
     res = run_link(wc, pl, n, p, svc)
     valid = np.zeros(n, bool)
     valid[wc] = True
-    ref = _fifo_model_reference(pl, valid, svc.ready_mask(n), p)
+    ref = fifo_model_reference(pl, valid, svc.ready_mask(n), p)
     np.testing.assert_array_equal(res.words, ref.words)
     np.testing.assert_array_equal(res.read_cycles, ref.cycles)
     np.testing.assert_array_equal(res.dropped_mask, ref.dropped)

@@ -12,8 +12,9 @@ from amaranth.sim import Simulator
 from cosim.testing import check_stream
 from hdl.fifo import DspFifo
 from hdl.model.fifo import (TAG_DATA, TAG_MARKER, FifoParams, FifoState, ReadySchedule,
-                            _fifo_model_reference, decode_stream, fifo_model,
+                            decode_stream, fifo_model,
                             fifo_model_events, pack_word, unpack_word)
+from hdl.model.fifo_reference import fifo_model_reference
 
 from _util import assert_lints_clean, needs_verilator
 
@@ -183,7 +184,7 @@ def test_fast_model_matches_reference_random():
     for seed in range(400):
         rng = np.random.default_rng(10_000 + seed)
         p, words, in_valid, out_ready = _random_scenario(rng)
-        want = _fifo_model_reference(words, in_valid, out_ready, p)
+        want = fifo_model_reference(words, in_valid, out_ready, p)
         got = fifo_model(words, in_valid, out_ready, p)
         _assert_same(got, want, f"(seed {10_000 + seed}, {p})")
         n_drop += bool(want.dropped.any())
@@ -206,7 +207,7 @@ def test_fast_model_matches_reference_schedule(depth):
                             stride=stride)
         in_valid = _random_pattern(rng, n)
         words = rng.integers(0, 1 << p.width, int(in_valid.sum()))
-        want = _fifo_model_reference(words, in_valid, sch.mask(n), p)
+        want = fifo_model_reference(words, in_valid, sch.mask(n), p)
         _assert_same(fifo_model(words, in_valid, sch, p), want, f"(seed {seed}, {sch})")
         ev = fifo_model_events(np.flatnonzero(in_valid), words, n, sch, p, trace=True)
         _assert_same(ev, want, f"events (seed {seed}, {sch})")
@@ -304,7 +305,7 @@ def test_fast_model_long_tacan_like():
     k = int(np.searchsorted(wc, m))
     iv = np.zeros(m, bool)
     iv[wc[:k]] = True
-    want = _fifo_model_reference(words[:k], iv, sch.mask(m), p)
+    want = fifo_model_reference(words[:k], iv, sch.mask(m), p)
     got = fifo_model_events(wc[:k], words[:k], m, sch, p, trace=True)
     _assert_same(got, want)
     np.testing.assert_array_equal(res.words[:want.words.size], want.words)
@@ -402,7 +403,7 @@ def test_parity_sim_matches_model():
                                   20_000), FifoParams(width=12, depth=8))
     np.testing.assert_array_equal(ref.words & ((1 << 14) - 1), plain.words)
     np.testing.assert_array_equal(ref.cycles, plain.cycles)
-    ref2 = _fifo_model_reference(*_stimulus(p, np.random.default_rng(301), 20_000), p)
+    ref2 = fifo_model_reference(*_stimulus(p, np.random.default_rng(301), 20_000), p)
     np.testing.assert_array_equal(ref2.words, ref.words)
     np.testing.assert_array_equal(pack_word(ref.words & 0xFFF, (ref.words >> 12) & 3, p),
                                   ref.words)
