@@ -40,8 +40,8 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
                  hold, tagw):
     """Run cycles ``c .. c_end - 1``; the policy of :mod:`hdl.model.fifo`, exactly as
     :func:`hdl.model.fifo_reference.fifo_model_reference` steps it (``record_words == 1``).
-    ``words`` is ``(n_in, n)``, ``hold`` the hold register's ``n`` words, ``tagw[j]`` the tag bits of a
-    record's word ``j``. Returns the number of output words."""
+    ``words`` is ``(n_in, n)``, ``hold`` the hold register's ``n`` words, ``tagw[j]`` the
+    tag bits of a record's word ``j``. Returns the number of output words."""
     out_full = st[_OUT_FULL]
     out_reg = st[_OUT_REG]
     left = st[_HOLD_V]          # hold words still to write
