@@ -56,7 +56,7 @@ pattern.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -207,14 +207,11 @@ class TacanFrontendParams:
         object.__setattr__(self, "env_out_bits", env.out_width)
         # thr_min_fs in envelope LSBs (scale of the chain up to the envelope).
         thr_min = int(round(cfg.thr_min_fs / self._scale_from(b)))
-        pk = cfg.peak
-        b["peak"] = PeakParams(amp_width=env.out_width, ts_bits=self.ts_bits,
-                               ts_step=cfg.decimation, block_log2=pk.block_log2,
-                               clip_log2=pk.clip_log2, smooth_log2=pk.smooth_log2,
-                               clip_to_floor=pk.clip_to_floor, thr_mult=pk.thr_mult, thr_frac=pk.thr_frac,
-                               thr_min=min(thr_min, (1 << env.out_width) - 1),
-                               hold=pk.hold, max_len=pk.max_len,
-                               partner_offset=pk.partner_offset)
+        # the algorithm's fields as configured; the widths, the timestamp step and the
+        # floor of the threshold are the chain's
+        b["peak"] = replace(cfg.peak, amp_width=env.out_width, ts_bits=self.ts_bits,
+                            ts_step=cfg.decimation,
+                            thr_min=min(thr_min, (1 << env.out_width) - 1))
         b["fifo"] = FifoParams(width=env.out_width + self.ts_bits, depth=self.fifo_depth,
                                count_width=self.fifo_count_bits, parity=self.fifo_parity)
         if self.check_headroom:
