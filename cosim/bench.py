@@ -115,6 +115,26 @@ def _pool(rows: list, key: str = "rmse_deg") -> dict:
     return out
 
 
+def _sweep_0db(step: int, crb: float, jobs, **opts) -> tuple[dict, list]:
+    """Every bearing in ``step`` deg steps at 0 dB (2 s records, IF chain) with the run
+    options ``opts``: the pooled figures and one row per bearing."""
+    b0 = np.arange(0, 360, step, dtype=float)
+    what = "".join(f", --{k.replace('_', '-')} {v}" for k, v in opts.items())
+    runs = _map(jobs, _one_run, [dict(bearing_deg=float(b), snr_db=0.0, duration_s=2.0,
+                                      seed=3000 + int(b), **opts) for b in b0],
+                f"bearing sweep (IF, 0 dB{what})")
+    rows = [{k: r.get(k) for k in ("bearing_deg", "locked", "rmse_deg", "mean_error_deg",
+                                   "max_abs_error_deg", "first_valid_bearing_s", "valid_rmse_deg",
+                                   "misleading_bearings")} for r in runs]
+    p = _pool(runs)
+    locked = [r for r in rows if r["locked"]]
+    return ({**p, **opts, "bearings": int(b0.size), "step_deg": step, "duration_s": 2.0,
+             "crb_deg": crb,
+             "rmse_over_crb": p["rmse_deg"] / crb if p["rmse_deg"] is not None else None,
+             "within_2x_crb": int(sum(r["rmse_deg"] <= 2 * crb for r in locked)),
+             "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in locked))}, rows)
+
+
 #: Rotation-rate offsets (relative) and echoes of the robustness table (10 dB, golden chain).
 ROBUST_ROTATIONS = (0.0, 0.005, -0.005, 0.01, -0.01)
 ROBUST_ECHO_PHASES = (0.0, 1.5708, 3.1416)
@@ -185,36 +205,12 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                 for r in sweep]
     locked = [r for r in brg_rows if r["locked"]]
 
-    # 0 dB, every bearing (2 deg steps): a bearing, no sector slip, RMSE within 2x the bound.
+    # 0 dB, every bearing (2 deg steps): a bearing, no sector slip, RMSE within 2x the bound;
+    # by default and with the pair-partner amplitude (--amplitude partner).
     step0 = 30 if quick else 2
-    b0 = np.arange(0, 360, step0, dtype=float)
     crb0 = crb_deg(TacanSignalConfig(snr_db=0.0).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
-    sweep0 = _map(jobs, _one_run, [dict(bearing_deg=float(b), snr_db=0.0, duration_s=2.0,
-                                        seed=3000 + int(b)) for b in b0], "bearing sweep (IF, 0 dB)")
-    rows0 = [{"bearing_deg": r["bearing_deg"], "locked": r["locked"], "rmse_deg": r["rmse_deg"],
-              "mean_error_deg": r["mean_error_deg"], "max_abs_error_deg": r["max_abs_error_deg"],
-              "first_valid_bearing_s": r.get("first_valid_bearing_s"),
-              "valid_rmse_deg": r.get("valid_rmse_deg"),
-              "misleading_bearings": r.get("misleading_bearings")} for r in sweep0]
-    p0 = _pool(sweep0)
-    sweep_0db = {**p0, "bearings": int(b0.size), "step_deg": step0, "duration_s": 2.0,
-                 "crb_deg": crb0,
-                 "rmse_over_crb": p0["rmse_deg"] / crb0 if p0["rmse_deg"] is not None else None,
-                 "within_2x_crb": int(sum(r["rmse_deg"] <= 2 * crb0 for r in rows0 if r["locked"])),
-                 "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in rows0 if r["locked"]))}
-    # the same with the pair-partner amplitude (--amplitude partner)
-    sweep0p = _map(jobs, _one_run, [dict(bearing_deg=float(b), snr_db=0.0, duration_s=2.0,
-                                         seed=3000 + int(b), amplitude="partner") for b in b0],
-                   "bearing sweep (IF, 0 dB, --amplitude partner)")
-    p0p = _pool(sweep0p)
-    sweep_0db_partner = {**p0p, "bearings": int(b0.size), "step_deg": step0, "duration_s": 2.0,
-                         "crb_deg": crb0, "amplitude": "partner",
-                         "rmse_over_crb": p0p["rmse_deg"] / crb0 if p0p["rmse_deg"] is not None
-                         else None,
-                         "within_2x_crb": int(sum(r["rmse_deg"] <= 2 * crb0 for r in sweep0p
-                                                  if r["locked"])),
-                         "sector_slips": int(sum(r["max_abs_error_deg"] > 20 for r in sweep0p
-                                                 if r["locked"]))}
+    sweep_0db, rows0 = _sweep_0db(step0, crb0, jobs)
+    sweep_0db_partner, _ = _sweep_0db(step0, crb0, jobs, amplitude="partner")
     robust = _robustness(quick, jobs)
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.

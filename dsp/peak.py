@@ -430,8 +430,9 @@ def _search(e, p: PeakParams, state, is_float: bool, thr_min, ahead=None, behind
             amp_list.append(np.array([pmax]))
             nmax_list.append(np.array([nmax], dtype=np.int64))
             end_list.append(np.array([n0 + carried], dtype=np.int64))
-            pa_list.append(np.array([pa]))
-            pb_list.append(np.array([pb]))
+            if partner:
+                pa_list.append(np.array([pa]))
+                pb_list.append(np.array([pb]))
             st.open = False
         else:
             st.pmax, st.nmax = pmax, nmax
