@@ -427,18 +427,34 @@ def burst_r_mult(tm: np.ndarray, dec, mode: str) -> np.ndarray:
     return r
 
 
+#: A bearing shown valid but further than this from the truth is *misleading* (a 40 deg
+#: sector slip the flag missed).
+MISLEADING_DEG = 20.0
+
+
 def bearing_stats(track: BearingTrack, bearing_true_deg, settle_s: float) -> dict:
-    """Error statistics of the bearings produced after ``settle_s`` (per trial arrays)."""
+    """Error statistics of the bearings produced after ``settle_s`` (per trial arrays), and
+    of those the receiver shows valid: their count, RMSE (NaN without any) and how many are
+    misleading (more than :data:`MISLEADING_DEG` off)."""
     keep = track.times_s >= settle_s
     truth = np.atleast_1d(np.asarray(bearing_true_deg, dtype=np.float64))[:, None]
     err = wrap_deg(track.bearing_deg[:, keep] - truth)
+    B = track.bearing_deg.shape[0]
+    shown = np.ones(track.bearing_deg.shape, bool) if track.valid is None else track.valid
+    valid = np.broadcast_to(shown[:, keep], err.shape)
+    n_valid = np.count_nonzero(valid, axis=1)
+    sq_valid = np.where(valid, err, 0.0) ** 2
+    vstats = {"n_valid": n_valid,
+              "valid_rmse_deg": np.where(n_valid > 0, np.sqrt(sq_valid.sum(axis=1)
+                                                               / np.maximum(n_valid, 1)), np.nan),
+              "misleading": np.count_nonzero(valid & (np.abs(err) > MISLEADING_DEG), axis=1)}
     if err.shape[1] == 0:
-        nan = np.full(track.bearing_deg.shape[0], np.nan)
+        nan = np.full(B, np.nan)
         return {"n": 0, "rmse_deg": nan, "mean_error_deg": nan, "max_abs_error_deg": nan,
-                "final_deg": nan}
+                "final_deg": nan, **vstats}
     return {"n": int(err.shape[1]), "rmse_deg": np.sqrt(np.mean(err ** 2, axis=1)),
             "mean_error_deg": np.mean(err, axis=1), "max_abs_error_deg": np.max(np.abs(err), axis=1),
-            "final_deg": track.bearing_deg[:, -1]}
+            "final_deg": track.bearing_deg[:, -1], **vstats}
 
 
 def crb_deg(rel_sigma: float, mod_15: float, mod_135: float, n_pulses: float) -> float:
