@@ -205,10 +205,16 @@ class GoldenFrontend:
         z = (2.0 * x) * lo
         return np.abs(self.fir(self.cic(z)))
 
-    def process(self, codes: np.ndarray) -> Peaks:
+    def search(self, codes: np.ndarray):
+        """The peak search's full result (:class:`dsp.peak.PeakResult`: with the threshold
+        of every envelope sample) on the next chunk of ADC codes."""
         env = self.envelope(codes)
         res, self.peak_state = peak_search_float(env, self.cfg.peak, self.peak_state,
                                                  thr_min=self.cfg.thr_min_fs)
+        return res
+
+    def process(self, codes: np.ndarray) -> Peaks:
+        res = self.search(codes)
         # with the pair-partner readout, the FPGA reports the partner's envelope as the
         # amplitude (hdl.tacan.frontend)
         amp = res.partner if self.cfg.peak.partner_offset else res.amplitude

@@ -14,6 +14,7 @@ import numpy as np
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       deg_to_bangle, reference_advances, track_sector, wrap_deg)
+from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
 from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .standard import burst_offsets
@@ -455,15 +456,3 @@ def bearing_stats(track: BearingTrack, bearing_true_deg, settle_s: float) -> dic
     return {"n": int(err.shape[1]), "rmse_deg": np.sqrt(np.mean(err ** 2, axis=1)),
             "mean_error_deg": np.mean(err, axis=1), "max_abs_error_deg": np.max(np.abs(err), axis=1),
             "final_deg": track.bearing_deg[:, -1], **vstats}
-
-
-def crb_deg(rel_sigma: float, mod_15: float, mod_135: float, n_pulses: float) -> float:
-    """Cramer-Rao bound (deg) of the joint coarse+fine bearing from ``n_pulses`` amplitudes.
-
-    ``var >= 2 sigma^2 / (N (A^2 + 81 B^2))`` rad^2 (DESIGN.md 4.1), sigma relative to the
-    unmodulated amplitude.
-    """
-    den = n_pulses * (mod_15 ** 2 + 81.0 * mod_135 ** 2)
-    if den <= 0:
-        return math.inf
-    return math.degrees(math.sqrt(2.0 * rel_sigma ** 2 / den))
