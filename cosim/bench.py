@@ -174,6 +174,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     from dsp.tacan.bearing import wrap_deg
     from dsp.tacan.kalman import KalmanConfig
     from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
+    from .tacan.detector import detector_bounds
     from .tacan.signal import TacanSignalConfig, pulse_observations
 
     t_start = time.perf_counter()
@@ -184,13 +185,19 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
              for s in snrs for b in (90.0, 270.0) for k in range(trials)]
     runs = _map(jobs, _one_run, items, "SNR sweep")
     kc = KalmanConfig()
+    # what the default detector's output allows at each SNR (dsp.tacan.bounds)
+    ops = _map(jobs, _operating_point, [dict(snr_db=float(s), noise_floor="clipped") for s in snrs],
+               "detector operating points")
     snr_rows = []
-    for s in snrs:
+    for s, op in zip(snrs, ops):
         crb = crb_deg(TacanSignalConfig(snr_db=float(s)).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
+        bounds = detector_bounds(op, 0.21, 0.21, kc.n_eff)
         for b in (90.0, 270.0):
             rs = [r for r in runs if r["snr_db"] == s and r["bearing_deg"] == b]
             ok = [r for r in rs if r["locked"]]
             row = {"snr_db": s, "bearing_deg": b, **_pool(rs), "crb_deg": crb,
+                   "detection_bound_deg": bounds["bound_both_deg"],
+                   "amplitude_bound_deg": bounds["bound_marks_deg"],
                    "gated": int(sum(r["gated"] for r in rs)), "reinit": int(sum(r["reinit"] for r in rs))}
             row["rmse_over_crb"] = row["rmse_deg"] / crb if ok else None
             snr_rows.append(row)
@@ -275,6 +282,9 @@ def _plot_accuracy(path: Path, snr_rows, brg_rows):
                     alpha=0.4, label=f"|mean error|, {b:g} deg")
     rs = [r for r in snr_rows if r["bearing_deg"] == 90.0]
     a1.semilogy([r["snr_db"] for r in rs], [r["crb_deg"] for r in rs], "k--", label="Cramer-Rao bound")
+    if all("amplitude_bound_deg" in r for r in rs):
+        a1.semilogy([r["snr_db"] for r in rs], [r["amplitude_bound_deg"] for r in rs], "k:",
+                    label="bound of an amplitude fit (detector output)")
     a1.axhline(0.61, color="r", ls=":", label="seed hardware, 10 dB (0.61)")
     a1.set_xlabel("SNR (dB, peak pulse power / noise in 2 MHz)")
     a1.set_ylabel("bearing error (deg)")
@@ -300,15 +310,21 @@ def _accuracy_markdown(s: dict) -> str:
     lines = [f"TACAN bearing accuracy, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
              f"commit {m['commit']}, {s['elapsed_s']:.0f} s)", "",
              "| SNR dB | bearing | locked | RMSE deg | mean err deg | max err deg | CRB deg | RMSE/CRB "
-             "| first valid bearing s (median) | valid-only RMSE deg | misleading |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| first valid bearing s (median) | valid-only RMSE deg | misleading "
+             "| bounds / CRB: detections, amplitudes |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
     for r in s["snr_sweep"]:
         lines.append(f"| {r['snr_db']:g} | {r['bearing_deg']:g} | {r['locked']}/{r['trials']} | "
                      f"{f(r['rmse_deg'], '.3f')} | {f(r['mean_error_deg'], '+.3f')} | "
                      f"{f(r['max_abs_error_deg'], '.3f')} | {r['crb_deg']:.3f} | {f(r['rmse_over_crb'], '.2f')} "
                      f"| {f(r['first_valid_bearing_s'], '.2f')} | {f(r.get('valid_rmse_deg'), '.3f')} "
-                     f"| {r.get('misleading_bearings', '-')} |")
+                     f"| {r.get('misleading_bearings', '-')} "
+                     f"| {r['detection_bound_deg'] / r['crb_deg']:.2f}, "
+                     f"{r['amplitude_bound_deg'] / r['crb_deg']:.2f} |")
+    lines += ["", "Bounds: what the default detector's output allows (`dsp.tacan.bounds`, operating "
+              "point measured per SNR by `cosim.tacan.detector`): a DSP using the detections' "
+              "times and amplitudes, and one fitting the detected amplitudes only (ours)."]
     b = s["bearing_sweep_if_10db"]
     lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB (IF chain, "
               f"{b['duration_s']:g} s each, {b['locked']}/{b['bearings']} locked): "
@@ -410,6 +426,16 @@ def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> d
                "bounds": bound_rows}
     out.mkdir(parents=True, exist_ok=True)
     (out / "tacan_detector.json").write_text(json.dumps(summary, indent=1))
+    (out / "tacan_detector.md").write_text(_detector_markdown(summary))
+    return summary
+
+
+def _times(v: float) -> str:
+    return f"{v:.2f}x" if v < 10 else f"{v:.0f}x"
+
+
+def _detector_markdown(summary: dict) -> str:
+    rows, seeds, n = summary["rows"], summary["seeds"], len(summary["seeds"])
     m = summary["machine"]
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
     lines = [f"TACAN detector options near the noise floor, golden chain (`{m['command']}`, "
@@ -428,18 +454,18 @@ def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> d
     lines += ["", "What the detector's output allows (`dsp.tacan.bounds`, `cosim.tacan.detector`): its "
               "operating point measured on a 1 s record at 90 deg (seed 100) and the bounds of a DSP "
               "using the detections' times and amplitudes (both), their number only (rate) or the "
-              "amplitudes of the detected pulses (marks: any amplitude-fitting DSP, ours included), "
-              "over the Cramer-Rao bound:", "",
+              "amplitudes of the detected pulses (marks: any DSP fitting the peak amplitudes, the "
+              "default's; `--amplitude partner` reads another observation, not covered), over the "
+              "Cramer-Rao bound:", "",
               "| SNR dB | noise floor | threshold / sigma | noise peaks / pulse | pulses detected "
               "(model) | bound: both | rate | marks |", "|---:|---|---:|---:|---:|---:|---:|---:|"]
-    for b in bound_rows:
+    for b in summary["bounds"]:
         c = b["crb_deg"]
         lines.append(f"| {b['snr_db']:g} | {b['noise_floor']} | {b['threshold_sigma']:.2f} | "
                      f"{b['false_peaks_per_pulse']:.3f} | {b['detected_fraction']:.3f} "
                      f"({b['model_detected_fraction']:.3f}) | {b['bound_both_deg'] / c:.2f}x | "
-                     f"{b['bound_rate_deg'] / c:.3g}x | {b['bound_marks_deg'] / c:.2f}x |")
-    (out / "tacan_detector.md").write_text("\n".join(lines) + "\n")
-    return summary
+                     f"{_times(b['bound_rate_deg'] / c)} | {b['bound_marks_deg'] / c:.2f}x |")
+    return "\n".join(lines) + "\n"
 
 
 def _operating_point(kw: dict) -> dict:
