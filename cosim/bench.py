@@ -213,11 +213,13 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     locked = [r for r in brg_rows if r["locked"]]
 
     # 0 dB, every bearing (2 deg steps): a bearing, no sector slip, RMSE within 2x the bound;
-    # by default and with the pair-partner amplitude (--amplitude partner).
+    # by default, with the pair-partner amplitude (--amplitude partner) and with it on the
+    # censored noise floor (--noise-floor censored).
     step0 = 30 if quick else 2
     crb0 = crb_deg(TacanSignalConfig(snr_db=0.0).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
     sweep_0db, rows0 = _sweep_0db(step0, crb0, jobs)
     sweep_0db_partner, _ = _sweep_0db(step0, crb0, jobs, amplitude="partner")
+    sweep_0db_both, _ = _sweep_0db(step0, crb0, jobs, amplitude="partner", noise_floor="censored")
     robust = _robustness(quick, jobs)
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.
@@ -252,6 +254,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
         "bearing_sweep_pulse_level": pl_rows,
         "bearing_sweep_if_0db": sweep_0db,
         "bearing_sweep_if_0db_partner": sweep_0db_partner,
+        "bearing_sweep_if_0db_partner_censored": sweep_0db_both,
         "robustness_10db": robust,
     }
     out.mkdir(parents=True, exist_ok=True)
@@ -336,7 +339,9 @@ def _accuracy_markdown(s: dict) -> str:
         lines.append(f"| {r['snr_db']:g} | {r['bearings']} x {r['seeds']} | {r['rmse_deg']:.3f} | "
                      f"{r['max_abs_error_deg']:.3f} | {r['crb_deg']:.3f} |")
     for key, what in (("bearing_sweep_if_0db", ""),
-                      ("bearing_sweep_if_0db_partner", " with `--amplitude partner`")):
+                      ("bearing_sweep_if_0db_partner", " with `--amplitude partner`"),
+                      ("bearing_sweep_if_0db_partner_censored",
+                       " with `--amplitude partner --noise-floor censored`")):
         z = s.get(key)
         if z is None:
             continue
