@@ -32,7 +32,9 @@ have. This module uses it, in three steps (all on the peak times only):
    per slot, the Poisson log-likelihood of "main burst here" minus "auxiliary burst here"
    (each with its own detection rate, fitted, over the noise rate); the best slot is
    declared when it leads the runner-up by ``slot_llr`` nats (odds of e^15 = 3e6 to 1
-   against a wrong slot, i.e. a 40 deg multiple of bearing error) after ``min_rotations``.
+   against a wrong slot, i.e. a 40 deg multiple of bearing error) after ``min_rotations``,
+   unless the test once called it auxiliary at those odds (a drifting grid can make an
+   auxiliary burst look like a main one; the odds assume a grid that holds).
 
 Causality: nothing is known before the grid is confirmed and the main slot declared; the
 references before that are known at the declaration (``done``), the later ones at the end
@@ -330,6 +332,12 @@ def track(t, mode: str, a, p, t_conf, cfg: AcquireConfig):
     ha = _hits(t, pos, a_only, cfg.tol_s).sum(axis=1)
     rot = (k_all - n_lo) // 9
     declared = None
+    # A slot the test has once called auxiliary at the declaration odds is never declared
+    # the main one later: near 0 dB a tracked grid that drifts by a few us makes an
+    # auxiliary burst match the main-only offsets (bearing 88 deg, 0 dB, censored floor,
+    # seed 3088: slot 5's ratio went from -20.7 to +15.3 over 12 rotations while the true
+    # slot had no evidence either way; declared, every bearing was 160 deg off and valid).
+    ever_aux = np.zeros(9, bool)
     for r in range(int(cfg.min_rotations) - 1, int(rot[-1]) + 1):
         sel = rot <= r
         if known[sel][-1] < t_conf:
@@ -346,8 +354,10 @@ def track(t, mode: str, a, p, t_conf, cfg: AcquireConfig):
         ll_aux = (_poisson_ll(C, nc, qa + nz) + _poisson_ll(M, nm_, nz)
                   + _poisson_ll(A, na, qa + nz))
         llr = ll_main - ll_aux
+        ever_aux |= llr <= -cfg.slot_llr
         o = np.argsort(llr)
-        if llr[o[-1]] > 0 and llr[o[-1]] - llr[o[-2]] >= cfg.slot_llr:
+        if (llr[o[-1]] > 0 and llr[o[-1]] - llr[o[-2]] >= cfg.slot_llr
+                and not ever_aux[o[-1]]):
             declared = (int(o[-1]), float(max(known[sel][-1], t_conf)))
             break
     if declared is None:

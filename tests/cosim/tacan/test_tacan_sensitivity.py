@@ -90,3 +90,19 @@ def test_partner_amplitude_removes_most_of_the_zero_db_error():
                     np.mean([r["mean_error_deg"] for r in rs]))
     assert out["partner"][0] < 0.5 * out["peak"][0]
     assert abs(out["partner"][1]) < 0.6 * abs(out["peak"][1])
+
+
+def test_a_slot_once_auxiliary_is_never_declared_the_main_one():
+    """0 dB, 88 deg, seed 3088, censored floor (`bench tacan-accuracy`'s third 0 dB sweep):
+    the tracked grid drifted, slot 5's likelihood ratio went from -20.7 (auxiliary) to +15.3
+    while the true main slot had no evidence either way, and slot 5 was declared: 135 valid
+    bearings 160 deg off. Now that slot cannot be declared; the record gives no valid
+    bearing (and no misleading one), as the default detector's peaks of it still give the
+    right slot."""
+    sig = TacanSignalConfig(bearing_deg=88.0, snr_db=0.0, duration_s=2.0, seed=3088)
+    for floor, amplitude in (("censored", "partner"), ("censored", "peak"), ("clipped", "peak")):
+        r = run_tacan(TacanRunConfig(signal=sig, require_bearing=False, noise_floor=floor,
+                                     amplitude=amplitude))
+        assert r["misleading_bearings"] == 0, (floor, amplitude)
+        if floor == "clipped":
+            assert r["first_valid_bearing_s"] is not None and r["max_abs_error_deg"] < 5.0
