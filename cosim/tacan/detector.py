@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from dsp.tacan.bounds import crb_deg, detected_fraction, detection_bound_deg
-from dsp.tacan.frontend import GoldenFrontend
+from dsp.tacan.decode import _match
+from dsp.tacan.frontend import GoldenFrontend, record_chunks
 
 from .run import TacanRunConfig
 from .signal import generate
@@ -37,11 +38,9 @@ def operating_point(run: TacanRunConfig) -> dict:
     cfg = run.frontend
     s = generate(sig)
     fe = GoldenFrontend(cfg, sig.adc_bits)
-    step = GoldenFrontend.CHUNK - GoldenFrontend.CHUNK % cfg.decimation
-    x = s.samples[:s.samples.size - s.samples.size % cfg.decimation]
     idx, thr = [], []
-    for c0 in range(0, x.size, step):
-        res = fe.search(x[c0:c0 + step])
+    for c0, chunk in record_chunks(s.samples, cfg):
+        res = fe.search(chunk)
         n = np.asarray(res.index, np.int64)
         idx.append(n)
         thr.append(np.asarray(res.thresholds)[n - c0 // cfg.decimation])
@@ -49,10 +48,8 @@ def operating_point(run: TacanRunConfig) -> dict:
     thr = np.concatenate(thr)
     t = (n * cfg.decimation - cfg.group_delay_samples) / sig.fs_hz
     tp = s.truth.pulse_times_s
-    duration = x.size / sig.fs_hz
-    j = np.clip(np.searchsorted(tp, t), 1, max(tp.size - 1, 1))
-    near = np.minimum(np.abs(tp[j] - t), np.abs(tp[j - 1] - t)) <= MATCH_S if tp.size > 1 \
-        else np.zeros(t.size, bool)
+    duration = (s.samples.size - s.samples.size % cfg.decimation) / sig.fs_hz
+    near = _match(tp, t, MATCH_S)[1] if tp.size else np.zeros(t.size, bool)
     # time within MATCH_S of a pulse: the union of the windows
     lo, hi = np.clip(tp - MATCH_S, 0, duration), np.clip(tp + MATCH_S, 0, duration)
     t_near = float(np.sum(np.minimum(hi, np.append(lo[1:], np.inf)) - lo)) if tp.size else 0.0

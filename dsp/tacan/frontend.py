@@ -222,16 +222,22 @@ class GoldenFrontend:
                      amplitudes=np.asarray(amp, np.float64), fs_hz=self.cfg.fs_hz)
 
 
+def record_chunks(samples: np.ndarray, cfg: FrontendConfig):
+    """``(first sample, chunk)`` of a record in :attr:`GoldenFrontend.CHUNK`-sized pieces, each
+    a multiple of the decimation (a last partial output sample is dropped)."""
+    samples = np.asarray(samples)
+    step = GoldenFrontend.CHUNK - GoldenFrontend.CHUNK % cfg.decimation
+    usable = len(samples) - len(samples) % cfg.decimation
+    for c0 in range(0, usable, step):
+        yield c0, samples[c0:min(usable, c0 + step)]
+
+
 def run_golden_frontend(samples: np.ndarray, cfg: FrontendConfig, adc_bits: int) -> Peaks:
     """All peaks of a record of ADC codes (chunked internally)."""
-    samples = np.asarray(samples)
-    step = GoldenFrontend.CHUNK
-    step -= step % cfg.decimation
     fe = GoldenFrontend(cfg, adc_bits)
-    usable = len(samples) - len(samples) % cfg.decimation
     ts, amps = [], []
-    for c0 in range(0, usable, step):
-        p = fe.process(samples[c0:min(usable, c0 + step)])
+    for _, chunk in record_chunks(samples, cfg):
+        p = fe.process(chunk)
         ts.append(p.timestamps)
         amps.append(p.amplitudes)
     return Peaks(np.concatenate(ts) if ts else np.zeros(0, np.int64),
