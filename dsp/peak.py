@@ -44,6 +44,20 @@ partner's is not). The search itself is unchanged; a pulse is emitted once input
 ``end_index + D`` has arrived (the HDL runs the search ``D`` samples behind its input, on a
 ``2 D``-word delay line).
 
+Pulse-pair detection (``pair_offset = D > 0``; excludes the partner readout): the search
+runs on the pair sum ``s[n] = e[n] + e[n - D]`` (``e`` = 0 before the first sample), one bit
+wider (``amp_width + 1``), with the partner readout at the same ``D`` on ``s``, and a peak
+of ``s`` is kept only if it is the largest of its side lobes: ``s[n_max] >= s[n_max - D]`` and
+``s[n_max] > s[n_max + D]`` (a pair at ``(n - D, n)`` also gives ``s`` peaks of about half its
+height at ``n - D`` and ``n + D``, one pulse each; at equal height the earlier one is kept).
+The reported amplitude is ``s >> 1`` (float: ``s / 2``), the mean of the two pulses' envelopes,
+in ``amp_width`` bits; the timestamp is the pair's second pulse. With ``D`` the TACAN pair
+spacing the detection integrates both pulses of a pair -- what a TACAN/DME pulse decoder
+does -- so a pair is found at ~3 dB less SNR than its pulses alone, and the amplitude
+measures both. The noise floor and threshold are those of ``s`` (``thr_mult`` relative to its
+floor, ``thr_min`` in units of ``s``). A pulse is emitted once input sample
+``end_index + D`` has arrived, as with the partner readout.
+
 The integer model (:func:`hdl.model.peak.peak_search`) is a compiled (numba) per-sample loop
 that follows the steps above as written; :func:`peak_search_numpy` is an independent vectorised
 implementation (a loop over blocks for the thresholds and over the sub-pulses of groups
@@ -53,7 +67,7 @@ in chunks with a :class:`PeakState` and give the same bits as one long run.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -107,6 +121,10 @@ class PeakParams:
         Pair-partner readout distance ``D`` in samples (0: off, else 1..4096; TACAN X mode:
         12 us, Y mode: 30 us of envelope samples). Adds ``partner`` and ``partner_late`` to
         each pulse (see the module doc) and delays the output by ``D`` input samples.
+    pair_offset : int
+        Pulse-pair detection at spacing ``D`` samples (0: off, else 1..4096; not with
+        ``partner_offset``): the search runs on ``e[n] + e[n - D]`` and reports pairs (see the
+        module doc); delays the output by ``D`` input samples.
     """
 
     amp_width: int = 19
@@ -122,6 +140,7 @@ class PeakParams:
     hold: int = 5
     max_len: int = 128
     partner_offset: int = 0
+    pair_offset: int = 0
 
     def __post_init__(self):
         check_width("peak amp_width", self.amp_width, minimum=1, maximum=40)
@@ -137,6 +156,10 @@ class PeakParams:
         _check_int("peak thr_min", self.thr_min, 0, (1 << self.amp_width) - 1)
         _check_int("peak hold", self.hold, 1, 1 << 16)
         _check_int("peak partner_offset", self.partner_offset, 0, 4096)
+        _check_int("peak pair_offset", self.pair_offset, 0, 4096)
+        if self.pair_offset and self.partner_offset:
+            raise ValueError("peak pair_offset and partner_offset exclude each other (the pair "
+                             "detection reads its partners itself)")
         if isinstance(self.max_len, bool) or not isinstance(self.max_len, int) \
                 or self.max_len <= self.hold or self.max_len > 1 << 20:
             raise ValueError(f"peak max_len must be an integer > hold ({self.hold}) and "
@@ -162,6 +185,21 @@ class PeakParams:
         return max(self.amp_width + self.thr_mult.bit_length() - self.thr_frac, self.amp_width, 1)
 
     @property
+    def search_params(self) -> "PeakParams":
+        """The parameters the search itself runs with: these, or with ``pair_offset`` those of
+        the search on the pair sum (one bit wider, partner readout at ``D``)."""
+        if not self.pair_offset:
+            return self
+        return replace(self, amp_width=self.amp_width + 1, partner_offset=self.pair_offset,
+                       pair_offset=0)
+
+    @property
+    def emit_delay(self) -> int:
+        """Input samples after a pulse's closing sample (``end_index``) before it is emitted
+        (the partner readout's or pair detection's ``D``, else 0)."""
+        return self.partner_offset or self.pair_offset
+
+    @property
     def det_delay(self) -> int:
         """Cycles the detector runs behind the noise-floor path (threshold pipeline: new
         ``nu`` 1 cycle after the block sum, product +1, floor +1, registered compare +1)."""
@@ -169,8 +207,10 @@ class PeakParams:
 
     @property
     def latency(self) -> int:
-        """Cycles from the input transfer of a pulse's closing sample to the output transfer."""
-        return 1 + self.det_delay + 1
+        """Cycles from the input transfer of sample ``end_index + emit_delay`` (a pulse's
+        closing sample, ``emit_delay`` later) to the output transfer; the pair detection adds
+        its sum stage and its output register."""
+        return 1 + self.det_delay + 1 + (2 if self.pair_offset else 0)
 
     @property
     def in_layout(self) -> list[tuple[str, int, bool]]:
@@ -220,6 +260,9 @@ class PeakState:
     pb: float = 0
     n_in: int = 0
     hist: tuple = ()
+    # pulse-pair detection (pair_offset D > 0): the last D input samples (zeros before the
+    # first), the e[n - D] of the pair sum
+    pair_hist: tuple = ()
 
 
 @dataclass
@@ -244,8 +287,9 @@ def peak_search_numpy(env, params: PeakParams, state: PeakState | None = None
     env = np.asarray(env)
     if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
         raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
-    return search_with_partner(env.astype(np.int64), params, state,
-                               lambda c, st, a, b: _search(c, params, st, False, params.thr_min, a, b))
+    q = params.search_params
+    return search_pairs(env.astype(np.int64), params, state,
+                        lambda c, st, a, b: _search(c, q, st, False, q.thr_min, a, b))
 
 
 def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *,
@@ -259,8 +303,30 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
     if np.isnan(env).any():
         raise ValueError("peak search input must not contain NaN")
     tm = float(params.thr_min if thr_min is None else thr_min)
-    return search_with_partner(env, params, state,
-                               lambda c, st, a, b: _search(c, params, st, True, tm, a, b))
+    q = params.search_params
+    return search_pairs(env, params, state, lambda c, st, a, b: _search(c, q, st, True, tm, a, b))
+
+
+def search_pairs(e, p: PeakParams, state: PeakState | None, run):
+    """:func:`search_with_partner` on the input (``run`` an implementation of the search with
+    ``p.search_params``), or with ``pair_offset`` on the pair sum, keeping the peaks that are
+    the largest of their side lobes (the module doc)."""
+    D = p.pair_offset
+    if not D:
+        return search_with_partner(e, p, state, run)
+    st = copy.copy(state) if state is not None else PeakState()
+    prev = np.asarray(st.pair_hist, dtype=e.dtype)
+    if prev.size < D:
+        prev = np.concatenate([np.zeros(D - prev.size, dtype=e.dtype), prev])
+    buf = np.concatenate([prev, e])
+    s = e + buf[:e.size]
+    res, st = search_with_partner(s, p.search_params, st, run)
+    st.pair_hist = tuple(buf[buf.size - D:].tolist())
+    a, b = res.amplitude, res.partner
+    keep = np.where(res.partner_late, a > b, a >= b)
+    amp = a[keep] * 0.5 if e.dtype.kind == "f" else a[keep] >> 1
+    return PeakResult(amplitude=amp, timestamp=res.timestamp[keep], index=res.index[keep],
+                      end_index=res.end_index[keep], thresholds=res.thresholds), st
 
 
 def search_with_partner(e, p: PeakParams, state: PeakState | None, run):

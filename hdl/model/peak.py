@@ -14,7 +14,7 @@ import numpy as np
 
 from dsp.jit import njit_cached
 from dsp.peak import (PeakParams, PeakResult, PeakState, peak_search_float, peak_search_numpy,
-                      search_with_partner)
+                      search_pairs)
 
 __all__ = ["PeakParams", "PeakState", "PeakResult", "peak_search", "peak_search_numpy",
            "peak_search_float"]
@@ -39,8 +39,9 @@ def peak_search(env, params: PeakParams, state: PeakState | None = None
     env = np.asarray(env)
     if env.size and (env.min() < 0 or env.max() >= 1 << params.amp_width):
         raise ValueError(f"peak search input must be unsigned {params.amp_width}-bit integers")
-    return search_with_partner(np.ascontiguousarray(env, dtype=np.int64), params, state,
-                               lambda c, st, a, b: _search_compiled(c, params, st, a, b))
+    q = params.search_params
+    return search_pairs(np.ascontiguousarray(env, dtype=np.int64), params, state,
+                        lambda c, st, a, b: _search_compiled(c, q, st, a, b))
 
 
 # -- implementation ------------------------------------------------------------------------

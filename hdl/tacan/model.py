@@ -424,11 +424,12 @@ class TacanFrontendState:
 class FrontendPeaks:
     """Peaks as the hardware reports them (before the FIFO).
 
-    amplitudes : int64 envelope LSBs (the peak's, or with the pair-partner readout the
-    partner's envelope, as the FIFO word carries it); timestamps : int64 ADC ticks,
-    unwrapped (``timestamps mod 2**ts_bits`` is the hardware field); index / end_index :
-    envelope sample of the peak / whose arrival emits the pulse (the closing sample,
-    ``partner_offset`` later with the readout).
+    amplitudes : int64 envelope LSBs (the peak's, with the pair-partner readout the
+    partner's envelope, with the pair detection the pair's mean, as the FIFO word carries
+    it); timestamps : int64 ADC ticks, unwrapped (``timestamps mod 2**ts_bits`` is the
+    hardware field); index / end_index : envelope sample of the peak / whose arrival emits
+    the pulse (the closing sample, ``PeakParams.emit_delay`` later with the readout or the
+    pair detection).
     """
 
     amplitudes: np.ndarray
@@ -646,7 +647,7 @@ class TacanFrontendModel:
             st.peak = pk
             amps.append(res.partner if p.peak.partner_offset else res.amplitude)
             idx.append(res.index)
-            end.append(res.end_index + p.peak.partner_offset)
+            end.append(res.end_index + p.peak.emit_delay)
         index = np.concatenate(idx).astype(np.int64)
         peaks = FrontendPeaks(amplitudes=np.concatenate(amps).astype(np.int64),
                               timestamps=index * np.int64(p.peak.ts_step),
