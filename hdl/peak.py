@@ -27,6 +27,23 @@ the search runs on -- and at ``wp`` before the write -- the sample ``2 D`` back,
 value). The current input is the ahead value. Both ride the detector's delay line and are
 kept with the pulse's max; the search starts once ``D`` samples are in (the memory is not
 reset: the behind value is 0 until ``2 D`` samples have been written since reset).
+
+Pulse-pair detection (``pair_offset = D > 0``): three stages around an inner
+``PeakSearch(params.search_params)`` (one bit wider, partner readout at ``D``):
+
+* sum stage (1 cycle): a ``D``-word memory of the input, written at a wrapping pointer on
+  each valid input and read at the same address before the write (non-transparent,
+  registered read port enabled by ``valid``: ``e[n - D]``; with ``D = 1`` a register of the
+  previous input instead, a one-word memory has no address); the input and its valid are
+  registered alongside, and the inner search is fed ``s[n] = e[n] + e[n - D]``. The memory is
+  not reset: a saturating count of the inputs since reset makes ``e[n - D]`` read 0 until
+  ``D`` samples have been written;
+* the inner search, with its partner readout on ``s`` (``s[n_max + D]``, ``s[n_max - D]``);
+* output filter (1 cycle, registered): a peak goes out only if it is the largest of its side
+  lobes (``amplitude > partner`` when ``partner_late``, else ``amplitude >= partner``), with
+  ``amplitude >> 1`` and the inner timestamp.
+
+So the latency is the inner search's plus 2 (:attr:`PeakParams.latency`).
 """
 from __future__ import annotations
 
@@ -56,6 +73,12 @@ class PeakSearch(wiring.Component):
             "timestamp": unsigned(ts_bits)}), always_ready=True))
         One transfer per pulse, ``params.latency`` (6) cycles after the transfer of the
         sample that closes the pulse. ``timestamp = (n_peak * ts_step) mod 2**ts_bits``.
+        With the pair-partner readout (``partner_offset = D``) the payload adds ``partner``
+        (``amp_width``) and ``partner_late`` (1 bit), and the transfer comes ``latency`` (6)
+        cycles after that of the sample ``D`` after the closing one. With the pulse-pair
+        detection (``pair_offset = D``) the payload is ``amplitude`` (the pair's mean,
+        ``s >> 1``) and ``timestamp`` only, ``latency`` (8) cycles after the transfer of the
+        sample ``D`` after the closing one.
     """
 
     def __init__(self, params: PeakParams | None = None):
@@ -71,6 +94,8 @@ class PeakSearch(wiring.Component):
         })
 
     def elaborate(self, platform):
+        if self.params.pair_offset:
+            return self._elaborate_pairs()
         p = self.params
         m = Module()
         aw = p.amp_width
@@ -242,4 +267,49 @@ class PeakSearch(wiring.Component):
             late = o_pa >= o_pb
             m.d.comb += [self.o.payload.partner.eq(Mux(late, o_pa, o_pb)),
                          self.o.payload.partner_late.eq(late)]
+        return m
+
+    def _elaborate_pairs(self):
+        """Pulse-pair detection: sum stage -> inner search on the pair sum -> side-lobe
+        filter (the module docstring)."""
+        p = self.params
+        D = p.pair_offset
+        aw = p.amp_width
+        m = Module()
+
+        # -- sum stage: s[n] = e[n] + e[n - D] ----------------------------------------------
+        seen = Signal(range(D + 1))               # inputs since reset, saturating at D
+        old_ok = Signal()                         # `old` is e[n - D] (else e = 0 there)
+        x_r = Signal(unsigned(aw))
+        v_r = Signal()
+        m.d.sync += v_r.eq(self.i.valid)
+        with m.If(self.i.valid):
+            m.d.sync += [x_r.eq(self.i.payload), old_ok.eq(seen == D)]
+            with m.If(seen != D):
+                m.d.sync += seen.eq(seen + 1)
+        if D == 1:   # e[n - 1] is the input register itself (a 1-word memory has no address)
+            old = Signal(unsigned(aw))
+            with m.If(self.i.valid):
+                m.d.sync += old.eq(x_r)
+        else:
+            m.submodules.hist = hist = Memory(shape=unsigned(aw), depth=D, init=[])
+            wr = hist.write_port()
+            rd = hist.read_port(transparent_for=())   # e[n - D]: read before this write
+            wp = Signal(range(D))
+            m.d.comb += [wr.addr.eq(wp), wr.data.eq(self.i.payload), wr.en.eq(self.i.valid),
+                         rd.addr.eq(wp), rd.en.eq(self.i.valid)]
+            with m.If(self.i.valid):
+                m.d.sync += wp.eq(Mux(wp == D - 1, 0, wp + 1))
+            old = rd.data
+
+        m.submodules.search = inner = PeakSearch(p.search_params)
+        m.d.comb += [inner.i.valid.eq(v_r),
+                     inner.i.payload.eq(x_r + Mux(old_ok, old, 0))]
+
+        # -- output filter: keep the peaks that are the largest of their side lobes ---------
+        q = inner.o.payload
+        keep = Mux(q.partner_late, q.amplitude > q.partner, q.amplitude >= q.partner)
+        m.d.sync += [self.o.valid.eq(inner.o.valid & keep),
+                     self.o.payload.amplitude.eq(q.amplitude >> 1),
+                     self.o.payload.timestamp.eq(q.timestamp)]
         return m

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from amaranth.hdl import Fragment, Shape, unsigned
 
 from cosim.pysim import run_stream, unpack_fields
 from hdl.model.peak import (PeakParams, PeakState, peak_search, peak_search_float,
@@ -16,14 +17,23 @@ from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_s
 
 # -- helpers -------------------------------------------------------------------------------
 def realistic_envelope(rng, n, *, noise=200.0, width=10.0, min_gap=21, max_gap=150,
-                       amp_range=(2.0, 20.0), amp_width=19):
+                       amp_range=(2.0, 20.0), amp_width=19, pair_offset=0, single=0.0):
     """Rayleigh noise (mean ``noise``) plus Gaussian pulses (FWHM ``width`` samples) at
-    random spacing > 20 samples with amplitudes 2..20 times the noise mean."""
+    random spacing > 20 samples with amplitudes 2..20 times the noise mean.
+
+    ``pair_offset = D``: each pulse gets a partner ``D`` samples later (its own random
+    amplitude, so either pulse of a pair may be the larger), except a fraction ``single``
+    of them, left alone."""
     mean_to_sigma = 1.0 / np.sqrt(np.pi / 2)
     e = rng.rayleigh(noise * mean_to_sigma, n)
     centres = np.cumsum(rng.integers(min_gap, max_gap, n // min_gap + 1))
     centres = centres[centres < n]
     amps = rng.uniform(*amp_range, centres.size) * noise
+    if pair_offset:
+        paired = rng.random(centres.size) >= single
+        second = centres[paired] + pair_offset
+        centres = np.concatenate((centres, second))
+        amps = np.concatenate((amps, rng.uniform(*amp_range, second.size) * noise))
     sigma = width / (2 * np.sqrt(2 * np.log(2)))
     k = np.arange(-4 * int(sigma + 1), 4 * int(sigma + 1) + 1)
     shape = np.exp(-0.5 * (k / sigma) ** 2)
@@ -98,10 +108,10 @@ def _check_sim(p, e, in_valid=None):
         np.testing.assert_array_equal(f["partner"], ref.partner)
         np.testing.assert_array_equal(f["partner_late"], ref.partner_late)
     # Emitted params.latency cycles after the input transfer of the closing sample (of the
-    # sample partner_offset later with the pair-partner readout).
+    # sample emit_delay later with the pair-partner readout or the pair detection).
     in_cycles = np.arange(e.size) if in_valid is None else np.flatnonzero(in_valid)[:e.size]
     np.testing.assert_array_equal(res.cycles,
-                                  in_cycles[ref.end_index + p.partner_offset] + p.latency)
+                                  in_cycles[ref.end_index + p.emit_delay] + p.latency)
     return ref
 
 
@@ -136,6 +146,9 @@ def test_sim_matches_model_realistic_quick():
     dict(block_log2=5, smooth_log2=3, clip_to_floor=True, thr_mult=52),  # censored floor
     dict(block_log2=5, hold=3, max_len=24, partner_offset=7),            # pair partner
     dict(block_log2=3, hold=2, max_len=7, partner_offset=1),
+    dict(block_log2=5, hold=3, max_len=24, pair_offset=7),               # pair detection
+    dict(block_log2=3, hold=2, max_len=7, pair_offset=1),
+    dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12, pair_offset=20),
 ])
 def test_sim_matches_model_variants(kw):
     p = PeakParams(**kw)
@@ -276,6 +289,208 @@ def test_partner_readout_model(D, kw):
     assert f.partner.size and np.all(f.partner >= 0)
 
 
+# -- pulse-pair detection ------------------------------------------------------------------
+def pair_sum(e, D):
+    """``s[n] = e[n] + e[n - D]`` (``e`` = 0 before the first sample)."""
+    e = np.asarray(e)
+    return e + np.concatenate((np.zeros(D, e.dtype), e))[:e.size]
+
+
+def pair_reference(e, p, *, is_float=False, thr_min=None):
+    """Brute-force pair detection, independent of the model: :func:`reference_loop` on the
+    pair sum with ``p.search_params``, then per pulse: emitted once sample ``end + D`` is in;
+    kept iff ``s[n_max] >= s[n_max - D]`` (0 before the start) and ``s[n_max] > s[n_max + D]``;
+    amplitude ``s >> 1`` (float: ``s / 2``). Returns the kept and the dropped pulses as
+    ``(amplitude, n_max, end)``."""
+    D = p.pair_offset
+    s = pair_sum(np.asarray(e, np.float64 if is_float else np.int64), D)
+    kept, dropped = [], []
+    for pmax, nmax, end in reference_loop(s, p.search_params, is_float=is_float, thr_min=thr_min):
+        if end + D >= len(s):
+            continue                      # not emitted yet: its sample end + D has not arrived
+        assert pmax == s[nmax]
+        behind = s[nmax - D] if nmax >= D else 0
+        ahead = s[nmax + D]
+        amp = pmax / 2 if is_float else int(pmax) >> 1
+        (kept if pmax >= behind and pmax > ahead else dropped).append((amp, nmax, end))
+    return kept, dropped
+
+
+def pair_envelope(rng, n, D, **kw):
+    """:func:`realistic_envelope` with pulse pairs ``D`` apart (a quarter of them single
+    pulses), spaced so that most pairs stand apart and some overlap; a carrier (max_len
+    cuts) and a stretch at the top of the input range."""
+    aw = kw.pop("amp_width", 19)
+    e = realistic_envelope(rng, n, pair_offset=D, single=0.25, min_gap=21 + D,
+                           max_gap=150 + 2 * D, amp_width=aw, **kw)
+    e[n // 3:n // 3 + 500] = min(4000, (1 << aw) - 1)
+    e[n // 2:n // 2 + 50] = (1 << aw) - 1
+    return e
+
+
+#: TACAN X mode at 5 MHz envelope samples (12 us = 60 samples), the censored floor.
+TACAN_X_PAIR = PeakParams(pair_offset=60, clip_to_floor=True, smooth_log2=10, thr_mult=46)
+
+PAIR_SETS = [TACAN_X_PAIR,
+             PeakParams(pair_offset=1, block_log2=3, hold=2, max_len=7),
+             PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24),
+             PeakParams(pair_offset=150, block_log2=6, clip_log2=0, thr_mult=40),
+             PeakParams(pair_offset=300, block_log2=4, max_len=20, ts_bits=10, amp_width=14)]
+
+
+@pytest.mark.parametrize("k", range(len(PAIR_SETS)))
+def test_pair_model_matches_reference(k):
+    """Compiled model == numpy model == the brute-force reference (pulses, timestamps,
+    thresholds, state); the side-lobe rule both drops and keeps pulses here."""
+    p = PAIR_SETS[k]
+    e = pair_envelope(np.random.default_rng(270 + k), 30_000, p.pair_offset, amp_width=p.amp_width)
+    r, st = peak_search(e, p)
+    rn, st_n = peak_search_numpy(e, p)
+    for name in ("amplitude", "timestamp", "index", "end_index", "thresholds"):
+        np.testing.assert_array_equal(getattr(r, name), getattr(rn, name), err_msg=name)
+    assert st == st_n
+    kept, dropped = pair_reference(e, p)
+    assert _as_tuples(r) == kept
+    np.testing.assert_array_equal(r.timestamp, (r.index * p.ts_step) & ((1 << p.ts_bits) - 1))
+    assert r.amplitude.max() < 1 << p.amp_width
+    assert len(kept) > 50 and len(dropped) > 10, (len(kept), len(dropped))
+
+
+@pytest.mark.parametrize("k", range(len(PAIR_SETS)))
+def test_pair_model_chunked_equals_one_run(k):
+    """Chunked runs (cuts inside pulses, within D of each other, 1-sample and empty chunks)
+    == one run, for the compiled and the numpy model, whose states agree after every chunk."""
+    p = PAIR_SETS[k]
+    D = p.pair_offset
+    rng = np.random.default_rng(280 + k)
+    e = pair_envelope(rng, 30_000, D, amp_width=p.amp_width)
+    whole, st_whole = peak_search(e, p)
+    cuts = np.unique(np.clip(np.concatenate((
+        whole.index[::5] + 1, whole.index[2::7] + D, rng.integers(0, e.size, 30),
+        [0, 1, 1, 2, D - 1, D, D + 1, 2 * D + 3, 10_000, 10_001, 10_000 + D])), 0, e.size))
+    st_a = st_b = None
+    parts = []
+    prev = 0
+    for c in list(cuts) + [e.size, e.size]:
+        ra, st_a = peak_search(e[prev:c], p, st_a)
+        rb, st_b = peak_search_numpy(e[prev:c], p, st_b)
+        for name in ("amplitude", "timestamp", "index", "end_index"):
+            np.testing.assert_array_equal(getattr(ra, name), getattr(rb, name))
+        assert st_a == st_b
+        parts.append(ra)
+        prev = c
+    for name in ("amplitude", "timestamp", "index", "end_index"):
+        np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]),
+                                      getattr(whole, name), err_msg=name)
+    assert st_a == st_whole
+
+
+@pytest.mark.parametrize("k", range(len(PAIR_SETS)))
+def test_pair_float_variant_matches_reference(k):
+    p = PAIR_SETS[k]
+    rng = np.random.default_rng(290 + k)
+    e = pair_envelope(rng, 10_000, p.pair_offset) * 1e-3 + rng.random(10_000) * 1e-4
+    r, _ = peak_search_float(e, p, thr_min=0.03)
+    kept, dropped = pair_reference(e, p, is_float=True, thr_min=0.03)
+    got = np.array(_as_tuples(r))
+    exp = np.array(kept)
+    assert got.shape == exp.shape and len(kept) > 10 and len(dropped) > 0
+    np.testing.assert_allclose(got, exp, rtol=0, atol=1e-12)
+    r1, st = peak_search_float(e[:4321], p, thr_min=0.03)
+    r2, _ = peak_search_float(e[4321:], p, st, thr_min=0.03)
+    np.testing.assert_array_equal(np.concatenate((r1.index, r2.index)), r.index)
+    np.testing.assert_array_equal(np.concatenate((r1.amplitude, r2.amplitude)), r.amplitude)
+
+
+@pytest.mark.parametrize("D, kw", [(1, dict(block_log2=3, hold=2, max_len=7)),
+                                   (7, dict(block_log2=5, hold=3, max_len=24)),
+                                   (45, dict(block_log2=5, hold=3, max_len=24, clip_to_floor=True,
+                                             smooth_log2=10, thr_mult=46))])
+def test_sim_matches_model_pair_detection(D, kw):
+    """Amaranth sim == model on pulse pairs D apart (small blocks: the first L samples only
+    feed the floor), with pulses dropped and kept by the side-lobe rule."""
+    p = PeakParams(pair_offset=D, **kw)
+    e = pair_envelope(np.random.default_rng(300 + D), 6000, D)
+    ref = _check_sim(p, e)
+    kept, dropped = pair_reference(e, p)
+    assert _as_tuples(ref) == kept
+    assert len(kept) > 30 and len(dropped) > 5, (len(kept), len(dropped))
+
+
+def test_pair_side_lobes_and_ties():
+    """Noise-free floor, D = 10. A single pulse at c gives two equal sums, s[c] = s[c + D]:
+    the rule (s[n] >= s[n - D], s[n] > s[n + D]) keeps the later one. A pair whose second
+    pulse is the larger: its side lobes at c1 (ahead larger) and c2 + D (behind larger) go,
+    the pair's sum at c2 stays. The simulation emits the same."""
+    D = 10
+    p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=D)
+    L = p.block_len
+    e = np.full(5 * L, 100, dtype=np.int64)
+    c = 2 * L + 6
+    e[c - 1:c + 2] = [400, 900, 400]
+    c1, c2 = 3 * L + 6, 3 * L + 6 + D
+    e[c1 - 1:c1 + 2] = [400, 700, 400]
+    e[c2 - 1:c2 + 2] = [400, 900, 400]
+    ref = _check_sim(p, e)
+    assert ref.index.tolist() == [c + D, c2]
+    assert ref.amplitude.tolist() == [(900 + 100) >> 1, (900 + 700) >> 1]
+    kept, dropped = pair_reference(e, p)
+    assert _as_tuples(ref) == kept
+    assert [d[1] for d in dropped] == [c, c1, c2 + D]
+
+
+def test_gaps_in_valid_with_pair_detection():
+    rng = np.random.default_rng(310)
+    p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=12)
+    e = pair_envelope(rng, 3000, p.pair_offset)
+    ref = _check_sim(p, e, rng.random(9000) < 0.35)
+    _check_sim(p, e, np.repeat(rng.random(900) < 0.5, 10))
+    kept, dropped = pair_reference(e, p)
+    assert ref.amplitude.size > 10 and len(dropped) > 0
+
+
+@pytest.mark.parametrize("D", [5, 40])
+def test_reset_mid_run_with_pair_detection(D):
+    """After a clear the memory's old words are not e[n - D]: 0 until D new samples are in
+    (the memory itself is not reset). Stale words would lift the first block's floor (a
+    quiet block: threshold 96 instead of 27 with D = 5, 465 instead of 16 with D = 40) and,
+    with D = 40 > L, the pulse at 33 (block 1) would sum with one, 3150 > 3025 at 73: the
+    pulse at 33 would be kept instead of its later side lobe."""
+    p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=D)
+    rng = np.random.default_rng(315)
+    e1 = pair_envelope(rng, 700, D)
+    e1[-40 - 2 * D:] = 150  # no pulse open when the clear comes; these stay in the memory
+    e2 = realistic_envelope(rng, 900)
+    e2[:32] = 5
+    e2[33:36] = 3000
+    e2[36:36 + 2 * D] = 25
+    ref1, st1 = peak_search(e1, p)
+    assert not st1.open
+    ref2, _ = peak_search(e2, p)
+    # what a sum stage that forgot the clear would give (stale e[n - D]): different pulses
+    stale, _ = peak_search(e2, p, PeakState(pair_hist=tuple(e1[-D:].tolist())))
+    assert not (np.array_equal(stale.amplitude, ref2.amplitude)
+                and np.array_equal(stale.index, ref2.index))
+    valid = np.concatenate((np.ones(e1.size, bool), np.zeros(30, bool)))
+    c = e1.size + 15
+    dut = WithClear(PeakSearch(p))
+    _, amp, ts = _run_sim(p, np.concatenate((e1, e2)), valid, dut=dut,
+                          writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)])
+    np.testing.assert_array_equal(amp, np.concatenate((ref1.amplitude, ref2.amplitude)))
+    np.testing.assert_array_equal(ts, np.concatenate((ref1.timestamp, ref2.timestamp)))
+
+
+def test_pair_detection_ports():
+    """The pair detection's output is amplitude (amp_width) + timestamp, as out_layout."""
+    p = PeakParams(pair_offset=60, amp_width=17, ts_bits=20)
+    dut = PeakSearch(p)
+    assert [(k, Shape.cast(v).width) for k, v in dut.out_layout.members.items()] \
+        == [(k, w) for k, w, _ in p.out_layout] == [("amplitude", 17), ("timestamp", 20)]
+    assert dut.i.payload.shape() == unsigned(17)
+    assert p.latency == 8 and p.emit_delay == 60
+    Fragment.get(dut, None)   # elaborates
+
+
 # -- model ---------------------------------------------------------------------------------
 PARAM_SETS = [PeakParams(), SMALL, PeakParams(block_log2=3, hold=2, max_len=7),
               PeakParams(block_log2=2, hold=1, max_len=2, smooth_log2=0),
@@ -402,6 +617,12 @@ def test_model_rejects_bad_input():
     (dict(smooth_log2=2.0), r"peak smooth_log2 must be an integer in \[0, 16\], not 2.0"),
     (dict(clip_to_floor=1), r"peak clip_to_floor must be True or False, not 1"),
     (dict(partner_offset=-1), r"peak partner_offset must be an integer in \[0, 4096\], not -1"),
+    (dict(pair_offset=-1), r"peak pair_offset must be an integer in \[0, 4096\], not -1"),
+    (dict(pair_offset=4097), r"peak pair_offset must be an integer in \[0, 4096\], not 4097"),
+    (dict(pair_offset=1.0), r"peak pair_offset must be an integer in \[0, 4096\], not 1.0"),
+    (dict(pair_offset=60, partner_offset=60), r"peak pair_offset and partner_offset exclude "
+                                              r"each other \(the pair detection reads its "
+                                              r"partners itself\)"),
 ])
 def test_bad_params(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -516,3 +737,37 @@ def test_verilator_matches_model_partner_readout():
         np.testing.assert_array_equal(f[k], getattr(ref, k))
     np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
         ref.end_index + p.partner_offset] + p.latency)
+
+
+@pytest.mark.verilator
+@pytest.mark.parametrize("D", [60, 1])
+def test_verilog_lints_clean_pair_detection(D):
+    """The pair detection (TACAN X mode; and D = 1, a one-word memory)."""
+    p = TACAN_X_PAIR if D == 60 else PeakParams(pair_offset=1)
+    assert_lints_clean(PeakSearch(p), f"peak_search_pair{D}")
+
+
+#: The pulse-pair detection (TACAN X mode: 12 us of 5 MHz envelope samples, censored floor)
+#: with Verilator.
+VL_PAIR = TACAN_X_PAIR
+
+
+@needs_verilator
+def test_verilator_matches_model_pair_detection():
+    sim = verilator_sim(PeakSearch(VL_PAIR), "peak_search_pair_vl")
+    p = VL_PAIR
+    rng = np.random.default_rng(320)
+    n = 200_000
+    e = pair_envelope(rng, n, p.pair_offset)
+    valid = rng.random(int(n / 0.7) + 100) < 0.7
+    res = sim.run(e, in_valid=valid, flush_cycles=p.latency + 2)
+    f = unpack_fields(res.words, p.out_layout)
+    ref, _ = peak_search(e, p)
+    inner, _ = peak_search(pair_sum(e, p.pair_offset), p.search_params)
+    # the side-lobe rule drops many of the search's pulses and keeps most pairs
+    assert ref.amplitude.size > 1000 and inner.amplitude.size - ref.amplitude.size > 500
+    np.testing.assert_array_equal(f["amplitude"], ref.amplitude)
+    np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
+        ref.end_index + p.emit_delay] + p.latency)
+
