@@ -41,10 +41,13 @@ class TacanFrontEnd(wiring.Component):
     o : Out(stream.Signature(StructLayout({"payload": unsigned(amp + ts), "tag": unsigned(2)})))
         FIFO words towards the DSP, with a real ``ready``. Data word (tag 0): payload =
         ``amplitude | timestamp << amp_width`` (amplitude in envelope LSBs,
-        ``TacanFrontendParams.scale_to_fs`` FS each; timestamp = ADC tick of the peak's
+        ``TacanFrontendParams.scale_to_fs`` FS each -- the peak's, with the peak search's
+        pair-partner readout the partner's, with its pulse-pair detection the mean of the
+        pair's two envelope values; timestamp = ADC tick of the peak's
         envelope sample mod ``2**ts_bits``). Marker (tag 2): payload = peaks dropped just
         before it. ``params.latency`` cycles from the ADC sample that completes the envelope
-        sample closing a pulse to ``o.valid`` (empty FIFO).
+        sample closing a pulse (``peak.emit_delay`` envelope samples later with the readout
+        or the pair detection) to ``o.valid`` (empty FIFO).
     overflow_count : Out(unsigned(fifo_count_bits))
         Peaks dropped because the FIFO was full (saturating), the cycle after the drop.
     """
@@ -84,7 +87,7 @@ class TacanFrontEnd(wiring.Component):
         # (amplitude at the LSB), which is the documented word format.
         if p.peak.partner_offset:   # the pair partner's envelope is the amplitude reported
             pay = Cat(peak.o.payload.partner, peak.o.payload.timestamp)
-        else:
+        else:   # amplitude (with the pair detection: the pair's mean) | timestamp
             pay = peak.o.payload.as_value()
         m.d.comb += [fifo.i.valid.eq(peak.o.valid), fifo.i.payload.eq(pay)]
         wiring.connect(m, fifo.o, wiring.flipped(self.o))
