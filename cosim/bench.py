@@ -81,7 +81,7 @@ def _one_run(kw: dict) -> dict:
     from .tacan.signal import Multipath, TacanSignalConfig
     kw = dict(kw)
     echo = kw.pop("multipath", None)
-    opts = {k: kw.pop(k) for k in ("amplitude", "noise_floor") if k in kw}
+    opts = {k: kw.pop(k) for k in ("amplitude", "noise_floor", "detector") if k in kw}
     sig = TacanSignalConfig(**kw, multipath=None if echo is None else Multipath(**echo))
     try:
         r = run_tacan(TacanRunConfig(signal=sig, backend="golden", **opts))

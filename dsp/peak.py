@@ -47,9 +47,12 @@ partner's is not). The search itself is unchanged; a pulse is emitted once input
 Pulse-pair detection (``pair_offset = D > 0``; excludes the partner readout): the search
 runs on the pair sum ``s[n] = e[n] + e[n - D]`` (``e`` = 0 before the first sample), one bit
 wider (``amp_width + 1``), with the partner readout at the same ``D`` on ``s``, and a peak
-of ``s`` is kept only if it is the largest of its side lobes: ``s[n_max] >= s[n_max - D]`` and
-``s[n_max] > s[n_max + D]`` (a pair at ``(n - D, n)`` also gives ``s`` peaks of about half its
-height at ``n - D`` and ``n + D``, one pulse each; at equal height the earlier one is kept).
+of ``s`` is kept unless a side lobe is clearly higher: ``8 s[n_max] >= pair_keep *
+max(s[n_max - D], s[n_max + D])`` (``pair_keep`` eighths, default 6). A lone pair at
+``(n - D, n)`` also gives ``s`` peaks of about half its height at ``n - D`` and ``n + D``
+(one pulse each): dropped. A train of pulses ``D`` apart (the X-mode auxiliary burst: 12
+pulses 12 us apart) gives equal peaks at every pulse: all kept, each pulse then reported
+by two pairs (a strict maximum rule keeps a random third of them and loses bursts).
 The reported amplitude is ``s >> 1`` (float: ``s / 2``), the mean of the two pulses' envelopes,
 in ``amp_width`` bits; the timestamp is the pair's second pulse. With ``D`` the TACAN pair
 spacing the detection integrates both pulses of a pair -- what a TACAN/DME pulse decoder
@@ -125,6 +128,9 @@ class PeakParams:
         Pulse-pair detection at spacing ``D`` samples (0: off, else 1..4096; not with
         ``partner_offset``): the search runs on ``e[n] + e[n - D]`` and reports pairs (see the
         module doc); delays the output by ``D`` input samples.
+    pair_keep : int
+        Pair detection: a pair-sum peak is dropped when a side lobe exceeds it by more
+        than ``8 / pair_keep`` (1..8 eighths; see the module doc).
     """
 
     amp_width: int = 19
@@ -141,6 +147,7 @@ class PeakParams:
     max_len: int = 128
     partner_offset: int = 0
     pair_offset: int = 0
+    pair_keep: int = 6
 
     def __post_init__(self):
         check_width("peak amp_width", self.amp_width, minimum=1, maximum=40)
@@ -157,6 +164,7 @@ class PeakParams:
         _check_int("peak hold", self.hold, 1, 1 << 16)
         _check_int("peak partner_offset", self.partner_offset, 0, 4096)
         _check_int("peak pair_offset", self.pair_offset, 0, 4096)
+        _check_int("peak pair_keep", self.pair_keep, 1, 8)
         if self.pair_offset and self.partner_offset:
             raise ValueError("peak pair_offset and partner_offset exclude each other (the pair "
                              "detection reads its partners itself)")
@@ -191,7 +199,7 @@ class PeakParams:
         if not self.pair_offset:
             return self
         return replace(self, amp_width=self.amp_width + 1, partner_offset=self.pair_offset,
-                       pair_offset=0)
+                       pair_offset=0, pair_keep=PeakParams.pair_keep)
 
     @property
     def emit_delay(self) -> int:
@@ -309,8 +317,8 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
 
 def search_pairs(e, p: PeakParams, state: PeakState | None, run):
     """:func:`search_with_partner` on the input (``run`` an implementation of the search with
-    ``p.search_params``), or with ``pair_offset`` on the pair sum, keeping the peaks that are
-    the largest of their side lobes (the module doc)."""
+    ``p.search_params``), or with ``pair_offset`` on the pair sum, dropping the peaks a side
+    lobe clearly exceeds (the module doc)."""
     D = p.pair_offset
     if not D:
         return search_with_partner(e, p, state, run)
@@ -323,7 +331,7 @@ def search_pairs(e, p: PeakParams, state: PeakState | None, run):
     res, st = search_with_partner(s, p.search_params, st, run)
     st.pair_hist = tuple(buf[buf.size - D:].tolist())
     a, b = res.amplitude, res.partner
-    keep = np.where(res.partner_late, a > b, a >= b)
+    keep = 8 * a >= p.pair_keep * b
     amp = a[keep] * 0.5 if e.dtype.kind == "f" else a[keep] >> 1
     return PeakResult(amplitude=amp, timestamp=res.timestamp[keep], index=res.index[keep],
                       end_index=res.end_index[keep], thresholds=res.thresholds), st

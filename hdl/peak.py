@@ -39,8 +39,8 @@ Pulse-pair detection (``pair_offset = D > 0``): three stages around an inner
   not reset: a saturating count of the inputs since reset makes ``e[n - D]`` read 0 until
   ``D`` samples have been written;
 * the inner search, with its partner readout on ``s`` (``s[n_max + D]``, ``s[n_max - D]``);
-* output filter (1 cycle, registered): a peak goes out only if it is the largest of its side
-  lobes (``amplitude > partner`` when ``partner_late``, else ``amplitude >= partner``), with
+* output filter (1 cycle, registered): a peak goes out unless a side lobe clearly exceeds
+  it (``8 amplitude >= pair_keep * partner``: a shift and a constant product), with
   ``amplitude >> 1`` and the inner timestamp.
 
 So the latency is the inner search's plus 2 (:attr:`PeakParams.latency`).
@@ -306,9 +306,9 @@ class PeakSearch(wiring.Component):
         m.d.comb += [inner.i.valid.eq(v_r),
                      inner.i.payload.eq(x_r + Mux(old_ok, old, 0))]
 
-        # -- output filter: keep the peaks that are the largest of their side lobes ---------
+        # -- output filter: drop the peaks a side lobe clearly exceeds ----------------------
         q = inner.o.payload
-        keep = Mux(q.partner_late, q.amplitude > q.partner, q.amplitude >= q.partner)
+        keep = (q.amplitude << 3) >= q.partner * Const(p.pair_keep, unsigned(4))
         m.d.sync += [self.o.valid.eq(inner.o.valid & keep),
                      self.o.payload.amplitude.eq(q.amplitude >> 1),
                      self.o.payload.timestamp.eq(q.timestamp)]

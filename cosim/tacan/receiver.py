@@ -40,6 +40,7 @@ OPTIONS = (
     Option(KalmanConfig, "memory_s", help="Kalman filter memory (s)"),
     Option(_RUN, "settle_s"), Option(_RUN, "backend"), Option(_RUN, "dsp"),
     Option(_RUN, "compare"), Option(_RUN, "noise_floor"), Option(_RUN, "amplitude"),
+    Option(_RUN, "detector"),
     Arg("--dsp-service", type=str.lower, choices=["default", "dma", "undersized"], default=None,
         help="how the DSP reads the FIFO (preset; the --dsp-* options below override its "
              "fields): default = 1 ms timer, 256 words; dma; undersized = 64 words per 10 ms, "

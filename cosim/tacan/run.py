@@ -27,7 +27,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from dsp.tacan.frontend import NOISE_FLOORS, FrontendConfig, run_golden_frontend
+from dsp.tacan.frontend import (DETECTORS, NOISE_FLOORS, PAIR_DETECTOR, FrontendConfig,
+                                pair_detector, run_golden_frontend)
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 crb_deg, process_peaks)
@@ -117,6 +118,12 @@ class TacanRunConfig:
                 "the detection, so not censored by the threshold near the noise floor; the "
                 "DSP then measures every pulse outside the bursts below ~1 dB)",
         "choices": ("peak", "partner"), "case": "lower"})
+    detector: str = field(default="pulse", metadata={
+        "help": "what the FPGA detects: single pulses (default) or pulse pairs (the "
+                "envelope summed with itself one pair spacing earlier: both pulses of a pair "
+                "integrated, ~3 dB more sensitive; censored slow floor, its own threshold; "
+                "see dsp.tacan.frontend.PAIR_DETECTOR)",
+        "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
     service: DspServiceConfig = field(default_factory=DspServiceConfig)
@@ -152,6 +159,13 @@ class TacanRunConfig:
                              "a 'peak' in frontend_changes, not both")
         if self.amplitude not in ("peak", "partner"):
             raise ValueError(f"amplitude must be 'peak' or 'partner', not {self.amplitude!r}")
+        if self.detector not in DETECTORS:
+            raise ValueError(f"detector must be one of {list(DETECTORS)}, not {self.detector!r}")
+        if self.detector == "pair" and (self.noise_floor != "clipped" or self.amplitude != "peak"
+                                        or "peak" in dict(self.frontend_changes)):
+            raise ValueError("the pair detector has its own noise floor and reports the pair's "
+                             "mean amplitude: give --detector pair without --noise-floor, "
+                             "--amplitude or a 'peak' in frontend_changes")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
@@ -209,6 +223,9 @@ class TacanRunConfig:
         if self.amplitude == "partner":     # the pair spacing in envelope samples
             d = int(round(pair_spacing_s(self.signal.mode) * cfg.env_rate_hz))
             cfg = replace(cfg, peak=replace(cfg.peak, partner_offset=d))
+        if self.detector == "pair":
+            cfg = replace(cfg, peak=pair_detector(self.signal.mode, cfg.env_rate_hz,
+                                                  replace(PAIR_DETECTOR, ts_step=cfg.peak.ts_step)))
         return cfg
 
     @property
@@ -229,7 +246,8 @@ class TacanRunConfig:
         dec = None
         if self.amplitude == "partner":
             dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
-        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec)
+        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec,
+                              pair_reports=self.detector == "pair")
 
 
 @dataclass

@@ -17,7 +17,7 @@ from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, com
 from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
 from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
-from .standard import burst_offsets
+from .standard import burst_offsets, pair_spacing_s
 
 
 @dataclass
@@ -122,6 +122,13 @@ class ReceiverConfig:
     #: at -3 dB, where it measured 20-39 deg and, unflagged, a record gave 15 bearings 38
     #: deg off as valid). None: off.
     flag_coarse_sigma_deg: float | None = 10.0
+    #: Each peak is a pulse *pair* (the FPGA's pulse-pair detection,
+    #: :attr:`dsp.peak.PeakParams.pair_offset`; ``python -m cosim tacan --detector pair``):
+    #: timestamped at its second pulse, with the pair's mean envelope. The DSP takes it as the
+    #: pair's two pulses, the mode's pair spacing apart, each at that amplitude
+    #: (:func:`expand_pairs`), so the decoder and the filter see pulses as from a pulse
+    #: detector.
+    pair_reports: bool = False
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -137,6 +144,8 @@ class ReceiverConfig:
                              f"{self.flag_coarse_sigma_deg!r}")
         if not isinstance(self.sector_track, bool):
             raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
+        if not isinstance(self.pair_reports, bool):
+            raise ValueError(f"pair_reports must be True or False, not {self.pair_reports!r}")
         if not isinstance(self.track_rotation, bool):
             raise ValueError(f"track_rotation must be True or False, not {self.track_rotation!r}")
         if not 0 < float(self.rotation_span_s) <= 10:
@@ -219,6 +228,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         raise ValueError(f"{amps.shape[1]} amplitudes for {t.size} peak times")
     if not (np.all(np.isfinite(t)) and (amps.dtype.kind == "i" or np.all(np.isfinite(amps)))):
         raise ValueError("peak times and amplitudes must be finite (NaN/inf from the front end)")
+    if cfg.pair_reports:
+        t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks, tick_hz=tick_hz,
+                                      tol_s=(cfg.decoder or DecoderConfig(mode=cfg.mode)).tol_s)
     dec = decode(t, cfg.mode, cfg.decoder or DecoderConfig(mode=cfg.mode))
     sel = np.flatnonzero(dec.measurement_mask)
     tm, ym = t[sel], amps[:, sel]
@@ -366,6 +378,36 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         events={**kf.events, "invalid_bearings": n_invalid, "flagged_bearings": n_flagged},
         state=state, valid=ok, produced_s=np.array(out_done),
         coarse_sigma_deg=sig)
+
+
+def expand_pairs(times_s, amplitudes, mode: str, *, ticks=None, tick_hz: float | None = None,
+                 tol_s: float = 1e-6):
+    """Pulse-pair reports -> the pairs' pulses: each report at ``t`` becomes pulses at
+    ``t - pair_spacing_s(mode)`` and ``t`` with the report's amplitude (columns of
+    ``amplitudes``, (B, N)), in time order; a pulse within ``tol_s`` after the previous one
+    is the same pulse reported by two pairs and is dropped. With ``ticks`` the spacing is
+    ``round(spacing * tick_hz)`` ticks and the times follow the ticks. Returns ``(times_s,
+    amplitudes, ticks)``."""
+    sp = pair_spacing_s(mode)
+    t = np.asarray(times_s, dtype=np.float64)
+    if ticks is not None:
+        d = int(round(sp * tick_hz))
+        tk = np.stack([ticks - d, ticks], axis=1).ravel()
+        order = np.argsort(tk, kind="stable")
+        tk = tk[order]
+        t2 = tk / tick_hz
+    else:
+        t2 = np.stack([t - sp, t], axis=1).ravel()
+        order = np.argsort(t2, kind="stable")
+        t2, tk = t2[order], None
+    amps = np.repeat(amplitudes, 2, axis=1)[:, order]
+    # a pulse reported by two pairs (a train of pulses one spacing apart: the X-mode
+    # auxiliary burst) is one pulse: the first report's
+    keep = np.r_[True, np.diff(t2) > tol_s] if t2.size else np.zeros(0, bool)
+    t2, amps = t2[keep], amps[:, keep]
+    if tk is not None:
+        tk = tk[keep]
+    return t2, amps, tk
 
 
 def amplitude_codes(amp_lsb, scale_to_fs: float, y: FixedFormat, gain_frac: int = 24):

@@ -299,8 +299,8 @@ def pair_sum(e, D):
 def pair_reference(e, p, *, is_float=False, thr_min=None):
     """Brute-force pair detection, independent of the model: :func:`reference_loop` on the
     pair sum with ``p.search_params``, then per pulse: emitted once sample ``end + D`` is in;
-    kept iff ``s[n_max] >= s[n_max - D]`` (0 before the start) and ``s[n_max] > s[n_max + D]``;
-    amplitude ``s >> 1`` (float: ``s / 2``). Returns the kept and the dropped pulses as
+    kept iff ``8 s[n_max] >= pair_keep * max(s[n_max - D], s[n_max + D])`` (0 before the
+    start); amplitude ``s >> 1`` (float: ``s / 2``). Returns the kept and the dropped pulses as
     ``(amplitude, n_max, end)``."""
     D = p.pair_offset
     s = pair_sum(np.asarray(e, np.float64 if is_float else np.int64), D)
@@ -312,7 +312,8 @@ def pair_reference(e, p, *, is_float=False, thr_min=None):
         behind = s[nmax - D] if nmax >= D else 0
         ahead = s[nmax + D]
         amp = pmax / 2 if is_float else int(pmax) >> 1
-        (kept if pmax >= behind and pmax > ahead else dropped).append((amp, nmax, end))
+        (kept if 8 * pmax >= p.pair_keep * max(behind, ahead) else dropped).append(
+            (amp, nmax, end))
     return kept, dropped
 
 
@@ -418,10 +419,11 @@ def test_sim_matches_model_pair_detection(D, kw):
 
 
 def test_pair_side_lobes_and_ties():
-    """Noise-free floor, D = 10. A single pulse at c gives two equal sums, s[c] = s[c + D]:
-    the rule (s[n] >= s[n - D], s[n] > s[n + D]) keeps the later one. A pair whose second
-    pulse is the larger: its side lobes at c1 (ahead larger) and c2 + D (behind larger) go,
-    the pair's sum at c2 stays. The simulation emits the same."""
+    """Noise-free floor, D = 10, pair_keep 6. A single pulse at c gives two equal sums,
+    s[c] = s[c + D] (a train of one pulse): both kept. A pair 700/900: its side lobes at c1
+    (800 against 1600 ahead) and c2 + D (1000 against 1600 behind) go, the pair's sum at c2
+    stays. A pair 900/400 at c3, c4: the side lobe at c3 (1000 against 1300 ahead, 8 * 1000
+    >= 6 * 1300) is kept (the one at c4 + D, 500, is under the threshold, 600). The simulation emits the same."""
     D = 10
     p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=D)
     L = p.block_len
@@ -431,12 +433,16 @@ def test_pair_side_lobes_and_ties():
     c1, c2 = 3 * L + 6, 3 * L + 6 + D
     e[c1 - 1:c1 + 2] = [400, 700, 400]
     e[c2 - 1:c2 + 2] = [400, 900, 400]
+    c3, c4 = 4 * L + 6, 4 * L + 6 + D
+    e[c3 - 1:c3 + 2] = [400, 900, 400]
+    e[c4 - 1:c4 + 2] = [300, 400, 300]
     ref = _check_sim(p, e)
-    assert ref.index.tolist() == [c + D, c2]
-    assert ref.amplitude.tolist() == [(900 + 100) >> 1, (900 + 700) >> 1]
+    assert ref.index.tolist() == [c, c + D, c2, c3, c4]
+    assert ref.amplitude.tolist() == [(900 + 100) >> 1, (100 + 900) >> 1, (900 + 700) >> 1,
+                                      (900 + 100) >> 1, (400 + 900) >> 1]
     kept, dropped = pair_reference(e, p)
     assert _as_tuples(ref) == kept
-    assert [d[1] for d in dropped] == [c, c1, c2 + D]
+    assert [d[1] for d in dropped] == [c1, c2 + D]
 
 
 def test_gaps_in_valid_with_pair_detection():
@@ -620,6 +626,8 @@ def test_model_rejects_bad_input():
     (dict(pair_offset=-1), r"peak pair_offset must be an integer in \[0, 4096\], not -1"),
     (dict(pair_offset=4097), r"peak pair_offset must be an integer in \[0, 4096\], not 4097"),
     (dict(pair_offset=1.0), r"peak pair_offset must be an integer in \[0, 4096\], not 1.0"),
+    (dict(pair_keep=0), r"peak pair_keep must be an integer in \[1, 8\], not 0"),
+    (dict(pair_keep=9), r"peak pair_keep must be an integer in \[1, 8\], not 9"),
     (dict(pair_offset=60, partner_offset=60), r"peak pair_offset and partner_offset exclude "
                                               r"each other \(the pair detection reads its "
                                               r"partners itself\)"),

@@ -138,3 +138,25 @@ def test_cli_partner_amplitude_reaches_the_hardware_and_stays_bit_exact(capsys):
     assert main(args + ["--amplitude", "partner", "--recheck", "pysim",
                         "--recheck-samples", "40000"]) == 0
     assert json.loads(capsys.readouterr().out)["recheck"]["same_bits"] is True
+
+
+def test_cli_pair_detector_reaches_the_hardware_and_stays_bit_exact(capsys):
+    """``--detector pair``: the FPGA detects pulse pairs (other words than the default's,
+    about half as many: one per pair), the model matches the RTL word for word (Verilator
+    when installed) and the DSP still finds the references."""
+    args = ["tacan", "--backend", "model", "--dsp", "fixed", "--duration-s", "0.5",
+            "--memory-s", "0.15", "--snr-db", "10", "--json"]
+    assert main(args) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main(args + ["--detector", "pair", "--recheck", "auto",
+                        "--recheck-samples", "300000"]) == 0
+    pair = json.loads(capsys.readouterr().out)
+    assert pair["recheck"]["same_bits"] is True and pair["recheck"]["words"] > 50
+    assert pair["n_main_refs"] == plain["n_main_refs"]
+    assert pair["digest"]["fifo"] != plain["digest"]["fifo"]
+
+
+@pytest.mark.parametrize("extra", [["--noise-floor", "censored"], ["--amplitude", "partner"]])
+def test_cli_pair_detector_refuses_the_pulse_detector_options(capsys, extra):
+    assert main(["tacan", "--detector", "pair", "--duration-s", "1"] + extra) == 2
+    assert "the pair detector has its own noise floor" in capsys.readouterr().err

@@ -125,3 +125,45 @@ def test_bearings_are_flagged_while_the_filter_warms_up_or_misfits(dsp):
                          (dict(flag_noise_ratio=0), "flag_noise_ratio must be > 0")):
         with pytest.raises(ValueError, match=msg):
             ReceiverConfig(**bad_cfg)
+
+
+def test_expand_pairs_gives_the_pulses_of_the_pairs():
+    """Each report -> its two pulses (the mode's spacing: 12 us X = 240 ticks of 20 MHz,
+    30 us Y), in time order, amplitudes per column; a pulse two reports share (a train of
+    pulses one spacing apart) is kept once, with the first report's amplitude."""
+    from dsp.tacan.receiver import expand_pairs
+    ticks = np.array([1000, 1240, 5000, 5003], np.int64)   # a train 0/240/480, then 2 near
+    amps = np.array([[1.0, 2.0, 3.0, 4.0], [5.0, 6.0, 7.0, 8.0]])
+    # tol 0.1 us: 760/1000 report 0's, 1240 report 1's (its 1000 is report 0's), then
+    # 4760, 4763 (0.15 us apart), 5000, 5003
+    t, a, tk = expand_pairs(ticks / 20e6, amps, "X", ticks=ticks, tick_hz=20e6, tol_s=0.1e-6)
+    assert tk.tolist() == [760, 1000, 1240, 4760, 4763, 5000, 5003]
+    np.testing.assert_array_equal(t, tk / 20e6)
+    np.testing.assert_array_equal(a, [[1, 1, 2, 3, 4, 3, 4], [5, 5, 6, 7, 8, 7, 8]])
+    # the default tol (1 us, the decoder's): 4763 and 5003 are 4760's and 5000's pulses
+    t, a, tk = expand_pairs(ticks / 20e6, amps, "X", ticks=ticks, tick_hz=20e6)
+    assert tk.tolist() == [760, 1000, 1240, 4760, 5000]
+    np.testing.assert_array_equal(a, [[1, 1, 2, 3, 3], [5, 5, 6, 7, 7]])
+    t, a, tk = expand_pairs(np.array([1e-3]), np.array([[2.0]]), "Y")
+    assert tk is None and np.allclose(t, [1e-3 - 30e-6, 1e-3]) and a.tolist() == [[2.0, 2.0]]
+
+
+def test_pair_reports_give_the_bearing_of_the_pulses():
+    """The same beacon reported as pairs (second pulse, the pair's mean amplitude) gives the
+    bearing the pulses give: the DSP sees the same pulses at the same times."""
+    cfg = TacanSignalConfig(duration_s=1.5, snr_db=20, seed=6)
+    t, amps, _ = pulse_observations(cfg, [135.0])
+    ticks = np.round(t * 20e6).astype(np.int64)
+    ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks, tick_hz=20e6)
+    # the pairs: pulses 240 ticks (12 us) apart; the second of each reports the mean
+    second = np.flatnonzero(np.isin(ticks - 240, ticks))
+    first = np.searchsorted(ticks, ticks[second] - 240)
+    mean = (amps[:, first] + amps[:, second]) / 2
+    pr = process_peaks(ticks[second] / 20e6, mean, ReceiverConfig(pair_reports=True),
+                       ticks=ticks[second], tick_hz=20e6)
+    assert pr.n_main_refs == ref.n_main_refs and pr.n_aux_refs == ref.n_aux_refs
+    keep = ref.times_s > 0.5
+    d = wrap_deg(pr.bearing_deg[0][pr.times_s > 0.5] - ref.bearing_deg[0][keep])
+    assert np.abs(d).max() < 0.1
+    with pytest.raises(ValueError, match="pair_reports must be True or False"):
+        ReceiverConfig(pair_reports=1)
