@@ -6,8 +6,9 @@ golden front end -> Kalman DSP) versus SNR at 90 and 270 degrees, and over every
 the same bearing sweep on the pulse-level fast path at 10/15/20 dB over several seeds,
 looking for 40-degree sector slips.
 
-``tacan-detector``: the pulse detector's options near the noise floor (``--amplitude
-partner``, ``--noise-floor censored``) against the default, 0-3 dB, 90 and 270 deg.
+``tacan-detector``: the detector's options near the noise floor (``--amplitude
+partner``, ``--noise-floor censored``, ``--detector pair``) against the default, 0-10 dB,
+90 and 270 deg, and on noise alone.
 """
 from __future__ import annotations
 
@@ -394,7 +395,8 @@ def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) ->
 DETECTOR_VARIANTS = (("default (peak, clipped floor)", {}),
                      ("--amplitude partner", {"amplitude": "partner"}),
                      ("--noise-floor censored", {"noise_floor": "censored"}),
-                     ("both", {"amplitude": "partner", "noise_floor": "censored"}))
+                     ("both", {"amplitude": "partner", "noise_floor": "censored"}),
+                     ("--detector pair", {"detector": "pair"}))
 
 
 def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
@@ -405,14 +407,16 @@ def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> d
     from .tacan.detector import detector_bounds
     from .tacan.signal import TacanSignalConfig
     t_start = time.perf_counter()
-    snrs = (0.0, 3.0) if quick else (0.0, 1.0, 2.0, 3.0)
+    snrs = (0.0, 3.0) if quick else (0.0, 1.0, 2.0, 3.0, 6.0, 10.0)
     seeds = range(100, 101 if quick else 108)
     items = [dict(bearing_deg=b, snr_db=s, duration_s=3.0, seed=k, **opt)
              for s in snrs for b in (90.0, 270.0) for _, opt in DETECTOR_VARIANTS for k in seeds]
     runs = _map(jobs, _one_run, items, "detector variants")
     floors = ("clipped", "censored")
-    ops = _map(jobs, _operating_point, [dict(snr_db=s, noise_floor=f) for s in snrs + (6.0, 10.0)
+    ops = _map(jobs, _operating_point, [dict(snr_db=s, noise_floor=f)
+                                        for s in sorted(set(snrs) | {6.0, 10.0})
                                         for f in floors], "detector operating points")
+    noise = _map(jobs, _noise_alone, [opt for _, opt in DETECTOR_VARIANTS], "noise alone")
     n = len(seeds)
     kc = KalmanConfig()
     rows, i = [], 0
@@ -428,7 +432,9 @@ def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> d
     bound_rows = [{**op, **detector_bounds(op, 0.21, 0.21, kc.n_eff)} for op in ops]
     summary = {"benchmark": "tacan-detector", "machine": machine_info(), "quick": quick,
                "elapsed_s": time.perf_counter() - t_start, "seeds": list(seeds), "rows": rows,
-               "bounds": bound_rows}
+               "bounds": bound_rows,
+               "noise_alone": [{"variant": label, **r}
+                               for (label, _), r in zip(DETECTOR_VARIANTS, noise)]}
     out.mkdir(parents=True, exist_ok=True)
     (out / "tacan_detector.json").write_text(json.dumps(summary, indent=1))
     (out / "tacan_detector.md").write_text(_detector_markdown(summary))
@@ -456,6 +462,15 @@ def _detector_markdown(summary: dict) -> str:
                  for r in g]
         lines.append(f"| {g[0]['snr_db']:g} | {g[0]['bearing_deg']:g} | {g[0]['crb_deg']:.3f} | "
                      + " | ".join(cells) + " |")
+    if summary.get("noise_alone"):
+        lines += ["", "On noise alone (a beacon 40 dB under the noise, 4 s, seed 100): the FPGA's "
+                  "reports and the DSP's amplitude measurements per second (the pulse detectors' "
+                  "noise peaks enter only as pulses of pairs, 12 us apart; the pair detector's "
+                  "reports are pairs) and the references decoded:", "",
+                  "| variant | reports / s | measurements / s | references |", "|---|---:|---:|---:|"]
+        for r in summary["noise_alone"]:
+            lines.append(f"| {r['variant']} | {r['reports_per_s']:.0f} | "
+                         f"{r['measurements_per_s']:.1f} | {r['references']} |")
     lines += ["", "What the detector's output allows (`dsp.tacan.bounds`, `cosim.tacan.detector`): its "
               "operating point measured on a 1 s record at 90 deg (seed 100) and the bounds of a DSP "
               "using the detections' times and amplitudes (both), their number only (rate) or the "
@@ -471,6 +486,28 @@ def _detector_markdown(summary: dict) -> str:
                      f"({b['model_detected_fraction']:.3f}) | {b['bound_both_deg'] / c:.2f}x | "
                      f"{_times(b['bound_rate_deg'] / c)} | {b['bound_marks_deg'] / c:.2f}x |")
     return "\n".join(lines) + "\n"
+
+
+def _noise_alone(opt: dict) -> dict:
+    """A detector variant on noise alone (a beacon 40 dB under the noise, 4 s): what the FPGA
+    reports per second and what the DSP takes as amplitude measurements (the decoder's
+    pulses of pairs; with ``--detector pair`` every report's two pulses)."""
+    from dsp.tacan.decode import DecoderConfig, decode
+    from dsp.tacan.frontend import run_golden_frontend
+    from dsp.tacan.receiver import expand_pairs
+    from .tacan.run import TacanRunConfig
+    from .tacan.signal import TacanSignalConfig, generate
+    sig = TacanSignalConfig(bearing_deg=90.0, snr_db=-40.0, duration_s=4.0, seed=100)
+    run = TacanRunConfig(signal=sig, require_bearing=False, **opt)
+    pk = run_golden_frontend(generate(sig).samples, run.frontend, sig.adc_bits)
+    rc = run.receiver
+    t = pk.times_s
+    if rc.pair_reports:
+        t = expand_pairs(t, pk.amplitudes[None, :], rc.mode)[0]
+    dec = decode(t, rc.mode, rc.decoder or DecoderConfig(mode=rc.mode))
+    return {"reports_per_s": pk.timestamps.size / sig.duration_s,
+            "measurements_per_s": int(np.count_nonzero(dec.measurement_mask)) / sig.duration_s,
+            "references": int(dec.ref_times_s.size)}
 
 
 def _operating_point(kw: dict) -> dict:
