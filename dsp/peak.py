@@ -56,8 +56,11 @@ by two pairs (a strict maximum rule keeps a random third of them and loses burst
 The reported amplitude is ``s >> 1`` (float: ``s / 2``), the mean of the two pulses' envelopes,
 in ``amp_width`` bits; the timestamp is the pair's second pulse. With ``D`` the TACAN pair
 spacing the detection integrates both pulses of a pair -- what a TACAN/DME pulse decoder
-does -- so a pair is found at ~3 dB less SNR than its pulses alone, and the amplitude
-measures both. The noise floor and threshold are those of ``s`` (``thr_mult`` relative to its
+does: the threshold applies to their sum, whose noise is smaller relative to its mean, and
+the amplitude measures both pulses. Its spacing tolerance is the pulse width: a single
+pulse gives two equal sums (both kept, a train of one) and two pulses a little more or less
+than ``D`` apart sum on their flanks; nothing here checks that both pulses are there at the
+spacing (see :data:`dsp.tacan.frontend.PAIR_DETECTOR`). The noise floor and threshold are those of ``s`` (``thr_mult`` relative to its
 floor, ``thr_min`` in units of ``s``). A pulse is emitted once input sample
 ``end_index + D`` has arrived, as with the partner readout.
 

@@ -121,8 +121,9 @@ class TacanRunConfig:
     detector: str = field(default="pulse", metadata={
         "help": "what the FPGA detects: single pulses (default) or pulse pairs (the "
                 "envelope summed with itself one pair spacing earlier: both pulses of a pair "
-                "integrated, ~3 dB more sensitive; censored slow floor, its own threshold; "
-                "see dsp.tacan.frontend.PAIR_DETECTOR)",
+                "integrated; censored slow floor, its own threshold; see "
+                "dsp.tacan.frontend.PAIR_DETECTOR). Experimental: a beacon of the other mode "
+                "can give valid bearings",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()

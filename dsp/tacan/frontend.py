@@ -52,12 +52,16 @@ NOISE_FLOORS = {
     "censored": PeakParams(clip_to_floor=True, thr_mult=55),
 }
 
-#: The pulse-pair detector (``python -m cosim tacan --detector pair``): the search runs on
-#: ``e[n] + e[n - D]``, ``D`` the mode's pair spacing (:func:`pair_detector`), with a censored
-#: floor smoothed over 2**10 blocks (~0.2 s) and threshold 2.875x (46/16) the pair sum's
-#: floor. Values measured below; the censored floor is needed (a clipped one is lifted by
-#: the bursts and biases the bearing, +0.5 deg at 3 dB, 270 deg), the slow one keeps the
-#: threshold from following the noise.
+#: The pulse-pair detector (``python -m cosim tacan --detector pair``, experimental): the
+#: search runs on ``e[n] + e[n - D]``, ``D`` the mode's pair spacing (:func:`pair_detector`),
+#: with a censored floor smoothed over 2**10 blocks (~0.2 s) and threshold 2.875x (46/16) the
+#: pair sum's floor. A clipped floor is lifted by the bursts and biases the bearing (+0.5 deg
+#: at 3 dB, 270 deg); the threshold trades the noise pairs the DSP measures (on noise alone
+#: 457 reports/s at 40/16, ~30/s at 46/16, 2/s at 52/16; the pulse detector's paired noise
+#: peaks: ~6-10/s) against the pairs found in the envelope trough that acquisition needs at
+#: 0 dB (48/16 acquired 1 of 4 records at 90 deg). Figures: ``python -m cosim bench
+#: tacan-detector``; choices and the integrity limit (a beacon of the other mode can give
+#: valid bearings): docs/experiments/README.md.
 PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46)
 
 #: The detectors of ``python -m cosim tacan --detector``: single pulses (with the profile of

@@ -150,7 +150,9 @@ def test_cli_pair_detector_reaches_the_hardware_and_stays_bit_exact(capsys):
     plain = json.loads(capsys.readouterr().out)
     assert main(args + ["--detector", "pair", "--recheck", "auto",
                         "--recheck-samples", "300000"]) == 0
-    pair = json.loads(capsys.readouterr().out)
+    out = capsys.readouterr()
+    pair = json.loads(out.out)
+    assert "warning: --detector pair is experimental" in out.err
     assert pair["recheck"]["same_bits"] is True and pair["recheck"]["words"] > 50
     assert pair["n_main_refs"] == plain["n_main_refs"]
     assert pair["digest"]["fifo"] != plain["digest"]["fifo"]
