@@ -147,7 +147,7 @@ def test_tacan_options_are_its_dataclass_fields_with_their_defaults():
         "--mod-15", "--mod-135", "--fs-hz", "--if-hz", "--adc-bits", "--rotation-hz",
         "--memory-s",
         "--settle-s", "--backend", "--dsp", "--compare", "--noise-floor", "--amplitude",
-        "--dsp-service",
+        "--detector", "--dsp-service",
         "--dsp-stall",
         "--dsp-period-cycles", "--dsp-latency-cycles", "--dsp-batch-words",
         "--dsp-cycles-per-word", "--trace", "--trace-window", "--recheck",
@@ -156,7 +156,7 @@ def test_tacan_options_are_its_dataclass_fields_with_their_defaults():
     for f in ("bearing_deg", "snr_db", "duration_s", "seed", "mode", "mod_15", "mod_135",
               "fs_hz", "if_hz", "adc_bits", "rotation_hz"):
         assert acts["--" + f.replace("_", "-")].default == getattr(sig, f), f
-    for f in ("settle_s", "backend", "dsp", "compare", "noise_floor", "amplitude", "trace", "recheck",
+    for f in ("settle_s", "backend", "dsp", "compare", "noise_floor", "amplitude", "detector", "trace", "recheck",
               "recheck_samples"):
         assert acts["--" + f.replace("_", "-")].default == getattr(run, f), f
     assert acts["--memory-s"].default == KalmanConfig().memory_s
