@@ -64,6 +64,26 @@ spacing (see :data:`dsp.tacan.frontend.PAIR_DETECTOR`). The noise floor and thre
 floor, ``thr_min`` in units of ``s``). A pulse is emitted once input sample
 ``end_index + D`` has arrived, as with the partner readout.
 
+Pair checks (with ``pair_offset``; both off by default, models only -- the HDL does not have
+them yet). The sum accepts anything that puts energy ``D`` apart within a pulse width: a
+single pulse (equal sums at ``c`` and ``c + D``, both kept by the side-lobe rule) and two
+pulses a few microseconds further apart than ``D`` (the other TACAN mode's 15-us auxiliary
+pulses at ``D`` = 12 us: both halves on a flank, ``s`` ~ 1.2 A). A kept peak of ``s`` at
+``n_max`` must then also pass, on the envelope around it (``e`` = 0 before the first sample):
+
+* ``pair_balance = k`` (both pulses there): ``16 min(e[n_max], e[n_max - D]) >= k s[n_max]``;
+* ``pair_spread = w`` (the pulses ``D +- w`` apart): ``s[n_max] >= max(e[n_max + w] +
+  e[n_max - D - w], e[n_max - w] + e[n_max - D + w])`` -- the sum at spacing ``D`` through the
+  pair's centre is not below those at ``D + 2 w`` and ``D - 2 w``. Two pulses ``D + d`` apart
+  peak ``s`` half-way between, each half ``d / 2`` off its pulse's peak: kept (noise-free) iff
+  ``|d| <= w``. Four envelope taps and two adders; ``w`` must reach the pulse's flank (TACAN:
+  19 samples at half amplitude at 5 MHz; ``w`` = 8 is 0.6 of the peak) or the noise on the
+  flat top decides.
+
+In hardware both read the envelope at fixed offsets from the peak, latched with it like
+the partner readout; the models read them from an envelope history of ``2 D + max_len + w``
+samples kept across chunks (:attr:`PeakParams.pair_history`).
+
 The integer model (:func:`hdl.model.peak.peak_search`) is a compiled (numba) per-sample loop
 that follows the steps above as written; :func:`peak_search_numpy` is an independent vectorised
 implementation (a loop over blocks for the thresholds and over the sub-pulses of groups
@@ -134,6 +154,15 @@ class PeakParams:
     pair_keep : int
         Pair detection: a pair-sum peak is dropped when a side lobe exceeds it by more
         than ``8 / pair_keep`` (1..8 eighths; see the module doc).
+    pair_balance : int
+        Pair detection, both pulses present (0: off, else 1..8 sixteenths): a pair-sum peak
+        ``s = e[n_max] + e[n_max - D]`` is dropped unless ``16 min(e[n_max], e[n_max - D]) >=
+        pair_balance * s`` (see the module doc).
+    pair_spread : int
+        Pair detection, pulse spacing ``D +- w`` (0: off, else ``w`` = 1..64 samples, <= D): a
+        pair-sum peak is dropped unless ``s[n_max] >= max(e[n_max + w] + e[n_max - D - w],
+        e[n_max - w] + e[n_max - D + w])``, i.e. the pair sum at spacing ``D`` through the
+        pair's centre is not below those at ``D +- 2 w`` (see the module doc).
     """
 
     amp_width: int = 19
@@ -151,6 +180,8 @@ class PeakParams:
     partner_offset: int = 0
     pair_offset: int = 0
     pair_keep: int = 6
+    pair_balance: int = 0
+    pair_spread: int = 0
 
     def __post_init__(self):
         check_width("peak amp_width", self.amp_width, minimum=1, maximum=40)
@@ -168,6 +199,11 @@ class PeakParams:
         _check_int("peak partner_offset", self.partner_offset, 0, 4096)
         _check_int("peak pair_offset", self.pair_offset, 0, 4096)
         _check_int("peak pair_keep", self.pair_keep, 1, 8)
+        _check_int("peak pair_balance", self.pair_balance, 0, 8)
+        _check_int("peak pair_spread", self.pair_spread, 0, 64)
+        if self.pair_offset and self.pair_spread > self.pair_offset:
+            raise ValueError(f"peak pair_spread ({self.pair_spread}) must not exceed "
+                             f"pair_offset ({self.pair_offset})")
         if self.pair_offset and self.partner_offset:
             raise ValueError("peak pair_offset and partner_offset exclude each other (the pair "
                              "detection reads its partners itself)")
@@ -202,7 +238,18 @@ class PeakParams:
         if not self.pair_offset:
             return self
         return replace(self, amp_width=self.amp_width + 1, partner_offset=self.pair_offset,
-                       pair_offset=0, pair_keep=PeakParams.pair_keep)
+                       pair_offset=0, pair_keep=PeakParams.pair_keep,
+                       pair_balance=0, pair_spread=0)
+
+    @property
+    def pair_history(self) -> int:
+        """Input samples the pair detection keeps from one chunk to the next: ``D`` (the
+        ``e[n - D]`` of the sum), with the pair checks ``2 D + max_len + pair_spread`` (the
+        envelope around a peak ``n_max`` emitted up to ``D + max_len`` samples after it)."""
+        D = self.pair_offset
+        if not (self.pair_balance or self.pair_spread):
+            return D
+        return 2 * D + self.max_len + self.pair_spread
 
     @property
     def emit_delay(self) -> int:
@@ -321,20 +368,33 @@ def peak_search_float(env, params: PeakParams, state: PeakState | None = None, *
 def search_pairs(e, p: PeakParams, state: PeakState | None, run):
     """:func:`search_with_partner` on the input (``run`` an implementation of the search with
     ``p.search_params``), or with ``pair_offset`` on the pair sum, dropping the peaks a side
-    lobe clearly exceeds (the module doc)."""
+    lobe clearly exceeds and (``pair_balance``, ``pair_spread``) those whose two pulses are
+    not both there or not ``D`` apart (the module doc)."""
     D = p.pair_offset
     if not D:
         return search_with_partner(e, p, state, run)
     st = copy.copy(state) if state is not None else PeakState()
+    H = p.pair_history
+    n_in0 = st.n_in                                  # input index of e[0]
     prev = np.asarray(st.pair_hist, dtype=e.dtype)
-    if prev.size < D:
-        prev = np.concatenate([np.zeros(D - prev.size, dtype=e.dtype), prev])
-    buf = np.concatenate([prev, e])
-    s = e + buf[:e.size]
+    if prev.size < H:
+        prev = np.concatenate([np.zeros(H - prev.size, dtype=e.dtype), prev])
+    buf = np.concatenate([prev, e])                  # buf[i] = e[n_in0 - H + i] (0 before 0)
+    s = e + buf[H - D:H - D + e.size]
     res, st = search_with_partner(s, p.search_params, st, run)
-    st.pair_hist = tuple(buf[buf.size - D:].tolist())
+    st.pair_hist = tuple(buf[buf.size - H:].tolist())
     a, b = res.amplitude, res.partner
     keep = 8 * a >= p.pair_keep * b
+    if p.pair_balance or p.pair_spread:
+        m = res.index - (n_in0 - H)                  # the peaks in buf
+
+        def env(k):
+            return buf[m + k]
+        if p.pair_balance:
+            keep &= 16 * np.minimum(env(0), env(-D)) >= p.pair_balance * a
+        if p.pair_spread:
+            w = p.pair_spread
+            keep &= a >= np.maximum(env(w) + env(-D - w), env(-w) + env(-D + w))
     amp = a[keep] * 0.5 if e.dtype.kind == "f" else a[keep] >> 1
     return PeakResult(amplitude=amp, timestamp=res.timestamp[keep], index=res.index[keep],
                       end_index=res.end_index[keep], thresholds=res.thresholds), st

@@ -84,6 +84,10 @@ class PeakSearch(wiring.Component):
     def __init__(self, params: PeakParams | None = None):
         self.params = check_params(self, PeakParams() if params is None else params, PeakParams)
         p = self.params
+        if p.pair_offset and (p.pair_balance or p.pair_spread):
+            self._MustUse__silence = True   # never elaborated: no UnusedElaboratable warning
+            raise ValueError("PeakSearch: the pair checks (pair_balance, pair_spread) are in the "
+                             "models only (dsp.peak), not in the HDL yet")
         fields = {"amplitude": unsigned(p.amp_width), "timestamp": unsigned(p.ts_bits)}
         if p.partner_offset:
             fields.update(partner=unsigned(p.amp_width), partner_late=unsigned(1))

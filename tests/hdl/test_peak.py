@@ -2,6 +2,8 @@
 the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from amaranth.hdl import Fragment, Shape, unsigned
@@ -497,6 +499,106 @@ def test_pair_detection_ports():
     Fragment.get(dut, None)   # elaborates
 
 
+def _gauss_pulse(e, c, amp, half_width=9.5):
+    """Add a TACAN-like pulse (the golden envelope's shape: 19 samples at half amplitude)."""
+    k = np.arange(-45, 46)
+    e[c + k] += np.round(amp * np.exp(-np.log(2) * (k / half_width) ** 2)).astype(np.int64)
+
+
+#: D = 60 (12 us at 5 MHz), the pair checks on; a noise-free floor of 100.
+PAIR_CHECKED = PeakParams(block_log2=8, hold=5, max_len=128, clip_to_floor=True, pair_offset=60,
+                          pair_balance=4, pair_spread=8)
+
+
+def _other_mode_envelope():
+    """Floor 100; a single pulse at c1 (a Y-mode reference pulse), two pulses 75 samples (15
+    us, the Y auxiliary burst) apart at c2, c2 + 75, an X pair 60 apart at c3, c3 + 60, and
+    one 62 apart (D + 2) at c4, c4 + 62."""
+    L = PAIR_CHECKED.block_len
+    e = np.full(12 * L, 100, dtype=np.int64)
+    c1, c2, c3, c4 = 2 * L, 4 * L, 6 * L, 8 * L
+    _gauss_pulse(e, c1, 3000)
+    _gauss_pulse(e, c2, 3000)
+    _gauss_pulse(e, c2 + 75, 3000)
+    _gauss_pulse(e, c3, 3000)
+    _gauss_pulse(e, c3 + 60, 2500)
+    _gauss_pulse(e, c4, 2000)
+    _gauss_pulse(e, c4 + 62, 3000)
+    return e, (c1, c2, c3, c4)
+
+
+def test_pair_checks_reject_single_pulses_and_other_spacings():
+    """Without the checks the pair sum takes a single pulse for two pairs (c1, c1 + D: equal
+    sums, the side-lobe rule keeps both) and two pulses 15 us apart for a 12-us pair (both
+    halves on a flank: s ~ 1.3 A at the middle). ``pair_balance`` (both halves >= s/4) drops the
+    single pulse, ``pair_spread`` (w = 8: the sum at spacing D through the pair's centre not
+    below those at D +- 16) the 15-us pair; the 12-us pairs (60 and 62 apart) stay. Compiled
+    model == numpy model; the float variant keeps the same pairs."""
+    e, (c1, c2, c3, c4) = _other_mode_envelope()
+    D = PAIR_CHECKED.pair_offset
+    plain = replace(PAIR_CHECKED, pair_balance=0, pair_spread=0)
+    r0, _ = peak_search(e, plain)
+    assert {c1, c1 + D} <= set(r0.index.tolist())
+    assert any(c2 + D <= i <= c2 + 75 for i in r0.index.tolist())
+    for kw, gone in [(dict(pair_spread=0), "single"), (dict(pair_balance=0), "15us"), ({}, "")]:
+        p = replace(PAIR_CHECKED, **kw)
+        r, st = peak_search(e, p)
+        rn, st_n = peak_search_numpy(e, p)
+        for name in ("amplitude", "timestamp", "index", "end_index", "thresholds"):
+            np.testing.assert_array_equal(getattr(r, name), getattr(rn, name), err_msg=name)
+        assert st == st_n
+        got = r.index.tolist()
+        single = [i for i in got if c1 - 5 <= i <= c1 + D + 5]
+        y_aux = [i for i in got if c2 + D - 5 <= i <= c2 + 80]
+        assert (single == []) == ("single" in gone or gone == ""), (kw, got)
+        assert (y_aux == []) == ("15us" in gone or gone == ""), (kw, got)
+        if not kw:  # both checks: only the X pairs, reported at their second pulse
+            assert len(got) == 2 and abs(got[0] - (c3 + D)) <= 1 and abs(got[1] - (c4 + 61)) <= 1, got
+            np.testing.assert_array_equal(r.amplitude, (e[got] + e[np.array(got) - D]) >> 1)
+            rf, _ = peak_search_float(e.astype(np.float64), p)
+            np.testing.assert_array_equal(rf.index, r.index)
+            np.testing.assert_array_equal(rf.amplitude, (e[got] + e[np.array(got) - D]) / 2)
+
+
+@pytest.mark.parametrize("p", [PAIR_CHECKED,
+                               replace(TACAN_X_PAIR, pair_balance=6, pair_spread=5),
+                               PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24,
+                                          pair_balance=8, pair_spread=7)])
+def test_pair_checks_chunked_equals_one_run(p):
+    """With the pair checks (an envelope history of 2 D + max_len + w samples across chunks):
+    chunked == one run, compiled == numpy after every chunk; the checks drop pairs here."""
+    D = p.pair_offset
+    rng = np.random.default_rng(320 + D)
+    e = pair_envelope(rng, 30_000, D, amp_width=p.amp_width)
+    e[:3000] = np.maximum(e[:3000], _other_mode_envelope()[0][:3000])
+    whole, st_whole = peak_search(e, p)
+    plain, _ = peak_search(e, replace(p, pair_balance=0, pair_spread=0))
+    assert 10 < whole.index.size < plain.index.size
+    cuts = np.unique(np.clip(np.concatenate((
+        whole.index[::5] + 1, whole.index[2::7] + D, rng.integers(0, e.size, 30),
+        [0, 1, 1, 2, D - 1, D, D + 1, 2 * D + 3, 10_000, 10_001, 10_000 + D])), 0, e.size))
+    st_a = st_b = None
+    parts = []
+    prev = 0
+    for c in list(cuts) + [e.size, e.size]:
+        ra, st_a = peak_search(e[prev:c], p, st_a)
+        rb, st_b = peak_search_numpy(e[prev:c], p, st_b)
+        for name in ("amplitude", "timestamp", "index", "end_index"):
+            np.testing.assert_array_equal(getattr(ra, name), getattr(rb, name))
+        assert st_a == st_b
+        parts.append(ra)
+        prev = c
+    for name in ("amplitude", "timestamp", "index", "end_index"):
+        np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]),
+                                      getattr(whole, name), err_msg=name)
+    assert st_a == st_whole
+
+
+def test_pair_checks_not_in_hdl():
+    with pytest.raises(ValueError, match="pair checks .* models only"):
+        PeakSearch(PAIR_CHECKED)
+
+
 # -- model ---------------------------------------------------------------------------------
 PARAM_SETS = [PeakParams(), SMALL, PeakParams(block_log2=3, hold=2, max_len=7),
               PeakParams(block_log2=2, hold=1, max_len=2, smooth_log2=0),
@@ -628,6 +730,10 @@ def test_model_rejects_bad_input():
     (dict(pair_offset=1.0), r"peak pair_offset must be an integer in \[0, 4096\], not 1.0"),
     (dict(pair_keep=0), r"peak pair_keep must be an integer in \[1, 8\], not 0"),
     (dict(pair_keep=9), r"peak pair_keep must be an integer in \[1, 8\], not 9"),
+    (dict(pair_balance=9), r"peak pair_balance must be an integer in \[0, 8\], not 9"),
+    (dict(pair_spread=-1), r"peak pair_spread must be an integer in \[0, 64\], not -1"),
+    (dict(pair_spread=65), r"peak pair_spread must be an integer in \[0, 64\], not 65"),
+    (dict(pair_offset=5, pair_spread=6), r"peak pair_spread \(6\) must not exceed pair_offset \(5\)"),
     (dict(pair_offset=60, partner_offset=60), r"peak pair_offset and partner_offset exclude "
                                               r"each other \(the pair detection reads its "
                                               r"partners itself\)"),
