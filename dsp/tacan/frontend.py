@@ -59,10 +59,14 @@ NOISE_FLOORS = {
 #: at 3 dB, 270 deg); the threshold trades the noise pairs the DSP measures (on noise alone
 #: 457 reports/s at 40/16, ~30/s at 46/16, 2/s at 52/16; the pulse detector's paired noise
 #: peaks: ~6-10/s) against the pairs found in the envelope trough that acquisition needs at
-#: 0 dB (48/16 acquired 1 of 4 records at 90 deg). Figures: ``python -m cosim bench
-#: tacan-detector``; choices and the integrity limit (a beacon of the other mode can give
-#: valid bearings): docs/experiments/README.md.
-PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46)
+#: 0 dB (48/16 acquired 1 of 4 records at 90 deg). The pair checks (``pair_balance`` 4: the
+#: smaller pulse at least a quarter of the sum; ``pair_spread`` 8: the pulses 12 us +- 1.6 us
+#: apart) keep the other mode out: without them a Y beacon heard by the X receiver gave 293
+#: main references and 13 valid bearings in 60 s at 20 dB (its single pulses and its 15 us
+#: auxiliary pulses pass a pair-sum test); with them 0 valid in 60 s at 20 and 10 dB.
+#: Figures: ``python -m cosim bench tacan-detector``; the choices: docs/experiments/README.md.
+PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair_balance=4,
+                           pair_spread=8)
 
 #: The detectors of ``python -m cosim tacan --detector``: single pulses (with the profile of
 #: ``--noise-floor``) or pulse pairs.
