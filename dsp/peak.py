@@ -64,8 +64,8 @@ spacing (see :data:`dsp.tacan.frontend.PAIR_DETECTOR`). The noise floor and thre
 floor, ``thr_min`` in units of ``s``). A pulse is emitted once input sample
 ``end_index + D`` has arrived, as with the partner readout.
 
-Pair checks (with ``pair_offset``; both off by default, models only -- the HDL does not have
-them yet). The sum accepts anything that puts energy ``D`` apart within a pulse width: a
+Pair checks (with ``pair_offset``; both off by default; in the HDL one cycle of latency more
+and ``ts_step`` a power of two, see :attr:`PeakParams.pair_check_depth`). The sum accepts anything that puts energy ``D`` apart within a pulse width: a
 single pulse (equal sums at ``c`` and ``c + D``, both kept by the side-lobe rule) and two
 pulses a few microseconds further apart than ``D`` (the other TACAN mode's 15-us auxiliary
 pulses at ``D`` = 12 us: both halves on a flank, ``s`` ~ 1.2 A). A kept peak of ``s`` at
@@ -80,9 +80,10 @@ pulses at ``D`` = 12 us: both halves on a flank, ``s`` ~ 1.2 A). A kept peak of 
   19 samples at half amplitude at 5 MHz; ``w`` = 8 is 0.6 of the peak) or the noise on the
   flat top decides.
 
-In hardware both read the envelope at fixed offsets from the peak, latched with it like
-the partner readout; the models read them from an envelope history of ``2 D + max_len + w``
-samples kept across chunks (:attr:`PeakParams.pair_history`).
+In hardware both read the envelope at fixed offsets from the peak out of an envelope
+history (:attr:`PeakParams.pair_check_depth` words, addressed by the peak's index, which the
+timestamp carries) when the search emits the peak; the models read them from an envelope
+history of ``2 D + max_len + w`` samples kept across chunks (:attr:`PeakParams.pair_history`).
 
 The integer model (:func:`hdl.model.peak.peak_search`) is a compiled (numba) per-sample loop
 that follows the steps above as written; :func:`peak_search_numpy` is an independent vectorised
@@ -211,6 +212,15 @@ class PeakParams:
                 or self.max_len <= self.hold or self.max_len > 1 << 20:
             raise ValueError(f"peak max_len must be an integer > hold ({self.hold}) and "
                              f"<= 2**20, not {self.max_len!r}")
+        if self.pair_offset and (self.pair_balance or self.pair_spread):
+            step = int(self.ts_step).bit_length() - 1
+            depth_log2 = self.pair_check_depth.bit_length() - 1
+            if int(self.ts_step) != 1 << step or self.ts_bits - step < depth_log2:
+                raise ValueError(
+                    f"peak pair checks (pair_balance, pair_spread) need ts_step a power of two "
+                    f"and ts_bits - log2(ts_step) >= {depth_log2} (the HDL reads the peak's "
+                    f"index mod {self.pair_check_depth} from its timestamp), not ts_step "
+                    f"{self.ts_step}, ts_bits {self.ts_bits}")
 
     # -- derived ---------------------------------------------------------------------------
     @property
@@ -252,6 +262,24 @@ class PeakParams:
         return 2 * D + self.max_len + self.pair_spread
 
     @property
+    def pair_checks(self) -> bool:
+        """Pair detection with a pair check (``pair_balance`` or ``pair_spread``) on."""
+        return bool(self.pair_offset and (self.pair_balance or self.pair_spread))
+
+    @property
+    def pair_check_depth(self) -> int:
+        """Words of the HDL's envelope history for the pair checks: the power of two >=
+        ``pair_history + search_params.latency``. A peak ``n_max`` is emitted by the inner
+        search ``search_params.latency + 1`` cycles (sum stage + inner search) after the
+        input transfer of sample ``end_index + D``, where the taps are read; up to
+        ``search_params.latency`` inputs after that sample are written before the read (the
+        read does not see the write of its own cycle), so the newest written sample is at
+        most ``end_index + D + search_params.latency`` and the oldest tap ``n_max - D - w >=
+        end_index - max_len + 1 - D - w``."""
+        need = self.pair_history + self.search_params.latency
+        return 1 << (need - 1).bit_length()
+
+    @property
     def emit_delay(self) -> int:
         """Input samples after a pulse's closing sample (``end_index``) before it is emitted
         (the partner readout's or pair detection's ``D``, else 0)."""
@@ -267,8 +295,9 @@ class PeakParams:
     def latency(self) -> int:
         """Cycles from the input transfer of sample ``end_index + emit_delay`` (a pulse's
         closing sample, ``emit_delay`` later) to the output transfer; the pair detection adds
-        its sum stage and its output register."""
-        return 1 + self.det_delay + 1 + (2 if self.pair_offset else 0)
+        its sum stage and its output register, the pair checks one cycle more (the envelope
+        history's registered read)."""
+        return 1 + self.det_delay + 1 + (2 if self.pair_offset else 0) + (1 if self.pair_checks else 0)
 
     @property
     def in_layout(self) -> list[tuple[str, int, bool]]:

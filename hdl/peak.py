@@ -44,6 +44,25 @@ Pulse-pair detection (``pair_offset = D > 0``): three stages around an inner
   ``amplitude >> 1`` and the inner timestamp.
 
 So the latency is the inner search's plus 2 (:attr:`PeakParams.latency`).
+
+Pair checks (``pair_balance``, ``pair_spread = w``; :mod:`dsp.peak`): the output filter
+becomes two stages, one cycle more (latency inner + 3):
+
+* an envelope history of ``depth = PeakParams.pair_check_depth`` words (the power of two >=
+  ``2 D + max_len + w + `` the inner latency: the inputs written between the peak's oldest tap
+  ``n_max - D - w >= end_index - max_len + 1 - D - w`` and the read, at most up to
+  ``end_index + D + `` inner latency, must not overwrite it), written at ``wp`` = the input
+  index mod ``depth`` with each valid input; not reset, a saturating count of the inputs
+  since reset (``cnt``, up to ``depth``) marks the taps before the first sample, which read 0;
+* when the inner search emits a peak, ``n_max mod depth`` is its timestamp's bits from
+  ``log2 ts_step`` on (``PeakParams`` checks that ``ts_step`` is a power of two and that the
+  timestamp has the bits); one non-transparent registered read port per tap ``n_max + k``, ``k``
+  in ``0, -D`` (balance) and ``w, -D - w, -w, -D + w`` (spread); a tap ``k < 0`` reads 0
+  unless ``cnt = depth`` or ``n_max = cnt - ((wp - n_max) mod depth) >= -k`` (registered with
+  the reads); the pulse (amplitude, partner, timestamp, valid) is registered alongside;
+* next cycle: side-lobe rule, ``16 min(e[n_max], e[n_max - D]) >= pair_balance * s`` and
+  ``s >= max(e[n_max + w] + e[n_max - D - w], e[n_max - w] + e[n_max - D + w])``, into the
+  output register (``amplitude >> 1``, timestamp).
 """
 from __future__ import annotations
 
@@ -77,17 +96,13 @@ class PeakSearch(wiring.Component):
         (``amp_width``) and ``partner_late`` (1 bit), and the transfer comes ``latency`` (6)
         cycles after that of the sample ``D`` after the closing one. With the pulse-pair
         detection (``pair_offset = D``) the payload is ``amplitude`` (the pair's mean,
-        ``s >> 1``) and ``timestamp`` only, ``latency`` (8) cycles after the transfer of the
-        sample ``D`` after the closing one.
+        ``s >> 1``) and ``timestamp`` only, ``latency`` (8; 9 with the pair checks) cycles
+        after the transfer of the sample ``D`` after the closing one.
     """
 
     def __init__(self, params: PeakParams | None = None):
         self.params = check_params(self, PeakParams() if params is None else params, PeakParams)
         p = self.params
-        if p.pair_offset and (p.pair_balance or p.pair_spread):
-            self._MustUse__silence = True   # never elaborated: no UnusedElaboratable warning
-            raise ValueError("PeakSearch: the pair checks (pair_balance, pair_spread) are in the "
-                             "models only (dsp.peak), not in the HDL yet")
         fields = {"amplitude": unsigned(p.amp_width), "timestamp": unsigned(p.ts_bits)}
         if p.partner_offset:
             fields.update(partner=unsigned(p.amp_width), partner_late=unsigned(1))
@@ -312,8 +327,80 @@ class PeakSearch(wiring.Component):
 
         # -- output filter: drop the peaks a side lobe clearly exceeds ----------------------
         q = inner.o.payload
-        keep = (q.amplitude << 3) >= q.partner * Const(p.pair_keep, unsigned(4))
-        m.d.sync += [self.o.valid.eq(inner.o.valid & keep),
-                     self.o.payload.amplitude.eq(q.amplitude >> 1),
-                     self.o.payload.timestamp.eq(q.timestamp)]
+        if not p.pair_checks:
+            keep = (q.amplitude << 3) >= q.partner * Const(p.pair_keep, unsigned(4))
+            m.d.sync += [self.o.valid.eq(inner.o.valid & keep),
+                         self.o.payload.amplitude.eq(q.amplitude >> 1),
+                         self.o.payload.timestamp.eq(q.timestamp)]
+            return m
+        self._pair_checks(m, inner)
         return m
+
+    def _pair_checks(self, m, inner):
+        """The pair checks: an envelope history read at the peak's taps when the inner search
+        emits it (registered reads, 1 cycle), then the checks and the side-lobe rule on the
+        registered pulse, and the output register (the module docstring)."""
+        p = self.params
+        D, w, aw = p.pair_offset, p.pair_spread, p.amp_width
+        depth = p.pair_check_depth
+        abits = depth.bit_length() - 1
+        step = int(p.ts_step).bit_length() - 1
+
+        # envelope history: e[n] at n mod depth, written with each valid input
+        m.submodules.env_hist = mem = Memory(shape=unsigned(aw), depth=depth, init=[])
+        wr = mem.write_port()
+        wp = Signal(abits)                        # inputs since reset, mod depth
+        cnt = Signal(range(depth + 1))            # inputs since reset, saturating at depth
+        m.d.comb += [wr.addr.eq(wp), wr.data.eq(self.i.payload), wr.en.eq(self.i.valid)]
+        with m.If(self.i.valid):
+            m.d.sync += wp.eq(wp + 1)
+            with m.If(cnt != depth):
+                m.d.sync += cnt.eq(cnt + 1)
+
+        # the taps n_max + k; n_max mod depth from the timestamp (n_max * ts_step)
+        q = inner.o.payload
+        n_lo = q.timestamp[step:step + abits]
+        # the inputs written so far are n < cnt; n_max = cnt - ((wp - n_max) mod depth) while
+        # cnt < depth, and every tap is at or after the first sample once cnt = depth
+        dist = Signal(abits)
+        m.d.comb += dist.eq(wp - n_lo)
+        n_max = Signal(range(depth + 1))
+        m.d.comb += n_max.eq(cnt - dist)
+        full = cnt == depth
+        offsets = [0, -D]
+        if w:
+            offsets += [w, -D - w, -w, -D + w]
+        taps = {}
+        for k in offsets:
+            if k in taps:
+                continue
+            rd = mem.read_port(transparent_for=())
+            m.d.comb += [rd.addr.eq(n_lo + (k % depth)), rd.en.eq(inner.o.valid)]
+            if k >= 0:
+                taps[k] = rd.data
+            else:
+                ok = Signal(name=f"tap_ok_m{-k}")
+                with m.If(inner.o.valid):
+                    m.d.sync += ok.eq(full | (n_max >= -k))
+                taps[k] = Mux(ok, rd.data, 0)
+
+        # the registered pulse (the reads' cycle)
+        a = Signal(unsigned(aw + 1))
+        pt = Signal(unsigned(aw + 1))
+        ts = Signal(unsigned(p.ts_bits))
+        v = Signal()
+        m.d.sync += [v.eq(inner.o.valid), a.eq(q.amplitude), pt.eq(q.partner), ts.eq(q.timestamp)]
+
+        keep = (a << 3) >= pt * Const(p.pair_keep, unsigned(4))
+        if p.pair_balance:
+            e0, eD = taps[0], taps[-D]
+            lo = Mux(e0 < eD, e0, eD)
+            keep = keep & ((lo << 4) >= a * Const(p.pair_balance, unsigned(4)))
+        if w:
+            s1 = Signal(unsigned(aw + 1))
+            s2 = Signal(unsigned(aw + 1))
+            m.d.comb += [s1.eq(taps[w] + taps[-D - w]), s2.eq(taps[-w] + taps[-D + w])]
+            keep = keep & (a >= s1) & (a >= s2)
+        m.d.sync += [self.o.valid.eq(v & keep),
+                     self.o.payload.amplitude.eq(a >> 1),
+                     self.o.payload.timestamp.eq(ts)]

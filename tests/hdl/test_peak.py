@@ -594,9 +594,115 @@ def test_pair_checks_chunked_equals_one_run(p):
     assert st_a == st_whole
 
 
-def test_pair_checks_not_in_hdl():
-    with pytest.raises(ValueError, match="pair checks .* models only"):
-        PeakSearch(PAIR_CHECKED)
+# -- pair checks in the HDL ----------------------------------------------------------------
+def checked_envelope(rng, n, D, other=None, width=10.0, **kw):
+    """:func:`pair_envelope` (pairs ``D`` apart, a quarter single pulses) with, at the
+    sample-wise max, a sparser stream of pairs ``other`` apart (default ``1.25 D``: the 15-us
+    pairs of the other TACAN mode at ``D`` = 12 us), a third of them single pulses; pulses
+    ``width`` samples at half amplitude (TACAN at 5 MHz: 19)."""
+    other = other or int(round(1.25 * D))
+    e = pair_envelope(rng, n, D, width=width, **kw)
+    e2 = realistic_envelope(rng, n, pair_offset=other, single=0.33, min_gap=60 + other,
+                            max_gap=300 + 3 * other, amp_width=kw.get("amp_width", 19),
+                            width=width)
+    return np.maximum(e, e2)
+
+
+def _assert_checks_bite(p, e):
+    """Each check on in ``p`` drops some of the peaks the side-lobe rule keeps and keeps
+    others (so the tests below can fail)."""
+    plain, _ = peak_search(e, replace(p, pair_balance=0, pair_spread=0))
+    got, _ = peak_search(e, p)
+    for name in ("pair_balance", "pair_spread"):
+        if getattr(p, name):
+            only = replace(p, **{"pair_balance": 0, "pair_spread": 0, name: getattr(p, name)})
+            r, _ = peak_search(e, only)
+            assert 5 <= r.index.size <= plain.index.size - 2, (name, r.index.size,
+                                                                plain.index.size)
+    assert got.index.size >= 5
+    return got
+
+
+PAIR_CHECK_SETS = [
+    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_balance=6),
+    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_spread=3),
+    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_balance=7, pair_spread=2),
+    # max_len such that pair_history + inner latency = 64, the history's depth: exactly
+    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=41, pair_balance=6, pair_spread=3),
+    replace(PAIR_CHECKED, pair_balance=4, pair_spread=8),
+]
+
+
+@pytest.mark.parametrize("k", range(len(PAIR_CHECK_SETS)))
+def test_sim_matches_model_pair_checks(k):
+    """Amaranth sim == model with the pair checks (balance alone, spread alone, both; D = 7
+    and TACAN-like D = 60) on pairs D apart, single pulses and pairs 1.25 D apart: amplitude,
+    timestamp and emission cycle (latency + 1: the history's registered read)."""
+    p = PAIR_CHECK_SETS[k]
+    D = p.pair_offset
+    e = checked_envelope(np.random.default_rng(330 + k), 6000 if D < 20 else 8000, D,
+                         width=10.0 if D < 20 else 19.0)
+    assert p.latency == PeakParams(pair_offset=D).latency + 1
+    ref = _check_sim(p, e)
+    _assert_checks_bite(p, e)
+    assert ref.index.size > 5
+
+
+def test_pair_check_history_depth():
+    """The history holds pair_history + the inner latency samples rounded up to a power of
+    two (here exactly: 2 * 7 + 41 + 3 + 6 = 64)."""
+    assert PAIR_CHECK_SETS[3].pair_check_depth == 64
+    assert PAIR_CHECK_SETS[3].pair_history + PAIR_CHECK_SETS[3].search_params.latency == 64
+    assert replace(TACAN_X_PAIR, pair_balance=4, pair_spread=8).pair_check_depth == 512
+
+
+def test_gaps_in_valid_with_pair_checks():
+    rng = np.random.default_rng(340)
+    p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=12, pair_balance=6,
+                   pair_spread=3)
+    e = checked_envelope(rng, 3000, p.pair_offset, width=14.0)
+    _check_sim(p, e, rng.random(9000) < 0.35)
+    _check_sim(p, e, np.repeat(rng.random(900) < 0.5, 10))
+    _assert_checks_bite(p, e)
+
+
+@pytest.mark.parametrize("kw, early_kept", [(dict(pair_balance=4), False),
+                                            (dict(pair_spread=8), True),
+                                            (dict(pair_balance=4, pair_spread=8), False)])
+def test_reset_mid_run_with_pair_checks(kw, early_kept):
+    """Early peaks (D = 40 > L = 32) whose taps fall before the first sample since reset read
+    e = 0 there, after power-up and after a clear (the history is not reset: its words are
+    stale, 1500). The peak at 36 (s = e[36] = 2000): balance drops it (min(e[36], e[-4]) = 0;
+    stale 1500 would keep it), spread keeps it (e[44] + e[-12] = 600; stale: 2100 > 2000)."""
+    D = 40
+    p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=D, **kw)
+    rng = np.random.default_rng(345)
+    e1 = pair_envelope(rng, 1400, D)
+    e1[-700:] = 1500      # a pulse (max_len cuts), then the floor catches up: closed
+    e2 = realistic_envelope(rng, 900)
+    e2[:120] = 5
+    e2[35:38] = [1000, 2000, 1000]
+    e2[38:46] = 600
+    ref1, st1 = peak_search(e1, p)
+    assert not st1.open and ref1.end_index[-1] < e1.size - 200
+    ref2, _ = peak_search(e2, p)
+    assert (36 in ref2.index.tolist()) == early_kept
+    _check_sim(p, e2)     # from power-up
+    valid = np.concatenate((np.ones(e1.size, bool), np.zeros(30, bool)))
+    c = e1.size + 15
+    dut = WithClear(PeakSearch(p))
+    _, amp, ts = _run_sim(p, np.concatenate((e1, e2)), valid, dut=dut,
+                          writes=[(c, dut.clear, 1), (c + 1, dut.clear, 0)])
+    np.testing.assert_array_equal(amp, np.concatenate((ref1.amplitude, ref2.amplitude)))
+    np.testing.assert_array_equal(ts, np.concatenate((ref1.timestamp, ref2.timestamp)))
+
+
+def test_pair_checks_ports():
+    p = replace(TACAN_X_PAIR, pair_balance=4, pair_spread=8)
+    dut = PeakSearch(p)
+    assert [(k, w) for k, w, _ in p.out_layout] == [("amplitude", 19), ("timestamp", 32)]
+    assert p.latency == 9 and p.emit_delay == 60
+    Fragment.get(dut, None)   # elaborates
 
 
 # -- model ---------------------------------------------------------------------------------
@@ -734,6 +840,11 @@ def test_model_rejects_bad_input():
     (dict(pair_spread=-1), r"peak pair_spread must be an integer in \[0, 64\], not -1"),
     (dict(pair_spread=65), r"peak pair_spread must be an integer in \[0, 64\], not 65"),
     (dict(pair_offset=5, pair_spread=6), r"peak pair_spread \(6\) must not exceed pair_offset \(5\)"),
+    (dict(pair_offset=60, pair_balance=4, ts_step=3), r"peak pair checks \(pair_balance, "
+     r"pair_spread\) need ts_step a power of two and ts_bits - log2\(ts_step\) >= 8 \(the "
+     r"HDL reads the peak's index mod 256 from its timestamp\), not ts_step 3, ts_bits 32"),
+    (dict(pair_offset=60, pair_spread=8, ts_bits=9, ts_step=2), r"need ts_step a power of "
+     r"two and ts_bits - log2\(ts_step\) >= 9 .* not ts_step 2, ts_bits 9"),
     (dict(pair_offset=60, partner_offset=60), r"peak pair_offset and partner_offset exclude "
                                               r"each other \(the pair detection reads its "
                                               r"partners itself\)"),
@@ -885,3 +996,36 @@ def test_verilator_matches_model_pair_detection():
     np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
         ref.end_index + p.emit_delay] + p.latency)
 
+
+
+@pytest.mark.verilator
+def test_verilog_lints_clean_pair_checks():
+    """The pair checks (TACAN X mode, balance 4, spread 8; and D = 1, spread 1)."""
+    assert_lints_clean(PeakSearch(replace(TACAN_X_PAIR, pair_balance=4, pair_spread=8)),
+                       "peak_search_pair_checks")
+    assert_lints_clean(PeakSearch(PeakParams(pair_offset=1, pair_balance=8, pair_spread=1)),
+                       "peak_search_pair_checks1")
+
+
+#: The pair checks (balance 4, spread 8) on the TACAN X-mode pair detection with Verilator.
+VL_PAIR_CHECKED = PeakParams(pair_offset=60, clip_to_floor=True, smooth_log2=10, thr_mult=46,
+                             pair_balance=4, pair_spread=8)
+
+
+@needs_verilator
+def test_verilator_matches_model_pair_checks():
+    """2e5 samples: pairs 60 apart, single pulses and 15-us-like pairs 75 apart; gaps."""
+    sim = verilator_sim(PeakSearch(VL_PAIR_CHECKED), "peak_search_pair_checks_vl")
+    p = VL_PAIR_CHECKED
+    rng = np.random.default_rng(350)
+    n = 200_000
+    e = checked_envelope(rng, n, p.pair_offset, other=75, width=19.0)
+    valid = rng.random(int(n / 0.7) + 100) < 0.7
+    res = sim.run(e, in_valid=valid, flush_cycles=p.latency + 2)
+    f = unpack_fields(res.words, p.out_layout)
+    ref = _assert_checks_bite(p, e)
+    assert ref.amplitude.size > 500
+    np.testing.assert_array_equal(f["amplitude"], ref.amplitude)
+    np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
+    np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
+        ref.end_index + p.emit_delay] + p.latency)

@@ -425,6 +425,16 @@ def _pair_params(**kw) -> TacanFrontendParams:
 PAIR = _pair_params()
 
 
+def _checked_params(**kw) -> TacanFrontendParams:
+    """:func:`_pair_params` with the pair checks (balance 4, spread 8): one cycle more."""
+    p = _pair_params(**kw)
+    return replace(p, config=replace(p.config, peak=replace(p.peak, pair_balance=4,
+                                                            pair_spread=8)))
+
+
+PAIR_CHECKED = _checked_params()
+
+
 def _pair_sum_peaks(p: TacanFrontendParams, x):
     """The front end's envelope, and the pulses of the pair-sum search before the side-lobe
     filter (the inner search of the pair detection)."""
@@ -479,9 +489,17 @@ def test_pysim_equals_model_pair_detection():
 
 @pytest.mark.verilator
 @verilator
-@pytest.mark.parametrize("samples, stall", [(200_000, False), (400_000, True)])
-def test_verilator_equals_model_pair_detection(samples, stall):
-    p = _pair_params(fifo_depth=4) if stall else PAIR
+@pytest.mark.parametrize("samples, stall, checks", [(200_000, False, False),
+                                                    (400_000, True, False),
+                                                    (200_000, False, True),
+                                                    (400_000, True, True)])
+def test_verilator_equals_model_pair_detection(samples, stall, checks):
+    """Model == Verilator word for word (and cycle), the pair checks off and on."""
+    make = _checked_params if checks else _pair_params
+    p = make(fifo_depth=4) if stall else make()
+    if checks:
+        assert p.peak.pair_balance == 4 and p.peak.pair_spread == 8
+        assert p.latency == PAIR.latency + 1
     r = check_equivalence(samples=samples, backends=("model", "verilator"), seed=1,
                           stall=stall, params=p)
     assert r["backends"] == ["model", "verilator"]
@@ -490,8 +508,11 @@ def test_verilator_equals_model_pair_detection(samples, stall):
     if stall:
         assert r["dropped"] > 0 and r["markers"] > 0
     else:   # the side-lobe filter dropped pulses of the pair-sum search on this record
-        _, inner = _pair_sum_peaks(p, tacan_record(samples, 1))
+        x = tacan_record(samples, 1)
+        _, inner = _pair_sum_peaks(p, x)
         assert inner.amplitude.size > 2 * r["peaks"]
+        if checks:   # and the checks some of the pairs it keeps (3 of 44)
+            assert 0 < len(TacanFrontendModel(PAIR).run(x)[0].amplitudes) - r["peaks"] < 10
 
 
 @pytest.mark.verilator
@@ -499,5 +520,8 @@ def test_verilator_equals_model_pair_detection(samples, stall):
 def test_exported_top_lints_clean_pair_detection(tmp_path):
     from cosim.verilog import export_verilog, lint
     path = export_verilog(TacanFrontEnd(PAIR), name="tacan_frontend_pair", out_dir=tmp_path)
+    assert lint(path) == []
+    path = export_verilog(TacanFrontEnd(PAIR_CHECKED), name="tacan_frontend_pair_checked",
+                          out_dir=tmp_path)
     assert lint(path) == []
 
