@@ -656,6 +656,34 @@ def test_pair_check_history_depth():
     assert replace(TACAN_X_PAIR, pair_balance=4, pair_spread=8).pair_check_depth == 512
 
 
+@pytest.mark.parametrize("max_len", [41, 42])
+def test_pair_check_history_worst_case(max_len):
+    """The oldest tap of the worst case: a max_len cut whose max is its first sample c, valid
+    on every cycle. Its tap e[c - D - w] (0) is read when the samples up to c + max_len - 1 +
+    D + inner latency (6) are in (with max_len 41 that is c + 54, exactly 64 = depth after
+    c - 10: the history is full); a spike at c + 54 written over it would make
+    e[c + w] + e[c - D - w] 6400 > s[c] = 5000 and drop the pair c - D, c (max_len 42: the
+    need is 65 words, the depth 128)."""
+    p = replace(PAIR_CHECK_SETS[3], max_len=max_len)
+    D, w = p.pair_offset, p.pair_spread
+    assert (p.pair_history + p.search_params.latency, p.pair_check_depth) \
+        == ((64, 64) if max_len == 41 else (65, 128))
+    c = 4 * p.block_len + 10
+    e = np.full(c + 200, 50, dtype=np.int64)
+    e[c - D - w] = 0
+    e[c - D] = 2000
+    e[c] = 3000
+    e[c + 1:c + 45] = 1400
+    e[c + D] = 0                      # s[c + D] = 3000 < s[c]
+    e[c + 54] = 5000                  # the sample that would overwrite e[c - D - w]
+    ref = _check_sim(p, e)
+    i = ref.index.tolist().index(c)
+    assert ref.end_index[i] == c + max_len - 1 and ref.amplitude[i] == 5000 >> 1
+    plain, _ = peak_search(e, replace(p, pair_spread=0))
+    assert plain.index.tolist() == ref.index.tolist()
+    # (checked by hand: a history one word short of the need, 64 with max_len 42, fails here)
+
+
 def test_gaps_in_valid_with_pair_checks():
     rng = np.random.default_rng(340)
     p = PeakParams(block_log2=5, hold=3, max_len=24, pair_offset=12, pair_balance=6,
