@@ -152,9 +152,9 @@ def tacan_run_config(a) -> TacanRunConfig:
 
 #: ``--detector pair`` is not fit for use yet (printed on every run with it).
 PAIR_DETECTOR_WARNING = (
-    "--detector pair is experimental: its pair-sum test accepts a single pulse and pulses "
-    "15 us apart as 12 us pairs, so a Y beacon heard by an X receiver can give valid "
-    "bearings (13 in 60 s at 20 dB, seed 5); see docs/experiments/README.md")
+    "--detector pair is experimental: near 0 dB it acquires fewer records than the pulse "
+    "detector and from 6 dB up it is less accurate (python -m cosim bench tacan-detector; "
+    "docs/experiments/README.md)")
 
 
 def _num(v, fmt: str, none: str = "-") -> str:

@@ -122,8 +122,8 @@ class TacanRunConfig:
         "help": "what the FPGA detects: single pulses (default) or pulse pairs (the "
                 "envelope summed with itself one pair spacing earlier: both pulses of a pair "
                 "integrated; censored slow floor, its own threshold; see "
-                "dsp.tacan.frontend.PAIR_DETECTOR). Experimental: a beacon of the other mode "
-                "can give valid bearings",
+                "dsp.tacan.frontend.PAIR_DETECTOR). Experimental: fewer records acquired "
+                "near 0 dB, less accurate from 6 dB up",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
