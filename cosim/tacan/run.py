@@ -28,13 +28,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dsp.tacan.frontend import (DETECTORS, NOISE_FLOORS, PAIR_DETECTOR, FrontendConfig,
-                                pair_detector, run_golden_frontend)
+                                pair_detector, pair_spacing_samples, run_golden_frontend)
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.decode import DecoderConfig
-from dsp.tacan.standard import pair_spacing_s
 from dsp.tacan.fifo_rx import receive_words
 from ..link import ControlPath, DspServiceConfig
 from .signal import TacanSignalConfig, generate
@@ -222,7 +221,7 @@ class TacanRunConfig:
             changes["peak"] = NOISE_FLOORS[self.noise_floor]
         cfg = FrontendConfig.for_signal(self.signal, **changes)
         if self.amplitude == "partner":     # the pair spacing in envelope samples
-            d = int(round(pair_spacing_s(self.signal.mode) * cfg.env_rate_hz))
+            d = pair_spacing_samples(self.signal.mode, cfg.env_rate_hz)
             cfg = replace(cfg, peak=replace(cfg.peak, partner_offset=d))
         if self.detector == "pair":
             cfg = replace(cfg, peak=pair_detector(self.signal.mode, cfg.env_rate_hz,

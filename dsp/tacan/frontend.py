@@ -73,10 +73,15 @@ PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair
 DETECTORS = ("pulse", "pair")
 
 
+def pair_spacing_samples(mode: str, env_rate_hz: float) -> int:
+    """The mode's pair spacing (12 us X, 30 us Y) in envelope samples at ``env_rate_hz``
+    (the partner readout's and the pair detection's ``D``)."""
+    return int(round(pair_spacing_s(mode) * env_rate_hz))
+
+
 def pair_detector(mode: str, env_rate_hz: float, base: PeakParams = PAIR_DETECTOR) -> PeakParams:
-    """``base`` with pulse-pair detection at the mode's pair spacing (12 us X, 30 us Y) in
-    envelope samples at ``env_rate_hz``."""
-    return replace(base, pair_offset=int(round(pair_spacing_s(mode) * env_rate_hz)))
+    """``base`` with pulse-pair detection at the mode's pair spacing."""
+    return replace(base, pair_offset=pair_spacing_samples(mode, env_rate_hz))
 
 
 @dataclass(frozen=True)
