@@ -114,6 +114,22 @@ def _ol_align(v, s):
         return lambda v, s: v
 
 
+def lut_index(v, s):
+    """Index of ``v`` in a table of step ``2**s`` in ``v``'s units: ``floor(v / 2**s)``
+    (integers: an arithmetic shift)."""
+    _jit_only()
+
+
+@overload(lut_index, jit_options=_OPTS)
+def _ol_lut_index(v, s):
+    if _is_int(v):
+        def impl(v, s):
+            return v >> s if s >= 0 else v << (-s)
+        return impl
+    if _is_float(v):
+        return lambda v, s: np.int64(math.floor(v * 2.0 ** (-s)))
+
+
 def sat(v, lo, hi, ev, i):
     """Saturate to ``[lo, hi]`` counting clamps in ``ev[i]`` (identity for floats)."""
     _jit_only()

@@ -72,3 +72,71 @@ def detector_bounds(op: dict, mod_15: float, mod_135: float, n_pulses: float) ->
             op["false_peaks_per_pulse"])
     return {"crb_deg": crb_deg(op["rel_sigma"], mod_15, mod_135, n_pulses),
             **{f"bound_{u}_deg": detection_bound_deg(*args, use=u) for u in ("both", "rate", "marks")}}
+
+
+def peak_bias_samples(run: TacanRunConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Each detection of a transmitted pulse on ``run``'s scenario (golden chain): the
+    pulse's amplitude and its report's bias, both in units of the threshold the report
+    passed (:mod:`dsp.tacan.peakbias`; a pair report is half the pair sum, so half the
+    sum's threshold). Noise peaks and the floor's first settling (infinite threshold) are
+    left out."""
+    sig = run.signal
+    cfg = run.frontend
+    s = generate(sig)
+    fe = GoldenFrontend(cfg, sig.adc_bits)
+    half = 0.5 if cfg.peak.pair_offset else 1.0
+    idx, amp, thr = [], [], []
+    for c0, chunk in record_chunks(s.samples, cfg):
+        res = fe.search(chunk)
+        n = np.asarray(res.index, np.int64)
+        idx.append(n)
+        amp.append(np.asarray(res.amplitude, np.float64))
+        thr.append(np.asarray(res.thresholds)[n - c0 // cfg.decimation] * half)
+    n, a, T = np.concatenate(idx), np.concatenate(amp), np.concatenate(thr)
+    t = (n * cfg.decimation - cfg.group_delay_samples) / sig.fs_hz
+    tp, ap = s.truth.pulse_times_s, s.truth.pulse_amplitudes
+    j, near = _match(tp, t, MATCH_S) if tp.size else (np.zeros(t.size, int), np.zeros(t.size, bool))
+    ok = near & np.isfinite(T) & (T > 0)
+    A = ap[j[ok]]
+    return A / T[ok], (a[ok] - A) / T[ok]
+
+
+def calibrate_peak_bias(runs, *, bin_width: float = 0.1, u_fit: float = 1.5,
+                        u_max: float = 5.0, min_count: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """The bias curve of :class:`dsp.tacan.peakbias.PeakBias` from the detections of
+    ``runs`` (:func:`peak_bias_samples` pooled): the mean bias in ``bin_width`` bins of
+    ``u`` below ``u_fit`` (bins of at least ``min_count`` detections), above it a fit ``c0 +
+    c1 / u`` (the bias left there is small and its bins noisy) on knots 0.25 apart up to
+    ``u_max``. Returns ``(u, beta)``."""
+    us, es = zip(*(peak_bias_samples(r) for r in runs))
+    u, e = np.concatenate(us), np.concatenate(es)
+    edges = np.arange(0.0, u_fit + 1e-9, bin_width)
+    k = np.digitize(u, edges) - 1
+    lo_u, lo_b = [], []
+    for q in range(edges.size - 1):
+        m = k == q
+        if np.count_nonzero(m) >= min_count:
+            lo_u.append(edges[q] + bin_width / 2)
+            lo_b.append(float(e[m].mean()))
+    hi = (u >= u_fit) & (u < u_max)
+    if np.count_nonzero(hi) < min_count or len(lo_u) < 2:
+        raise ValueError("too few detections to calibrate the peak bias: add records")
+    c, *_ = np.linalg.lstsq(np.column_stack([np.ones(hi.sum()), 1.0 / u[hi]]), e[hi], rcond=None)
+    ku = np.arange(u_fit, u_max + 1e-9, 0.25)
+    return np.r_[lo_u, ku], np.r_[lo_b, c[0] + c[1] / ku]
+
+
+def pair_bias_runs(seeds=range(3), snrs=(-3, -1, 1, 3, 5, 8, 12), duration_s: float = 2.0):
+    """The records :data:`dsp.tacan.peakbias.PAIR_PEAK_BIAS` was calibrated on: the pair
+    detector at each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random
+    bearing drawn from that seed."""
+    from .signal import TacanSignalConfig
+    out = []
+    for snr in snrs:
+        for k in seeds:
+            seed = 9000 + 10 * k + int(snr + 5)
+            b = float(np.random.default_rng(seed).uniform(0, 360))
+            out.append(TacanRunConfig(signal=TacanSignalConfig(
+                bearing_deg=b, snr_db=float(snr), duration_s=duration_s, seed=seed),
+                detector="pair"))
+    return out

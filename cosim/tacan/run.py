@@ -30,6 +30,7 @@ import numpy as np
 from dsp.tacan.frontend import (DETECTORS, NOISE_FLOORS, PAIR_DETECTOR, FrontendConfig,
                                 pair_detector, pair_spacing_samples, run_golden_frontend)
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.peakbias import PAIR_PEAK_BIAS
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
@@ -246,8 +247,9 @@ class TacanRunConfig:
         dec = None
         if self.amplitude == "partner":
             dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
-        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec,
-                              pair_reports=self.detector == "pair")
+        pair = self.detector == "pair"
+        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec, pair_reports=pair,
+                              peak_bias=PAIR_PEAK_BIAS if pair else None)
 
 
 @dataclass

@@ -100,7 +100,7 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from ..qops import (PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm,
-                    div_square, ewma, floor_one, mac2, mulw, new_event_array, rate_dt, rs, sat,
+                    div_square, ewma, floor_one, lut_index, mac2, mulw, new_event_array, rate_dt, rs, sat,
                     scale_sat, sincos_dt, snorm)
 from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
 
@@ -322,10 +322,12 @@ def _reset(x, P, p0):
 
 
 @_jit
-def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
+def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs):
     """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
     gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
-    minimum) or NaN (float) is no measurement: predict only."""
+    minimum) or NaN (float) is no measurement: predict only. ``bt`` (empty: none) is the
+    expected measurement bias at the predicted amplitude, a table of step ``2**bs`` in the
+    ``x`` format's units (:meth:`EnvelopeKalman.set_peak_bias`)."""
     yf = ci[_Y]
     xf, xlo, xhi, xh = ci[_X], ci[_X + 1], ci[_X + 2], ci[_X + 3]
     pf, plo, phi, ph = ci[_P], ci[_P + 1], ci[_P + 2], ci[_P + 3]
@@ -395,8 +397,11 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv):
         for i in range(5):
             PH[i] = Pp[i, 0] + Pp[i, 2] + Pp[i, 4]
         S = PH[0] + PH[2] + PH[4] + sc[k, 6]
-        iv = sat(rs(align(y, xf - yf) - (xp[0] + xp[2] + xp[4]), xf - ivf, ivh),
-                 ivlo, ivhi, ev, 4)
+        yh = xp[0] + xp[2] + xp[4]
+        if bt.size:                 # what the front end reports at that amplitude
+            j = lut_index(yh, bs)
+            yh = yh + bt[min(max(j, 0), bt.size - 1)]
+        iv = sat(rs(align(y, xf - yf) - yh, xf - ivf, ivh), ivlo, ivhi, ev, 4)
         r = r_st[0]
         n = cnt[0]
         if not S > 0:
@@ -469,19 +474,21 @@ BLOCK = 2048
 
 
 @_jit
-def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv):
+def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in range(ys.shape[0]):
-            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv)
+            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
+                   bt, bs)
 
 
 @njit_cached(nogil=True, parallel=True)
-def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv):
+def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in numba.prange(ys.shape[0]):
-            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv)
+            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
+                   bt, bs)
 
 
 # ---------------------------------------------------------------------------------------
@@ -545,6 +552,8 @@ class EnvelopeKalman:
         self.n_updates = 0
         self._upsets = None
         self.upsets_applied = 0
+        self._bt = np.zeros(0, dtype)      # the peak-bias table (set_peak_bias), step 2**_bs
+        self._bs = 0
         self.reset()
 
     @property
@@ -570,6 +579,28 @@ class EnvelopeKalman:
             scale = 2.0 ** PHASE_BITS / self.tick_hz
             self._cv[0], self._cv[1] = int(round(f * scale)), int(round(9 * f * scale))
         self._rotation_hz = f
+
+    def set_peak_bias(self, bias, step_log2: int) -> None:
+        """Expect measurements biased by ``bias[i]`` at the amplitude ``i * 2**-step_log2``
+        (signal units; the last entry beyond the table, the first below zero) from the next
+        step on: the innovation is taken against the predicted amplitude plus that bias (the
+        conditional mean of a peak the front end reports near its threshold,
+        :class:`dsp.tacan.peakbias.PeakBias`). The fixed core holds the table in the ``x``
+        format. An empty ``bias``: none (the default)."""
+        b = np.asarray(bias, dtype=np.float64).ravel()
+        k = int(step_log2)
+        if not np.isfinite(b).all():
+            raise ValueError("peak-bias table must be finite")
+        if b.size > 1 << 16:
+            raise ValueError(f"peak-bias table of {b.size} entries: at most 65536")
+        if self.fixed is None:
+            self._bt, self._bs = b.copy(), -k
+            return
+        fx = self.fixed.x
+        if not -62 < fx.frac - k < 62:
+            raise ValueError(f"peak-bias table step 2**-{k} does not suit the x format {fx}")
+        self._bt = np.clip(np.round(np.ldexp(b, fx.frac)), fx.min_int, fx.max_int).astype(np.int64)
+        self._bs = fx.frac - k
 
     def reset(self) -> None:
         """Back to the prior (keeps r, events and the time residual)."""
@@ -727,7 +758,8 @@ class EnvelopeKalman:
         kern = _run_parallel if self.parallel else _run_serial
         y = np.ascontiguousarray(y)
         if self._upsets is None:
-            kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv)
+            kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv,
+                 self._bt, self._bs)
             self.n_updates += t.size
             return
         st, wd, bt, k = self._upsets
@@ -737,7 +769,7 @@ class EnvelopeKalman:
             b = t.size if k >= st.size or st[k] - n0 >= t.size else int(st[k] - n0)
             if b > a:
                 kern(self.x, self.P, self._r, self._cnt, self._ev, sc[a:b],
-                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv)
+                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv, self._bt, self._bs)
                 a = b
             while k < st.size and st[k] - n0 == a and a < t.size:
                 self._flip(int(wd[k]), int(bt[k]))

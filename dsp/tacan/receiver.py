@@ -17,6 +17,7 @@ from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, com
 from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
 from .decode import REF_MAIN, DecoderConfig, decode, rotation_track
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from .peakbias import PeakBias
 from .standard import burst_offsets, pair_spacing_s
 
 
@@ -129,6 +130,12 @@ class ReceiverConfig:
     #: (:func:`expand_pairs`), so the decoder and the filter see pulses as from a pulse
     #: detector.
     pair_reports: bool = False
+    #: The front end's peak-amplitude bias near its threshold
+    #: (:class:`dsp.tacan.peakbias.PeakBias`, e.g. ``PAIR_PEAK_BIAS`` for the pair
+    #: detector): the threshold is estimated from each block's reports and the filter
+    #: expects each report at its predicted amplitude plus that bias. None: reports are
+    #: taken as unbiased.
+    peak_bias: PeakBias | None = None
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -144,6 +151,8 @@ class ReceiverConfig:
                              f"{self.flag_coarse_sigma_deg!r}")
         if not isinstance(self.sector_track, bool):
             raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
+        if self.peak_bias is not None and not isinstance(self.peak_bias, PeakBias):
+            raise ValueError(f"peak_bias must be a PeakBias or None, not {self.peak_bias!r}")
         if not isinstance(self.pair_reports, bool):
             raise ValueError(f"pair_reports must be True or False, not {self.pair_reports!r}")
         if not isinstance(self.track_rotation, bool):
@@ -228,6 +237,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         raise ValueError(f"{amps.shape[1]} amplitudes for {t.size} peak times")
     if not (np.all(np.isfinite(t)) and (amps.dtype.kind == "i" or np.all(np.isfinite(amps)))):
         raise ValueError("peak times and amplitudes must be finite (NaN/inf from the front end)")
+    thr = cfg.peak_bias.threshold(amps) if cfg.peak_bias is not None else None
     if cfg.pair_reports:
         t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks, tick_hz=tick_hz,
                                       tol_s=(cfg.decoder or DecoderConfig(mode=cfg.mode)).tol_s)
@@ -243,6 +253,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     elif tick_hz is not None and state.kf.tick_hz != tick_hz:
         raise ValueError(f"state counts ticks of {state.kf.tick_hz:g} Hz, not {tick_hz:g} Hz")
     kf = state.kf
+    if thr is not None:      # amplitude codes: their threshold in signal units
+        thr = math.ldexp(thr, -cfg.kalman.y.frac) if amps.dtype.kind == "i" else thr
+        kf.set_peak_bias(*cfg.peak_bias.table(thr))
 
     n_ref = dec.ref_times_s.size
     out_t, out_k, out_b, out_c = [], [], [], []

@@ -45,6 +45,7 @@ class _Ref:
         self.warmup, self.max_rej, self.r_smooth = k.warmup, k.max_rejects, k.r_smooth
         self.ev = {n: 0 for n in kfx.EVENT_NAMES}
         self.r = 1 << cfg.r.frac
+        self.bias = None
         self.reset()
 
     def reset(self):
@@ -105,8 +106,12 @@ class _Ref:
             return
         PH = [Pp[i][0] + Pp[i][2] + Pp[i][4] for i in range(5)]
         S = PH[0] + PH[2] + PH[4] + rm
-        iv = self.sat(_rs((y << (fx.frac - fy.frac)) - (xp[0] + xp[2] + xp[4]),
-                          fx.frac - fi.frac, hi), fi, "sat_innov")
+        yh = xp[0] + xp[2] + xp[4]
+        if self.bias:                  # (table codes, shift): the peak-bias table
+            tab, sh = self.bias
+            yh += tab[min(max(_rs(yh, sh, False), 0), len(tab) - 1)]
+        iv = self.sat(_rs((y << (fx.frac - fy.frac)) - yh, fx.frac - fi.frac, hi), fi,
+                      "sat_innov")
         if S <= 0:
             raise AssertionError("S <= 0 in the reference run")
         nb = S.bit_length() - kfx.S_BITS
@@ -166,20 +171,32 @@ def _stream(seed, n, batch, outliers=()):
     return dt, y, rm
 
 
-def test_kernel_equals_unbounded_integer_reference():
+@pytest.mark.parametrize("peak_bias", [False, True])
+def test_kernel_equals_unbounded_integer_reference(peak_bias):
+    """Bit-exact, also with a peak-bias table (the prediction plus the table's entry at
+    the predicted amplitude; :mod:`dsp.tacan.peakbias`)."""
     n, B = 400, 4
     outl = [(k, 1.9) for k in range(250, 256)] + [(300, -1.9)] + \
         [(k, 7.5) for k in range(100, 104)] + [(k, -40.0) for k in range(320, 330)]
     dt, y, rm = _stream(7, n, B, outl)
     cfg = KalmanFixedConfig(KalmanConfig(warmup=60, max_rejects=5, r_smooth=64))
     kf = EnvelopeKalmanFixed(cfg, batch=B)
+    if peak_bias:
+        from dsp.tacan.peakbias import PAIR_PEAK_BIAS
+        kf.set_peak_bias(*PAIR_PEAK_BIAS.table(0.6))
+        assert len(set(kf._bt.tolist())) > 50 and kf._bs > 0
+        plain = EnvelopeKalmanFixed(cfg, batch=B)
+        plain.run(dt, y, rm)
     kf.run(dt, y, rm)
+    if peak_bias:
+        assert (np.abs(kf.x - plain.x) > 100).any()              # the table acts
     yi = cfg.y.quantize(y)[0]
     raw = np.floor(np.ldexp(y, cfg.y.frac) + 0.5)                 # y codes before saturation
     implausible = (raw < cfg.y.min_int) | (raw > cfg.y.max_int)   # beyond the y range
     rmi = np.round(np.ldexp(rm, cfg.P.frac)).astype(np.int64)
     for b in range(B):
         ref = _Ref(cfg)
+        ref.bias = ([int(v) for v in kf._bt], int(kf._bs)) if peak_bias else None
         for k in range(n):
             ref.step(int(dt[k]), None if implausible[b, k] else int(yi[b, k]), int(rmi[k]))
         assert [int(v) for v in kf.x[b]] == ref.x
