@@ -152,9 +152,10 @@ def tacan_run_config(a) -> TacanRunConfig:
 
 #: ``--detector pair`` is not fit for use yet (printed on every run with it).
 PAIR_DETECTOR_WARNING = (
-    "--detector pair is experimental: near 0 dB it acquires fewer records than the pulse "
-    "detector and from 6 dB up it is less accurate (python -m cosim bench tacan-detector; "
-    "docs/experiments/README.md)")
+    "--detector pair is experimental: at 0 dB it acquires fewer records than the pulse "
+    "detector (4 of 8 at 90 deg), and its figures with the DSP's peak-bias model "
+    "(dsp.tacan.peakbias) are from 8-12 records, not yet from the benchmarks "
+    "(docs/experiments/README.md)")
 
 
 def _num(v, fmt: str, none: str = "-") -> str:

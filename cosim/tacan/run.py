@@ -123,7 +123,8 @@ class TacanRunConfig:
                 "envelope summed with itself one pair spacing earlier: both pulses of a pair "
                 "integrated; censored slow floor, its own threshold; see "
                 "dsp.tacan.frontend.PAIR_DETECTOR). Experimental: fewer records acquired "
-                "near 0 dB, less accurate from 6 dB up",
+                "at 0 dB; the DSP corrects its reports' bias near the threshold "
+                "(dsp.tacan.peakbias)",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()

@@ -100,7 +100,8 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from ..qops import (PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm,
-                    div_square, ewma, floor_one, lut_index, mac2, mulw, new_event_array, rate_dt, rs, sat,
+                    div_square, ewma, floor_one, lut_index, mac2, mulw, new_event_array,
+                    rate_dt, rs, sat,
                     scale_sat, sincos_dt, snorm)
 from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
 
