@@ -126,10 +126,11 @@ def calibrate_peak_bias(runs, *, bin_width: float = 0.1, u_fit: float = 1.5,
     return np.r_[lo_u, ku], np.r_[lo_b, c[0] + c[1] / ku]
 
 
-def pair_bias_runs(seeds=range(3), snrs=(-3, -1, 1, 3, 5, 8, 12), duration_s: float = 2.0):
-    """The records :data:`dsp.tacan.peakbias.PAIR_PEAK_BIAS` was calibrated on: the pair
-    detector at each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random
-    bearing drawn from that seed."""
+def bias_runs(detector: str = "pair", noise_floor: str = "clipped", seeds=range(3),
+              snrs=(-3, -1, 1, 3, 5, 8, 12), duration_s: float = 2.0):
+    """The records a :class:`dsp.tacan.peakbias.PeakBias` is calibrated on (``PAIR_PEAK_BIAS``:
+    the defaults): each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random bearing drawn from
+    that seed."""
     from .signal import TacanSignalConfig
     out = []
     for snr in snrs:
@@ -138,5 +139,5 @@ def pair_bias_runs(seeds=range(3), snrs=(-3, -1, 1, 3, 5, 8, 12), duration_s: fl
             b = float(np.random.default_rng(seed).uniform(0, 360))
             out.append(TacanRunConfig(signal=TacanSignalConfig(
                 bearing_deg=b, snr_db=float(snr), duration_s=duration_s, seed=seed),
-                detector="pair"))
+                detector=detector, noise_floor=noise_floor))
     return out

@@ -65,7 +65,7 @@ NOISE_FLOORS = {
 #: main references and 13 valid bearings in 60 s at 20 dB (its single pulses and its 15 us
 #: auxiliary pulses pass a pair-sum test); with them 0 valid in 60 s at 20 and 10 dB.
 #: Figures: ``python -m cosim bench tacan-detector``; the choices: docs/experiments/README.md.
-PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair_balance=4,
+PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=40, pair_balance=4,
                            pair_spread=8)
 
 #: The detectors of ``python -m cosim tacan --detector``: single pulses (with the profile of

@@ -112,7 +112,7 @@ Q_EXTRA = 16
 MAX_TICKS = 1 << 38
 
 EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
-               "p_clamps", "p_neg", "reinit", "gated", "implausible")
+               "p_clamps", "p_neg", "reinit", "gated", "implausible", "noise_reports")
 _EV = {n: i for i, n in enumerate(EVENT_NAMES)}
 #: Signals whose range the fixed-point core logs (event index -> format name): every store
 #: of that format goes through a saturating operator with that index (r also holds e2).
@@ -323,12 +323,14 @@ def _reset(x, P, p0):
 
 
 @_jit
-def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs):
+def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
     gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
     minimum) or NaN (float) is no measurement: predict only. ``bt`` (empty: none) is the
     expected measurement bias at the predicted amplitude, a table of step ``2**bs`` in the
-    ``x`` format's units (:meth:`EnvelopeKalman.set_peak_bias`)."""
+    ``x`` format's units; with it, a measurement below ``nq[0]`` while the predicted
+    amplitude is ``nq[1]`` or more (``nq[1] > 0``) is a noise report: predict only
+    (:meth:`EnvelopeKalman.set_peak_bias`)."""
     yf = ci[_Y]
     xf, xlo, xhi, xh = ci[_X], ci[_X + 1], ci[_X + 2], ci[_X + 3]
     pf, plo, phi, ph = ci[_P], ci[_P + 1], ci[_P + 2], ci[_P + 3]
@@ -394,11 +396,18 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs):
                     P[i, j] = Pp[i, j]
             continue
         cnt[2] = 0
+        yh = xp[0] + xp[2] + xp[4]
+        if bt.size and nq[1] > 0 and yh >= nq[1] and align(y, xf - yf) < nq[0]:
+            ev[12] += 1             # a noise report where the signal stands clear of it
+            for i in range(5):
+                x[i] = xp[i]
+                for j in range(5):
+                    P[i, j] = Pp[i, j]
+            continue
         # -- innovation, S, e2 = innov^2 / S
         for i in range(5):
             PH[i] = Pp[i, 0] + Pp[i, 2] + Pp[i, 4]
         S = PH[0] + PH[2] + PH[4] + sc[k, 6]
-        yh = xp[0] + xp[2] + xp[4]
         if bt.size:                 # what the front end reports at that amplitude
             j = lut_index(yh, bs)
             yh = yh + bt[min(max(j, 0), bt.size - 1)]
@@ -475,21 +484,21 @@ BLOCK = 2048
 
 
 @_jit
-def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs):
+def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in range(ys.shape[0]):
             _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
-                   bt, bs)
+                   bt, bs, nq)
 
 
 @njit_cached(nogil=True, parallel=True)
-def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs):
+def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in numba.prange(ys.shape[0]):
             _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
-                   bt, bs)
+                   bt, bs, nq)
 
 
 # ---------------------------------------------------------------------------------------
@@ -555,6 +564,7 @@ class EnvelopeKalman:
         self.upsets_applied = 0
         self._bt = np.zeros(0, dtype)      # the peak-bias table (set_peak_bias), step 2**_bs
         self._bs = 0
+        self._nq = np.zeros(2, dtype)      # its noise-report rule (0: off)
         self.reset()
 
     @property
@@ -581,27 +591,36 @@ class EnvelopeKalman:
             self._cv[0], self._cv[1] = int(round(f * scale)), int(round(9 * f * scale))
         self._rotation_hz = f
 
-    def set_peak_bias(self, bias, step_log2: int) -> None:
+    def set_peak_bias(self, bias, step_log2: int, noise: tuple | None = None) -> None:
         """Expect measurements biased by ``bias[i]`` at the amplitude ``i * 2**-step_log2``
         (signal units; the last entry beyond the table, the first below zero) from the next
         step on: the innovation is taken against the predicted amplitude plus that bias (the
         conditional mean of a peak the front end reports near its threshold,
         :class:`dsp.tacan.peakbias.PeakBias`). The fixed core holds the table in the ``x``
-        format. An empty ``bias``: none (the default)."""
+        format. An empty ``bias``: none (the default).
+
+        ``noise = (report, predicted)`` (signal units): a report below ``report`` while the
+        predicted amplitude is ``predicted`` or more is taken as a noise report, not a
+        measurement (predict only; counted as ``noise_reports``)."""
         b = np.asarray(bias, dtype=np.float64).ravel()
         k = int(step_log2)
+        nq = (0.0, 0.0) if noise is None else tuple(float(v) for v in noise)
+        if len(nq) != 2 or not all(math.isfinite(v) and v >= 0 for v in nq):
+            raise ValueError(f"noise rule must be (report, predicted) >= 0, not {noise!r}")
         if not np.isfinite(b).all():
             raise ValueError("peak-bias table must be finite")
         if b.size > 1 << 16:
             raise ValueError(f"peak-bias table of {b.size} entries: at most 65536")
         if self.fixed is None:
-            self._bt, self._bs = b.copy(), -k
+            self._bt, self._bs, self._nq = b.copy(), -k, np.array(nq)
             return
         fx = self.fixed.x
         if not -62 < fx.frac - k < 62:
             raise ValueError(f"peak-bias table step 2**-{k} does not suit the x format {fx}")
         self._bt = np.clip(np.round(np.ldexp(b, fx.frac)), fx.min_int, fx.max_int).astype(np.int64)
         self._bs = fx.frac - k
+        self._nq = np.clip(np.round(np.ldexp(np.array(nq), fx.frac)), 0, fx.max_int
+                           ).astype(np.int64)
 
     def reset(self) -> None:
         """Back to the prior (keeps r, events and the time residual)."""
@@ -760,7 +779,7 @@ class EnvelopeKalman:
         y = np.ascontiguousarray(y)
         if self._upsets is None:
             kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv,
-                 self._bt, self._bs)
+                 self._bt, self._bs, self._nq)
             self.n_updates += t.size
             return
         st, wd, bt, k = self._upsets
@@ -770,7 +789,8 @@ class EnvelopeKalman:
             b = t.size if k >= st.size or st[k] - n0 >= t.size else int(st[k] - n0)
             if b > a:
                 kern(self.x, self.P, self._r, self._cnt, self._ev, sc[a:b],
-                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv, self._bt, self._bs)
+                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv, self._bt, self._bs,
+                     self._nq)
                 a = b
             while k < st.size and st[k] - n0 == a and a < t.size:
                 self._flip(int(wd[k]), int(bt[k]))

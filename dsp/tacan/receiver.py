@@ -255,7 +255,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     kf = state.kf
     if thr is not None:      # amplitude codes: their threshold in signal units
         thr = math.ldexp(thr, -cfg.kalman.y.frac) if amps.dtype.kind == "i" else thr
-        kf.set_peak_bias(*cfg.peak_bias.table(thr))
+        kf.set_peak_bias(*cfg.peak_bias.table(thr), noise=cfg.peak_bias.noise_rule(thr))
 
     n_ref = dec.ref_times_s.size
     out_t, out_k, out_b, out_c = [], [], [], []

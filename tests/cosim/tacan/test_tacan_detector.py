@@ -58,11 +58,11 @@ def test_pair_peak_bias_model_matches_a_record_it_was_not_calibrated_on():
 
 @pytest.mark.slow
 def test_pair_peak_bias_calibration_reproduces_the_committed_curve():
-    """`calibrate_peak_bias(pair_bias_runs(seeds=[0]))`: a third of the calibration records
+    """`calibrate_peak_bias(bias_runs(seeds=[0]))`: a third of the calibration records
     gives the committed knots within 0.02 thresholds from u = 0.65 up."""
-    from cosim.tacan.detector import calibrate_peak_bias, pair_bias_runs
+    from cosim.tacan.detector import calibrate_peak_bias, bias_runs
     from dsp.tacan.peakbias import PAIR_PEAK_BIAS
-    u, beta = calibrate_peak_bias(pair_bias_runs(seeds=[0]))
+    u, beta = calibrate_peak_bias(bias_runs(seeds=[0]))
     import dataclasses
     m = u >= 0.65
     want = dataclasses.replace(PAIR_PEAK_BIAS, u_min=0.0).bias(u[m])    # the knots as such

@@ -104,11 +104,16 @@ class _Ref:
             self.ev["implausible"] += 1
             self.x, self.P = xp, Pp
             return
+        yh = xp[0] + xp[2] + xp[4]
+        if self.bias and self.bias[2][1] > 0 and yh >= self.bias[2][1] \
+                and (y << (fx.frac - fy.frac)) < self.bias[2][0]:
+            self.ev["noise_reports"] += 1               # a noise report: predict only
+            self.x, self.P = xp, Pp
+            return
         PH = [Pp[i][0] + Pp[i][2] + Pp[i][4] for i in range(5)]
         S = PH[0] + PH[2] + PH[4] + rm
-        yh = xp[0] + xp[2] + xp[4]
-        if self.bias:                  # (table codes, shift): the peak-bias table
-            tab, sh = self.bias
+        if self.bias:                  # (table codes, shift, noise rule): the peak-bias table
+            tab, sh, _ = self.bias
             yh += tab[min(max(_rs(yh, sh, False), 0), len(tab) - 1)]
         iv = self.sat(_rs((y << (fx.frac - fy.frac)) - yh, fx.frac - fi.frac, hi), fi,
                       "sat_innov")
@@ -183,20 +188,22 @@ def test_kernel_equals_unbounded_integer_reference(peak_bias):
     kf = EnvelopeKalmanFixed(cfg, batch=B)
     if peak_bias:
         from dsp.tacan.peakbias import PAIR_PEAK_BIAS
-        kf.set_peak_bias(*PAIR_PEAK_BIAS.table(0.6))
+        kf.set_peak_bias(*PAIR_PEAK_BIAS.table(0.6), noise=(0.45, 0.9))
         assert len(set(kf._bt.tolist())) > 50 and kf._bs > 0
         plain = EnvelopeKalmanFixed(cfg, batch=B)
         plain.run(dt, y, rm)
     kf.run(dt, y, rm)
     if peak_bias:
         assert (np.abs(kf.x - plain.x) > 100).any()              # the table acts
+        assert (kf.events["noise_reports"] > 0).any()             # and the noise rule
     yi = cfg.y.quantize(y)[0]
     raw = np.floor(np.ldexp(y, cfg.y.frac) + 0.5)                 # y codes before saturation
     implausible = (raw < cfg.y.min_int) | (raw > cfg.y.max_int)   # beyond the y range
     rmi = np.round(np.ldexp(rm, cfg.P.frac)).astype(np.int64)
     for b in range(B):
         ref = _Ref(cfg)
-        ref.bias = ([int(v) for v in kf._bt], int(kf._bs)) if peak_bias else None
+        ref.bias = ([int(v) for v in kf._bt], int(kf._bs), [int(v) for v in kf._nq]) \
+            if peak_bias else None
         for k in range(n):
             ref.step(int(dt[k]), None if implausible[b, k] else int(yi[b, k]), int(rmi[k]))
         assert [int(v) for v in kf.x[b]] == ref.x
