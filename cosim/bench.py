@@ -203,6 +203,21 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
             row["rmse_over_crb"] = row["rmse_deg"] / crb if ok else None
             snr_rows.append(row)
 
+    # The same with the pulse-pair detector (--detector pair) and its DSP bias model, on
+    # more records (its figures are the ones issue 18's acceptance asks of an option).
+    trials_p = 1 if quick else 4
+    items_p = [dict(bearing_deg=b, snr_db=float(s), duration_s=duration, seed=100 + k,
+                    detector="pair") for s in snrs for b in (90.0, 270.0) for k in range(trials_p)]
+    runs_p = _map(jobs, _one_run, items_p, "SNR sweep (--detector pair)")
+    snr_rows_pair = []
+    for s in snrs:
+        crb = next(r["crb_deg"] for r in snr_rows if r["snr_db"] == s)
+        for b in (90.0, 270.0):
+            rs = [r for r in runs_p if r["snr_db"] == s and r["bearing_deg"] == b]
+            row = {"snr_db": s, "bearing_deg": b, **_pool(rs), "crb_deg": crb}
+            row["rmse_over_crb"] = row["rmse_deg"] / crb if row["rmse_deg"] is not None else None
+            snr_rows_pair.append(row)
+
     step = 15 if quick else 2
     bearings = np.arange(0, 360, step, dtype=float)
     sweep_items = [dict(bearing_deg=float(b), snr_db=10.0, duration_s=1.6, seed=1000 + int(b))
@@ -221,6 +236,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     sweep_0db, rows0 = _sweep_0db(step0, crb0, jobs)
     sweep_0db_partner, _ = _sweep_0db(step0, crb0, jobs, amplitude="partner")
     sweep_0db_both, _ = _sweep_0db(step0, crb0, jobs, amplitude="partner", noise_floor="censored")
+    sweep_0db_pair, rows0_pair = _sweep_0db(step0, crb0, jobs, detector="pair")
     robust = _robustness(quick, jobs)
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.
@@ -248,6 +264,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                      "adc_bits": 12, "backend": "golden", "kalman_memory_s": kc.memory_s,
                      "settle_s": 2 * kc.memory_s},
         "snr_sweep": snr_rows,
+        "snr_sweep_pair": snr_rows_pair,
         "bearing_sweep_if_10db": {"bearings": int(bearings.size), "locked": len(locked), "duration_s": 1.6,
                                   "rmse_deg": float(np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in locked]))) if locked else None,
                                   "max_abs_error_deg": worst_if,
@@ -256,11 +273,14 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
         "bearing_sweep_if_0db": sweep_0db,
         "bearing_sweep_if_0db_partner": sweep_0db_partner,
         "bearing_sweep_if_0db_partner_censored": sweep_0db_both,
+        "bearing_sweep_if_0db_pair": sweep_0db_pair,
         "robustness_10db": robust,
     }
     out.mkdir(parents=True, exist_ok=True)
     (out / "tacan_accuracy.json").write_text(json.dumps({**summary, "bearing_sweep_rows": brg_rows,
-                                                         "bearing_sweep_0db_rows": rows0}, indent=1))
+                                                         "bearing_sweep_0db_rows": rows0,
+                                                         "bearing_sweep_0db_pair_rows": rows0_pair},
+                                                        indent=1))
     with open(out / "tacan_accuracy_snr.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(snr_rows[0]))
         w.writeheader()
@@ -329,6 +349,18 @@ def _accuracy_markdown(s: dict) -> str:
     lines += ["", "Bounds: what the default detector's output allows (`dsp.tacan.bounds`, operating "
               "point measured per SNR by `cosim.tacan.detector`): a DSP using the detections' "
               "times and amplitudes, and one fitting the detected amplitudes only (ours)."]
+    if s.get("snr_sweep_pair"):
+        lines += ["", "With `--detector pair` (pulse-pair detection in the FPGA, the DSP's peak-bias "
+                  "model `dsp.tacan.peakbias`):", "",
+                  "| SNR dB | bearing | locked | RMSE deg | mean err deg | max err deg | CRB deg "
+                  "| RMSE/CRB | first valid bearing s (median) | misleading |",
+                  "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in s["snr_sweep_pair"]:
+            lines.append(f"| {r['snr_db']:g} | {r['bearing_deg']:g} | {r['locked']}/{r['trials']} | "
+                         f"{f(r['rmse_deg'], '.3f')} | {f(r['mean_error_deg'], '+.3f')} | "
+                         f"{f(r['max_abs_error_deg'], '.3f')} | {r['crb_deg']:.3f} | "
+                         f"{f(r['rmse_over_crb'], '.2f')} | {f(r['first_valid_bearing_s'], '.2f')} "
+                         f"| {r.get('misleading_bearings', '-')} |")
     b = s["bearing_sweep_if_10db"]
     lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB (IF chain, "
               f"{b['duration_s']:g} s each, {b['locked']}/{b['bearings']} locked): "
@@ -342,7 +374,8 @@ def _accuracy_markdown(s: dict) -> str:
     for key, what in (("bearing_sweep_if_0db", ""),
                       ("bearing_sweep_if_0db_partner", " with `--amplitude partner`"),
                       ("bearing_sweep_if_0db_partner_censored",
-                       " with `--amplitude partner --noise-floor censored`")):
+                       " with `--amplitude partner --noise-floor censored`"),
+                      ("bearing_sweep_if_0db_pair", " with `--detector pair`")):
         z = s.get(key)
         if z is None:
             continue

@@ -56,16 +56,19 @@ NOISE_FLOORS = {
 #: search runs on ``e[n] + e[n - D]``, ``D`` the mode's pair spacing (:func:`pair_detector`),
 #: with a censored floor smoothed over 2**10 blocks (~0.2 s) and threshold 2.875x (46/16) the
 #: pair sum's floor. A clipped floor is lifted by the bursts and biases the bearing (+0.5 deg
-#: at 3 dB, 270 deg); the threshold trades the noise pairs the DSP measures (on noise alone
-#: 457 reports/s at 40/16, ~30/s at 46/16, 2/s at 52/16; the pulse detector's paired noise
-#: peaks: ~6-10/s) against the pairs found in the envelope trough that acquisition needs at
-#: 0 dB (48/16 acquired 1 of 4 records at 90 deg). The pair checks (``pair_balance`` 4: the
+#: at 3 dB, 270 deg). The threshold trades the pairs found in the envelope's deep trough,
+#: which reference acquisition needs at 0 dB, 90 deg (46/16 acquired 4 of 8 records, 40/16
+#: all 8), against the noise pairs (on noise alone ~30/s at 46/16, ~460/s at 40/16) and the
+#: other mode's pulses that pass as pairs: at 40/16 a Y beacon heard by the X receiver gave
+#: 150 main references and 9 valid bearings, 180 deg off, in 10 s at 10 dB (46/16: 1 and 0).
+#: The DSP corrects the reports' bias near the threshold with the curve calibrated at this
+#: threshold (``dsp.tacan.peakbias.PAIR_PEAK_BIAS``). The pair checks (``pair_balance`` 4: the
 #: smaller pulse at least a quarter of the sum; ``pair_spread`` 8: the pulses 12 us +- 1.6 us
 #: apart) keep the other mode out: without them a Y beacon heard by the X receiver gave 293
 #: main references and 13 valid bearings in 60 s at 20 dB (its single pulses and its 15 us
 #: auxiliary pulses pass a pair-sum test); with them 0 valid in 60 s at 20 and 10 dB.
-#: Figures: ``python -m cosim bench tacan-detector``; the choices: docs/experiments/README.md.
-PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=40, pair_balance=4,
+#: Figures: ``python -m cosim bench tacan-accuracy``; the choices: docs/experiments/README.md.
+PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair_balance=4,
                            pair_spread=8)
 
 #: The detectors of ``python -m cosim tacan --detector``: single pulses (with the profile of

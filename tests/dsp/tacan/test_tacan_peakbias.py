@@ -29,6 +29,8 @@ def test_bias_curve_knots_hold_and_extrapolation():
     (dict(u=(0.5, 1.0), beta=(0.1, np.nan)), "finite"),
     (dict(u=(0.5, 1.0), beta=(0.1, 0.2), quantile=0.7), "quantile"),
     (dict(u=(0.5, 1.0), beta=(0.1, 0.2), entries=8), "entries"),
+    (dict(u=(0.5, 1.0), beta=(0.1, 0.2), noise_report=2.0, noise_predicted=1.5), "noise rule"),
+    (dict(u=(0.5, 1.0), beta=(0.1, 0.2), noise_report=-1.0), "noise rule"),
 ])
 def test_bad_bias_model_is_refused(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -60,14 +62,14 @@ def test_table_covers_the_span_in_power_of_two_steps():
         PAIR_PEAK_BIAS.table(0.0)
 
 
-def _biased_reports(T, seed=3):
+def _biased_reports(T, seed=3, sigma=0.02):
     """Pulse amplitudes of 90 deg (15 and 135 Hz modulation 0.21 each) reported as the
     model says: the expected report at each amplitude plus noise."""
     cfg = TacanSignalConfig(duration_s=2.0, snr_db=10, bearing_deg=90, seed=seed)
     t, _, truth = pulse_observations(cfg)
     u = truth[0] / T
     y = (u + PAIR_PEAK_BIAS.bias(u)) * T
-    y = y + np.random.default_rng(seed).standard_normal(y.size) * 0.02
+    y = y + np.random.default_rng(seed).standard_normal(y.size) * sigma
     return np.diff(t, prepend=t[0]), y[None, :]
 
 
@@ -90,6 +92,38 @@ def test_filter_with_the_table_recovers_the_modulation_the_bias_compresses(kalma
     assert depths[False][0] < 0.19 and depths[False][1] < 0.19     # compressed without it
 
 
+@pytest.mark.parametrize("kalman", [KalmanConfig(), KalmanFixedConfig()], ids=["float", "fixed"])
+def test_noise_rule_skips_low_reports_only_where_the_signal_stands_clear(kalman):
+    """Noise reports (1.0-1.1 T, 5 % of the reports) mixed into a strong signal (pulses at
+    1.9-4.7 T, noise 0.33 T: those near the trough lie within the innovation gate): with the
+    rule they are skipped (counted) and the fit is the clean one; without it they pull the
+    fit down. Where the prediction is below the rule's level (a weak signal) nothing is
+    skipped."""
+    T = 0.3
+    dts, y = _biased_reports(T, sigma=0.1)
+    rng = np.random.default_rng(9)
+    noisy = y.copy()
+    hit = rng.random(y.shape[1]) < 0.05
+    noisy[0, hit] = T * rng.uniform(1.0, 1.1, hit.sum())
+    out = {}
+    pb = dataclasses.replace(PAIR_PEAK_BIAS, noise_report=1.15, noise_predicted=1.8)
+    assert PAIR_PEAK_BIAS.noise_rule(T) is None           # the shipped profile has none
+    for rule in (None, pb.noise_rule(T)):
+        kf = EnvelopeKalman(kalman, tick_hz=20e6)
+        kf.set_peak_bias(*PAIR_PEAK_BIAS.table(T), noise=rule)
+        kf.run(dts, noisy)
+        out[rule is None] = (kf.phases()[4][0], int(kf.events["noise_reports"][0]),
+                             int(kf.events["gated"][0]))
+    clean_dc, skipped, gated = out[False]
+    assert abs(clean_dc - 1.0) < 0.002 and skipped >= 0.9 * hit.sum() and gated == 0
+    dc, skipped, gated = out[True]                                  # without the rule:
+    assert skipped == 0 and dc < 0.997 and gated > 100              # pulled down, gated
+    weak = EnvelopeKalman(kalman, tick_hz=20e6)                      # threshold ~ the signal
+    weak.set_peak_bias(*pb.table(0.9), noise=pb.noise_rule(0.9))
+    weak.run(dts, noisy)
+    assert int(weak.events["noise_reports"][0]) == 0
+
+
 def test_set_peak_bias_refuses_garbage():
     kf = EnvelopeKalman(KalmanFixedConfig())
     with pytest.raises(ValueError, match="finite"):
@@ -98,5 +132,7 @@ def test_set_peak_bias_refuses_garbage():
         kf.set_peak_bias(np.zeros(70000), 4)
     with pytest.raises(ValueError, match="does not suit"):
         kf.set_peak_bias([0.1, 0.2], -80)
+    with pytest.raises(ValueError, match="noise rule"):
+        kf.set_peak_bias([0.1, 0.2], 4, noise=(0.1, -1.0))
     kf.set_peak_bias([], 0)                       # empty: no table
     assert kf._bt.size == 0
