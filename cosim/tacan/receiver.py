@@ -153,8 +153,8 @@ def tacan_run_config(a) -> TacanRunConfig:
 #: ``--detector pair`` is not fit for use yet (printed on every run with it).
 PAIR_DETECTOR_WARNING = (
     "--detector pair is experimental: at 0 dB it acquires fewer records than the pulse "
-    "detector (4 of 8 at 90 deg), and its figures with the DSP's peak-bias model "
-    "(dsp.tacan.peakbias) are from 8-12 records, not yet from the benchmarks "
+    "detector (4 of 8 at 90 deg), and a beacon of the other mode can pass its pair test: an "
+    "X beacon heard by the Y receiver gave 105 bearings shown valid in 60 s at 10 dB "
     "(docs/experiments/README.md)")
 
 

@@ -122,9 +122,9 @@ class TacanRunConfig:
         "help": "what the FPGA detects: single pulses (default) or pulse pairs (the "
                 "envelope summed with itself one pair spacing earlier: both pulses of a pair "
                 "integrated; censored slow floor, its own threshold; see "
-                "dsp.tacan.frontend.PAIR_DETECTOR). Experimental: fewer records acquired "
-                "at 0 dB; the DSP corrects its reports' bias near the threshold "
-                "(dsp.tacan.peakbias)",
+                "dsp.tacan.frontend.PAIR_DETECTOR; the DSP corrects the reports' bias near "
+                "the threshold, dsp.tacan.peakbias). Experimental: fewer records acquired "
+                "at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
