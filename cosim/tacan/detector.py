@@ -23,6 +23,28 @@ from .signal import generate
 MATCH_S = 3e-6
 
 
+def _detections(run: TacanRunConfig):
+    """The golden front end on ``run``'s scenario: ``(signal, amplitude, threshold, t, (j,
+    near))`` per detection -- its reported amplitude, the threshold at it, its time (s,
+    group delay removed) and the nearest transmitted pulse (index, within
+    :data:`MATCH_S`)."""
+    cfg = run.frontend
+    s = generate(run.signal)
+    fe = GoldenFrontend(cfg, run.signal.adc_bits)
+    idx, amp, thr = [], [], []
+    for c0, chunk in record_chunks(s.samples, cfg):
+        res = fe.search(chunk)
+        n = np.asarray(res.index, np.int64)
+        idx.append(n)
+        amp.append(np.asarray(res.amplitude, np.float64))
+        thr.append(np.asarray(res.thresholds)[n - c0 // cfg.decimation])
+    n, a, T = np.concatenate(idx), np.concatenate(amp), np.concatenate(thr)
+    t = (n * cfg.decimation - cfg.group_delay_samples) / run.signal.fs_hz
+    tp = s.truth.pulse_times_s
+    match = _match(tp, t, MATCH_S) if tp.size else (np.zeros(t.size, int), np.zeros(t.size, bool))
+    return s, a, T, t, match
+
+
 def operating_point(run: TacanRunConfig) -> dict:
     """The detector's operating point on ``run``'s scenario (golden chain, direct path).
 
@@ -35,21 +57,10 @@ def operating_point(run: TacanRunConfig) -> dict:
     sig = run.signal
     if sig.snr_db is None:
         raise ValueError("the operating point needs a noisy scenario (snr_db is None)")
-    cfg = run.frontend
-    s = generate(sig)
-    fe = GoldenFrontend(cfg, sig.adc_bits)
-    idx, thr = [], []
-    for c0, chunk in record_chunks(s.samples, cfg):
-        res = fe.search(chunk)
-        n = np.asarray(res.index, np.int64)
-        idx.append(n)
-        thr.append(np.asarray(res.thresholds)[n - c0 // cfg.decimation])
-    n = np.concatenate(idx)
-    thr = np.concatenate(thr)
-    t = (n * cfg.decimation - cfg.group_delay_samples) / sig.fs_hz
+    s, _, thr, t, (_, near) = _detections(run)
     tp = s.truth.pulse_times_s
-    duration = (s.samples.size - s.samples.size % cfg.decimation) / sig.fs_hz
-    near = _match(tp, t, MATCH_S)[1] if tp.size else np.zeros(t.size, bool)
+    dec = run.frontend.decimation
+    duration = (s.samples.size - s.samples.size % dec) / sig.fs_hz
     # time within MATCH_S of a pulse: the union of the windows
     lo, hi = np.clip(tp - MATCH_S, 0, duration), np.clip(tp + MATCH_S, 0, duration)
     t_near = float(np.sum(np.minimum(hi, np.append(lo[1:], np.inf)) - lo)) if tp.size else 0.0
@@ -80,22 +91,9 @@ def peak_bias_samples(run: TacanRunConfig) -> tuple[np.ndarray, np.ndarray]:
     passed (:mod:`dsp.tacan.peakbias`; a pair report is half the pair sum, so half the
     sum's threshold). Noise peaks and the floor's first settling (infinite threshold) are
     left out."""
-    sig = run.signal
-    cfg = run.frontend
-    s = generate(sig)
-    fe = GoldenFrontend(cfg, sig.adc_bits)
-    half = 0.5 if cfg.peak.pair_offset else 1.0
-    idx, amp, thr = [], [], []
-    for c0, chunk in record_chunks(s.samples, cfg):
-        res = fe.search(chunk)
-        n = np.asarray(res.index, np.int64)
-        idx.append(n)
-        amp.append(np.asarray(res.amplitude, np.float64))
-        thr.append(np.asarray(res.thresholds)[n - c0 // cfg.decimation] * half)
-    n, a, T = np.concatenate(idx), np.concatenate(amp), np.concatenate(thr)
-    t = (n * cfg.decimation - cfg.group_delay_samples) / sig.fs_hz
-    tp, ap = s.truth.pulse_times_s, s.truth.pulse_amplitudes
-    j, near = _match(tp, t, MATCH_S) if tp.size else (np.zeros(t.size, int), np.zeros(t.size, bool))
+    s, a, T, _, (j, near) = _detections(run)
+    T = T * (0.5 if run.frontend.peak.pair_offset else 1.0)
+    ap = s.truth.pulse_amplitudes
     ok = near & np.isfinite(T) & (T > 0)
     A = ap[j[ok]]
     return A / T[ok], (a[ok] - A) / T[ok]
@@ -129,8 +127,8 @@ def calibrate_peak_bias(runs, *, bin_width: float = 0.1, u_fit: float = 1.5,
 def bias_runs(detector: str = "pair", noise_floor: str = "clipped", seeds=range(3),
               snrs=(-3, -1, 1, 3, 5, 8, 12), duration_s: float = 2.0):
     """The records a :class:`dsp.tacan.peakbias.PeakBias` is calibrated on (``PAIR_PEAK_BIAS``:
-    the defaults): each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random bearing drawn from
-    that seed."""
+    the defaults): each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random
+    bearing drawn from that seed."""
     from .signal import TacanSignalConfig
     out = []
     for snr in snrs:
