@@ -323,6 +323,15 @@ def _reset(x, P, p0):
 
 
 @_jit
+def _predict_only(x, P, xp, Pp):
+    """The step keeps the prediction (no measurement, a gated or a noise report)."""
+    for i in range(5):
+        x[i] = xp[i]
+        for j in range(5):
+            P[i, j] = Pp[i, j]
+
+
+@_jit
 def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
     gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
@@ -390,19 +399,13 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
         if y != y or y == skip:     # implausible input: not a measurement
             ev[11] += 1
             cnt[2] += 1
-            for i in range(5):
-                x[i] = xp[i]
-                for j in range(5):
-                    P[i, j] = Pp[i, j]
+            _predict_only(x, P, xp, Pp)
             continue
         cnt[2] = 0
         yh = xp[0] + xp[2] + xp[4]
         if bt.size and nq[1] > 0 and yh >= nq[1] and align(y, xf - yf) < nq[0]:
             ev[12] += 1             # a noise report where the signal stands clear of it
-            for i in range(5):
-                x[i] = xp[i]
-                for j in range(5):
-                    P[i, j] = Pp[i, j]
+            _predict_only(x, P, xp, Pp)
             continue
         # -- innovation, S, e2 = innov^2 / S
         for i in range(5):
@@ -427,10 +430,7 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
         warm = n >= warmup
         gated = warm and e2 > thr
         if gated:
-            for i in range(5):
-                x[i] = xp[i]
-                for j in range(5):
-                    P[i, j] = Pp[i, j]
+            _predict_only(x, P, xp, Pp)
         else:
             for i in range(5):
                 K[i] = div_norm(PH[i], Sn, nb, kf, kh, klo, khi, ev, 3)
