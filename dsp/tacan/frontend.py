@@ -109,6 +109,11 @@ class FrontendConfig:
         Pulse-peak search (noise-floor block, threshold factor, hold, max length).
     thr_min_fs : float
         Lowest detection threshold in the golden model (fraction of ADC full scale).
+    pair_peak : PeakParams, optional
+        A second search on the same envelope, a pulse-*pair* detection (``pair_offset > 0``,
+        :func:`pair_detector`), run beside ``peak`` (single pulses): both report into one
+        stream, each report tagged with its search (:attr:`Peaks.source`; ``python -m cosim
+        tacan --detector both``). None: one search.
     """
 
     fs_hz: float = 20e6
@@ -121,6 +126,7 @@ class FrontendConfig:
     pulse_sigma_s: float = PULSE_SIGMA_S
     peak: PeakParams = field(default_factory=PeakParams)
     thr_min_fs: float = 0.05
+    pair_peak: PeakParams | None = None
 
     def __post_init__(self):
         for name in ("fs_hz", "if_hz", "pulse_sigma_s"):
@@ -142,6 +148,16 @@ class FrontendConfig:
                              f"decimation cic_rate*fir_decim = {self.decimation}")
         if not self.thr_min_fs >= 0:
             raise ValueError(f"thr_min_fs must be >= 0, not {self.thr_min_fs}")
+        if self.pair_peak is not None:
+            if not isinstance(self.pair_peak, PeakParams) or not self.pair_peak.pair_offset:
+                raise ValueError(f"pair_peak must be a PeakParams with pulse-pair detection "
+                                 f"(pair_offset > 0), not {self.pair_peak!r}")
+            if self.peak.pair_offset or self.peak.partner_offset:
+                raise ValueError("with pair_peak, peak must be the single-pulse search (no "
+                                 "pair_offset, no partner_offset): the pair search is pair_peak")
+            if self.pair_peak.ts_step != self.decimation:
+                raise ValueError(f"pair_peak ts_step ({self.pair_peak.ts_step}) must equal the "
+                                 f"total decimation cic_rate*fir_decim = {self.decimation}")
 
     @property
     def decimation(self) -> int:
@@ -201,10 +217,27 @@ class Peaks:
     timestamps: np.ndarray   # ADC sample ticks (int64, not wrapped)
     amplitudes: np.ndarray   # fraction of ADC full scale
     fs_hz: float
+    #: With two searches (``FrontendConfig.pair_peak``): which search reported each peak
+    #: (int8, :data:`SOURCE_PULSE` or :data:`SOURCE_PAIR`); None: one search.
+    source: np.ndarray | None = None
 
     @property
     def times_s(self) -> np.ndarray:
         return self.timestamps / self.fs_hz
+
+
+#: :attr:`Peaks.source` values: the single-pulse search, the pulse-pair search.
+SOURCE_PULSE, SOURCE_PAIR = 0, 1
+
+
+def merge_sources(pulse_ts, pulse_amp, pair_ts, pair_amp):
+    """Two searches' reports as one stream in timestamp order (a pulse report before a pair
+    report with the same timestamp): ``(timestamps, amplitudes, source)``."""
+    ts = np.concatenate([pulse_ts, pair_ts])
+    src = np.concatenate([np.full(len(pulse_ts), SOURCE_PULSE, np.int8),
+                          np.full(len(pair_ts), SOURCE_PAIR, np.int8)])
+    o = np.lexsort((src, ts))
+    return ts[o], np.concatenate([pulse_amp, pair_amp])[o], src[o]
 
 
 class GoldenFrontend:
@@ -219,6 +252,7 @@ class GoldenFrontend:
         self.cic = _DecimatingFir(cic_taps(cfg.cic_stages, cfg.cic_rate, cfg.cic_delay), cfg.cic_rate)
         self.fir = _DecimatingFir(cfg.fir_taps, cfg.fir_decim)
         self.peak_state: PeakState | None = None
+        self.pair_state: PeakState | None = None
         self.w = 2 * np.pi * cfg.if_hz / cfg.fs_hz
         # When f_IF / fs is a ratio of small integers (3/20 by default) the LO repeats every
         # `period` samples: one table serves every chunk, exactly (same bits for any chunking).
@@ -241,21 +275,29 @@ class GoldenFrontend:
         z = (2.0 * x) * lo
         return np.abs(self.fir(self.cic(z)))
 
-    def search(self, codes: np.ndarray):
+    def search(self, codes: np.ndarray, env: np.ndarray | None = None):
         """The peak search's full result (:class:`dsp.peak.PeakResult`: with the threshold
-        of every envelope sample) on the next chunk of ADC codes."""
-        env = self.envelope(codes)
+        of every envelope sample) on the next chunk of ADC codes (or on its ``env``)."""
+        env = self.envelope(codes) if env is None else env
         res, self.peak_state = peak_search_float(env, self.cfg.peak, self.peak_state,
                                                  thr_min=self.cfg.thr_min_fs)
         return res
 
     def process(self, codes: np.ndarray) -> Peaks:
-        res = self.search(codes)
+        env = self.envelope(codes)
+        res = self.search(codes, env)
         # with the pair-partner readout, the FPGA reports the partner's envelope as the
         # amplitude (hdl.tacan.frontend)
         amp = res.partner if self.cfg.peak.partner_offset else res.amplitude
-        return Peaks(timestamps=np.asarray(res.index, np.int64) * self.cfg.decimation,
-                     amplitudes=np.asarray(amp, np.float64), fs_hz=self.cfg.fs_hz)
+        ts = np.asarray(res.index, np.int64) * self.cfg.decimation
+        amp = np.asarray(amp, np.float64)
+        if self.cfg.pair_peak is None:
+            return Peaks(timestamps=ts, amplitudes=amp, fs_hz=self.cfg.fs_hz)
+        pr, self.pair_state = peak_search_float(env, self.cfg.pair_peak, self.pair_state,
+                                                thr_min=self.cfg.thr_min_fs)
+        ts, amp, src = merge_sources(ts, amp, np.asarray(pr.index, np.int64) * self.cfg.decimation,
+                                     np.asarray(pr.amplitude, np.float64))
+        return Peaks(timestamps=ts, amplitudes=amp, fs_hz=self.cfg.fs_hz, source=src)
 
 
 def record_chunks(samples: np.ndarray, cfg: FrontendConfig):
@@ -271,10 +313,14 @@ def record_chunks(samples: np.ndarray, cfg: FrontendConfig):
 def run_golden_frontend(samples: np.ndarray, cfg: FrontendConfig, adc_bits: int) -> Peaks:
     """All peaks of a record of ADC codes (chunked internally)."""
     fe = GoldenFrontend(cfg, adc_bits)
-    ts, amps = [], []
+    ts, amps, src = [], [], []
     for _, chunk in record_chunks(samples, cfg):
         p = fe.process(chunk)
         ts.append(p.timestamps)
         amps.append(p.amplitudes)
-    return Peaks(np.concatenate(ts) if ts else np.zeros(0, np.int64),
-                 np.concatenate(amps) if amps else np.zeros(0), cfg.fs_hz)
+        src.append(p.source)
+    out = Peaks(np.concatenate(ts) if ts else np.zeros(0, np.int64),
+                np.concatenate(amps) if amps else np.zeros(0), cfg.fs_hz)
+    if cfg.pair_peak is not None:
+        out.source = np.concatenate(src) if src else np.zeros(0, np.int8)
+    return out
