@@ -124,7 +124,9 @@ class TacanRunConfig:
                 "integrated; censored slow floor, its own threshold; see "
                 "dsp.tacan.frontend.PAIR_DETECTOR; the DSP corrects the reports' bias near "
                 "the threshold, dsp.tacan.peakbias). Experimental: fewer records acquired "
-                "at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it",
+                "at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it. both: "
+                "the two searches side by side in the FPGA, one tagged stream; the DSP "
+                "decodes the references on the single pulses and measures on the pairs",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
@@ -168,6 +170,11 @@ class TacanRunConfig:
             raise ValueError("the pair detector has its own noise floor and reports the pair's "
                              "mean amplitude: give --detector pair without --noise-floor, "
                              "--amplitude or a 'peak' in frontend_changes")
+        if self.detector == "both" and (self.amplitude != "peak"
+                                        or "pair_peak" in dict(self.frontend_changes)):
+            raise ValueError("with --detector both the pair search reports the pairs' "
+                             "amplitudes: give it without --amplitude partner or a "
+                             "'pair_peak' in frontend_changes")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
@@ -225,9 +232,10 @@ class TacanRunConfig:
         if self.amplitude == "partner":     # the pair spacing in envelope samples
             d = pair_spacing_samples(self.signal.mode, cfg.env_rate_hz)
             cfg = replace(cfg, peak=replace(cfg.peak, partner_offset=d))
-        if self.detector == "pair":
-            cfg = replace(cfg, peak=pair_detector(self.signal.mode, cfg.env_rate_hz,
-                                                  replace(PAIR_DETECTOR, ts_step=cfg.peak.ts_step)))
+        if self.detector != "pulse":
+            pair = pair_detector(self.signal.mode, cfg.env_rate_hz,
+                                 replace(PAIR_DETECTOR, ts_step=cfg.peak.ts_step))
+            cfg = replace(cfg, **{"peak" if self.detector == "pair" else "pair_peak": pair})
         return cfg
 
     @property
@@ -248,9 +256,9 @@ class TacanRunConfig:
         dec = None
         if self.amplitude == "partner":
             dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
-        pair = self.detector == "pair"
-        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec, pair_reports=pair,
-                              peak_bias=PAIR_PEAK_BIAS if pair else None)
+        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec,
+                              pair_reports=self.detector == "pair",
+                              peak_bias=None if self.detector == "pulse" else PAIR_PEAK_BIAS)
 
 
 @dataclass
@@ -274,6 +282,7 @@ class FrontendOutput:
     n_cycles: int = 0
     scale_to_fs: float = 1.0
     extra: dict = field(default_factory=dict)
+    source: np.ndarray | None = None   # with two searches: each peak's (dsp.tacan.frontend)
 
 
 # ---------------------------------------------------------------------------------------
@@ -282,7 +291,7 @@ class FrontendOutput:
 def _golden(samples, run: TacanRunConfig) -> FrontendOutput:
     pk = run_golden_frontend(samples, run.frontend, run.signal.adc_bits)
     return FrontendOutput(ticks=np.asarray(pk.timestamps, np.int64),
-                          amplitude_fs=np.asarray(pk.amplitudes, np.float64))
+                          amplitude_fs=np.asarray(pk.amplitudes, np.float64), source=pk.source)
 
 
 def _n_cycles(samples, params) -> int:
@@ -374,7 +383,7 @@ def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float) -> BearingTra
         amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
     else:
         amps = fo.amplitude_fs
-    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz)
+    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz, source=fo.source)
 
 
 def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):

@@ -337,6 +337,15 @@ def _measurements(t, paired, ref_t, kinds, main_off, aux_off, cfg: DecoderConfig
     return paired & out
 
 
+def outside_bursts(times_s, dec: Decoded, mode: str) -> np.ndarray:
+    """Per peak time: not within the span of one of ``dec``'s reference bursts."""
+    t = np.asarray(times_s, dtype=np.float64)
+    if dec.ref_times_s.size == 0:
+        return np.ones(t.size, bool)
+    return ~_in_bursts(t, dec.ref_times_s, dec.ref_kinds, burst_offsets(mode, "main"),
+                       burst_offsets(mode, "aux"))
+
+
 def _in_bursts(t, ref_t, kinds, main_off, aux_off):
     """Peaks within the span of a reference burst (first to last pulse)."""
     o = np.argsort(ref_t)

@@ -74,8 +74,9 @@ PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair
                            pair_spread=8)
 
 #: The detectors of ``python -m cosim tacan --detector``: single pulses (with the profile of
-#: ``--noise-floor``) or pulse pairs.
-DETECTORS = ("pulse", "pair")
+#: ``--noise-floor``), pulse pairs, or both searches side by side (``FrontendConfig.pair_peak``:
+#: the DSP decodes the references on the single pulses and measures on the pairs).
+DETECTORS = ("pulse", "pair", "both")
 
 
 def pair_spacing_samples(mode: str, env_rate_hz: float) -> int:

@@ -167,3 +167,48 @@ def test_pair_reports_give_the_bearing_of_the_pulses():
     assert np.abs(d).max() < 0.1
     with pytest.raises(ValueError, match="pair_reports must be True or False"):
         ReceiverConfig(pair_reports=1)
+
+
+def _two_searches(cfg):
+    """An ideal front end with both searches (X mode): every pulse from the single-pulse
+    search (source 0), and every pair's second pulse with the pair's mean amplitude from the
+    pair search (source 1), merged in time order."""
+    from dsp.tacan.frontend import merge_sources
+    t, amps, _ = pulse_observations(cfg, [135.0])
+    ticks = np.round(t * 20e6).astype(np.int64)
+    second = np.flatnonzero(np.isin(ticks - 240, ticks))
+    first = np.searchsorted(ticks, ticks[second] - 240)
+    mean = (amps[0, first] + amps[0, second]) / 2
+    tk, a, src = merge_sources(ticks, amps[0], ticks[second], mean)
+    return ticks, amps, second, mean, tk, a, src
+
+
+def test_two_searches_decode_on_the_pulses_and_measure_on_the_pairs():
+    """With ``source`` the references come from the single pulses and the measurements are
+    the pair reports' pulses: the bearings are those of the pair reports alone (same pulses,
+    same amplitudes), the references those of the pulses; without the single pulses no
+    reference is decoded at all -- the pair reports are not decoded."""
+    from dsp.tacan.frontend import SOURCE_PAIR
+    ticks, amps, second, mean, tk, a, src = _two_searches(
+        TacanSignalConfig(duration_s=1.5, snr_db=20, seed=6))
+    ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks, tick_hz=20e6)
+    pr = process_peaks(ticks[second] / 20e6, mean[None], ReceiverConfig(pair_reports=True),
+                       ticks=ticks[second], tick_hz=20e6)
+    both = process_peaks(tk / 20e6, a, ReceiverConfig(), ticks=tk, tick_hz=20e6, source=src)
+    assert (both.n_main_refs, both.n_aux_refs) == (ref.n_main_refs, ref.n_aux_refs)
+    assert both.n_peaks == tk.size and both.n_measurements == pr.n_measurements
+    np.testing.assert_allclose(both.bearing_deg, pr.bearing_deg, atol=1e-9)
+    only = src == SOURCE_PAIR
+    alone = process_peaks(tk[only] / 20e6, a[only], ReceiverConfig(), ticks=tk[only],
+                          tick_hz=20e6, source=src[only])
+    assert alone.n_main_refs == alone.n_aux_refs == 0 and alone.times_s.size == 0
+
+
+def test_two_searches_source_is_checked():
+    _, _, _, _, tk, a, src = _two_searches(TacanSignalConfig(duration_s=0.3, snr_db=20, seed=6))
+    with pytest.raises(ValueError, match="source must be one search per peak"):
+        process_peaks(tk / 20e6, a, ReceiverConfig(), source=src[:-1])
+    with pytest.raises(ValueError, match="source must be one search per peak"):
+        process_peaks(tk / 20e6, a, ReceiverConfig(), source=src * 2)
+    with pytest.raises(ValueError, match="pair_reports says every peak is a pair"):
+        process_peaks(tk / 20e6, a, ReceiverConfig(pair_reports=True), source=src)
