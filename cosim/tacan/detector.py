@@ -9,6 +9,8 @@ bounds use). :func:`detector_bounds` turns that into the bounds of
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from dsp.tacan.bounds import crb_deg, detected_fraction, detection_bound_deg
@@ -23,12 +25,19 @@ from .signal import generate
 MATCH_S = 3e-6
 
 
-def _detections(run: TacanRunConfig):
-    """The golden front end on ``run``'s scenario: ``(signal, amplitude, threshold, t, (j,
-    near))`` per detection -- its reported amplitude, the threshold at it, its time (s,
-    group delay removed) and the nearest transmitted pulse (index, within
-    :data:`MATCH_S`)."""
+def _measured_search(run: TacanRunConfig):
+    """``run``'s front end with the one search whose reports the DSP measures: the pair
+    search with both searches (``--detector both``), else the only one."""
     cfg = run.frontend
+    return cfg if cfg.pair_peak is None else replace(cfg, peak=cfg.pair_peak, pair_peak=None)
+
+
+def _detections(run: TacanRunConfig):
+    """The golden front end on ``run``'s scenario (its measured search,
+    :func:`_measured_search`): ``(signal, amplitude, threshold, t, (j, near))`` per detection
+    -- its reported amplitude, the threshold at it, its time (s, group delay removed) and the
+    nearest transmitted pulse (index, within :data:`MATCH_S`)."""
+    cfg = _measured_search(run)
     s = generate(run.signal)
     fe = GoldenFrontend(cfg, run.signal.adc_bits)
     idx, amp, thr = [], [], []
@@ -92,7 +101,7 @@ def peak_bias_samples(run: TacanRunConfig) -> tuple[np.ndarray, np.ndarray]:
     sum's threshold). Noise peaks and the floor's first settling (infinite threshold) are
     left out."""
     s, a, T, _, (j, near) = _detections(run)
-    T = T * (0.5 if run.frontend.peak.pair_offset else 1.0)
+    T = T * (0.5 if _measured_search(run).peak.pair_offset else 1.0)
     ap = s.truth.pulse_amplitudes
     ok = near & np.isfinite(T) & (T > 0)
     A = ap[j[ok]]
@@ -127,7 +136,7 @@ def calibrate_peak_bias(runs, *, bin_width: float = 0.1, u_fit: float = 1.5,
 def bias_runs(detector: str = "pair", noise_floor: str = "clipped", seeds=range(3),
               snrs=(-3, -1, 1, 3, 5, 8, 12), duration_s: float = 2.0):
     """The records a :class:`dsp.tacan.peakbias.PeakBias` is calibrated on (``PAIR_PEAK_BIAS``:
-    the defaults): each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random
+    the defaults; ``BOTH_PEAK_BIAS``: ``detector="both"``): each SNR, seed ``9000 + 10 k + snr + 5`` for ``k`` in ``seeds``, a random
     bearing drawn from that seed."""
     from .signal import TacanSignalConfig
     out = []

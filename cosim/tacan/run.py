@@ -27,10 +27,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from dsp.tacan.frontend import (DETECTORS, NOISE_FLOORS, PAIR_DETECTOR, FrontendConfig,
+from dsp.tacan.frontend import (BOTH_PAIR_SEARCH, DETECTORS, NOISE_FLOORS, PAIR_DETECTOR,
+                                FrontendConfig,
                                 pair_detector, pair_spacing_samples, run_golden_frontend)
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
-from dsp.tacan.peakbias import PAIR_PEAK_BIAS
+from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PAIR_PEAK_BIAS
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
@@ -233,8 +234,9 @@ class TacanRunConfig:
             d = pair_spacing_samples(self.signal.mode, cfg.env_rate_hz)
             cfg = replace(cfg, peak=replace(cfg.peak, partner_offset=d))
         if self.detector != "pulse":
+            base = PAIR_DETECTOR if self.detector == "pair" else BOTH_PAIR_SEARCH
             pair = pair_detector(self.signal.mode, cfg.env_rate_hz,
-                                 replace(PAIR_DETECTOR, ts_step=cfg.peak.ts_step))
+                                 replace(base, ts_step=cfg.peak.ts_step))
             cfg = replace(cfg, **{"peak" if self.detector == "pair" else "pair_peak": pair})
         return cfg
 
@@ -258,7 +260,8 @@ class TacanRunConfig:
             dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
         return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec,
                               pair_reports=self.detector == "pair",
-                              peak_bias=None if self.detector == "pulse" else PAIR_PEAK_BIAS)
+                              peak_bias={"pulse": None, "pair": PAIR_PEAK_BIAS,
+                                         "both": BOTH_PEAK_BIAS}[self.detector])
 
 
 @dataclass

@@ -144,8 +144,9 @@ class PeakBias:
 #: ``u`` to 1.5, above it a fit ``c0 + c1 / u``). No noise-report rule: at this threshold
 #: ~30 noise pairs a second pass on noise alone. (At 40/16, the threshold that acquires
 #: every record at 0 dB, the rule ``noise_report=1.15, noise_predicted=1.8`` with the curve
-#: recalibrated there kept 10 dB at 1.19x the bound; that profile is not used: it lets the
-#: other mode through, :data:`dsp.tacan.frontend.PAIR_DETECTOR`.)
+#: recalibrated there kept 10 dB at 1.19x the bound; that profile is not used here: it lets
+#: the other mode through, :data:`dsp.tacan.frontend.PAIR_DETECTOR`. With both searches the
+#: references come from the single pulses and it is :data:`BOTH_PEAK_BIAS`.)
 PAIR_PEAK_BIAS = PeakBias(
     u_min=0.7,
     u=(0.45, 0.55, 0.65, 0.75, 0.85, 0.95, 1.05, 1.15, 1.25, 1.35, 1.45, 1.5, 1.75, 2.0, 2.25,
@@ -153,3 +154,17 @@ PAIR_PEAK_BIAS = PeakBias(
     beta=(0.5848, 0.512, 0.4325, 0.3496, 0.2738, 0.2072, 0.1487, 0.1022, 0.0691, 0.0481,
           0.043, 0.0396, 0.0335, 0.0288, 0.0253, 0.0224, 0.02, 0.0181, 0.0164, 0.015, 0.0138,
           0.0127, 0.0117, 0.0109, 0.0101, 0.0095))
+
+#: The pair search's bias with both searches (:data:`dsp.tacan.frontend.BOTH_PAIR_SEARCH`,
+#: threshold 40/16; ``python -m cosim tacan --detector both``), calibrated the same way on
+#: ``bias_runs("both")``, with the noise-report rule: a report under 1.15 T where the filter
+#: predicts over 1.8 T is taken as a noise pair and not measured (~460 noise pairs a second
+#: pass this threshold on noise alone; without the rule, 10 dB was 0.174 / 0.148 deg at 90 /
+#: 270 deg with the pair detector at 40/16, with it 0.082 / 0.081).
+BOTH_PEAK_BIAS = PeakBias(
+    u_min=0.7, noise_report=1.15, noise_predicted=1.8,
+    u=(0.45, 0.55, 0.65, 0.75, 0.85, 0.95, 1.05, 1.15, 1.25, 1.35, 1.45, 1.5, 1.75, 2.0, 2.25,
+       2.5, 2.75, 3.0, 3.25, 3.5, 3.75, 4.0, 4.25, 4.5, 4.75, 5.0),
+    beta=(0.6123, 0.5294, 0.4474, 0.3809, 0.297, 0.2312, 0.1723, 0.1289, 0.0889, 0.0581,
+          0.0397, 0.0339, 0.0316, 0.0299, 0.0286, 0.0276, 0.0267, 0.026, 0.0254, 0.0249,
+          0.0244, 0.024, 0.0237, 0.0234, 0.0231, 0.0229))
