@@ -4,9 +4,11 @@ Parameters, word lengths and the bit-exact model are in :mod:`hdl.tacan.model`.
 """
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
+
+from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
 
 from ..cic import Cic
 from ..common import check_params
@@ -14,8 +16,8 @@ from ..ddc import Ddc
 from ..envelope import Envelope
 from ..fifo import DspFifo
 from ..fir import Fir
-from .model import TacanFrontendParams
 from ..peak import PeakSearch
+from .model import TacanFrontendParams
 
 __all__ = ["TacanFrontEnd", "TacanFrontendParams"]
 
@@ -89,7 +91,27 @@ class TacanFrontEnd(wiring.Component):
             pay = Cat(peak.o.payload.partner, peak.o.payload.timestamp)
         else:   # amplitude (with the pair detection: the pair's mean) | timestamp
             pay = peak.o.payload.as_value()
-        m.d.comb += [fifo.i.valid.eq(peak.o.valid), fifo.i.payload.eq(pay)]
+        if p.pair_peak is None:
+            m.d.comb += [fifo.i.valid.eq(peak.o.valid), fifo.i.payload.eq(pay)]
+        else:
+            m.submodules.pair_peak = pair = PeakSearch(p.pair_peak)
+            # both searches see every envelope transfer (their inputs are always_ready)
+            m.d.comb += [pair.i.valid.eq(env.o.valid), pair.i.payload.eq(env.o.payload)]
+            self._merge(m, fifo, Cat(pay, Const(SOURCE_PULSE, 1)), peak.o.valid,
+                        Cat(pair.o.payload.as_value(), Const(SOURCE_PAIR, 1)), pair.o.valid)
         wiring.connect(m, fifo.o, wiring.flipped(self.o))
         m.d.comb += self.overflow_count.eq(fifo.overflow_count)
         return m
+
+    @staticmethod
+    def _merge(m, fifo, pulse, pulse_valid, pair, pair_valid):
+        """The two searches into the one FIFO input (:func:`hdl.tacan.model.fifo_write_cycles`):
+        a pulse word is written at once; a pair word too, unless a pulse word comes in the same
+        cycle, then it waits one cycle in ``hold``. The searches emit at least ``decimation
+        >= 2`` cycles apart (checked by the params), so the cycle after a collision has
+        neither a pulse word nor a new pair word."""
+        hold = Signal.like(fifo.i.payload)
+        hold_valid = Signal()
+        m.d.sync += [hold.eq(pair), hold_valid.eq(pulse_valid & pair_valid)]
+        m.d.comb += [fifo.i.valid.eq(pulse_valid | pair_valid | hold_valid),
+                     fifo.i.payload.eq(Mux(pulse_valid, pulse, Mux(hold_valid, hold, pair)))]
