@@ -111,7 +111,7 @@ class TacanModelSession(FrontendSession):
             def adc_cycles(adc_idx):
                 r = np.searchsorted(self._run_s, adc_idx, side="right") - 1
                 return self._run_c[r] + (adc_idx - self._run_s[r])
-            ec = np.r_[self._carry_ec, self.model.emit_cycles(pk, adc_cycles)]
+            ec = np.r_[self._carry_ec, self.model.emit_cycles(pk, adc_cycles=adc_cycles)]
             w = np.r_[self._carry_w, self.model.words(pk)]
             src = None if pk.source is None else np.r_[self._carry_src, pk.source]
         else:

@@ -1,5 +1,8 @@
 """TACAN FPGA front end: DDC -> CIC -> FIR -> envelope -> peak search -> FIFO, one clock.
 
+With ``config.pair_peak`` a second peak search (the pulse-pair detection) runs on the same
+envelope stream beside the single-pulse one, and both write into the one FIFO, each word
+tagged with its search in the payload's top bit (the merge: :meth:`TacanFrontEnd._merge`).
 Parameters, word lengths and the bit-exact model are in :mod:`hdl.tacan.model`.
 """
 from __future__ import annotations
@@ -40,16 +43,23 @@ class TacanFrontEnd(wiring.Component):
         word) is what ``amaranth.sim`` uses when a testbench does not drive it; in the
         exported Verilog it is a plain input that the surrounding design (or the DSP's
         control register) must drive, as the Verilator runs do with ``inputs={"freq": ...}``.
-    o : Out(stream.Signature(StructLayout({"payload": unsigned(amp + ts), "tag": unsigned(2)})))
+    o : Out(stream.Signature(StructLayout({"payload": unsigned(amp + ts [+ 1]),
+            "tag": unsigned(2)})))
         FIFO words towards the DSP, with a real ``ready``. Data word (tag 0): payload =
         ``amplitude | timestamp << amp_width`` (amplitude in envelope LSBs,
         ``TacanFrontendParams.scale_to_fs`` FS each -- the peak's, with the peak search's
         pair-partner readout the partner's, with its pulse-pair detection the mean of the
         pair's two envelope values; timestamp = ADC tick of the peak's
-        envelope sample mod ``2**ts_bits``). Marker (tag 2): payload = peaks dropped just
+        envelope sample mod ``2**ts_bits``); with both searches (``config.pair_peak``)
+        ``| source << (amp_width + ts_bits)``, source 0 = the single-pulse search
+        (``peak``), 1 = the pair search (``pair_peak``: amplitude = the pair's mean,
+        timestamp = its second pulse). Marker (tag 2): payload = peaks dropped just
         before it. ``params.latency`` cycles from the ADC sample that completes the envelope
         sample closing a pulse (``peak.emit_delay`` envelope samples later with the readout
-        or the pair detection) to ``o.valid`` (empty FIFO).
+        or the pair detection) to ``o.valid`` (empty FIFO); a pair word of the second search
+        ``params.pair_peak_latency + FIFO_LATENCY`` cycles after the ADC sample completing
+        the envelope sample ``pair_peak.emit_delay`` after the pair's closing one, one
+        cycle more when a pulse word is written in the same cycle.
     overflow_count : Out(unsigned(fifo_count_bits))
         Peaks dropped because the FIFO was full (saturating), the cycle after the drop.
     """

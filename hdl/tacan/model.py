@@ -40,8 +40,8 @@ the carrier amplitude in FS (its mixer multiplies by ``2 exp(-jwn)``).
 * **Peak search** 19-bit amplitude, 32-bit timestamp (wraps after 214 s at 20 MHz; the model
   also returns it unwrapped), threshold floor ``thr_min`` = the golden's ``thr_min_fs`` in
   envelope LSBs.
-* **FIFO** 51-bit payload (amplitude | timestamp << 19) + 2-bit tag, 512 deep (one DP16KD
-  block pair), 16-bit overflow counter.
+* **FIFO** 51-bit payload (amplitude | timestamp << 19; 52 with both searches, the source
+  bit on top) + 2-bit tag, 512 deep (one DP16KD block pair), 16-bit overflow counter.
 
 Model
 -----
@@ -52,6 +52,30 @@ Model
 when the word lengths allow);
 :meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle model for a given DSP ``ready``
 pattern.
+
+Both searches (``config.pair_peak``)
+------------------------------------
+A second :class:`~hdl.peak.PeakSearch` (the pulse-pair detection,
+:attr:`TacanFrontendParams.pair_peak`, built as :attr:`~TacanFrontendParams.peak` is: envelope
+width, ``ts_bits``, the decimation as timestamp step, the same threshold floor) runs on the
+same envelope stream. Both write into the one FIFO, whose payload grows by a **source bit**
+at the top::
+
+    payload = amplitude | timestamp << amp_width | source << (amp_width + ts_bits)
+
+(source 0 = the single-pulse search, 1 = the pair search; a 52-bit payload by default).
+Merge rule (:func:`fifo_write_cycles`, the HDL's ``TacanFrontEnd._merge``): the pulse search
+has priority; a pair word emitted in the same cycle as a pulse word waits in a one-word hold
+register and is written the next cycle. Each search emits at most one word per envelope
+sample, i.e. at least ``decimation`` cycles apart, and ``decimation >= 2`` (checked), so that
+next cycle has no pulse word and no new pair word: one register suffices, nothing is lost.
+The pair search's latency is 8 (9 with the pair checks) against the pulse search's 6, and
+envelope samples are at least ``decimation`` cycles apart, so the two can only meet when the
+decimation is at most that difference: never with the default decimation 4, at decimation 2
+they do. Resources: a second search (its pair-sum memory of ``pair_offset`` words, the inner
+search's ``2 pair_offset``-word partner line, with the pair checks an envelope history of
+``pair_check_depth`` (512) words), the hold register and one FIFO bit more;
+``results/synth_tacan.json`` is the single search's (not re-synthesised).
 """
 from __future__ import annotations
 
@@ -90,6 +114,8 @@ class TacanFrontendParams:
         length/decimation, pulse width, peak-search parameters, ``thr_min_fs``).
         ``config.peak`` gives the noise-floor/threshold/hold settings; its ``amp_width`` and
         ``thr_min`` are replaced by the envelope width and ``thr_min_fs`` in LSBs.
+        ``config.pair_peak`` (optional) adds the pair search, built the same way
+        (:attr:`pair_peak`), and the source bit of the FIFO payload.
     adc_bits : int
         ADC word (signed, 2..18).
     nco_phase_bits, nco_table_bits, nco_amp_bits, nco_dither_bits : int
@@ -170,6 +196,10 @@ class TacanFrontendParams:
             raise ValueError(f"fir_out_shift_rel must be an integer in [0, 8], not "
                              f"{self.fir_out_shift_rel!r}")
         cfg = self.config
+        if cfg.pair_peak is not None and cfg.decimation < 2:   # (FrontendConfig: cic_rate >= 2)
+            raise ValueError(f"with pair_peak the total decimation must be >= 2 (the merge of "
+                             f"the two searches holds a word for one cycle and needs each "
+                             f"search's words 2 cycles apart), not {cfg.decimation}")
         if self.fir_input_spacing is None:
             object.__setattr__(self, "fir_input_spacing", cfg.cic_rate)
         if isinstance(self.fir_input_spacing, bool) or not isinstance(self.fir_input_spacing, int) \
@@ -211,10 +241,6 @@ class TacanFrontendParams:
         # floor of the threshold are the chain's
         searches = {"peak": cfg.peak}
         if cfg.pair_peak is not None:
-            if cfg.decimation < 2:   # FrontendConfig already has cic_rate >= 2
-                raise ValueError(f"with pair_peak the total decimation must be >= 2 (the merge "
-                                 f"of the two searches holds one word for one cycle), not "
-                                 f"{cfg.decimation}")
             searches["pair_peak"] = cfg.pair_peak
         for name, search in searches.items():
             b[name] = replace(search, amp_width=env.out_width, ts_bits=self.ts_bits,
@@ -495,9 +521,10 @@ class FrontendPeaks:
 
 
 def fifo_write_cycles(emit_cycles, source=None, *, last_pulse: int = -1) -> np.ndarray:
-    """The merge of the two searches into the one FIFO input (:class:`~hdl.tacan.frontend.TacanFrontEnd`
-    with ``config.pair_peak``): the cycle each peak is written to the FIFO, from the cycle it
-    leaves its search (``emit_cycles``) and its ``source``.
+    """The merge of the two searches into the one FIFO input
+    (:class:`~hdl.tacan.frontend.TacanFrontEnd` with ``config.pair_peak``): the cycle each
+    peak is written to the FIFO, from the cycle it leaves its search (``emit_cycles``) and
+    its ``source``.
 
     The pulse search has priority: a pulse word is written in the cycle it is emitted; a pair
     word too, unless a pulse word is emitted in the same cycle, then it waits in a one-word
@@ -811,15 +838,25 @@ class TacanFrontendModel:
             out["source"] = (w >> np.int64(aw + tb)) & np.int64(1)
         return out
 
-    def emit_cycles(self, peaks: FrontendPeaks, adc_cycles=None) -> np.ndarray:
-        """Clock cycle at which each peak leaves its search: the cycle of the ADC transfer
-        that completes its emitting envelope sample (``end_index``) plus that search's
-        latency (:attr:`~TacanFrontendParams.peak_latency`, ``pair_peak_latency``).
-        ``adc_cycles(adc_index) -> cycle`` maps valid ADC samples (counted from reset) to
-        their transfer cycles (default: one sample per cycle from reset)."""
+    def emit_cycles(self, peaks: FrontendPeaks, in_valid=None, *, adc_cycles=None) -> np.ndarray:
+        """Clock cycle (from reset, as :func:`cosim.pysim.run_stream` counts) at which each
+        peak leaves its search: the cycle of the ADC transfer that completes its emitting
+        envelope sample (``end_index``) plus that search's latency
+        (:attr:`~TacanFrontendParams.peak_latency`, ``pair_peak_latency``), for ADC samples
+        offered with ``in_valid`` (per cycle; every cycle after the pattern ends, as
+        ``run_stream``), or mapped to their cycles by ``adc_cycles(adc_index) -> cycle``
+        (valid ADC samples counted from reset). Default: one sample per cycle from reset."""
         p = self.params
         adc_idx = (peaks.end_index + 1) * np.int64(p.decimation) - 1
-        acc = adc_idx if adc_cycles is None else np.asarray(adc_cycles(adc_idx), np.int64)
+        if adc_cycles is not None:
+            acc = np.asarray(adc_cycles(adc_idx), np.int64)
+        elif in_valid is not None:
+            v = np.flatnonzero(np.asarray(in_valid, dtype=bool))
+            n_pat = len(np.asarray(in_valid))
+            acc = np.where(adc_idx < len(v), v[np.minimum(adc_idx, max(len(v) - 1, 0))]
+                           if len(v) else 0, n_pat + adc_idx - len(v))
+        else:
+            acc = adc_idx
         if peaks.source is None:
             return acc + np.int64(p.peak_latency)
         self._check_source(peaks)
@@ -827,21 +864,10 @@ class TacanFrontendModel:
                               np.int64(p.peak_latency))
 
     def peak_cycles(self, peaks: FrontendPeaks, in_valid=None) -> np.ndarray:
-        """Clock cycle (from reset, as :func:`cosim.pysim.run_stream` counts) at which each
-        peak is written to the FIFO (:meth:`emit_cycles`, merged by :func:`fifo_write_cycles`),
-        for ADC samples offered with ``in_valid`` (per cycle; every cycle after the pattern
-        ends, as ``run_stream``). The peaks must be all of a record from reset (the merge
-        looks at every pulse word)."""
-        if in_valid is None:
-            adc_cycles = None
-        else:
-            v = np.flatnonzero(np.asarray(in_valid, dtype=bool))
-            n_pat = len(np.asarray(in_valid))
-
-            def adc_cycles(adc_idx):
-                return np.where(adc_idx < len(v), v[np.minimum(adc_idx, max(len(v) - 1, 0))]
-                                if len(v) else 0, n_pat + adc_idx - len(v))
-        return fifo_write_cycles(self.emit_cycles(peaks, adc_cycles), peaks.source)
+        """Clock cycle at which each peak is written to the FIFO: :meth:`emit_cycles`, with
+        two searches merged by :func:`fifo_write_cycles`. The peaks must be all of a record
+        from reset (the merge looks at every pulse word)."""
+        return fifo_write_cycles(self.emit_cycles(peaks, in_valid), peaks.source)
 
     def fifo_output(self, peaks: FrontendPeaks, n_cycles: int, *, in_valid=None,
                     out_ready=None) -> FifoRun:
