@@ -185,19 +185,16 @@ def test_fifo_parity_on_the_rtl_equals_the_model_and_changes_nothing_else(short_
 
 @pytest.mark.parametrize("backend", ["model", pytest.param("verilator", marks=needs_verilator)])
 def test_both_searches_reach_the_dsp_with_their_source(backend):
-    """A front end with both searches (``pair_peak`` via ``frontend_changes``), the DSP
-    stalling on an 8-word FIFO: ``_dsp_receive`` takes the source bit (``source_bits=1``) and the
-    peaks it hands on are per source the model's, with their sources."""
-    from dsp.tacan.frontend import PAIR_DETECTOR, SOURCE_PAIR, SOURCE_PULSE, pair_detector
+    """``--detector both`` on an HDL backend, the DSP stalling on an 8-word FIFO:
+    ``_dsp_receive`` takes the source bit (``source_bits=1``) and the peaks it hands on are
+    per source the model's, with their sources."""
+    from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
     from hdl.tacan.model import TacanFrontendModel
     from cosim.tacan.run import FRONTENDS
     from cosim.tacan.signal import generate
     sig = TacanSignalConfig(duration_s=0.02, snr_db=10.0, seed=4)
-    env_rate = sig.fs_hz / 4
-    pair = pair_detector(sig.mode, env_rate, PAIR_DETECTOR)
-    run = TacanRunConfig(signal=sig, backend=backend, settle_s=0.0, require_bearing=False,
-                         frontend_changes=(("pair_peak", pair),),
-                         hdl_changes=(("fifo_depth", 8),),
+    run = TacanRunConfig(signal=sig, backend=backend, detector="both", settle_s=0.0,
+                         require_bearing=False, hdl_changes=(("fifo_depth", 8),),
                          service=DspServiceConfig().with_stalls((100_000, 200_000)))
     p = run.hdl_params
     assert p.pair_peak is not None and p.source_bits == 1
