@@ -272,7 +272,9 @@ class FrontendOutput:
         completes the envelope sample); amplitude_fs : float amplitudes (FS);
     amplitude_lsb : envelope LSBs (HDL backends) or None; words/cycles : FIFO words read by
     the DSP and their read cycles (HDL backends); fifo_dropped : FPGA overflow counter at
-    the end; dropped_reported : sum of the gap markers the DSP read.
+    the end; dropped_reported : sum of the gap markers the DSP read; source : with two
+    searches (``FrontendConfig.pair_peak``) the search of each peak (int8,
+    ``dsp.tacan.frontend.SOURCE_PULSE`` / ``SOURCE_PAIR``), else None.
     """
 
     ticks: np.ndarray
@@ -310,16 +312,20 @@ def _freq_segments(run: TacanRunConfig, params, n_cycles: int):
 
 
 def _dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
-    """The DSP side of the link: tagged words -> peaks (unwrapped ticks, amplitudes)."""
-    ts, amp, rx = receive_words(words, width=params.fifo.width, amp_width=params.peak.amp_width,
-                                ts_bits=params.peak.ts_bits, parity=params.fifo.parity)
+    """The DSP side of the link: tagged words -> peaks (unwrapped ticks, amplitudes; with
+    two searches their sources, each search's timestamps checked on their own)."""
+    out = receive_words(words, width=params.fifo.width, amp_width=params.peak.amp_width,
+                        ts_bits=params.peak.ts_bits, parity=params.fifo.parity,
+                        source_bits=params.source_bits)
+    ts, amp, rx = out[0], out[1], out[-1]
     ticks = ts + np.int64(params.decimation - 1)     # golden convention (see peaks_to_fs)
     return FrontendOutput(ticks=ticks, amplitude_fs=amp * params.scale_to_fs, amplitude_lsb=amp,
                           words=np.asarray(words, np.int64), cycles=np.asarray(cycles, np.int64),
                           fifo_dropped=int(ovf_count),
                           dropped_reported=int(rx.stats["dropped_reported"]),
                           n_cycles=int(n_cycles), scale_to_fs=params.scale_to_fs,
-                          extra={"rx": dict(rx.stats)})
+                          extra={"rx": dict(rx.stats)},
+                          source=out[2] if params.source_bits else None)
 
 
 def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOutput:

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dsp.tacan.frontend import SOURCE_PULSE
 from hdl.model.fifo import FifoState
+from hdl.tacan.model import fifo_write_cycles
 
 from ..session import FrontendSession, fifo_step
 
@@ -16,7 +18,9 @@ class TacanModelSession(FrontendSession):
     """The bit-exact model of :class:`hdl.tacan.frontend.TacanFrontEnd` as a session.
 
     :class:`~hdl.tacan.model.TacanFrontendModel` (its state carried) gives the peaks
-    and the cycle each is written to the FIFO; the FIFO model
+    and the cycle each leaves its search, :func:`~hdl.tacan.model.fifo_write_cycles` the
+    cycle each is written to the FIFO (with two searches, ``config.pair_peak``, a pair word
+    may wait a cycle behind a pulse word); the FIFO model
     (:func:`~hdl.model.fifo.fifo_model_events`, its state carried) gives what the DSP reads.
     A peak written after the step's last cycle waits for the next step. ``freq`` writes take
     effect from the first ADC sample offered at or after their cycle (the NCO samples the
@@ -39,8 +43,11 @@ class TacanModelSession(FrontendSession):
         self.model = TacanFrontendModel(params, log_ranges=log_ranges, fast=fast)
         self._fe_state = None
         self._fifo_state = FifoState()
-        self._carry_wc = np.zeros(0, np.int64)
+        # Words emitted but not yet written to the FIFO: emit cycles, words, sources.
+        self._carry_ec = np.zeros(0, np.int64)
         self._carry_w = np.zeros(0, np.int64)
+        self._carry_src = None if params.pair_peak is None else np.zeros(0, np.int8)
+        self._last_pulse = -1      # emit cycle of the last pulse word written (two searches)
         self._n_samples = 0
         # Runs of samples offered on consecutive cycles: sample s0 + j at cycle c0 + j.
         self._run_s = np.zeros(0, np.int64)
@@ -100,15 +107,30 @@ class TacanModelSession(FrontendSession):
             pk, self._fe_state = self.model.run(x, self._fe_state, freq_changes=changes)
             self._n_samples += x.size
             self.n_peaks += len(pk)
-            adc_idx = (pk.end_index + 1) * np.int64(p.decimation) - 1
-            r = np.searchsorted(self._run_s, adc_idx, side="right") - 1
-            wc = self._run_c[r] + (adc_idx - self._run_s[r]) + np.int64(p.peak_latency)
-            wc = np.r_[self._carry_wc, wc]
+
+            def adc_cycles(adc_idx):
+                r = np.searchsorted(self._run_s, adc_idx, side="right") - 1
+                return self._run_c[r] + (adc_idx - self._run_s[r])
+            ec = np.r_[self._carry_ec, self.model.emit_cycles(pk, adc_cycles=adc_cycles)]
             w = np.r_[self._carry_w, self.model.words(pk)]
+            src = None if pk.source is None else np.r_[self._carry_src, pk.source]
         else:
-            wc, w = self._carry_wc, self._carry_w
+            ec, w, src = self._carry_ec, self._carry_w, self._carry_src
+        # The words leave their searches at ec; the merge (two searches) may delay a pair
+        # word by one cycle behind a pulse word of the same cycle, which may have been
+        # written in the previous step (_last_pulse). Words written from `stop` on wait, with
+        # their emit cycles: a pulse of a later step can still collide with them.
+        wc = fifo_write_cycles(ec, src, last_pulse=self._last_pulse)
+        order = np.argsort(wc, kind="stable")
+        ec, w, wc = ec[order], w[order], wc[order]
         now = wc < stop
-        self._carry_wc, self._carry_w = wc[~now], w[~now]
+        if src is not None:
+            src = src[order]
+            pulses = ec[now & (src == SOURCE_PULSE)]
+            if pulses.size:
+                self._last_pulse = int(pulses[-1])
+            self._carry_src = src[~now]
+        self._carry_ec, self._carry_w = ec[~now], w[~now]
         wc, w = wc[now], w[now]
         words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, p.fifo,
                                                     self._fifo_state)

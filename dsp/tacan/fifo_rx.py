@@ -1,8 +1,9 @@
 """DSP side of the FPGA->DSP FIFO: tagged words -> peaks, with plausibility checks.
 
 Word format (:mod:`hdl.model.fifo`): ``payload | tag << width``; tag 0 = data (payload =
-``amplitude | timestamp << amp_width``, timestamp = ADC tick mod ``2**ts_bits``), tag 2 =
-gap marker (payload = peaks the FPGA dropped just before it), tags 1 and 3 reserved.
+``amplitude | timestamp << amp_width``, timestamp = ADC tick mod ``2**ts_bits``; with two
+searches in the front end, ``source_bits = 1``, also ``| source << (amp_width + ts_bits)``),
+tag 2 = gap marker (payload = peaks the FPGA dropped just before it), tags 1 and 3 reserved.
 
 Nothing is taken on trust, because the link may carry bit errors:
 
@@ -10,10 +11,12 @@ Nothing is taken on trust, because the link may carry bit errors:
   not have even parity is counted (``parity_errors``) and skipped: any odd number of
   flipped bits is caught before the word is interpreted;
 * reserved tags are counted (``bad_tags``) and the word skipped;
-* timestamps are unwrapped against the last *accepted* one: a data word is accepted when
-  its tick advances by ``1 .. max_gap_ticks`` (peaks are strictly increasing in time and a
-  beacon sends thousands per second) and the next data word does not contradict it (one
-  word of look-ahead); otherwise it is rejected (``ts_rejected``). A corrupted timestamp
+* timestamps are unwrapped against the last *accepted* one (with two searches, of the same
+  source: each search's timestamps ascend, the merged stream's do not): a data word is
+  accepted when its tick advances by ``1 .. max_gap_ticks`` (peaks are strictly increasing
+  in time and a beacon sends thousands per second) and the next data word (of its source)
+  does not contradict it (one word of look-ahead); otherwise it is rejected
+  (``ts_rejected``). A corrupted timestamp
   costs its own word; after ``resync_after`` consecutive rejections the receiver
   re-synchronises (``ts_resyncs``): a real outage longer than ``max_gap_ticks`` costs
   ``resync_after`` peaks;
@@ -38,89 +41,125 @@ STAT_NAMES = ("words", "data", "markers", "dropped_reported", "bad_tags", "ts_re
 
 
 @dataclass
-class RxState:
-    """Carried between batches of words."""
+class RxTrack:
+    """One search's timeline (with ``source_bits = 1`` there is one per source)."""
 
     last_wrapped: int = -1      # -1: nothing accepted yet
     last_tick: int = 0
     rejects: int = 0
-    pending: tuple | None = None   # (wrapped timestamp, amplitude) awaiting its successor
+    pending: tuple | None = None   # (wrapped timestamp, amplitude, data word number)
+
+
+@dataclass
+class RxState:
+    """Carried between batches of words: a timeline per source (``tracks``), the number of
+    data words seen (``n_data``, numbering the words across batches) and the cumulative
+    ``stats``."""
+
+    tracks: list = field(default_factory=lambda: [RxTrack()])
+    n_data: int = 0
     stats: dict = field(default_factory=lambda: dict.fromkeys(STAT_NAMES, 0))
+
+    @property
+    def pending(self):
+        """The words still awaiting their successor (``final=False``), None when none."""
+        p = [t.pending for t in self.tracks if t.pending is not None]
+        return p or None
+
+
+# Columns of the kernel's per-track state rows.
+_LAST_W, _LAST_T, _REJ, _HAVE_C, _C_TS, _C_AMP, _C_SEQ = range(7)
 
 
 @njit_cached(nogil=True)
-def _rx(data, amp_width, ts_bits, max_gap, resync_after, final, st, out_t, out_a, stats):
+def _decide(st, s, n_ts, last, tmask, max_gap, resync_after, out_t, out_a, out_i, out_s,
+            n, stats):
+    """Decide track ``s``'s pending word C knowing its successor's timestamp ``n_ts`` (or
+    alone, ``last``); append it to the outputs if accepted; return the new output count."""
+    c_ts = st[s, _C_TS]
+    last_w, last_t, rej = st[s, _LAST_W], st[s, _LAST_T], st[s, _REJ]
+    d_cn = (n_ts - c_ts) & tmask
+    p_cn = last or (0 < d_cn <= max_gap)
+    if last_w < 0:
+        accept, t = p_cn, c_ts
+        o = 1 - s
+        if st.shape[0] == 2 and st[o, _LAST_W] >= 0:
+            # The other search's timeline is running: unwrap next to it (the two searches'
+            # timestamps are close in time, far less than half a wrap apart).
+            d = (c_ts - st[o, _LAST_W]) & tmask
+            if d > (tmask >> 1):
+                d -= tmask + 1
+            t = st[o, _LAST_T] + d
+        if not accept:
+            stats[5] += 1
+    else:
+        d_ac = (c_ts - last_w) & tmask
+        d_an = (n_ts - last_w) & tmask
+        p_ac = 0 < d_ac <= max_gap
+        p_an = (not last) and 0 < d_an <= max_gap
+        accept = p_ac and (p_cn or not p_an)
+        t = last_t + d_ac
+        if accept:
+            rej = 0
+        else:
+            rej += 1
+            stats[5] += 1
+            if rej >= resync_after and p_cn:
+                stats[6] += 1
+                rej = 0
+                accept = True
+                if tmask + 1 - d_ac <= max_gap:
+                    # C is a little *behind* A: A itself was a corrupted word that
+                    # got through. Re-anchor just after it rather than jump a wrap
+                    # ahead; later ticks keep a constant offset (harmless: the DSP
+                    # only uses tick differences), the step across gets dt = 1.
+                    t = last_t + 1
+                else:           # a real outage: forward distance modulo the wrap
+                    t = last_t + (d_ac if d_ac > 0 else tmask + 1)
+    st[s, _REJ] = rej
+    if accept:
+        st[s, _LAST_W], st[s, _LAST_T] = c_ts, t
+        out_t[n] = t
+        out_a[n] = st[s, _C_AMP]
+        out_i[n] = st[s, _C_SEQ]
+        out_s[n] = s
+        n += 1
+    return n
+
+
+@njit_cached(nogil=True)
+def _rx(data, src, seq0, amp_width, ts_bits, max_gap, resync_after, final, st, out_t, out_a,
+        out_i, out_s, stats):
     """``data``: the payloads of the data words, in order (parity, tags and markers already
-    handled); ``st`` = [last wrapped ts (-1: none), last tick, consecutive rejects, pending
-    flag, pending ts, pending amplitude]; see :func:`receive_words` for the rules."""
+    handled), ``src`` their sources (track numbers), ``seq0`` the number of the first; ``st``
+    one row per track (the ``_LAST_W`` ... ``_C_SEQ`` columns); see :func:`receive_words`
+    for the rules. Outputs in the order decided, with the word numbers in ``out_i`` and the
+    tracks in ``out_s``."""
     amask = (np.int64(1) << amp_width) - 1
     tmask = (np.int64(1) << ts_bits) - 1
-    last_w, last_t, rej = st[0], st[1], st[2]
-    have_c, c_ts, c_amp = st[3], st[4], st[5]
     n = 0
-    for k in range(data.size + (1 if final else 0)):
-        if k < data.size:
-            pay = data[k]
-            n_ts = (pay >> amp_width) & tmask
-            n_amp = pay & amask
-            if have_c == 0:
-                have_c, c_ts, c_amp = 1, n_ts, n_amp
-                continue
-            last = False
-        else:                       # end of the stream: decide the pending word alone
-            if have_c == 0:
-                break
-            last = True
-            n_ts = c_ts
-        # decide the candidate C (pending) knowing its successor N
-        d_cn = (n_ts - c_ts) & tmask
-        p_cn = last or (0 < d_cn <= max_gap)
-        if last_w < 0:
-            accept, t = p_cn, c_ts
-            if not accept:
-                stats[5] += 1
-        else:
-            d_ac = (c_ts - last_w) & tmask
-            d_an = (n_ts - last_w) & tmask
-            p_ac = 0 < d_ac <= max_gap
-            p_an = (not last) and 0 < d_an <= max_gap
-            accept = p_ac and (p_cn or not p_an)
-            t = last_t + d_ac
-            if accept:
-                rej = 0
-            else:
-                rej += 1
-                stats[5] += 1
-                if rej >= resync_after and p_cn:
-                    stats[6] += 1
-                    rej = 0
-                    accept = True
-                    if tmask + 1 - d_ac <= max_gap:
-                        # C is a little *behind* A: A itself was a corrupted word that
-                        # got through. Re-anchor just after it rather than jump a wrap
-                        # ahead; later ticks keep a constant offset (harmless: the DSP
-                        # only uses tick differences), the step across gets dt = 1.
-                        t = last_t + 1
-                    else:           # a real outage: forward distance modulo the wrap
-                        t = last_t + (d_ac if d_ac > 0 else tmask + 1)
-        if accept:
-            last_w, last_t = c_ts, t
-            out_t[n] = t
-            out_a[n] = c_amp
-            n += 1
-        if last:
-            have_c = 0
-        else:
-            c_ts, c_amp = n_ts, n_amp
-    st[0], st[1], st[2] = last_w, last_t, rej
-    st[3], st[4], st[5] = have_c, c_ts, c_amp
+    for k in range(data.size):
+        pay = data[k]
+        s = src[k]
+        n_ts = (pay >> amp_width) & tmask
+        if st[s, _HAVE_C] != 0:
+            n = _decide(st, s, n_ts, False, tmask, max_gap, resync_after, out_t, out_a, out_i,
+                        out_s, n, stats)
+        st[s, _HAVE_C], st[s, _C_TS], st[s, _C_AMP] = 1, n_ts, pay & amask
+        st[s, _C_SEQ] = seq0 + k
+    if final:                   # end of the stream: decide the pending words alone
+        for s in range(st.shape[0]):
+            if st[s, _HAVE_C] != 0:
+                n = _decide(st, s, st[s, _C_TS], True, tmask, max_gap, resync_after, out_t,
+                            out_a, out_i, out_s, n, stats)
+                st[s, _HAVE_C] = 0
     return n
 
 
 def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
                   max_gap_ticks: int = 1 << 22, resync_after: int = 8,
                   max_marker: int = 1 << 24, state: RxState | None = None,
-                  final: bool = True, parity: bool = False):
+                  final: bool = True, parity: bool = False, source_bits: int = 0):
     """Decode FIFO words.
 
     A data word is accepted when its timestamp advances by ``1 .. max_gap_ticks`` from the
@@ -135,6 +174,18 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     corrupted word that got through, e.g. two corruptions in a row): then it re-anchors one
     tick after it, so the timeline never jumps.
 
+    Two searches (``source_bits = 1``, the front end with ``FrontendConfig.pair_peak``):
+    the payload's top bit (``amplitude | timestamp << amp_width | source << (amp_width +
+    ts_bits)``) says which search reported the word (:data:`dsp.tacan.frontend.SOURCE_PULSE`
+    / ``SOURCE_PAIR``). Each search's timestamps ascend but the merged stream's do not (a
+    pair is timestamped at its second pulse and leaves its search later than a pulse), so
+    the rules above run per source, on that source's words alone (its own predecessor and
+    successor, its own rejection count). A source's first accepted word is unwrapped next to
+    the other source's last accepted tick when that one has started (nearest, either
+    direction), so both timelines share one unwrapping; else it keeps its wrapped value.
+    A corrupted source bit moves a word to the other timeline, where its timestamp is
+    usually still plausible: parity (``parity=True``) is what catches it.
+
     Parameters
     ----------
     words : array of int
@@ -142,8 +193,8 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     width, amp_width, ts_bits : int
         Payload width, amplitude width and timestamp width of the front end.
     max_gap_ticks : int
-        Largest plausible advance between consecutive peaks (default 2**22 ticks, 0.21 s
-        at 20 MHz).
+        Largest plausible advance between consecutive peaks of a source (default 2**22
+        ticks, 0.21 s at 20 MHz).
     resync_after : int
         Consecutive implausible timestamps after which the receiver re-synchronises.
     max_marker : int
@@ -153,11 +204,13 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     state : RxState, optional
         Continue from an earlier batch (updated in place and returned).
     final : bool
-        The stream ends with this batch: decide the last data word without a successor
-        (default). With ``final=False`` it stays pending in ``state`` until the next batch
-        (a DSP streaming batch after batch).
+        The stream ends with this batch: decide the last data word (of each source) without
+        a successor (default). With ``final=False`` it stays pending in ``state`` until the
+        next batch (a DSP streaming batch after batch).
     parity : bool
         The words carry the FIFO's even-parity bit (``FifoParams.parity``): check it.
+    source_bits : {0, 1}
+        Bits of the source field at the top of the payload (1: two searches).
 
     Returns
     -------
@@ -165,15 +218,23 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
         Unwrapped timestamps (ticks; the first accepted word keeps its wrapped value).
     amplitudes : int64 array
         Amplitudes (envelope LSBs).
+    source : int8 array
+        With ``source_bits = 1`` only: the source of each accepted word.
     state : RxState
         With cumulative ``stats``.
+
+    The accepted words come in stream order; with ``final=False`` a word decided in a later
+    batch (it waited for its successor of the same source) comes out of that batch.
     """
     for name, v, lo, hi in (("width", width, 2, 61), ("amp_width", amp_width, 1, 60),
                             ("ts_bits", ts_bits, 1, 62), ("resync_after", resync_after, 1, 1 << 30)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
             raise ValueError(f"{name} must be an integer in {lo}..{hi}, not {v!r}")
-    if amp_width + ts_bits > width:
-        raise ValueError(f"amp_width + ts_bits ({amp_width + ts_bits}) exceeds the payload "
+    if isinstance(source_bits, bool) or source_bits not in (0, 1):
+        raise ValueError(f"source_bits must be 0 or 1, not {source_bits!r}")
+    if amp_width + ts_bits + source_bits > width:
+        what = "amp_width + ts_bits" + (" + source_bits" if source_bits else "")
+        raise ValueError(f"{what} ({amp_width + ts_bits + source_bits}) exceeds the payload "
                          f"width {width}")
     if isinstance(max_marker, bool) or not isinstance(max_marker, (int, np.integer)) or max_marker < 1:
         raise ValueError(f"max_marker must be an integer >= 1, not {max_marker!r}")
@@ -187,22 +248,38 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     link = receive_records(w, width=int(width), parity=bool(parity), max_marker=int(max_marker))
     data = np.ascontiguousarray(link.records[:, 0])
     state = state or RxState()
-    pend = state.pending
-    st = np.array([state.last_wrapped, state.last_tick, state.rejects,
-                   0 if pend is None else 1, 0 if pend is None else pend[0],
-                   0 if pend is None else pend[1]], np.int64)
-    out_t = np.empty(data.size + 1, np.int64)
-    out_a = np.empty(data.size + 1, np.int64)
+    n_tracks = 1 << source_bits
+    if len(state.tracks) != n_tracks:
+        if state.n_data:
+            raise ValueError(f"state has {len(state.tracks)} source timelines, not "
+                             f"{n_tracks} (source_bits={source_bits})")
+        state.tracks = [RxTrack() for _ in range(n_tracks)]
+    if source_bits:
+        src = ((data >> np.int64(amp_width + ts_bits)) & np.int64(1)).astype(np.int64)
+    else:
+        src = np.zeros(data.size, np.int64)
+    st = np.array([[t.last_wrapped, t.last_tick, t.rejects, t.pending is not None,
+                    *(t.pending if t.pending is not None else (0, 0, 0))]
+                   for t in state.tracks], np.int64)
+    cap = data.size + n_tracks
+    out_t, out_a, out_i, out_s = (np.empty(cap, np.int64) for _ in range(4))
     stats = np.zeros(len(STAT_NAMES), np.int64)
-    n = _rx(data, int(amp_width), int(ts_bits), int(max_gap_ticks), int(resync_after),
-            bool(final), st, out_t, out_a, stats)
+    n = _rx(data, src, np.int64(state.n_data), int(amp_width), int(ts_bits), int(max_gap_ticks),
+            int(resync_after), bool(final), st, out_t, out_a, out_i, out_s, stats)
     ls = link.state.stats
     for name, generic in (("words", "words"), ("data", "records"), ("markers", "markers"),
                           ("dropped_reported", "dropped_reported"), ("bad_tags", "bad_tags"),
                           ("bad_markers", "bad_markers"), ("parity_errors", "parity_errors")):
         stats[STAT_NAMES.index(name)] = ls[generic]
-    state.last_wrapped, state.last_tick, state.rejects = (int(v) for v in st[:3])
-    state.pending = (int(st[4]), int(st[5])) if st[3] else None
+    for t, row in zip(state.tracks, st):
+        t.last_wrapped, t.last_tick, t.rejects = (int(v) for v in row[:3])
+        t.pending = tuple(int(v) for v in row[_C_TS:]) if row[_HAVE_C] else None
+    state.n_data += int(data.size)
     for name, v in zip(STAT_NAMES, stats):
         state.stats[name] += int(v)
-    return out_t[:n], out_a[:n], state
+    # decided in track order per word; the word numbers restore the stream order
+    order = np.argsort(out_i[:n], kind="stable")
+    ticks, amps = out_t[:n][order], out_a[:n][order]
+    if not source_bits:
+        return ticks, amps, state
+    return ticks, amps, out_s[:n][order].astype(np.int8), state

@@ -40,8 +40,8 @@ the carrier amplitude in FS (its mixer multiplies by ``2 exp(-jwn)``).
 * **Peak search** 19-bit amplitude, 32-bit timestamp (wraps after 214 s at 20 MHz; the model
   also returns it unwrapped), threshold floor ``thr_min`` = the golden's ``thr_min_fs`` in
   envelope LSBs.
-* **FIFO** 51-bit payload (amplitude | timestamp << 19) + 2-bit tag, 512 deep (one DP16KD
-  block pair), 16-bit overflow counter.
+* **FIFO** 51-bit payload (amplitude | timestamp << 19; 52 with both searches, the source
+  bit on top) + 2-bit tag, 512 deep (one DP16KD block pair), 16-bit overflow counter.
 
 Model
 -----
@@ -52,6 +52,30 @@ Model
 when the word lengths allow);
 :meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle model for a given DSP ``ready``
 pattern.
+
+Both searches (``config.pair_peak``)
+------------------------------------
+A second :class:`~hdl.peak.PeakSearch` (the pulse-pair detection,
+:attr:`TacanFrontendParams.pair_peak`, built as :attr:`~TacanFrontendParams.peak` is: envelope
+width, ``ts_bits``, the decimation as timestamp step, the same threshold floor) runs on the
+same envelope stream. Both write into the one FIFO, whose payload grows by a **source bit**
+at the top::
+
+    payload = amplitude | timestamp << amp_width | source << (amp_width + ts_bits)
+
+(source 0 = the single-pulse search, 1 = the pair search; a 52-bit payload by default).
+Merge rule (:func:`fifo_write_cycles`, the HDL's ``TacanFrontEnd._merge``): the pulse search
+has priority; a pair word emitted in the same cycle as a pulse word waits in a one-word hold
+register and is written the next cycle. Each search emits at most one word per envelope
+sample, i.e. at least ``decimation`` cycles apart, and ``decimation >= 2`` (checked), so that
+next cycle has no pulse word and no new pair word: one register suffices, nothing is lost.
+The pair search's latency is 8 (9 with the pair checks) against the pulse search's 6, and
+envelope samples are at least ``decimation`` cycles apart, so the two can only meet when the
+decimation is at most that difference: never with the default decimation 4, at decimation 2
+they do. Resources: a second search (its pair-sum memory of ``pair_offset`` words, the inner
+search's ``2 pair_offset``-word partner line, with the pair checks an envelope history of
+``pair_check_depth`` (512) words), the hold register and one FIFO bit more;
+``results/synth_tacan.json`` is the single search's (not re-synthesised).
 """
 from __future__ import annotations
 
@@ -62,7 +86,7 @@ import numpy as np
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
 from dsp.jit import njit_cached
-from dsp.tacan.frontend import FrontendConfig, Peaks
+from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE, FrontendConfig, Peaks
 
 from ..model.cic import CicParams, CicState, cic_model
 from ..model.ddc import DdcCicKernel, DdcModel, DdcParams
@@ -76,7 +100,7 @@ from ..model.peak import PeakParams, PeakState, peak_search
 from ..model.rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
 
 __all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",
-           "FifoRun"]
+           "FifoRun", "fifo_write_cycles"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +114,8 @@ class TacanFrontendParams:
         length/decimation, pulse width, peak-search parameters, ``thr_min_fs``).
         ``config.peak`` gives the noise-floor/threshold/hold settings; its ``amp_width`` and
         ``thr_min`` are replaced by the envelope width and ``thr_min_fs`` in LSBs.
+        ``config.pair_peak`` (optional) adds the pair search, built the same way
+        (:attr:`pair_peak`), and the source bit of the FIFO payload.
     adc_bits : int
         ADC word (signed, 2..18).
     nco_phase_bits, nco_table_bits, nco_amp_bits, nco_dither_bits : int
@@ -170,6 +196,10 @@ class TacanFrontendParams:
             raise ValueError(f"fir_out_shift_rel must be an integer in [0, 8], not "
                              f"{self.fir_out_shift_rel!r}")
         cfg = self.config
+        if cfg.pair_peak is not None and cfg.decimation < 2:   # (FrontendConfig: cic_rate >= 2)
+            raise ValueError(f"with pair_peak the total decimation must be >= 2 (the merge of "
+                             f"the two searches holds a word for one cycle and needs each "
+                             f"search's words 2 cycles apart), not {cfg.decimation}")
         if self.fir_input_spacing is None:
             object.__setattr__(self, "fir_input_spacing", cfg.cic_rate)
         if isinstance(self.fir_input_spacing, bool) or not isinstance(self.fir_input_spacing, int) \
@@ -209,11 +239,16 @@ class TacanFrontendParams:
         thr_min = int(round(cfg.thr_min_fs / self._scale_from(b)))
         # the algorithm's fields as configured; the widths, the timestamp step and the
         # floor of the threshold are the chain's
-        b["peak"] = replace(cfg.peak, amp_width=env.out_width, ts_bits=self.ts_bits,
-                            ts_step=cfg.decimation,
-                            thr_min=min(thr_min, (1 << env.out_width) - 1))
-        b["fifo"] = FifoParams(width=env.out_width + self.ts_bits, depth=self.fifo_depth,
-                               count_width=self.fifo_count_bits, parity=self.fifo_parity)
+        searches = {"peak": cfg.peak}
+        if cfg.pair_peak is not None:
+            searches["pair_peak"] = cfg.pair_peak
+        for name, search in searches.items():
+            b[name] = replace(search, amp_width=env.out_width, ts_bits=self.ts_bits,
+                              ts_step=cfg.decimation,
+                              thr_min=min(thr_min, (1 << env.out_width) - 1))
+        b["fifo"] = FifoParams(width=env.out_width + self.ts_bits + self.source_bits,
+                               depth=self.fifo_depth, count_width=self.fifo_count_bits,
+                               parity=self.fifo_parity)
         if self.check_headroom:
             self._check_headroom()
 
@@ -271,6 +306,17 @@ class TacanFrontendParams:
         return self._blocks["peak"]
 
     @property
+    def pair_peak(self) -> PeakParams | None:
+        """The pulse-pair search beside :attr:`peak` (``config.pair_peak``), None without."""
+        return self._blocks.get("pair_peak")
+
+    @property
+    def source_bits(self) -> int:
+        """Bits of the source field at the top of the FIFO payload: 1 with
+        :attr:`pair_peak` (0 = :attr:`peak`, 1 = :attr:`pair_peak`), else 0."""
+        return 0 if self.config.pair_peak is None else 1
+
+    @property
     def fifo(self) -> FifoParams:
         return self._blocks["fifo"]
 
@@ -291,11 +337,24 @@ class TacanFrontendParams:
         return self.config.decimation
 
     @property
+    def chain_latency(self) -> int:
+        """Cycles from the ADC transfer that completes an envelope sample to the envelope's
+        output transfer of that sample (DDC, CIC, FIR, CORDIC)."""
+        return self.ddc.latency + self.cic.latency + self.fir.latency + self.envelope.latency
+
+    @property
     def peak_latency(self) -> int:
-        """Cycles from the ADC transfer that completes a pulse's closing envelope sample to
-        the peak search's output transfer (= the FIFO write)."""
-        return (self.ddc.latency + self.cic.latency + self.fir.latency + self.envelope.latency
-                + self.peak.latency)
+        """Cycles from the ADC transfer that completes a pulse's closing envelope sample
+        (``peak.emit_delay`` samples later with the readout or the pair detection) to the
+        peak search's output transfer (= the FIFO write)."""
+        return self.chain_latency + self.peak.latency
+
+    @property
+    def pair_peak_latency(self) -> int | None:
+        """:attr:`peak_latency` of the pair search (``pair_peak.emit_delay`` envelope samples
+        after the pair's closing sample), None without it. Its FIFO write comes one cycle
+        later when the pulse search writes in the same cycle (:func:`fifo_write_cycles`)."""
+        return None if self.pair_peak is None else self.chain_latency + self.pair_peak.latency
 
     #: SyncFIFOBuffered: a word written into an empty queue is offered 2 cycles later.
     FIFO_LATENCY = 2
@@ -413,11 +472,15 @@ class TacanFrontendState:
     cic: object = None         #: CicState (block path) or (integrators, combs) arrays (fast)
     fir: object = None         #: FirState (block path) or (2, taps-1) history array (fast)
     peak: PeakState | None = None
+    pair_peak: PeakState | None = None   #: the pair search's (``config.pair_peak``)
     n_adc: int = 0            #: ADC samples consumed
     pending: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     #: ADC samples left over (fewer than one decimation group: the CIC/FIR consume whole
     #: groups per chunk so that the integer models' chunks line up).
     freq: int | None = None   #: NCO word in force at the next sample (None: the model's)
+    #: Pair-search peaks held back by ``run(..., final=False)`` (a pulse of the next call may
+    #: be written before them; see :meth:`TacanFrontendModel.run`).
+    held: "FrontendPeaks | None" = None
 
 
 @dataclass
@@ -429,16 +492,61 @@ class FrontendPeaks:
     it); timestamps : int64 ADC ticks, unwrapped (``timestamps mod 2**ts_bits`` is the
     hardware field); index / end_index : envelope sample of the peak / whose arrival emits
     the pulse (the closing sample, ``PeakParams.emit_delay`` later with the readout or the
-    pair detection).
+    pair detection); source : with two searches (``config.pair_peak``) the search of each
+    peak, int8 :data:`~dsp.tacan.frontend.SOURCE_PULSE` / ``SOURCE_PAIR`` (None: one search).
     """
 
     amplitudes: np.ndarray
     timestamps: np.ndarray
     index: np.ndarray
     end_index: np.ndarray
+    source: np.ndarray | None = None
 
     def __len__(self):
         return len(self.amplitudes)
+
+    def take(self, idx) -> "FrontendPeaks":
+        """The peaks at ``idx`` (indices or a mask), in that order."""
+        return FrontendPeaks(self.amplitudes[idx], self.timestamps[idx], self.index[idx],
+                             self.end_index[idx], None if self.source is None else self.source[idx])
+
+    @staticmethod
+    def concat(parts) -> "FrontendPeaks":
+        """The peaks of ``parts`` one after the other (all with a source, or none)."""
+        parts = list(parts)
+        cat = [np.concatenate([getattr(q, f) for q in parts])
+               for f in ("amplitudes", "timestamps", "index", "end_index")]
+        src = None if parts[0].source is None else np.concatenate([q.source for q in parts])
+        return FrontendPeaks(*cat, source=src)
+
+
+def fifo_write_cycles(emit_cycles, source=None, *, last_pulse: int = -1) -> np.ndarray:
+    """The merge of the two searches into the one FIFO input
+    (:class:`~hdl.tacan.frontend.TacanFrontEnd` with ``config.pair_peak``): the cycle each
+    peak is written to the FIFO, from the cycle it leaves its search (``emit_cycles``) and
+    its ``source``.
+
+    The pulse search has priority: a pulse word is written in the cycle it is emitted; a pair
+    word too, unless a pulse word is emitted in the same cycle, then it waits in a one-word
+    hold register and is written the next cycle. Each search emits at most one word per
+    envelope sample, i.e. at least ``decimation >= 2`` cycles apart, so that cycle has no
+    pulse word and the register is free again before the next pair word: one register
+    suffices and no word is lost or reordered within its search.
+
+    ``source`` None (one search): the emit cycles. ``last_pulse``: the emit cycle of the
+    last pulse word written before these (a caller that hands the FIFO the words of one
+    stretch of cycles at a time, keeping the later ones).
+    """
+    c = np.asarray(emit_cycles, dtype=np.int64)
+    if source is None:
+        return c.copy()
+    pair = np.asarray(source) == SOURCE_PAIR
+    pulses = np.r_[c[~pair], np.int64(last_pulse)]
+    w = c + (pair & np.isin(c, pulses))
+    if np.unique(w).size != w.size:
+        raise RuntimeError("two FIFO writes in one cycle: each search's words must be >= 2 "
+                           "cycles apart (decimation >= 2, one word per envelope sample)")
+    return w
 
 
 @dataclass
@@ -496,7 +604,7 @@ class TacanFrontendModel:
     def envelope(self, adc_codes, state: TacanFrontendState | None = None, *,
                  freq_changes=None) -> tuple[np.ndarray, TacanFrontendState]:
         """Envelope samples (envelope LSBs) of the next ADC codes, and the new state
-        (the peak search state is carried unchanged).
+        (the peak searches' states are carried unchanged).
 
         ``freq_changes``: ``(index, word)`` pairs, the ``freq`` port taking ``word`` from the
         ADC sample ``index`` on (counted from reset, strictly increasing); the pairs outside
@@ -546,8 +654,8 @@ class TacanFrontendModel:
                 self._note("fir", f)
         if self.log_ranges and x.size:
             self._note("envelope", e)
-        return e, TacanFrontendState(nco=nco, cic=cic, fir=fir, peak=st.peak,
-                                     n_adc=st.n_adc + usable, pending=rest, freq=fw_end)
+        return e, replace(st, nco=nco, cic=cic, fir=fir, n_adc=st.n_adc + usable,
+                          pending=rest, freq=fw_end)
 
     def _note(self, name: str, v) -> None:
         v = np.asarray(v)
@@ -612,8 +720,8 @@ class TacanFrontendModel:
         e = envelope_model(fi, fq, p.envelope, check=False)
         return e, nco, (integ, combs), hist
 
-    def run(self, adc_codes, state: TacanFrontendState | None = None, *, freq_changes=None
-            ) -> tuple[FrontendPeaks, TacanFrontendState]:
+    def run(self, adc_codes, state: TacanFrontendState | None = None, *, freq_changes=None,
+            final: bool = True) -> tuple[FrontendPeaks, TacanFrontendState]:
         """Peaks of the next ADC codes (valid samples only; gaps in valid do not change the
         values), vectorised, in internal chunks of :attr:`CHUNK`.
 
@@ -628,11 +736,25 @@ class TacanFrontendModel:
             calls passes the same list to each: a call applies the changes that fall in its
             samples, the state carries the word in force, changes before the call's first
             sample (``state.n_adc``) were applied by the earlier calls.
+        final : bool
+            Two searches only (``config.pair_peak``): the record ends with this call. With
+            ``False`` the pair peaks that a pulse peak of the next call could precede in the
+            FIFO are held in the state and come out of the next call (only possible when
+            the decimation is <= the pair search's extra latency, 2 or 3 cycles: see below),
+            so that the calls' outputs put together equal one call's.
 
         Returns
         -------
         peaks : FrontendPeaks
-            ``amplitudes`` (envelope LSBs) and ``timestamps`` (unwrapped int64 ADC ticks).
+            ``amplitudes`` (envelope LSBs) and ``timestamps`` (unwrapped int64 ADC ticks);
+            with two searches both searches' peaks with their ``source``, in the order the
+            FIFO is written (:func:`fifo_write_cycles`) when the ADC samples arrive on
+            consecutive cycles. The order does not depend on gaps in ``valid`` when the
+            decimation exceeds ``pair_peak.latency - peak.latency`` (2, 3 with the pair
+            checks; the decimation is 4 by default): a pulse word comes first exactly when
+            its emitting envelope sample is not later than the pair word's. Otherwise
+            :meth:`peak_cycles` gives the cycles for a ``valid`` pattern and
+            :meth:`fifo_output` writes in that order.
         state : TacanFrontendState
             Pass it to the next call: the result of several calls equals one long call.
         """
@@ -640,72 +762,131 @@ class TacanFrontendModel:
         x = np.asarray(adc_codes)
         st = TacanFrontendState() if state is None else state
         changes = _check_changes(freq_changes, self.params.nco_phase_bits)
-        amps, ts, idx, end = [], [], [], []
+        searches = [("peak", p.peak)] + ([("pair_peak", p.pair_peak)] if p.pair_peak else [])
+        found = {name: [] for name, _ in searches}
         for c0 in range(0, max(len(x), 1), self.CHUNK):
             e, st = self.envelope(x[c0:c0 + self.CHUNK], st, freq_changes=changes)
-            res, pk = peak_search(e, p.peak, st.peak)
-            st.peak = pk
-            amps.append(res.partner if p.peak.partner_offset else res.amplitude)
-            idx.append(res.index)
-            end.append(res.end_index + p.peak.emit_delay)
-        index = np.concatenate(idx).astype(np.int64)
-        peaks = FrontendPeaks(amplitudes=np.concatenate(amps).astype(np.int64),
-                              timestamps=index * np.int64(p.peak.ts_step),
-                              index=index, end_index=np.concatenate(end).astype(np.int64))
+            for name, search in searches:
+                res, pk = peak_search(e, search, getattr(st, name))
+                setattr(st, name, pk)
+                found[name].append(res)
+        parts = []
+        for k, (name, search) in enumerate(searches):
+            res = found[name]
+            index = np.concatenate([r.index for r in res]).astype(np.int64)
+            amps = [r.partner if search.partner_offset else r.amplitude for r in res]
+            parts.append(FrontendPeaks(
+                amplitudes=np.concatenate(amps).astype(np.int64),
+                timestamps=index * np.int64(search.ts_step), index=index,
+                end_index=np.concatenate([r.end_index for r in res]).astype(np.int64)
+                + search.emit_delay,
+                source=np.full(index.size, k, np.int8) if p.pair_peak else None))
+        if p.pair_peak is None:
+            return parts[0], st
+        if st.held is not None:
+            parts.append(st.held)
+        peaks = FrontendPeaks.concat(parts)
+        emit = self.emit_cycles(peaks)
+        peaks = peaks.take(np.argsort(fifo_write_cycles(emit, peaks.source), kind="stable"))
+        st = replace(st, held=None)
+        if not final:
+            # a pulse of a later call leaves the search at this emit cycle or later
+            # (the next envelope sample, closing a pulse); pair words from there on wait
+            first = (st.peak.n + 1) * np.int64(p.decimation) - 1 + p.peak_latency
+            late = self.emit_cycles(peaks) >= first
+            if late.any():
+                st.held, peaks = peaks.take(late), peaks.take(~late)
         return peaks, st
 
     # -- conversions --------------------------------------------------------------------------
     def peaks_to_fs(self, peaks: FrontendPeaks) -> Peaks:
         """The golden model's units: amplitudes in ADC full scale, timestamps in the golden's
-        convention (the ADC tick that completes the envelope sample: ``ts + D - 1``)."""
+        convention (the ADC tick that completes the envelope sample: ``ts + D - 1``); the
+        ``source`` is carried."""
         p = self.params
         return Peaks(timestamps=peaks.timestamps + (p.decimation - 1),
-                     amplitudes=peaks.amplitudes * p.scale_to_fs, fs_hz=p.config.fs_hz)
+                     amplitudes=peaks.amplitudes * p.scale_to_fs, fs_hz=p.config.fs_hz,
+                     source=None if peaks.source is None else peaks.source.copy())
+
+    def _check_source(self, peaks: FrontendPeaks) -> None:
+        if (peaks.source is None) != (self.params.pair_peak is None):
+            raise ValueError("peaks must carry a source exactly when the front end has two "
+                             "searches (config.pair_peak)")
 
     def words(self, peaks: FrontendPeaks) -> np.ndarray:
-        """Packed FIFO input payloads ``amplitude | (timestamp mod 2**ts_bits) << amp_width``."""
+        """Packed FIFO input payloads ``amplitude | (timestamp mod 2**ts_bits) << amp_width``,
+        with two searches ``| source << (amp_width + ts_bits)``."""
+        self._check_source(peaks)
         p = self.params.peak
         ts = peaks.timestamps & np.int64((1 << p.ts_bits) - 1)
-        return peaks.amplitudes | (ts << np.int64(p.amp_width))
+        w = peaks.amplitudes | (ts << np.int64(p.amp_width))
+        if peaks.source is not None:
+            w = w | (peaks.source.astype(np.int64) << np.int64(p.amp_width + p.ts_bits))
+        return w
 
     def unpack(self, fifo_words) -> dict[str, np.ndarray]:
-        """Split FIFO output words into ``amplitude``, ``timestamp`` (wrapped) and ``tag``."""
+        """Split FIFO output words into ``amplitude``, ``timestamp`` (wrapped), ``tag`` and,
+        with two searches, ``source`` (the payload's top bit; in a marker word it is part
+        of the drop count)."""
         p = self.params
         w = np.asarray(fifo_words, dtype=np.int64)
-        aw, tb = p.peak.amp_width, p.peak.ts_bits
-        return {"amplitude": w & np.int64((1 << aw) - 1),
-                "timestamp": (w >> np.int64(aw)) & np.int64((1 << tb) - 1),
-                "tag": (w >> np.int64(aw + tb)) & np.int64(3)}
+        aw, tb, sb = p.peak.amp_width, p.peak.ts_bits, p.source_bits
+        out = {"amplitude": w & np.int64((1 << aw) - 1),
+               "timestamp": (w >> np.int64(aw)) & np.int64((1 << tb) - 1),
+               "tag": (w >> np.int64(aw + tb + sb)) & np.int64(3)}
+        if sb:
+            out["source"] = (w >> np.int64(aw + tb)) & np.int64(1)
+        return out
 
-    def peak_cycles(self, peaks: FrontendPeaks, in_valid=None) -> np.ndarray:
+    def emit_cycles(self, peaks: FrontendPeaks, in_valid=None, *, adc_cycles=None) -> np.ndarray:
         """Clock cycle (from reset, as :func:`cosim.pysim.run_stream` counts) at which each
-        peak leaves the peak search (and is written to the FIFO), for ADC samples offered
-        with ``in_valid`` (per cycle; every cycle after the pattern ends, as ``run_stream``)."""
+        peak leaves its search: the cycle of the ADC transfer that completes its emitting
+        envelope sample (``end_index``) plus that search's latency
+        (:attr:`~TacanFrontendParams.peak_latency`, ``pair_peak_latency``), for ADC samples
+        offered with ``in_valid`` (per cycle; every cycle after the pattern ends, as
+        ``run_stream``), or mapped to their cycles by ``adc_cycles(adc_index) -> cycle``
+        (valid ADC samples counted from reset). Default: one sample per cycle from reset."""
         p = self.params
         adc_idx = (peaks.end_index + 1) * np.int64(p.decimation) - 1
-        if in_valid is None:
-            acc = adc_idx
-        else:
+        if adc_cycles is not None:
+            acc = np.asarray(adc_cycles(adc_idx), np.int64)
+        elif in_valid is not None:
             v = np.flatnonzero(np.asarray(in_valid, dtype=bool))
             n_pat = len(np.asarray(in_valid))
             acc = np.where(adc_idx < len(v), v[np.minimum(adc_idx, max(len(v) - 1, 0))]
                            if len(v) else 0, n_pat + adc_idx - len(v))
-        return acc + np.int64(p.peak_latency)
+        else:
+            acc = adc_idx
+        if peaks.source is None:
+            return acc + np.int64(p.peak_latency)
+        self._check_source(peaks)
+        return acc + np.where(peaks.source == SOURCE_PAIR, np.int64(p.pair_peak_latency),
+                              np.int64(p.peak_latency))
+
+    def peak_cycles(self, peaks: FrontendPeaks, in_valid=None) -> np.ndarray:
+        """Clock cycle at which each peak is written to the FIFO: :meth:`emit_cycles`, with
+        two searches merged by :func:`fifo_write_cycles`. The peaks must be all of a record
+        from reset (the merge looks at every pulse word)."""
+        return fifo_write_cycles(self.emit_cycles(peaks, in_valid), peaks.source)
 
     def fifo_output(self, peaks: FrontendPeaks, n_cycles: int, *, in_valid=None,
                     out_ready=None) -> FifoRun:
         """What the FIFO hands the DSP in ``n_cycles`` cycles from reset, given the DSP's
-        ``ready`` per cycle (default always; after the pattern ends: ready)."""
+        ``ready`` per cycle (default always; after the pattern ends: ready). ``dropped``:
+        per peak written within ``n_cycles`` (in the order of ``peaks``), whether the FIFO
+        dropped it."""
         p = self.params
         cyc = self.peak_cycles(peaks, in_valid)
-        keep = cyc < n_cycles
+        order = np.argsort(cyc, kind="stable")        # the FIFO's write order
+        order = order[cyc[order] < n_cycles]
         w_valid = np.zeros(n_cycles, dtype=bool)
-        w_valid[cyc[keep]] = True
+        w_valid[cyc[order]] = True
         rdy = np.ones(n_cycles, dtype=bool)
         if out_ready is not None:
             r = np.asarray(out_ready, dtype=bool)[:n_cycles]
             rdy[:len(r)] = r
-        res = fifo_model(self.words(peaks)[keep], w_valid, rdy, p.fifo)
+        res = fifo_model(self.words(peaks)[order], w_valid, rdy, p.fifo)
+        dropped = np.zeros(len(peaks), dtype=bool)
+        dropped[order] = res.dropped
         return FifoRun(words=res.words, cycles=res.cycles,
-                       overflow_count=res.overflow_count, dropped=res.dropped)
-
+                       overflow_count=res.overflow_count, dropped=dropped[cyc < n_cycles])

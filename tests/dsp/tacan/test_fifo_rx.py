@@ -166,3 +166,97 @@ def test_parity_errors_are_counted_and_the_words_skipped():
         receive_words(words, width=W, amp_width=AW, ts_bits=TB, parity=1)
     with pytest.raises(ValueError, match="with parity the payload width must be <= 60"):
         receive_words(words, width=61, amp_width=AW, ts_bits=TB, parity=True)
+
+
+# -- two searches: a source bit above the timestamp -------------------------------------------
+W2 = AW + TB + 1
+
+
+def _pack2(ts, amp, src, tag=0):
+    return _pack(ts, amp) | (np.asarray(src, np.int64) << (AW + TB)) | (np.int64(tag) << W2)
+
+
+def _two_streams(n=3000, seed=0, start=(1 << 32) - 400_000):
+    """A pulse stream and a pair stream (every third pulse starts a pair, timestamped 240
+    ticks later at its second pulse), merged in the order the front end emits them: a pulse
+    ~24 ticks after its timestamp, a pair ~300 after (so a pulse between a pair's timestamp
+    and its emission comes first: the merged timestamps are not in order). The pair stream
+    starts after the 32-bit wrap, the pulse stream before it."""
+    rng = np.random.default_rng(seed)
+    tp = start + np.cumsum(rng.integers(200, 800, n))
+    tq = tp[(tp > (1 << 32) + 1000) & (np.arange(n) % 3 == 0)] + 240
+    ts = np.r_[tp, tq]
+    src = np.r_[np.zeros(tp.size, np.int8), np.ones(tq.size, np.int8)]
+    o = np.argsort(ts + np.where(src == 1, 300, 24), kind="stable")
+    return ts[o], rng.integers(1, 1 << AW, ts.size), src[o]
+
+
+def test_two_sources_unwrap_per_source_across_the_wrap_and_batches():
+    t, a, s = _two_streams()
+    words = _pack2(t, a, s)
+    assert np.any(np.diff(t) < 0) and t[s == 1][0] > 1 << 32 > t[0]
+    ticks, amps, src, st = receive_words(words, width=W2, amp_width=AW, ts_bits=TB,
+                                         source_bits=1)
+    np.testing.assert_array_equal(ticks, t)   # the pair timeline starts next to the pulses'
+    np.testing.assert_array_equal(amps, a)
+    np.testing.assert_array_equal(src, s)
+    assert src.dtype == np.int8 and st.stats["ts_rejected"] == 0 and len(st.tracks) == 2
+    # one timeline for the merged stream rejects the words behind their predecessor
+    one, _, st1 = receive_words(words, width=W2, amp_width=AW, ts_bits=TB)
+    assert st1.stats["ts_rejected"] > 100
+    # batches, the pending word of each source carried
+    st2, parts = RxState(), []
+    edges = [0, 1, 2, 700, 701, 1700, 2500, words.size]
+    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        parts.append(receive_words(words[lo:hi], width=W2, amp_width=AW, ts_bits=TB,
+                                   state=st2, final=(i == len(edges) - 2), source_bits=1))
+    for k, want in ((0, ticks), (1, amps), (2, src)):
+        got = np.concatenate([q[k] for q in parts])
+        np.testing.assert_array_equal(np.sort(got), np.sort(want))
+    # each source's order is kept (across batches a word waiting for its successor of
+    # its source comes out later than the other source's words)
+    t_all, s_all = np.concatenate([q[0] for q in parts]), np.concatenate([q[2] for q in parts])
+    for k in (0, 1):
+        np.testing.assert_array_equal(t_all[s_all == k], t[s == k])
+    assert st2.pending is None and st2.stats == st.stats
+
+
+def test_two_sources_a_corrupted_word_costs_only_itself():
+    """A flipped high timestamp bit in a pair word and in a pulse word: each is rejected by
+    its own timeline; every other word of both sources keeps its exact tick."""
+    t, a, s = _two_streams(2000, seed=4)
+    words = _pack2(t, a, s)
+    bad = [int(np.flatnonzero(s == 1)[40]), int(np.flatnonzero(s == 0)[900])]
+    w2 = words.copy()
+    w2[bad] ^= np.int64(1) << (AW + 27)               # +6.7 s, beyond max_gap
+    ticks, amps, src, st = receive_words(w2, width=W2, amp_width=AW, ts_bits=TB, source_bits=1)
+    keep = np.setdiff1d(np.arange(t.size), bad)
+    np.testing.assert_array_equal(ticks, t[keep])
+    np.testing.assert_array_equal(src, s[keep])
+    assert st.stats["ts_rejected"] == 2 and st.stats["ts_resyncs"] == 0
+
+
+def test_two_sources_parity_catches_a_flipped_source_bit():
+    from hdl.model.fifo import FifoParams, with_parity
+    t, a, s = _two_streams(1000, seed=6)
+    words = with_parity(_pack2(t, a, s), FifoParams(width=W2, parity=True))
+    hit = int(np.flatnonzero(s == 1)[10])
+    words[hit] ^= np.int64(1) << (AW + TB)            # the source bit
+    ticks, _, src, st = receive_words(words, width=W2, amp_width=AW, ts_bits=TB, parity=True,
+                                      source_bits=1)
+    keep = np.setdiff1d(np.arange(t.size), [hit])
+    np.testing.assert_array_equal(ticks, t[keep])
+    np.testing.assert_array_equal(src, s[keep])
+    assert st.stats["parity_errors"] == 1 and st.stats["ts_rejected"] == 0
+
+
+def test_source_bits_arguments():
+    with pytest.raises(ValueError, match="source_bits must be 0 or 1, not 2"):
+        receive_words([], width=W2, amp_width=AW, ts_bits=TB, source_bits=2)
+    with pytest.raises(ValueError, match=r"amp_width \+ ts_bits \+ source_bits \(52\) exceeds "
+                                         r"the payload width 51"):
+        receive_words([], width=W, amp_width=AW, ts_bits=TB, source_bits=1)
+    t, a = _stream(10)
+    _, _, st = receive_words(_pack(t, a), width=W, amp_width=AW, ts_bits=TB, final=False)
+    with pytest.raises(ValueError, match=r"state has 1 source timelines, not 2 \(source_bits=1\)"):
+        receive_words([], width=W2, amp_width=AW, ts_bits=TB, state=st, source_bits=1)
