@@ -21,8 +21,20 @@ Noise floor, in blocks of ``L = 2**block_log2`` samples (block ``b`` is
   ``nu_{b+1} = nu_b + ((m_b - nu_b) >> smooth_log2)`` (arithmetic shift = floor);
 * threshold of block ``b >= 1``: ``T_b = max(thr_min, (nu_b * thr_mult) >> thr_frac)``.
 
+This floor has a truncation bias: any ``m - nu`` in ``[0, 2**smooth_log2)`` adds nothing and
+any negative one subtracts at least 1, so ``nu`` settles up to ``2**smooth_log2`` LSB *below*
+the mean of ``m`` (with ``smooth_log2`` 10 and a floor of a few thousand LSB, ~14 % of the
+threshold). With ``floor_frac`` the floor keeps ``smooth_log2`` fraction bits, ``F_b``, and
+settles within ~1 LSB of the mean of ``m``:
+
+* block 0: ``F_1 = m_0 << smooth_log2`` (so ``nu_1 = m_0`` as above);
+* block ``b >= 1``: ``F_{b+1} = F_b - (F_b >> smooth_log2) + m_b``;
+* ``nu_b = F_b >> smooth_log2``, used for the clip level, the censored substitute and the
+  threshold exactly where ``nu_b`` is used above. ``0 <= F_b < 2**(amp_width + smooth_log2)``.
+
 Float variant: sums times ``2**-block_log2``, ``nu + (m - nu) * 2**-smooth_log2``,
-``T = max(thr_min, nu * thr_mult * 2**-thr_frac)``, no rounding anywhere.
+``T = max(thr_min, nu * thr_mult * 2**-thr_frac)``, no rounding anywhere (``floor_frac`` has
+no effect on it: it has no truncation bias to remove).
 
 Pulses (``T`` is the threshold of the sample's own block):
 
@@ -136,6 +148,13 @@ class PeakParams:
         bearing 270 deg RMSE 1.22 -> 0.61 deg, mean error +1.08 -> +0.26 deg; 90 deg and
         10 dB unchanged within the spread. On noise alone the floor settles ~8.5 % lower
         than the clipped mean's (``E[e | e < 2 nu]`` against ``E[min(e, 2 nu)]``).
+    floor_frac : bool
+        The integer floor keeps ``smooth_log2`` fraction bits (``F``, see the module doc):
+        ``F += m - (F >> smooth_log2)``, ``nu = F >> smooth_log2``, instead of ``nu += (m -
+        nu) >> smooth_log2``, whose truncation leaves ``nu`` up to ``2**smooth_log2`` LSB below
+        the mean of ``m`` (negligible at ``smooth_log2`` 2, ~14 % of the pair detector's floor
+        at 10). The HDL's floor register is ``smooth_log2`` bits wider. No effect on the float
+        variant (no rounding there).
     thr_mult, thr_frac : int
         Threshold factor ``thr_mult * 2**-thr_frac`` times the noise floor (default 3.0).
     thr_min : int
@@ -173,6 +192,7 @@ class PeakParams:
     clip_log2: int = 1
     smooth_log2: int = 2
     clip_to_floor: bool = False
+    floor_frac: bool = False
     thr_mult: int = 48
     thr_frac: int = 4
     thr_min: int = 16
@@ -193,6 +213,8 @@ class PeakParams:
         _check_int("peak smooth_log2", self.smooth_log2, 0, 16)
         if not isinstance(self.clip_to_floor, bool):
             raise ValueError(f"peak clip_to_floor must be True or False, not {self.clip_to_floor!r}")
+        if not isinstance(self.floor_frac, bool):
+            raise ValueError(f"peak floor_frac must be True or False, not {self.floor_frac!r}")
         _check_int("peak thr_frac", self.thr_frac, 0, 16)
         _check_int("peak thr_mult", self.thr_mult, 1, (1 << 20) - 1)
         _check_int("peak thr_min", self.thr_min, 0, (1 << self.amp_width) - 1)
@@ -235,6 +257,12 @@ class PeakParams:
     def acc_width(self) -> int:
         """Noise accumulator: ``nu*(2**s - 1)*L + sum(min(e, clip)) < 2**(amp + log2 L + s)``."""
         return self.amp_width + self.block_log2 + self.smooth_log2
+
+    @property
+    def floor_width(self) -> int:
+        """The HDL's noise-floor register: ``nu`` (``amp_width``), or with ``floor_frac``
+        ``F < 2**(amp_width + smooth_log2)``."""
+        return self.amp_width + (self.smooth_log2 if self.floor_frac else 0)
 
     @property
     def thr_width(self) -> int:
@@ -326,14 +354,16 @@ def _check_int(name, value, lo, hi):
 class PeakState:
     """Everything the search carries from one chunk to the next (initial value = reset).
 
-    ``n`` samples seen; ``nu`` current noise floor (meaningful once ``n >= L``);
-    ``bsum`` partial sum of the current block; an open pulse has ``start`` (its first
+    ``n`` samples seen; ``nu`` current noise floor (meaningful once ``n >= L``); ``nuf``
+    the floor with its ``smooth_log2`` fraction bits (``F``, ``nu = nuf >> smooth_log2``) in
+    the integer model with ``floor_frac``, else 0; ``bsum`` partial sum of the current block; an open pulse has ``start`` (its first
     ``n``), ``pmax``/``nmax`` (max so far and its ``n``), ``below`` and ``length``.
     Values are Python ints in the integer model and floats in the float model.
     """
 
     n: int = 0
     nu: float = 0
+    nuf: int = 0
     bsum: float = 0
     open: bool = False
     start: int = 0
@@ -463,7 +493,7 @@ def _clipped(seg, clip, nu, to_floor: bool):
 
 
 def _thresholds(e, p: PeakParams, st: PeakState, is_float: bool, thr_min):
-    """Per-sample threshold; updates ``st.nu``/``st.bsum`` (loop over blocks)."""
+    """Per-sample threshold; updates ``st.nu``/``st.nuf``/``st.bsum`` (loop over blocks)."""
     N = e.size
     L = p.block_len
     inf = np.inf if is_float else _INF_INT
@@ -494,7 +524,11 @@ def _thresholds(e, p: PeakParams, st: PeakState, is_float: bool, thr_min):
                 st.nu = m if b == 0 else st.nu + (m - st.nu) * 2.0 ** -p.smooth_log2
             else:
                 m = int(st.bsum) >> p.block_log2
-                st.nu = m if b == 0 else st.nu + ((m - st.nu) >> p.smooth_log2)
+                if p.floor_frac:    # F keeps smooth_log2 fraction bits, nu = F >> s
+                    f = m << p.smooth_log2 if b == 0 else st.nuf - (st.nuf >> p.smooth_log2) + m
+                    st.nuf, st.nu = f, f >> p.smooth_log2
+                else:
+                    st.nu = m if b == 0 else st.nu + ((m - st.nu) >> p.smooth_log2)
             st.bsum = 0.0 if is_float else 0
     return T
 

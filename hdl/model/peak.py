@@ -4,7 +4,10 @@ The algorithm, its parameters (:class:`PeakParams`) and the numpy implementation
 tested against (:func:`peak_search_numpy`; :func:`peak_search_float` is the golden's float64
 twin) are in :mod:`dsp.peak`, re-exported here. :func:`peak_search` is a compiled (numba)
 per-sample loop that follows the algorithm's steps as written; it runs in chunks with a
-:class:`PeakState` and gives the same bits as one long run.
+:class:`PeakState` and gives the same bits as one long run. With ``floor_frac`` the kernel
+carries the floor with its ``smooth_log2`` fraction bits (``F``, the HDL's wider floor
+register; :attr:`PeakState.nuf`) and derives ``nu = F >> smooth_log2`` from it at each block
+end.
 """
 from __future__ import annotations
 
@@ -46,15 +49,17 @@ def peak_search(env, params: PeakParams, state: PeakState | None = None
 
 # -- implementation ------------------------------------------------------------------------
 @njit_cached(nogil=True)
-def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
+def _search_kernel(e, n, nu, nuf, bsum, is_open, start, pmax, nmax, below, length,
                    block_log2, clip_log2, smooth_log2, thr_mult, thr_frac, thr_min, hold, max_len,
-                   clip_to_floor, ahead, behind, pa, pb, thr, amp, imax, iend, pa_out, pb_out):
+                   clip_to_floor, floor_frac, ahead, behind, pa, pb, thr, amp, imax, iend,
+                   pa_out, pb_out):
     """The integer search, one sample at a time (the module docstring's algorithm as
     written). Writes the per-sample threshold to ``thr`` and the pulses to ``amp``/``imax``/
     ``iend`` (capacity ``len(e) // 2 + 1``: a pulse needs two samples, and one may be carried
     in); returns their count and the new state. With the pair-partner readout (``ahead``
     and ``behind`` as long as ``e``, else empty) the open pulse's ``pa``/``pb`` follow its
-    max and go to ``pa_out``/``pb_out``."""
+    max and go to ``pa_out``/``pb_out``. With ``floor_frac`` the floor is carried as ``nuf``
+    (``F``, ``smooth_log2`` fraction bits) and ``nu = nuf >> smooth_log2``."""
     N = e.shape[0]
     partner = ahead.shape[0] == N and N > 0
     mask = (np.int64(1) << block_log2) - 1
@@ -105,13 +110,17 @@ def _search_kernel(e, n, nu, bsum, is_open, start, pmax, nmax, below, length,
                 is_open = False
         if (n & mask) == mask:   # block complete: new floor, threshold of the next block
             m = bsum >> block_log2
-            nu = m if b == 0 else nu + ((m - nu) >> smooth_log2)
+            if floor_frac:
+                nuf = (m << smooth_log2) if b == 0 else nuf - (nuf >> smooth_log2) + m
+                nu = nuf >> smooth_log2
+            else:
+                nu = m if b == 0 else nu + ((m - nu) >> smooth_log2)
             bsum = 0
             b += 1
             T = max(thr_min, (nu * thr_mult) >> thr_frac)
             clip = nu << clip_log2
         n += 1
-    return cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length, pa, pb
+    return cnt, n, nu, nuf, bsum, is_open, start, pmax, nmax, below, length, pa, pb
 
 
 def _search_compiled(e, p: PeakParams, state, ahead=None, behind=None):
@@ -127,14 +136,14 @@ def _search_compiled(e, p: PeakParams, state, ahead=None, behind=None):
     pb_out = np.zeros(cap, dtype=np.int64)
     partner = ahead is not None
     none = np.zeros(0, dtype=np.int64)
-    (cnt, n, nu, bsum, is_open, start, pmax, nmax, below, length, pa, pb) = _search_kernel(
-        e, int(st.n), int(st.nu), int(st.bsum), bool(st.open), int(st.start), int(st.pmax),
-        int(st.nmax), int(st.below), int(st.length), p.block_log2, p.clip_log2,
+    (cnt, n, nu, nuf, bsum, is_open, start, pmax, nmax, below, length, pa, pb) = _search_kernel(
+        e, int(st.n), int(st.nu), int(st.nuf), int(st.bsum), bool(st.open), int(st.start),
+        int(st.pmax), int(st.nmax), int(st.below), int(st.length), p.block_log2, p.clip_log2,
         p.smooth_log2, p.thr_mult, p.thr_frac, p.thr_min, p.hold, p.max_len,
-        bool(p.clip_to_floor), ahead.astype(np.int64) if partner else none,
+        bool(p.clip_to_floor), bool(p.floor_frac), ahead.astype(np.int64) if partner else none,
         behind.astype(np.int64) if partner else none, int(st.pa), int(st.pb),
         thr, amp, imax, iend, pa_out, pb_out)
-    st.n, st.nu, st.bsum, st.open = int(n), int(nu), int(bsum), bool(is_open)
+    st.n, st.nu, st.nuf, st.bsum, st.open = int(n), int(nu), int(nuf), int(bsum), bool(is_open)
     if st.open:
         st.start, st.pmax, st.nmax = int(start), int(pmax), int(nmax)
         st.below, st.length = int(below), int(length)
