@@ -16,6 +16,14 @@ the previous cycle. To keep that loop to one compare, one mux and one adder:
   (``def_*`` registers), after the new ``nu`` is in place;
 * block 0 accumulates ``e << s`` so that the same shift gives ``nu_1 = S_0 >> log2 L``.
 
+With ``floor_frac`` the floor register is ``F`` (``amp_width + s`` bits, ``s`` fraction bits;
+``nu = F >> s`` is its top ``amp_width`` bits, a slice): ``F_{b+1} = G_b + (S >> log2 L)``
+with ``G_b = F_b - (F_b >> s)`` a register computed during the block (in place of ``base``),
+again one adder from the block's sum to the new floor, ``nu`` changing on the same cycle as
+without it. The block-0 sum is still that of ``e << s``, and a flag (set at reset, cleared
+by the first block end) selects ``F_1 = (S_0 >> (log2 L + s)) << s``. ``F <= (2**aw - 1) << s``
+(``m_b <= 2**aw - 1``), so it fits its width.
+
 The detector runs ``det_delay`` (4) cycles behind the noise path on a delay line, so the
 threshold multiplier ``nu * thr_mult`` and the ``max(thr_min, .)`` are registered and
 ``T_{b+1}`` is ready when the detector reaches block ``b+1``; its pre-stage registers the
@@ -154,8 +162,12 @@ class PeakSearch(wiring.Component):
         # -- noise floor ------------------------------------------------------------------
         pos = Signal(unsigned(p.block_log2))
         blk0 = Signal(init=1)
-        nu = Signal(unsigned(aw))
-        base = Signal(unsigned(p.acc_width))
+        if p.floor_frac:
+            # the floor with smooth_log2 fraction bits; nu is its top aw bits
+            nu_f = Signal(unsigned(p.floor_width))
+            nu = nu_f[p.smooth_log2:]
+        else:
+            nu = Signal(unsigned(aw))
         acc = Signal(unsigned(p.acc_width))
         s_reg = Signal(unsigned(p.acc_width))
         s_v = Signal()
@@ -191,10 +203,21 @@ class PeakSearch(wiring.Component):
             m.d.sync += pos.eq(pos + 1)
             with m.If(last):
                 m.d.sync += blk0.eq(0)
-        with m.If(s_v):
-            m.d.sync += nu.eq((s_reg + base) >> K)
-        base_mult = ((1 << p.smooth_log2) - 1) * L
-        m.d.sync += base.eq(nu * base_mult)
+        if p.floor_frac:
+            # F_{b+1} = F_b - (F_b >> s) + m_b; block 0: F_1 = m_0 << s (S_0 sums e << s)
+            keep = Signal(unsigned(p.floor_width))   # G = F - (F >> s), during the block
+            f_init = Signal(init=1)                  # the next block end is block 0's
+            m.d.sync += keep.eq(nu_f - (nu_f >> p.smooth_log2))
+            with m.If(s_v):
+                m.d.sync += [nu_f.eq(Mux(f_init, (s_reg >> K) << p.smooth_log2,
+                                         keep + (s_reg >> p.block_log2))),
+                             f_init.eq(0)]
+        else:
+            base = Signal(unsigned(p.acc_width))
+            with m.If(s_v):
+                m.d.sync += nu.eq((s_reg + base) >> K)
+            base_mult = ((1 << p.smooth_log2) - 1) * L
+            m.d.sync += base.eq(nu * base_mult)
 
         # Threshold pipeline: registered product, then the floor.
         prod = Signal(unsigned(aw + p.thr_mult.bit_length()))

@@ -156,13 +156,25 @@ def test_sim_matches_model_realistic_quick():
     dict(block_log2=5, hold=3, max_len=24, pair_offset=7),               # pair detection
     dict(block_log2=3, hold=2, max_len=7, pair_offset=1),
     dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12, pair_offset=20),
+    # the floor with fraction bits (floor_frac)
+    dict(block_log2=1, hold=1, max_len=2, floor_frac=True),
+    dict(block_log2=6, smooth_log2=0, clip_log2=0, thr_mult=5, thr_frac=0, floor_frac=True),
+    dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12, floor_frac=True),
+    dict(block_log2=5, smooth_log2=3, clip_to_floor=True, thr_mult=52, floor_frac=True),
+    dict(block_log2=3, smooth_log2=16, hold=2, max_len=7, floor_frac=True),
+    dict(block_log2=5, hold=3, max_len=24, smooth_log2=6, pair_offset=7, floor_frac=True),
+    dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12, pair_offset=20,
+         floor_frac=True),
 ])
 def test_sim_matches_model_variants(kw):
     p = PeakParams(**kw)
     rng = np.random.default_rng(202)
     e = realistic_envelope(rng, 8000, amp_width=p.amp_width)
     e[3000:3300] = min(3000, (1 << p.amp_width) - 1)
-    _check_sim(p, e)
+    ref = _check_sim(p, e)
+    if p.floor_frac and p.smooth_log2:   # the option changes the floor here
+        plain, _ = peak_search(e, replace(p, floor_frac=False))
+        assert not np.array_equal(ref.thresholds, plain.thresholds)
 
 
 def test_gaps_in_valid():
@@ -173,6 +185,15 @@ def test_gaps_in_valid():
     # Bursty valid too: long gaps, then back to back.
     valid = np.repeat(rng.random(900) < 0.5, 10)
     _check_sim(SMALL, e, valid)
+
+
+def test_gaps_in_valid_with_floor_frac():
+    rng = np.random.default_rng(206)
+    e = realistic_envelope(rng, 3000)
+    for p in (replace(SMALL, smooth_log2=5, floor_frac=True),
+              PeakParams(block_log2=1, hold=1, max_len=2, smooth_log2=3, floor_frac=True)):
+        _check_sim(p, e, rng.random(9000) < 0.35)
+        _check_sim(p, e, np.repeat(rng.random(900) < 0.5, 10))
 
 
 def test_gaps_in_valid_with_partner_readout():
@@ -416,7 +437,11 @@ def test_pair_float_variant_matches_reference(k):
 @pytest.mark.parametrize("D, kw", [(1, dict(block_log2=3, hold=2, max_len=7)),
                                    (7, dict(block_log2=5, hold=3, max_len=24)),
                                    (45, dict(block_log2=5, hold=3, max_len=24, clip_to_floor=True,
-                                             smooth_log2=10, thr_mult=46))])
+                                             smooth_log2=10, thr_mult=46)),
+                                   (45, dict(block_log2=5, hold=3, max_len=24, clip_to_floor=True,
+                                             smooth_log2=6, thr_mult=46, floor_frac=True)),
+                                   (1, dict(block_log2=3, hold=2, max_len=7, smooth_log2=4,
+                                            floor_frac=True))])
 def test_sim_matches_model_pair_detection(D, kw):
     """Amaranth sim == model on pulse pairs D apart (small blocks: the first L samples only
     feed the floor), with pulses dropped and kept by the side-lobe rule."""
@@ -640,6 +665,8 @@ PAIR_CHECK_SETS = [
     # max_len such that pair_history + inner latency = 64, the history's depth: exactly
     PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=41, pair_balance=6, pair_spread=3),
     replace(PAIR_CHECKED, pair_balance=4, pair_spread=8),
+    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_balance=6, pair_spread=3,
+               smooth_log2=6, floor_frac=True),
 ]
 
 
@@ -1115,3 +1142,39 @@ def test_verilator_matches_model_pair_checks():
     np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
     np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
         ref.end_index + p.emit_delay] + p.latency)
+
+
+#: The floor with fraction bits (floor_frac) on the TACAN X-mode pair detection with its pair
+#: checks (dsp.tacan.frontend.PAIR_DETECTOR) with Verilator.
+VL_PAIR_FRAC = replace(VL_PAIR_CHECKED, floor_frac=True)
+
+
+@pytest.mark.verilator
+def test_verilog_lints_clean_floor_frac():
+    assert_lints_clean(PeakSearch(VL_PAIR_FRAC), "peak_search_pair_frac")
+    assert_lints_clean(PeakSearch(PeakParams(floor_frac=True)), "peak_search_frac")
+
+
+@needs_verilator
+def test_verilator_matches_model_floor_frac():
+    """2e5 samples, gaps in valid: the pair detection with floor_frac, and the single-pulse
+    search with floor_frac (smooth_log2 6: the fraction bits move the floor within the run)."""
+    rng = np.random.default_rng(352)
+    n = 200_000
+    for name, p, e in (
+            ("peak_search_pair_frac_vl", VL_PAIR_FRAC,
+             checked_envelope(rng, n, VL_PAIR_FRAC.pair_offset, other=75, width=19.0)),
+            ("peak_search_frac_vl", PeakParams(smooth_log2=6, floor_frac=True),
+             _vl_stimulus(rng, n, 0.7)[0])):
+        sim = verilator_sim(PeakSearch(p), name)
+        valid = rng.random(int(n / 0.7) + 100) < 0.7
+        res = sim.run(e, in_valid=valid, flush_cycles=p.latency + 2)
+        f = unpack_fields(res.words, p.out_layout)
+        ref, _ = peak_search(e, p)
+        plain, _ = peak_search(e, replace(p, floor_frac=False))
+        assert ref.amplitude.size > 500
+        assert not np.array_equal(ref.thresholds, plain.thresholds)
+        np.testing.assert_array_equal(f["amplitude"], ref.amplitude)
+        np.testing.assert_array_equal(f["timestamp"], ref.timestamp)
+        np.testing.assert_array_equal(res.cycles, accepted_cycles(e.size, valid)[
+            ref.end_index + p.emit_delay] + p.latency)
