@@ -69,9 +69,12 @@ NOISE_FLOORS = {
 #: auxiliary pulses pass a pair-sum test); with them 0 valid in 60 s at 20 and 10 dB. They
 #: do not keep an X beacon out of the Y receiver at 10 dB: 900 main references and 105
 #: valid bearings in 60 s (the X main burst's pairs, 30 us apart, are Y pairs; 20 dB: 0
-#: valid). Figures: ``python -m cosim bench tacan-accuracy``; the choices: docs/experiments/README.md.
-PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair_balance=4,
-                           pair_spread=8)
+#: valid). The floor keeps its 10 fraction bits (``floor_frac``): without them the integer
+#: floor's truncation settled the HDL's threshold ~14 % below the float golden's (1.5 s at 10
+#: dB: 6528 reports against 6368). Figures: ``python -m cosim bench tacan-accuracy``; the
+#: choices: docs/experiments/README.md.
+PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, floor_frac=True, thr_mult=46,
+                           pair_balance=4, pair_spread=8)
 
 #: The pair search beside the single-pulse one (``python -m cosim tacan --detector both``):
 #: :data:`PAIR_DETECTOR` at threshold 2.5x (40/16). Here the references, the acquisition and
@@ -80,7 +83,9 @@ PAIR_DETECTOR = PeakParams(clip_to_floor=True, smooth_log2=10, thr_mult=46, pair
 #: noise alone; the DSP's noise-report rule drops most, ``dsp.tacan.peakbias.BOTH_PEAK_BIAS``).
 #: Measured with both searches (golden chain, 8 records of 3 s, seeds 100-107, RMSE deg at
 #: 90 / 270 deg; 46/16 -> 40/16): 0 dB 0.461 / 0.420 -> 0.294 / 0.267; 3 dB 0.184 / 0.189 ->
-#: 0.231 / 0.204; 10 dB 0.082 / 0.081 both. The bound at 0 dB is 0.219 deg.
+#: 0.231 / 0.204; 10 dB 0.082 / 0.081 both. The bound at 0 dB is 0.219 deg. Its floor keeps
+#: its fraction bits as :data:`PAIR_DETECTOR`'s (``floor_frac``: the HDL's threshold is then the
+#: golden's, not ~14 % below it).
 BOTH_PAIR_SEARCH = replace(PAIR_DETECTOR, thr_mult=40)
 
 #: The detectors of ``python -m cosim tacan --detector``: single pulses (with the profile of
