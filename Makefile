@@ -44,7 +44,7 @@ test: setup  ## run the whole test suite on JOBS cores (slow tests excluded: see
 test-all: setup  ## run every test on JOBS cores, slow ones included
 	$(PY) -m pytest -q -n $(JOBS)
 
-bench: setup  ## run every benchmark but suite-time (~4 h on 2 cores); results go to results/ (shown in README.md)
+bench: setup  ## run every benchmark but suite-time (~4.7 h on 2 cores); results go to results/ (shown in README.md)
 	$(PY) -m cosim bench dsp-speed
 	$(PY) -m cosim bench sim-speed
 	$(PY) -m cosim bench estimation
@@ -52,6 +52,7 @@ bench: setup  ## run every benchmark but suite-time (~4 h on 2 cores); results g
 	$(PY) -m cosim bench tacan-accuracy
 	$(PY) -m cosim bench tacan-robustness
 	$(PY) -m cosim bench tacan-detector
+	$(PY) -m cosim bench tacan-sensitivity
 	$(PY) -m cosim bench gnss-speed
 	$(PY) -m cosim bench gnss-tracking
 	$(PY) -m cosim bench aukf
