@@ -145,9 +145,10 @@ ROBUST_ROTATIONS = (0.0, 0.005, -0.005, 0.01, -0.01)
 ROBUST_ECHO_PHASES = (0.0, 1.5708, 3.1416)
 
 
-def _robustness(quick: bool, jobs) -> list:
+def _robustness(quick: bool, jobs, **opts) -> list:
     """Bias at 10 dB, 90 and 270 deg: beacon rotating 0.5 % and 1 % off 15 Hz, and a -6 dB
-    echo 2 us late (same bearing; carrier phases 0, 90, 180 deg)."""
+    echo 2 us late (same bearing; carrier phases 0, 90, 180 deg), with the run options
+    ``opts`` (e.g. ``detector="both"``)."""
     seeds = 1 if quick else 2
     cases = [("rotation", {"rotation_hz": 15.0 * (1 + e)}, f"rotation {100 * e:+.1f} %")
              for e in ROBUST_ROTATIONS]
@@ -155,9 +156,10 @@ def _robustness(quick: bool, jobs) -> list:
                                       "phase_rad": ph}},
                f"echo -6 dB, 2 us, phase {round(ph * 57.29578):d} deg")
               for ph in (ROBUST_ECHO_PHASES[:1] if quick else ROBUST_ECHO_PHASES)]
-    items = [dict(bearing_deg=b, snr_db=10.0, duration_s=3.0, seed=200 + k, **kw)
+    items = [dict(bearing_deg=b, snr_db=10.0, duration_s=3.0, seed=200 + k, **kw, **opts)
              for _, kw, _ in cases for b in (90.0, 270.0) for k in range(seeds)]
-    runs = _map(jobs, _one_run, items, "robustness (10 dB)")
+    what = "".join(f", --{k.replace('_', '-')} {v}" for k, v in opts.items())
+    runs = _map(jobs, _one_run, items, f"robustness (10 dB{what})")
     rows = []
     for i, (kind, kw, label) in enumerate(cases):
         for j, b in enumerate((90.0, 270.0)):
@@ -414,17 +416,23 @@ def _robustness_markdown(rows) -> list:
 
 
 def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
-    """The robustness table of ``tacan-accuracy`` alone (rotation off 15 Hz, echo)."""
+    """The robustness table of ``tacan-accuracy`` alone (rotation off 15 Hz, echo), and the
+    same with ``--detector both``."""
     t_start = time.perf_counter()
     rows = _robustness(quick, jobs)
+    rows_both = _robustness(quick, jobs, detector="both")
     summary = {"benchmark": "tacan-robustness", "machine": machine_info(), "quick": quick,
-               "elapsed_s": time.perf_counter() - t_start, "robustness_10db": rows}
+               "elapsed_s": time.perf_counter() - t_start, "robustness_10db": rows,
+               "robustness_10db_both": rows_both}
     out.mkdir(parents=True, exist_ok=True)
     (out / "tacan_robustness.json").write_text(json.dumps(summary, indent=1))
     m = summary["machine"]
     head = [f"TACAN bearing robustness, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
             f"commit {m['commit']}, {summary['elapsed_s']:.0f} s)"]
-    (out / "tacan_robustness.md").write_text("\n".join(head + _robustness_markdown(rows)) + "\n")
+    both = ["", "With `--detector both` (both searches in the FPGA):"] \
+        + _robustness_markdown(rows_both)[1:]
+    (out / "tacan_robustness.md").write_text("\n".join(head + _robustness_markdown(rows) + both)
+                                             + "\n")
     return summary
 
 
