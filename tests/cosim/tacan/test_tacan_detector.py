@@ -102,6 +102,7 @@ def test_both_searches_run_config():
         TacanRunConfig(detector="both", amplitude="partner")
 
 
+@pytest.mark.slow   # 18 s; bench tacan-sensitivity measures it on 16 records
 def test_both_searches_golden_chain_gives_a_bearing_at_0_db_90_deg():
     """Seed 102 at 0 dB, 90 deg (main burst in the envelope's trough): the pair detector
     alone acquires no reference in 3 s; with both searches the references come from the

@@ -689,6 +689,7 @@ def test_pysim_equals_model_both_searches():
     assert res.cycles[k] == adc + p.pair_peak_latency + p.FIFO_LATENCY
 
 
+@pytest.mark.slow   # 17 s; Verilator == model with stalls and both searches runs in make test
 def test_pysim_both_searches_gaps_in_valid_and_dsp_stalls():
     """Both searches, ADC valid with gaps, a DSP that stalls on a 1-deep FIFO: drops,
     markers and the overflow counter, word for word."""
