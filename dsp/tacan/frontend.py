@@ -26,7 +26,7 @@ from scipy import signal as sps
 
 from dsp.design import cic_taps, design_pulse_fir
 from dsp.peak import PeakParams, PeakState, peak_search_float
-from dsp.tacan.standard import PULSE_WIDTH_S, pair_spacing_s
+from dsp.tacan.standard import PULSE_WIDTH_S, SOURCE_PAIR, SOURCE_PULSE, pair_spacing_s  # noqa: F401
 
 PULSE_SIGMA_S = PULSE_WIDTH_S / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 
@@ -241,9 +241,6 @@ class Peaks:
     def times_s(self) -> np.ndarray:
         return self.timestamps / self.fs_hz
 
-
-#: :attr:`Peaks.source` values: the single-pulse search, the pulse-pair search.
-SOURCE_PULSE, SOURCE_PAIR = 0, 1
 
 
 def merge_sources(pulse_ts, pulse_amp, pair_ts, pair_amp):

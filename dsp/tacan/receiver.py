@@ -16,10 +16,9 @@ from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, com
                       deg_to_bangle, reference_advances, track_sector, wrap_deg)
 from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
 from .decode import REF_MAIN, DecoderConfig, decode, outside_bursts, rotation_track
-from .frontend import SOURCE_PAIR, SOURCE_PULSE
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .peakbias import PeakBias
-from .standard import burst_offsets, pair_spacing_s
+from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s
 
 
 @dataclass

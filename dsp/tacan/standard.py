@@ -48,3 +48,8 @@ def burst_offsets(mode: str, kind: str) -> np.ndarray:
 def pair_spacing_s(mode: str) -> float:
     """Spacing of the two pulses of a pair: 12 us (X) or 30 us (Y)."""
     return {"X": 12 * _US, "Y": 30 * _US}[mode]
+
+
+#: Which search reported a peak when the front end runs two (``FrontendConfig.pair_peak``,
+#: ``Peaks.source``, the FIFO word's source bit): the single-pulse search, the pair search.
+SOURCE_PULSE, SOURCE_PAIR = 0, 1
