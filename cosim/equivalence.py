@@ -70,6 +70,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     stall : bool
         DSP ``ready`` pattern with long off bursts and a 4-word FIFO (drops and markers).
     params : TacanFrontendParams, optional
+        Default: the default receiver's front end (``TacanRunConfig().hdl_params``).
     pysim_max_samples : int
         Longest record the Amaranth simulation is run on (default
         :data:`PYSIM_MAX_SAMPLES`: about 15 s at ~3k cycles/s).
@@ -85,7 +86,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         (True only when at least two backends compared a non-empty record and nothing
         differed) and ``verdict`` (why, in words).
     """
-    from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendModel
     if top not in TOPS:
         raise ValueError(f"top must be one of {TOPS}, not {top!r}")
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
@@ -93,8 +94,12 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
-    if params is None:
-        params = TacanFrontendParams(fifo_depth=4) if stall else TacanFrontendParams()
+    if params is None:      # the default receiver's front end
+        from dataclasses import replace
+        from .tacan.run import TacanRunConfig
+        params = TacanRunConfig().hdl_params
+        if stall:
+            params = replace(params, fifo_depth=4)
     x = tacan_record(int(samples), seed)
     n_cycles = len(x) + FLUSH_CYCLES
     ready = stall_pattern(n_cycles, seed) if stall else None

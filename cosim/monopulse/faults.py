@@ -38,6 +38,9 @@ def check(fc) -> None:
                          "model)")
     if fc.fifo_parity:
         raise ValueError("the monopulse FIFO words carry no parity bit (fifo_parity False)")
+    if fc.detector is not None:
+        raise ValueError("detector chooses the TACAN front end's peak searches: the "
+                         "monopulse receiver has none")
 
 
 def _run_cfg(fc, trial: int):

@@ -162,6 +162,9 @@ class FaultConfig:
     disturbed_deg: float = 1.0
     fifo_parity: bool = False
     receiver: str = "tacan"
+    #: TACAN: the front end's peak search(es) (``TacanRunConfig.detector``); None: the
+    #: receiver's default. Other receivers refuse it.
+    detector: str | None = None
 
     def __post_init__(self):
         if not isinstance(self.fifo_parity, bool):
@@ -257,7 +260,8 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
 
 
 def report_stem(fc: FaultConfig) -> str:
-    return f"faults_{fc.target.replace('-', '_')}" + ("_parity" if fc.fifo_parity else "")
+    return (f"faults_{fc.target.replace('-', '_')}" + ("_parity" if fc.fifo_parity else "")
+            + (f"_{fc.detector}" if fc.detector else ""))
 
 
 def _values(recs, key):
@@ -321,7 +325,8 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
              f"{fc.duration_s:g} s, fixed-point DSP, backend {fc.backend}"
              + (f", bits {list(fc.bits)}" if fc.bits else "")
              + (", FIFO words with an even-parity bit (checked by the DSP)" if fc.fifo_parity
-                else "") + ".", "",
+                else "")
+             + (f", detector {fc.detector}" if fc.detector else "") + ".", "",
              f"![{stem}.png]({stem}.png)", "",
              model.scores_note.format(disturbed_deg=fc.disturbed_deg), "",
              f"| BER | flips | exceptions | NaN {model.quantity}s | RMSE deg | worst deg | disturbed | "

@@ -8,6 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from dsp.tacan.frontend import DETECTORS
+
 from ..receivers import FaultModel
 from ..studies.faults import _flip_signed, flip_bits
 
@@ -27,6 +29,8 @@ def check(fc) -> None:
     if fc.fifo_parity and fc.target != "fifo":
         raise ValueError(f"fifo_parity protects the FIFO words: it changes nothing for "
                          f"target {fc.target!r} (use target 'fifo')")
+    if fc.detector is not None and fc.detector not in DETECTORS:
+        raise ValueError(f"detector must be one of {list(DETECTORS)}, not {fc.detector!r}")
 
 
 def check_size(fc) -> None:
@@ -60,9 +64,11 @@ def _run_cfg(fc, trial: int):
     sig = TacanSignalConfig(snr_db=fc.snr_db, duration_s=fc.duration_s,
                             seed=int(rng.integers(1 << 31)),
                             bearing_deg=float(np.round(rng.uniform(0, 360), 3)))
+    det = {} if fc.detector is None else {"detector": fc.detector}
     return TacanRunConfig(signal=sig, backend="model", dsp="fixed",
                           kalman=KalmanConfig(memory_s=fc.memory_s), require_bearing=False,
-                          hdl_changes=(("fifo_parity", True),) if fc.fifo_parity else ())
+                          hdl_changes=(("fifo_parity", True),) if fc.fifo_parity else (),
+                          **det)
 
 
 def _score(fc, run, track, truth_deg) -> dict:
@@ -168,9 +174,9 @@ def _dsp_state_run(fc, run, s, ber, rng, cache, trial):
     """Single-event upsets of the Kalman core's stored state (``x`` and the upper triangle
     of ``P``): each bit of each word flips with probability ``ber`` per filter update, in
     the compiled core between two updates (:meth:`EnvelopeKalman.schedule_upsets`)."""
-    from .run import FRONTENDS
+    from .run import FRONTENDS, run_dsp
     from dsp.tacan.kalman import EnvelopeKalman
-    from dsp.tacan.receiver import ReceiverState, amplitude_codes, process_peaks
+    from dsp.tacan.receiver import ReceiverState
     fkey = ("fo", trial)
     if fkey not in cache:
         cache[fkey] = FRONTENDS["model"](s.samples, run)
@@ -184,7 +190,8 @@ def _dsp_state_run(fc, run, s, ber, rng, cache, trial):
     if fc.bits is not None:         # chosen bit positions: only those of each word
         keep = np.isin(bit_in_word, np.asarray(fc.bits))
         word_of_bit, bit_in_word = word_of_bit[keep], bit_in_word[keep]
-    n_steps = int(fo.ticks.size)    # an upper bound on the updates (gated ones included)
+    # an upper bound on the updates (gated ones included; a pair report is two pulses)
+    n_steps = int(fo.ticks.size) * (1 if fo.source is None else 2)
     total = n_steps * word_of_bit.size
     n_flips = int(rng.binomial(total, ber)) if ber > 0 and total else 0
     flat = np.sort(rng.integers(0, total, n_flips)) if n_flips else np.zeros(0, np.int64)
@@ -192,9 +199,7 @@ def _dsp_state_run(fc, run, s, ber, rng, cache, trial):
     sel = flat % word_of_bit.size
     kf = EnvelopeKalman(fx, batch=1)
     kf.schedule_upsets(steps, word_of_bit[sel], bit_in_word[sel])
-    y = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, fx.y)
-    track = process_peaks(fo.ticks / run.signal.fs_hz, y, rc, ticks=fo.ticks,
-                          tick_hz=run.signal.fs_hz, state=ReceiverState(kf=kf))
+    track = run_dsp(fo, run, run.signal.fs_hz, state=ReceiverState(kf=kf))
     return track, int(kf.upsets_applied)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import sys
 
+from dsp.tacan.frontend import DETECTORS
 from dsp.tacan.kalman import KalmanConfig
 
 from ..link import DspServiceConfig
@@ -324,6 +325,9 @@ FAULT_OPTIONS = (
            help="register target: the DSP rewrites the register this often (s; default 0.01)"),
     Option(_FC, "fifo_parity",
            help="fifo target: FIFO words carry an even-parity bit, checked by the DSP"),
+    Option(_FC, "detector", default=None, choices=DETECTORS, case="lower",
+           help="the front end's peak search(es), as tacan --detector (default: the "
+                "receiver's, pulse)"),
     Arg("--out", default="build/studies/faults", help="output directory"),
     Arg("--json", action="store_true", help="print one JSON object"),
 )
@@ -356,9 +360,9 @@ def cmd_faults(a) -> int:
 
 # -- the entry -----------------------------------------------------------------------------
 def _top():
+    """The default receiver's front end (``TacanRunConfig().hdl_params``)."""
     from hdl.tacan.frontend import TacanFrontEnd
-    from hdl.tacan.model import TacanFrontendParams
-    return TacanFrontEnd(TacanFrontendParams())
+    return TacanFrontEnd(TacanRunConfig().hdl_params)
 
 
 def _equivalence(**kw) -> dict:

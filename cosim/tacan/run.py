@@ -33,7 +33,7 @@ from dsp.tacan.frontend import (BOTH_PAIR_SEARCH, DETECTORS, NOISE_FLOORS, PAIR_
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PAIR_PEAK_BIAS
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
-                                crb_deg, process_peaks)
+                                ReceiverState, crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.decode import DecoderConfig
 from dsp.tacan.fifo_rx import receive_words
@@ -120,14 +120,16 @@ class TacanRunConfig:
                 "DSP then measures every pulse outside the bursts below ~1 dB)",
         "choices": ("peak", "partner"), "case": "lower"})
     detector: str = field(default="pulse", metadata={
-        "help": "what the FPGA detects: single pulses (default) or pulse pairs (the "
-                "envelope summed with itself one pair spacing earlier: both pulses of a pair "
-                "integrated; censored slow floor, its own threshold; see "
-                "dsp.tacan.frontend.PAIR_DETECTOR; the DSP corrects the reports' bias near "
-                "the threshold, dsp.tacan.peakbias). Experimental: fewer records acquired "
-                "at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it. both: "
-                "the two searches side by side in the FPGA, one tagged stream; the DSP "
-                "decodes the references on the single pulses and measures on the pairs",
+        "help": "what the FPGA detects. pulse (default): single pulses. both: a "
+                "single-pulse search and a pulse-pair search side by side (the envelope "
+                "summed with itself one pair spacing earlier: both pulses of a pair "
+                "integrated; censored slow floor, its own threshold), one tagged FIFO "
+                "stream; the DSP decodes the references on the single pulses and measures "
+                "the bearing on the pairs, correcting their bias near the threshold "
+                "(dsp.tacan.peakbias): 1.2-1.5x the bound from 0 to 20 dB, but it flags "
+                "fewer of the bearings disturbed by DSP state upsets (faults --target "
+                "dsp-state). pair: the pair search alone, experimental (fewer records "
+                "acquired at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it)",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
@@ -173,9 +175,10 @@ class TacanRunConfig:
                              "--amplitude or a 'peak' in frontend_changes")
         if self.detector == "both" and (self.amplitude != "peak"
                                         or "pair_peak" in dict(self.frontend_changes)):
-            raise ValueError("with --detector both the pair search reports the pairs' "
-                             "amplitudes: give it without --amplitude partner or a "
-                             "'pair_peak' in frontend_changes")
+            raise ValueError("with --detector both the bearing is measured on the pair "
+                             "search's amplitudes: --amplitude partner is an option of the "
+                             "single-pulse search alone, and give no 'pair_peak' in "
+                             "frontend_changes")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
@@ -384,15 +387,18 @@ FRONTENDS = {"golden": _golden, "model": _model,
 
 
 # ---------------------------------------------------------------------------------------
-def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float) -> BearingTrack:
-    """The bearing DSP on a front end's output (float or fixed by ``run.dsp``)."""
+def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float,
+            state: ReceiverState | None = None) -> BearingTrack:
+    """The bearing DSP on a front end's output (float or fixed by ``run.dsp``), from
+    ``state`` when given (e.g. a core with scheduled upsets, :mod:`cosim.tacan.faults`)."""
     rc = run.receiver
     times = fo.ticks / fs_hz
     if rc.dsp == "fixed" and fo.amplitude_lsb is not None:
         amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
     else:
         amps = fo.amplitude_fs
-    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz, source=fo.source)
+    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz, source=fo.source,
+                         state=state)
 
 
 def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):

@@ -123,11 +123,12 @@ def test_cli_censored_noise_floor_reaches_the_hardware_and_stays_bit_exact(capsy
 
 
 def test_cli_partner_amplitude_reaches_the_hardware_and_stays_bit_exact(capsys):
-    """``--amplitude partner``: the FPGA reports the pair partner's envelope (other words
-    than the default's, the same pulses), and the model matches the RTL word for word --
-    Verilator over 0.05 s and the Amaranth simulation over the first 40,000 samples."""
+    """``--amplitude partner`` (an option of the single-pulse search alone, ``--detector
+    pulse``): the FPGA reports the pair partner's envelope (other words than the peak's, the
+    same pulses), and the model matches the RTL word for word -- Verilator over 0.05 s and
+    the Amaranth simulation over the first 40,000 samples."""
     args = ["tacan", "--backend", "model", "--dsp", "fixed", "--duration-s", "0.5",
-            "--memory-s", "0.15", "--snr-db", "3", "--json"]
+            "--memory-s", "0.15", "--snr-db", "3", "--json", "--detector", "pulse"]
     assert main(args) == 0
     plain = json.loads(capsys.readouterr().out)
     assert main(args + ["--amplitude", "partner", "--recheck", "auto"]) == 0

@@ -13,7 +13,8 @@ from dsp.tacan.receiver import bearing_stats
 
 def _op(snr_db, floor="censored"):
     sig = TacanSignalConfig(bearing_deg=90.0, duration_s=1.0, seed=100, snr_db=snr_db)
-    return operating_point(TacanRunConfig(signal=sig, noise_floor=floor, settle_s=0.5))
+    return operating_point(TacanRunConfig(signal=sig, noise_floor=floor, settle_s=0.5,
+                                          detector="pulse"))
 
 
 def test_operating_point_matches_the_model_the_bounds_use():
@@ -81,7 +82,7 @@ def test_pair_peak_bias_calibration_reproduces_the_committed_curve(detector):
 def test_pair_detector_runs_with_its_bias_model():
     from dsp.tacan.peakbias import PAIR_PEAK_BIAS
     assert TacanRunConfig(detector="pair").receiver.peak_bias is PAIR_PEAK_BIAS
-    assert TacanRunConfig().receiver.peak_bias is None
+    assert TacanRunConfig(detector="pulse").receiver.peak_bias is None
 
 
 def test_both_searches_run_config():
@@ -98,8 +99,10 @@ def test_both_searches_run_config():
     rc = run.receiver
     assert rc.peak_bias is BOTH_PEAK_BIAS and not rc.pair_reports
     assert BOTH_PEAK_BIAS.noise_rule(1.0) == (1.15, 1.8) and PAIR_PEAK_BIAS.noise_rule(1.0) is None
-    with pytest.raises(ValueError, match="with --detector both the pair search"):
+    assert TacanRunConfig().frontend.pair_peak is None                  # the default: pulse
+    with pytest.raises(ValueError, match="option of the single-pulse search alone"):
         TacanRunConfig(detector="both", amplitude="partner")
+    assert TacanRunConfig(amplitude="partner").frontend.pair_peak is None
 
 
 @pytest.mark.slow   # 18 s; bench tacan-sensitivity measures it on 16 records

@@ -98,11 +98,12 @@ def test_a_slot_once_auxiliary_is_never_declared_the_main_one():
     while the true main slot had no evidence either way, and slot 5 was declared: 135 valid
     bearings 160 deg off. Now that slot cannot be declared; the record gives no valid
     bearing (and no misleading one), as the default detector's peaks of it still give the
-    right slot."""
+    right slot (with the single-pulse search alone, and with both searches, the default)."""
     sig = TacanSignalConfig(bearing_deg=88.0, snr_db=0.0, duration_s=2.0, seed=3088)
-    for floor, amplitude in (("censored", "partner"), ("censored", "peak"), ("clipped", "peak")):
+    for floor, amplitude, det in (("censored", "partner", "pulse"), ("censored", "peak", "pulse"),
+                                  ("clipped", "peak", "pulse"), ("clipped", "peak", "both")):
         r = run_tacan(TacanRunConfig(signal=sig, require_bearing=False, noise_floor=floor,
-                                     amplitude=amplitude))
-        assert r["misleading_bearings"] == 0, (floor, amplitude)
+                                     amplitude=amplitude, detector=det))
+        assert r["misleading_bearings"] == 0, (floor, amplitude, det)
         if floor == "clipped":
             assert r["first_valid_bearing_s"] is not None and r["max_abs_error_deg"] < 5.0
