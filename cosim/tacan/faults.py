@@ -8,8 +8,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from dsp.tacan.frontend import DETECTORS
-
 from ..receivers import FaultModel
 from ..studies.faults import _flip_signed, flip_bits
 
@@ -29,8 +27,6 @@ def check(fc) -> None:
     if fc.fifo_parity and fc.target != "fifo":
         raise ValueError(f"fifo_parity protects the FIFO words: it changes nothing for "
                          f"target {fc.target!r} (use target 'fifo')")
-    if fc.detector is not None and fc.detector not in DETECTORS:
-        raise ValueError(f"detector must be one of {list(DETECTORS)}, not {fc.detector!r}")
 
 
 def check_size(fc) -> None:
