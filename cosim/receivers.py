@@ -300,7 +300,9 @@ class FaultModel:
         "deg) and the longest disturbance. Integrity: flagged (the receiver's warning flag: "
         "filter warming up, latest inputs rejected, ambiguous fine sector or implausible noise "
         "estimate), misleading (disturbed and *not* flagged) and the errors of the unflagged "
-        "bearings.")
+        "bearings. State faults: the DSP's continuity check saw its Kalman state or covariance "
+        "change between two references by more than the filter can (a corrupted word) and put "
+        "the previous reference's back, predicted to now; twice in a row it re-initialises.")
 
 
 @dataclass(frozen=True)

@@ -248,6 +248,7 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
             "valid_rmse_deg": _rms_of(ok, "valid_rmse_deg"),
             "valid_max_abs_error_deg": _max_of(ok, "valid_max_abs_error_deg"),
             "reinit": ev.get("reinit", 0), "gated": ev.get("gated", 0), "p_neg": ev.get("p_neg", 0),
+            "state_faults": ev.get("state_faults"),      # None: the receiver has no such check
             "saturations": sum(v for k, v in ev.items() if k.startswith("sat_")),
             "rx": rx})
     from cosim.bench import machine_info
@@ -292,7 +293,7 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",
             "flagged_fraction", "misleading_fraction", "valid_rmse_deg",
-            "valid_max_abs_error_deg", "reinit", "gated", "p_neg", "saturations"]
+            "valid_max_abs_error_deg", "state_faults", "reinit", "gated", "p_neg", "saturations"]
     with open(out / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
@@ -331,8 +332,8 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
              model.scores_note.format(disturbed_deg=fc.disturbed_deg), "",
              f"| BER | flips | exceptions | NaN {model.quantity}s | RMSE deg | worst deg | disturbed | "
              "longest disturbance s | flagged | misleading | unflagged RMSE deg | "
-             "unflagged worst deg | re-inits | gated | saturations |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "unflagged worst deg | state faults | re-inits | gated | saturations |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in s["rows"]:
         lines.append(f"| {r['ber']:g} | {r['flips']} | {r['exceptions']} | {r['nan_bearings']} | "
                      f"{f_(r['rmse_deg'], '.4f')} | {f_(r['max_abs_error_deg'], '.3f')} | "
@@ -341,7 +342,8 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
                      f"{f_(r.get('flagged_fraction'), '.2%')} | "
                      f"{f_(r.get('misleading_fraction'), '.2%')} | "
                      f"{f_(r.get('valid_rmse_deg'), '.4f')} | "
-                     f"{f_(r.get('valid_max_abs_error_deg'), '.3f')} | {r['reinit']} | "
+                     f"{f_(r.get('valid_max_abs_error_deg'), '.3f')} | "
+                     f"{f_(r.get('state_faults'), 'd')} | {r['reinit']} | "
                      f"{r['gated']} | {r['saturations']} |")
     if any(r["rx"] for r in s["rows"]):
         lines += ["", "DSP receiver (FIFO words): " + "; ".join(

@@ -112,7 +112,8 @@ Q_EXTRA = 16
 MAX_TICKS = 1 << 38
 
 EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
-               "p_clamps", "p_neg", "reinit", "gated", "implausible", "noise_reports")
+               "p_clamps", "p_neg", "reinit", "gated", "implausible", "noise_reports",
+               "state_faults")
 _EV = {n: i for i, n in enumerate(EVENT_NAMES)}
 #: Signals whose range the fixed-point core logs (event index -> format name): every store
 #: of that format goes through a saturating operator with that index (r also holds e2).
@@ -565,6 +566,11 @@ class EnvelopeKalman:
         self._bt = np.zeros(0, dtype)      # the peak-bias table (set_peak_bias), step 2**_bs
         self._bs = 0
         self._nq = np.zeros(2, dtype)      # its noise-report rule (0: off)
+        self._ck = None                    # the state-continuity checkpoint (checkpoint())
+        self._adv = [0, 0] if dtype == np.int64 else [0.0, 0.0]   # model phase advance since
+        self._elapsed_s = 0.0
+        self._elapsed_ticks = 0
+        self._failed = np.zeros(self.batch, bool)   # the last check failed (recover())
         self.reset()
 
     @property
@@ -628,6 +634,144 @@ class EnvelopeKalman:
         self.P[:] = 0
         self.P[:, np.arange(5), np.arange(5)] = self._cv[4]
         self._cnt[:] = 0
+
+    # -- state continuity (integrity monitor) -------------------------------------------------
+    def _advance(self, t) -> None:
+        """Add the steps ``t`` (ticks in fixed point, seconds in float) to the time and the
+        transition model's phase advance since the checkpoint: the fixed core's phase is
+        ``dt * fw mod 2**40`` per step, so the sum is exact in integers."""
+        if self.fixed is None:
+            tot = float(np.sum(t))
+            self._adv = [self._adv[i] + float(self._cv[i]) * tot for i in range(2)]
+            self._elapsed_s += tot
+        else:
+            tot, m = int(np.sum(t)), (1 << PHASE_BITS) - 1
+            self._adv = [(self._adv[i] + tot * int(self._cv[i])) & m for i in range(2)]
+            self._elapsed_ticks += tot
+            self._elapsed_s = self._elapsed_ticks / self.tick_hz
+
+    def _block_tr(self) -> np.ndarray:
+        """Per trial, the covariance's trace over each of the state's three blocks -- the
+        15 Hz pair, the 135 Hz pair, the DC level -- in units of ``r`` ((B, 3)): invariant
+        under the model's rotations."""
+        d = np.diagonal(self.P_float(), axis1=1, axis2=2)
+        return np.stack([d[:, 0] + d[:, 1], d[:, 2] + d[:, 3], d[:, 4]], axis=1)
+
+    def checkpoint(self) -> None:
+        """Remember the state for :meth:`state_jump`, :meth:`covariance_fault` and
+        :meth:`recover` (the stored ``x`` and ``P``, the block traces of ``P``, the
+        re-initialisation count) and restart the time and phase advance."""
+        self._ck = (self.x_float(), self._block_tr(), self._ev[:, _EV["reinit"]].copy(),
+                    self.x.copy(), self.P.copy())
+        self._adv = [0, 0] if self.fixed is not None else [0.0, 0.0]
+        self._elapsed_s = 0.0
+        self._elapsed_ticks = 0
+
+    def _judged(self) -> np.ndarray:
+        """Trials whose change since the checkpoint can be judged: not re-initialised since
+        (the warm-up is judged too: a state corrupted there would be carried past it)."""
+        return self._ev[:, _EV["reinit"]] == self._ck[2]
+
+    def covariance_fault(self) -> np.ndarray:
+        """Per trial: the covariance changed since the :meth:`checkpoint` in a way the filter
+        cannot change it. Between checkpoints ``P`` only rotates (which keeps each block's
+        trace), grows by the process noise (``q_rates`` times the time, per state) and
+        shrinks with each update; so a block trace above its checkpoint value plus 1.5 x
+        the process noise (and rounding), or an off-diagonal term beyond the Cauchy-Schwarz
+        bound ``P_ij^2 <= P_ii P_jj`` of a covariance, is a corrupted word. A float
+        readout, for monitoring only; False where :meth:`state_jump` is not judged."""
+        if self._ck is None:
+            return np.zeros(self.batch, bool)
+        grow = 1.5 * self._elapsed_s * self._q_block()
+        lsb = 0.0 if self.fixed is None else math.ldexp(64.0, -self.fixed.P.frac)
+        tr0 = self._ck[1]
+        up = (self._block_tr() > tr0 * (1 + 1e-6) + grow + lsb).any(axis=1)
+        P = self.P_float()
+        d = np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0)
+        cs = (P * P > d[:, :, None] * d[:, None, :] * (1 + 1e-6) + lsb * lsb).any(axis=(1, 2))
+        return (up | cs) & self._judged()
+
+    def state_jump(self) -> np.ndarray:
+        """Per trial: how far the state has moved since the :meth:`checkpoint` beyond what
+        the transition model explains, against what the measurements since can move it.
+
+        Between two checkpoints the state may only rotate (the model) and take the
+        measurements' corrections ``K * innovation``. Rotated back, the change of each
+        block (15 Hz pair, 135 Hz pair, DC) is the sum of those corrections, whose variance
+        is the information the block gained: ``r`` times (its covariance trace then, plus
+        the process noise since, minus its trace now). A state word changed by anything
+        else -- an upset of the DSP's memory -- moves a block by far more. Returned: the
+        largest block change in standard deviations of that variance (~1.5-2 in normal
+        operation: the largest of three). 0 where it cannot be judged (no checkpoint, or the
+        filter re-initialised since). A float readout, for monitoring only."""
+        if self._ck is None:
+            return np.zeros(self.batch)
+        x0, tr0 = self._ck[:2]
+        if self.fixed is None:
+            ang = np.array(self._adv, dtype=np.float64)
+        else:
+            ang = np.array(self._adv, dtype=np.float64) * (2.0 * math.pi / 2.0 ** PHASE_BITS)
+        x = self.x_float()
+        pred = x0.copy()
+        for b, a in enumerate(ang):          # x_pred = A x0: R(a) = [[c, s], [-s, c]]
+            c, s = math.cos(a), math.sin(a)
+            u, v = x0[:, 2 * b], x0[:, 2 * b + 1]
+            pred[:, 2 * b], pred[:, 2 * b + 1] = c * u + s * v, -s * u + c * v
+        d = x - pred
+        d2 = np.stack([d[:, 0] ** 2 + d[:, 1] ** 2, d[:, 2] ** 2 + d[:, 3] ** 2, d[:, 4] ** 2],
+                      axis=1)
+        # the information gained: trace then, plus the process noise since, minus trace now
+        # (floored at 1e-4 of the trace then: no update since, or rounding)
+        tr = self._block_tr()
+        gained = np.maximum(tr0 + self._elapsed_s * self._q_block() - tr, 1e-4 * np.abs(tr0))
+        var = np.maximum(self.r, 0.0)[:, None] * gained
+        z = np.full(d2.shape, np.inf)
+        np.divide(d2, var, out=z, where=var > 0)
+        z[d2 == 0] = 0.0
+        return np.where(self._judged(), np.sqrt(z.max(axis=1)), 0.0)
+
+    def _q_block(self) -> np.ndarray:
+        """The process noise per second over each block's trace (units of r)."""
+        q_rot, q_dc = self.kalman.q_rates()
+        return np.array([2 * q_rot, 2 * q_rot, q_dc])
+
+    def recover(self, faulty) -> None:
+        """The answer to a failed continuity check (:meth:`state_jump`,
+        :meth:`covariance_fault`) on the trials of ``faulty``, each counted as
+        ``state_faults``: the state and covariance stored at the :meth:`checkpoint`, which
+        passed its own check, are restored and predicted to now -- the core's own
+        prediction, one step over the time since, as through a gap: the measurements since
+        are lost, nothing else. A trial whose previous check failed too (its checkpoint is
+        not trusted: e.g. a state refitted to garbage that the good pulses now pull back)
+        is re-initialised instead (counted as ``reinit``; warm-up again)."""
+        m = np.asarray(faulty, bool)
+        again = m & self._failed
+        self._failed = m.copy()
+        if not m.any():
+            return
+        self._ev[m, _EV["state_faults"]] += 1
+        if again.any():
+            self.x[again] = 0
+            self.P[again] = 0
+            for i in range(5):
+                self.P[again, i, i] = self._cv[4]
+            self._cnt[again] = 0
+            self._ev[again, _EV["reinit"]] += 1
+        back = m & ~again
+        if not back.any():
+            return
+        x, P = self._ck[3][back], self._ck[4][back]
+        t = np.array([self._elapsed_ticks if self.fixed is not None else self._elapsed_s],
+                     dtype=np.int64 if self.fixed is not None else np.float64)
+        sc = np.empty((1, 7), self.x.dtype)
+        _step_consts(SIN_LUT, t, np.ones(1, self.x.dtype) if self.fixed is None
+                     else np.array([1 << self.fixed.P.frac], np.int64), self._ci, self._cv, sc)
+        nb = int(back.sum())
+        no_y = np.full((nb, 1), self._cv[7], self.x.dtype)      # no measurement: predict
+        cnt, ev = self._cnt[back].copy(), self._ev[back].copy()   # counters untouched
+        _run_serial(x, P, self._r[back].copy(), cnt, ev, sc, no_y, self._ci, self._cv,
+                    self._bt, self._bs, self._nq)
+        self.x[back], self.P[back] = x, P
 
     # -- upsets (bit-error studies) -------------------------------------------------------
     #: Words of the state as the DSP stores it: ``x[0..4]``, then the upper triangle of
@@ -773,6 +917,7 @@ class EnvelopeKalman:
             self._note_python(6, np.round(np.ldexp(rmf, self.fixed.P.frac))[None, :])
         else:
             rm = rmf
+        self._advance(t)
         sc = np.empty((t.size, 7), self.x.dtype)
         _step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
         kern = _run_parallel if self.parallel else _run_serial

@@ -143,3 +143,82 @@ def test_nan_measurement_is_refused():
 def test_bad_config(kw, message):
     with pytest.raises(ValueError, match=message):
         KalmanConfig(**kw)
+
+
+@pytest.mark.parametrize("arith", ["float", "fixed"])
+def test_state_jump_sees_a_state_word_changed_between_updates(arith):
+    """The state-continuity monitor: between checkpoints ~50 updates apart the state,
+    turned back by the model, moves by about what the measurements' information allows
+    (a few standard deviations of it at most); a state word changed from outside (an upset
+    of the DSP's memory) moves it by many; so does a covariance word raised beyond the
+    process noise. The answer: the checkpoint's state predicted to now (the core's own
+    prediction); twice in a row, a re-initialisation, after which nothing is judged until
+    the next checkpoint."""
+    from dsp.tacan.kalman import KalmanFixedConfig
+    t, y, _ = _stream(5, n=3000)
+    cfg = KalmanConfig()
+    kf = EnvelopeKalman(KalmanFixedConfig(kalman=cfg) if arith == "fixed" else cfg)
+    dts = np.diff(t, prepend=t[0])
+    assert kf.state_jump()[0] == 0.0                     # no checkpoint yet
+    kf.run(dts[:1000], y[None, :1000])
+    kf.checkpoint()
+    z = []
+    for a in range(1000, 2500, 50):
+        kf.run(dts[a:a + 50], y[None, a:a + 50])
+        z.append(kf.state_jump()[0])
+        kf.checkpoint()
+    assert 0.5 < np.median(z) < 3 and max(z) < 6 and not kf.covariance_fault()[0]
+    # the 135 Hz sine term moved by 0.02 (10 % of its amplitude) between two updates
+    x_ck, P_ck = kf.x.copy(), kf.P.copy()
+    kf.x[0, 2] += 0.02 if arith == "float" else int(round(0.02 * 2 ** kf.fixed.x.frac))
+    kf.run(dts[2500:2550], y[None, 2500:2550])
+    assert kf.state_jump()[0] > 12.0 and not kf.covariance_fault()[0]
+    # recovered: the checkpoint's state predicted over the interval, by the core itself
+    # (a reference filter fed one implausible input over the interval: predict only)
+    rcfg = KalmanConfig(input_limit=10.0)
+    ref = EnvelopeKalman(KalmanFixedConfig(kalman=rcfg) if arith == "fixed" else rcfg)
+    ref.x[:], ref.P[:], ref._r[:] = x_ck, P_ck, kf._r
+    ref.run(np.array([kf._elapsed_ticks]) if arith == "fixed" else np.array([kf._elapsed_s]),
+            np.array([[100.0]]))
+    assert ref.events["implausible"][0] == 1
+    kf.recover(kf.state_jump() > 12.0)
+    if arith == "fixed":                                 # the same bits
+        np.testing.assert_array_equal(kf.x, ref.x)
+        np.testing.assert_array_equal(kf.P, ref.P)
+    else:
+        np.testing.assert_allclose(kf.x, ref.x, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(kf.P, ref.P, rtol=1e-15, atol=0)
+    assert kf.events["state_faults"][0] == 1 and kf.events["reinit"][0] == 0
+    assert kf.state_jump()[0] < 1.0                      # its own checkpoint, unmoved
+    # a second failed check in a row: the checkpoint is not trusted -- re-initialised
+    kf.recover(np.array([True]))
+    assert kf.events["state_faults"][0] == 2 and kf.events["reinit"][0] == 1
+    assert (kf.P_float()[0].diagonal() == cfg.p0).all() and (kf.x[0] == 0).all()
+    kf.run(dts[2550:3000], y[None, 2550:3000])
+    assert kf.state_jump()[0] == 0.0                     # across a re-initialisation: not judged
+    assert not kf.covariance_fault()[0]
+
+
+@pytest.mark.parametrize("arith", ["float", "fixed"])
+def test_covariance_fault_sees_a_covariance_word_changed_between_updates(arith):
+    """``P`` only rotates, grows by the process noise and shrinks with updates: a diagonal
+    word raised by far more than the process noise since the checkpoint, or an off-diagonal
+    word beyond the Cauchy-Schwarz bound, is a corrupted word (and a state-jump statistic
+    that divides by the covariance does not see it)."""
+    from dsp.tacan.kalman import KalmanFixedConfig
+    t, y, _ = _stream(6, n=2000)
+    cfg = KalmanConfig()
+    dts = np.diff(t, prepend=t[0])
+    for i, j, v in ((1, 1, 0.5), (0, 2, 0.5)):
+        kf = EnvelopeKalman(KalmanFixedConfig(kalman=cfg) if arith == "fixed" else cfg)
+        kf.run(dts[:1500], y[None, :1500])
+        kf.checkpoint()
+        kf.run(dts[1500:1550], y[None, 1500:1550])
+        assert not kf.covariance_fault()[0]
+        kf.checkpoint()
+        code = v if arith == "float" else int(round(v * 2 ** kf.fixed.P.frac))
+        kf.P[0, i, j] += code
+        if i != j:
+            kf.P[0, j, i] += code
+        assert kf.covariance_fault()[0], (i, j)            # as stored
+        assert kf.state_jump()[0] < 12.0

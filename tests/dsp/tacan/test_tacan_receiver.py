@@ -122,7 +122,8 @@ def test_bearings_are_flagged_while_the_filter_warms_up_or_misfits(dsp):
     assert v[ts > 3.0].all() and err[ts > 3.0].max() < 0.5  # recovered
     for bad_cfg, msg in ((dict(flag_gated=0), "flag_gated must be an integer >= 1"),
                          (dict(flag_sector_deg=25), r"flag_sector_deg must be in \(0, 20\]"),
-                         (dict(flag_noise_ratio=0), "flag_noise_ratio must be > 0")):
+                         (dict(flag_noise_ratio=0), "flag_noise_ratio must be > 0"),
+                         (dict(flag_state_jump=0), "flag_state_jump must be > 0")):
         with pytest.raises(ValueError, match=msg):
             ReceiverConfig(**bad_cfg)
 
