@@ -126,9 +126,7 @@ class TacanRunConfig:
                 "integrated; censored slow floor, its own threshold), one tagged FIFO "
                 "stream; the DSP decodes the references on the single pulses and measures "
                 "the bearing on the pairs, correcting their bias near the threshold "
-                "(dsp.tacan.peakbias): 1.2-1.5x the bound from 0 to 20 dB, but it flags "
-                "fewer of the bearings disturbed by DSP state upsets (faults --target "
-                "dsp-state). pair: the pair search alone, experimental (fewer records "
+                "(dsp.tacan.peakbias): 1.2-1.5x the bound from 0 to 20 dB. pair: the pair search alone, experimental (fewer records "
                 "acquired at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it)",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
