@@ -628,12 +628,15 @@ class EnvelopeKalman:
         self._nq = np.clip(np.round(np.ldexp(np.array(nq), fx.frac)), 0, fx.max_int
                            ).astype(np.int64)
 
-    def reset(self) -> None:
-        """Back to the prior (keeps r, events and the time residual)."""
-        self.x[:] = 0
-        self.P[:] = 0
-        self.P[:, np.arange(5), np.arange(5)] = self._cv[4]
-        self._cnt[:] = 0
+    def reset(self, mask=None) -> None:
+        """Back to the prior (keeps r, events and the time residual): every trial, or those
+        of the boolean ``mask``."""
+        m = slice(None) if mask is None else np.asarray(mask, bool)
+        self.x[m] = 0
+        self.P[m] = 0
+        for i in range(5):
+            self.P[m, i, i] = self._cv[4]
+        self._cnt[m] = 0
 
     # -- state continuity (integrity monitor) -------------------------------------------------
     def _advance(self, t) -> None:
@@ -650,11 +653,11 @@ class EnvelopeKalman:
             self._elapsed_ticks += tot
             self._elapsed_s = self._elapsed_ticks / self.tick_hz
 
-    def _block_tr(self) -> np.ndarray:
+    def _block_tr(self, P=None) -> np.ndarray:
         """Per trial, the covariance's trace over each of the state's three blocks -- the
         15 Hz pair, the 135 Hz pair, the DC level -- in units of ``r`` ((B, 3)): invariant
-        under the model's rotations."""
-        d = np.diagonal(self.P_float(), axis1=1, axis2=2)
+        under the model's rotations. ``P``: its float readout, when the caller has it."""
+        d = np.diagonal(self.P_float() if P is None else P, axis1=1, axis2=2)
         return np.stack([d[:, 0] + d[:, 1], d[:, 2] + d[:, 3], d[:, 4]], axis=1)
 
     def checkpoint(self) -> None:
@@ -685,8 +688,8 @@ class EnvelopeKalman:
         grow = 1.5 * self._elapsed_s * self._q_block()
         lsb = 0.0 if self.fixed is None else math.ldexp(64.0, -self.fixed.P.frac)
         tr0 = self._ck[1]
-        up = (self._block_tr() > tr0 * (1 + 1e-6) + grow + lsb).any(axis=1)
         P = self.P_float()
+        up = (self._block_tr(P) > tr0 * (1 + 1e-6) + grow + lsb).any(axis=1)
         d = np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0)
         cs = (P * P > d[:, :, None] * d[:, None, :] * (1 + 1e-6) + lsb * lsb).any(axis=(1, 2))
         return (up | cs) & self._judged()
@@ -751,11 +754,7 @@ class EnvelopeKalman:
             return
         self._ev[m, _EV["state_faults"]] += 1
         if again.any():
-            self.x[again] = 0
-            self.P[again] = 0
-            for i in range(5):
-                self.P[again, i, i] = self._cv[4]
-            self._cnt[again] = 0
+            self.reset(again)
             self._ev[again, _EV["reinit"]] += 1
         back = m & ~again
         if not back.any():
