@@ -138,6 +138,8 @@ def _add_hdl(sub):
     p.add_argument("--seed", type=int, default=1, help="nextpnr seed")
     p.add_argument("--router", default="router2", choices=("router2", "router1"),
                    help="nextpnr router (router1: nextpnr-ecp5's default, slow when congested)")
+    p.add_argument("--no-tmg-ripup", action="store_true",
+                   help="without nextpnr's timing-driven rip-up in the router (--tmg-ripup)")
     p.add_argument("--channels", type=parse_int, default=1,
                    help="channels on one input stream (receivers with an array top: gnss)")
     p.add_argument("--timeout-min", type=parse_finite, default=30.0,
@@ -255,7 +257,8 @@ def _cmd_synth(a) -> int:
         top = make()
     t0 = time.time()
     r = synth(top, name=name, device=a.device, target_mhz=a.target_mhz, out_dir=a.out,
-              seed=a.seed, timeout_s=60 * a.timeout_min, router=a.router)
+              seed=a.seed, timeout_s=60 * a.timeout_min, router=a.router,
+              tmg_ripup=not a.no_tmg_ripup)
     wall_s = time.time() - t0
     short = {"top": a.top, "channels": a.channels,
              **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
@@ -264,7 +267,8 @@ def _cmd_synth(a) -> int:
         from .bench import machine_info
         Path(a.results).mkdir(parents=True, exist_ok=True)
         rec = {**short, "device": r["device"], "target_mhz": r["target_mhz"],
-               "timing_met": r["timing_met"], "seed": a.seed, "router": a.router, "wall_s": round(wall_s, 1),
+               "timing_met": r["timing_met"], "seed": a.seed, "router": a.router,
+               "tmg_ripup": not a.no_tmg_ripup, "wall_s": round(wall_s, 1),
                "tools": tool_versions(), "machine": machine_info()}
         suffix = f"_{a.channels}ch" if a.channels != 1 else ""
         (Path(a.results) / f"synth_{a.top}{suffix}.json").write_text(dumps(rec, indent=1) + "\n")

@@ -322,10 +322,14 @@ class PeakParams:
     @property
     def latency(self) -> int:
         """Cycles from the input transfer of sample ``end_index + emit_delay`` (a pulse's
-        closing sample, ``emit_delay`` later) to the output transfer; the pair detection adds
-        its sum stage and its output register, the pair checks one cycle more (the envelope
-        history's registered read)."""
-        return 1 + self.det_delay + 1 + (2 if self.pair_offset else 0) + (1 if self.pair_checks else 0)
+        closing sample, ``emit_delay`` later) to the output transfer: the input register, the
+        detector ``det_delay`` behind, the output register; a search reading through its
+        partner delay line (the pair detection's inner search too) two more (the line's read
+        data registered in the fabric, then the compare register); the pair detection its
+        sum stage, its constant-product register and its output register, the pair checks
+        one cycle more (the envelope history's registered read). :mod:`hdl.peak` says why."""
+        return (1 + (2 if self.partner_offset or self.pair_offset else 0) + self.det_delay + 1
+                + (3 if self.pair_offset else 0) + (1 if self.pair_checks else 0))
 
     @property
     def in_layout(self) -> list[tuple[str, int, bool]]:

@@ -8,6 +8,7 @@ the same way:
 * **Rounding** -- :func:`round_shift`, the HDL form of :func:`dsp.fixed.shift_right` (the
   numpy models use that, the numba kernels :mod:`hdl.model.rounding`); **saturation /
   wraparound** -- :func:`fit_width` (the ``overflow`` modes of :mod:`dsp.fixed`).
+* **Constant products** -- :func:`const_mul`, shifts and adds instead of a multiplier.
 * **Constructor errors** -- a block validates its arguments in ``__init__`` and raises
   ``ValueError`` stating the rule and repeating the bad value (never ``assert``: it vanishes
   under ``python -O``): :func:`check_params` for the parameter object, the parameter
@@ -15,13 +16,13 @@ the same way:
 """
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Mux, signed
+from amaranth.hdl import Cat, Const, Mux, signed
 from amaranth.lib import data
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS
 
 __all__ = ["iq_layout", "lo_layout", "sample_shape", "channel_values", "round_shift",
-           "fit_width", "check_params", "check_bool"]
+           "fit_width", "const_mul", "check_params", "check_bool"]
 
 
 # -- layouts ----------------------------------------------------------------------------------
@@ -98,6 +99,34 @@ def fit_width(v, width: int, overflow: str):
 
 
 # -- constructor checks -----------------------------------------------------------------------
+
+def const_mul(x, c: int):
+    """``x * c`` for a constant ``c >= 0`` as a sum of shifted copies of ``x`` (canonical signed
+    digits: 7 is ``(x << 3) - x``; every ``c <= 10`` takes at most one adder), not a
+    multiplier. An ECP5 DSP block without its registers, fed and read by fabric logic in one
+    cycle, was the slowest path of the TACAN front end; the result is a signed expression
+    when a digit is negative (its value is ``x * c >= 0``), assign it to an unsigned signal
+    of the product's width."""
+    if int(c) != c or c < 0:
+        raise ValueError(f"const_mul needs an integer constant >= 0, not {c!r}")
+    c = int(c)
+    pos, neg, i = [], [], 0
+    while c:
+        if c & 1:
+            d = 2 - (c & 3)           # 1, or -1 when the next bit is set too (... 0 1 1 -> 1 0 -1)
+            (pos if d > 0 else neg).append(x << i)
+            c -= d
+        c >>= 1
+        i += 1
+    if not pos:
+        return Const(0, 1)
+    out = pos[0]
+    for t in pos[1:]:
+        out = out + t
+    for t in neg:
+        out = out - t
+    return out
+
 
 def check_params(component, params, cls: type, *, article: str | None = None):
     """``params`` if it is a ``cls``, else ``ValueError("<Block> needs a <cls>, not <params>")``.

@@ -4,39 +4,59 @@ The algorithm, its parameters and the bit-exact model are in :mod:`hdl.model.pea
 
 Hardware structure (why it looks the way it does)
 -------------------------------------------------
+Every path is one compare, a few LUT levels or one adder between registers, and every block
+RAM read and constant product is registered before use: the TACAN front end with both
+searches meets 100 MHz on the LFE5U-85F (results/synth_tacan_both.json). Before this
+structure it reached 56.7 MHz: a block RAM's clock-to-output, a compare, muxes and the
+floor's adder shared one cycle.
+
 The noise floor has a one-sample recursion at every block boundary: the clip level of the
-first sample of block ``b+1`` depends on the last sample of block ``b``, which may arrive on
-the previous cycle. To keep that loop to one compare, one mux and one adder:
+first samples of block ``b+1`` depends on the last sample of block ``b``, which may arrive on
+the previous cycle. The last sample of block ``b`` is in the input register ``e_r`` at ``T``:
 
 * ``nu_{b+1} = nu_b + ((floor(S/L) - nu_b) >> s)`` is computed as
   ``(S + nu_b*(2**s - 1)*L) >> (log2 L + s)`` (identical for integers; ``base =
   nu_b*(2**s-1)*L`` is a register computed during the block), so block end -> new ``nu``
-  is one adder, one cycle after the block's sum ``S`` is registered;
-* the clipped contribution of the *first* sample of every block is taken one cycle late
-  (``def_*`` registers), after the new ``nu`` is in place;
+  is one adder: the block's sum is registered at ``T + 1``, the new ``nu`` is in place from
+  ``T + 2``;
+* from a block's third sample on, the compare with the clip level is made as the sample
+  enters ``e_r`` (a registered flag): that sample enters at ``T + 2`` or later, when the new
+  ``nu`` is in place, and its contribution reaches the accumulator's adder one LUT from
+  registers;
+* the block's first two samples may enter before that; they wait in ``d0`` / ``d1`` and
+  are compared there (registered). ``d0``'s contribution starts the block's sum with the
+  third sample (in place of the accumulator), ``d1``'s is added into the floor update's
+  other operand during the block (``base2 = base + cd1``), so the block end is still one
+  adder from the sum to the new ``nu``. That needs the third sample to come after ``d0``'s
+  compare and the block end after ``base2``: ``block_log2 >= 2`` (the model takes 1);
 * block 0 accumulates ``e << s`` so that the same shift gives ``nu_1 = S_0 >> log2 L``.
 
 With ``floor_frac`` the floor register is ``F`` (``amp_width + s`` bits, ``s`` fraction bits;
-``nu = F >> s`` is its top ``amp_width`` bits, a slice): ``F_{b+1} = G_b + (S >> log2 L)``
-with ``G_b = F_b - (F_b >> s)`` a register computed during the block (in place of ``base``),
-again one adder from the block's sum to the new floor, ``nu`` changing on the same cycle as
-without it. The block-0 sum is still that of ``e << s``, and a flag (set at reset, cleared
-by the first block end) selects ``F_1 = (S_0 >> (log2 L + s)) << s``. ``F <= (2**aw - 1) << s``
-(``m_b <= 2**aw - 1``), so it fits its width.
+``nu = F >> s`` is its top ``amp_width`` bits, a slice): ``F_{b+1} = G_b + (S >> log2 L) =
+(S + G_b L) >> log2 L`` (``G_b L`` has no bits below ``log2 L``) with ``G_b = F_b - (F_b >> s)``
+a register computed during the block, ``base2 = G_b L + cd1``: again one adder from the
+block's sum to the new floor, ``nu`` changing on the same cycle as without it. The block-0
+sum is still that of ``e << s``, and a flag (set at reset, cleared by the first block end)
+selects ``F_1 = (S_0 >> (log2 L + s)) << s``. ``F <= (2**aw - 1) << s`` (``m_b <= 2**aw -
+1``), so it fits its width.
 
 The detector runs ``det_delay`` (4) cycles behind the noise path on a delay line, so the
 threshold multiplier ``nu * thr_mult`` and the ``max(thr_min, .)`` are registered and
 ``T_{b+1}`` is ready when the detector reaches block ``b+1``; its pre-stage registers the
-comparison ``e >= T`` so the pulse logic starts from a flop. Needs ``block_log2 >= 1``.
+comparison ``e >= T`` so the pulse logic starts from a flop. A pulse closes on compares of
+its registers with constants (``below = hold - 1`` and not above, ``len = max_len - 1``), not
+on their incremented values.
 
 Pair-partner readout (``partner_offset = D > 0``): the input goes through a ``2 D``-word
 delay line (one memory, written at ``wp``; read at ``wp + D`` -- the sample ``D`` back, which
 the search runs on -- and at ``wp`` before the write -- the sample ``2 D`` back, the behind
 value). The current input is the ahead value. Both ride the detector's delay line and are
 kept with the pulse's max; the search starts once ``D`` samples are in (the memory is not
-reset: the behind value is 0 until ``2 D`` samples have been written since reset).
+reset: the behind value is 0 until ``2 D`` samples have been written since reset). The
+memory's read data is registered in the fabric, and that register is where the floor's
+compare is made: two cycles more than without the readout (:attr:`PeakParams.latency`).
 
-Pulse-pair detection (``pair_offset = D > 0``): three stages around an inner
+Pulse-pair detection (``pair_offset = D > 0``): stages around an inner
 ``PeakSearch(params.search_params)`` (one bit wider, partner readout at ``D``):
 
 * sum stage (1 cycle): a ``D``-word memory of the input, written at a wrapping pointer on
@@ -47,14 +67,15 @@ Pulse-pair detection (``pair_offset = D > 0``): three stages around an inner
   not reset: a saturating count of the inputs since reset makes ``e[n - D]`` read 0 until
   ``D`` samples have been written;
 * the inner search, with its partner readout on ``s`` (``s[n_max + D]``, ``s[n_max - D]``);
-* output filter (1 cycle, registered): a peak goes out unless a side lobe clearly exceeds
-  it (``8 amplitude >= pair_keep * partner``: a shift and a constant product), with
-  ``amplitude >> 1`` and the inner timestamp.
+* output filter (2 cycles): the pulse and ``pair_keep * partner`` (shifts and an adder,
+  :func:`hdl.common.const_mul`) registered, then a peak goes out unless a side lobe clearly
+  exceeds it (``8 amplitude >= pair_keep * partner``), with ``amplitude >> 1`` and the inner
+  timestamp.
 
-So the latency is the inner search's plus 2 (:attr:`PeakParams.latency`).
+So the latency is the inner search's plus 3 (:attr:`PeakParams.latency`).
 
 Pair checks (``pair_balance``, ``pair_spread = w``; :mod:`dsp.peak`): the output filter
-becomes two stages, one cycle more (latency inner + 3):
+becomes three stages, one cycle more (latency inner + 4):
 
 * an envelope history of ``depth = PeakParams.pair_check_depth`` words (the power of two >=
   ``2 D + max_len + w + `` the inner latency: the inputs written between the peak's oldest tap
@@ -66,8 +87,11 @@ becomes two stages, one cycle more (latency inner + 3):
   ``log2 ts_step`` on (``PeakParams`` checks that ``ts_step`` is a power of two and that the
   timestamp has the bits); one non-transparent registered read port per tap ``n_max + k``, ``k``
   in ``0, -D`` (balance) and ``w, -D - w, -w, -D + w`` (spread); a tap ``k < 0`` reads 0
-  unless ``cnt = depth`` or ``n_max = cnt - ((wp - n_max) mod depth) >= -k`` (registered with
-  the reads); the pulse (amplitude, partner, timestamp, valid) is registered alongside;
+  unless ``cnt = depth`` or ``n_max >= -k`` (until the history is full every index written
+  is below ``depth``, so ``n_max`` is its low bits; registered with the reads); the pulse
+  (amplitude, partner, timestamp, valid) is registered alongside;
+* next cycle: the taps registered in the fabric, the constant products ``pair_keep *
+  partner`` and ``pair_balance * s`` registered, the pulse alongside;
 * next cycle: side-lobe rule, ``16 min(e[n_max], e[n_max - D]) >= pair_balance * s`` and
   ``s >= max(e[n_max + w] + e[n_max - D - w], e[n_max - w] + e[n_max - D + w])``, into the
   output register (``amplitude >> 1``, timestamp).
@@ -79,7 +103,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from hdl.common import check_params
+from hdl.common import check_params, const_mul
 from hdl.model.peak import PeakParams
 
 __all__ = ["PeakSearch", "PeakParams"]
@@ -101,16 +125,22 @@ class PeakSearch(wiring.Component):
         One transfer per pulse, ``params.latency`` (6) cycles after the transfer of the
         sample that closes the pulse. ``timestamp = (n_peak * ts_step) mod 2**ts_bits``.
         With the pair-partner readout (``partner_offset = D``) the payload adds ``partner``
-        (``amp_width``) and ``partner_late`` (1 bit), and the transfer comes ``latency`` (6)
+        (``amp_width``) and ``partner_late`` (1 bit), and the transfer comes ``latency`` (8)
         cycles after that of the sample ``D`` after the closing one. With the pulse-pair
         detection (``pair_offset = D``) the payload is ``amplitude`` (the pair's mean,
-        ``s >> 1``) and ``timestamp`` only, ``latency`` (8; 9 with the pair checks) cycles
+        ``s >> 1``) and ``timestamp`` only, ``latency`` (11; 12 with the pair checks) cycles
         after the transfer of the sample ``D`` after the closing one.
     """
 
     def __init__(self, params: PeakParams | None = None):
         self.params = check_params(self, PeakParams() if params is None else params, PeakParams)
         p = self.params
+        for q in (p, p.search_params) if p.pair_offset else (p,):
+            if q.block_log2 < 2:
+                self._MustUse__silence = True     # never elaborated (hdl.common.check_params)
+                raise ValueError(f"PeakSearch needs peak block_log2 >= 2 (a block's first two "
+                                 f"samples wait for the new floor; the model takes 1), not "
+                                 f"{q.block_log2}")
         fields = {"amplitude": unsigned(p.amp_width), "timestamp": unsigned(p.ts_bits)}
         if p.partner_offset:
             fields.update(partner=unsigned(p.amp_width), partner_late=unsigned(1))
@@ -134,7 +164,7 @@ class PeakSearch(wiring.Component):
         v_r = Signal()
         D = p.partner_offset
         if not D:
-            m.d.sync += [e_r.eq(self.i.payload), v_r.eq(self.i.valid)]
+            x_in, v_in = self.i.payload, self.i.valid
             a_r = b_r = None
         else:
             # 2D-word delay line; its (registered) read data is the search's input register
@@ -145,79 +175,119 @@ class PeakSearch(wiring.Component):
             rd_b = line.read_port()            # x[n - 2D] (read before this write)
             wp = Signal(range(depth))
             seen = Signal(range(depth + 1))    # inputs since reset, saturating at 2D
-            a_r = Signal(unsigned(aw))
+            a_m = Signal(unsigned(aw))
             b_ok = Signal()
+            v_m = Signal()
             m.d.comb += [wr.addr.eq(wp), wr.data.eq(self.i.payload), wr.en.eq(self.i.valid),
                          rd_c.addr.eq(Mux(wp >= D, wp - D, wp + D)), rd_b.addr.eq(wp),
-                         rd_c.en.eq(self.i.valid), rd_b.en.eq(self.i.valid),
-                         e_r.eq(rd_c.data)]
-            m.d.sync += v_r.eq(self.i.valid & (seen >= D))
+                         rd_c.en.eq(self.i.valid), rd_b.en.eq(self.i.valid)]
+            m.d.sync += v_m.eq(self.i.valid & (seen >= D))
             with m.If(self.i.valid):
-                m.d.sync += [wp.eq(Mux(wp == depth - 1, 0, wp + 1)), a_r.eq(self.i.payload),
+                m.d.sync += [wp.eq(Mux(wp == depth - 1, 0, wp + 1)), a_m.eq(self.i.payload),
                              b_ok.eq(seen == depth)]
                 with m.If(seen != depth):
                     m.d.sync += seen.eq(seen + 1)
-            b_r = Mux(b_ok, rd_b.data, 0)
+            # the memory's read data is registered once more in the fabric (its
+            # clock-to-output went straight into the floor's compare and accumulator: 56.7
+            # MHz on the LFE5U-85F): one cycle of latency (PeakParams.latency)
+            e_m, v_m2 = Signal(unsigned(aw)), Signal()
+            a_m2, b_m2 = Signal(unsigned(aw)), Signal(unsigned(aw))
+            m.d.sync += [e_m.eq(rd_c.data), v_m2.eq(v_m), a_m2.eq(a_m),
+                         b_m2.eq(Mux(b_ok, rd_b.data, 0))]
+            x_in, v_in = e_m, v_m2
+            a_r, b_r = Signal(unsigned(aw)), Signal(unsigned(aw))
+            m.d.sync += [a_r.eq(a_m2), b_r.eq(b_m2)]
+        m.d.sync += [e_r.eq(x_in), v_r.eq(v_in)]
 
         # -- noise floor ------------------------------------------------------------------
+        # Block positions as flags (registers): f0 / f1 / f2 = the sample in e_r is the
+        # block's first / second / third; the *_n values are those of the sample entering
+        # e_r on this cycle.
         pos = Signal(unsigned(p.block_log2))
+        last = pos == L - 1
+        f0, f1, f2 = Signal(init=1), Signal(), Signal()
         blk0 = Signal(init=1)
+        with m.If(v_r):
+            m.d.sync += [pos.eq(pos + 1), f0.eq(last), f1.eq(f0), f2.eq(f1)]
+            with m.If(last):
+                m.d.sync += blk0.eq(0)
+        step = v_r
+        f0_n, f1_n, f2_n = Mux(step, last, f0), Mux(step, f0, f1), Mux(step, f1, f2)
+        blk0_n = blk0 & ~(step & last)
+
         if p.floor_frac:
             # the floor with smooth_log2 fraction bits; nu is its top aw bits
             nu_f = Signal(unsigned(p.floor_width))
             nu = nu_f[p.smooth_log2:]
         else:
             nu = Signal(unsigned(aw))
-        acc = Signal(unsigned(p.acc_width))
-        s_reg = Signal(unsigned(p.acc_width))
-        s_v = Signal()
-        def_v = Signal()
-        def_e = Signal(unsigned(aw))
-        def_blk0 = Signal()
-
         clip = Signal(unsigned(aw + p.clip_log2))
         m.d.comb += clip.eq(nu << p.clip_log2)
+        cl = nu if p.clip_to_floor else clip     # what a sample over the clip level adds
 
-        def contribution(e, in_blk0):
-            # over the clip level: the clip level, or (clip_to_floor) the floor itself
-            clipped = Mux(e > clip, nu if p.clip_to_floor else clip, e)
-            return Mux(in_blk0, e << p.smooth_log2, clipped)
+        def term(e, in_blk0):   # a sample's contribution before the clip: block 0 sums e << s
+            return Mux(in_blk0, e << p.smooth_log2, e)
 
-        first = pos == 0
-        last = pos == L - 1
-        take_in = v_r & ~first
-        lhs = Mux(def_v, contribution(def_e, def_blk0), acc)
-        rhs = Mux(take_in, contribution(e_r, blk0), 0)
+        # Samples from the block's third on: the compare against the clip level is made as
+        # the sample enters e_r (registered: over_r), so e_r's contribution is one LUT from
+        # registers and the adder is alone in its cycle. A block's first two samples may
+        # enter before the new clip level is in place (the last sample of block b is in e_r
+        # at T, nu_{b+1} from T + 2); they wait in d0 / d1 and are compared there: d0's
+        # contribution (cd0) starts the block's sum at its third sample, d1's (cd1) is added
+        # into the floor update's other operand (base2) during the block. Needs L >= 4.
+        reg_r = Signal()          # e_r is a valid sample from the block's third on
+        first_r = Signal()        # ... the third (its sum starts from cd0)
+        over_r = Signal()         # ... and over the clip level (never in block 0)
+        e_pre = Signal(unsigned(aw + p.smooth_log2))
+        m.d.sync += [reg_r.eq(v_in & ~f0_n & ~f1_n), first_r.eq(v_in & f2_n),
+                     over_r.eq(~blk0_n & (x_in > clip)), e_pre.eq(term(x_in, blk0_n))]
+
+        # the deferred samples: d0 / d1 and their terms before the clip, and the registered
+        # compares (dsel: over the clip level, not block 0); their terms are muxed in front
+        # of the adders that take them (cd0, cd1)
+        cds = []
+        for k, flag in ((0, f0), (1, f1)):
+            d_k = Signal(unsigned(aw), name=f"d{k}")
+            d_pre = Signal(unsigned(aw + p.smooth_log2), name=f"d{k}_pre")
+            d_clip = Signal(name=f"d{k}_clip")
+            d_sel = Signal(name=f"d{k}_sel")
+            with m.If(v_r & flag):
+                m.d.sync += [d_k.eq(e_r), d_pre.eq(term(e_r, blk0)), d_clip.eq(~blk0)]
+            m.d.sync += d_sel.eq(d_clip & (d_k > clip))
+            cds.append(Mux(d_sel, cl, d_pre))
+        cd0, cd1 = cds
+
+        acc = Signal(unsigned(p.acc_width))
+        lhs = Mux(first_r, cd0, acc)
+        rhs = Mux(reg_r, Mux(over_r, cl, e_pre), 0)
         total = Signal(unsigned(p.acc_width))
         m.d.comb += total.eq(lhs + rhs)
-        with m.If(def_v | take_in):
+        with m.If(reg_r):
             m.d.sync += acc.eq(total)
-        m.d.sync += [
-            s_v.eq(v_r & last),
-            s_reg.eq(total),
-            def_v.eq(v_r & first),
-        ]
-        with m.If(v_r & first):
-            m.d.sync += [def_e.eq(e_r), def_blk0.eq(blk0)]
-        with m.If(v_r):
-            m.d.sync += pos.eq(pos + 1)
-            with m.If(last):
-                m.d.sync += blk0.eq(0)
+        s_reg = Signal(unsigned(p.acc_width))    # the block's sum without d1's term
+        s_v = Signal()
+        m.d.sync += [s_v.eq(v_r & last), s_reg.eq(total)]
+
+        # the floor update: one adder from the block's sum (s_reg + base2) to the new nu
+        base2 = Signal(unsigned(p.acc_width + 1))
         if p.floor_frac:
-            # F_{b+1} = F_b - (F_b >> s) + m_b; block 0: F_1 = m_0 << s (S_0 sums e << s)
-            keep = Signal(unsigned(p.floor_width))   # G = F - (F >> s), during the block
+            # F_{b+1} = G_b + (S >> log2 L) = (S + G_b L) >> log2 L with G_b = F_b - (F_b >> s);
+            # block 0: F_1 = (S_0 >> (log2 L + s)) << s
+            keep = Signal(unsigned(p.floor_width))
             f_init = Signal(init=1)                  # the next block end is block 0's
-            m.d.sync += keep.eq(nu_f - (nu_f >> p.smooth_log2))
+            m.d.sync += [keep.eq(nu_f - (nu_f >> p.smooth_log2)),
+                         base2.eq(Mux(f_init, 0, keep << p.block_log2) + cd1)]
+            upd = s_reg + base2
             with m.If(s_v):
-                m.d.sync += [nu_f.eq(Mux(f_init, (s_reg >> K) << p.smooth_log2,
-                                         keep + (s_reg >> p.block_log2))),
+                m.d.sync += [nu_f.eq(Mux(f_init, (upd >> K) << p.smooth_log2,
+                                         upd >> p.block_log2)),
                              f_init.eq(0)]
         else:
+            # nu_{b+1} = (S + nu_b (2**s - 1) L) >> (log2 L + s)
             base = Signal(unsigned(p.acc_width))
+            m.d.sync += [base.eq(nu * (((1 << p.smooth_log2) - 1) * L)), base2.eq(base + cd1)]
             with m.If(s_v):
-                m.d.sync += nu.eq((s_reg + base) >> K)
-            base_mult = ((1 << p.smooth_log2) - 1) * L
-            m.d.sync += base.eq(nu * base_mult)
+                m.d.sync += nu.eq((s_reg + base2) >> K)
 
         # Threshold pipeline: registered product, then the floor.
         prod = Signal(unsigned(aw + p.thr_mult.bit_length()))
@@ -271,7 +341,8 @@ class PeakSearch(wiring.Component):
         new_ts = Mux(upd, ts, pts)
         below_n = Mux(above, 0, below + 1)
         len_n = plen + 1
-        close = (below_n == p.hold) | (len_n == p.max_len)
+        # (compares of the registers with constants: no adder in front of the enables)
+        close = (~above & (below == p.hold - 1)) | (plen == p.max_len - 1)
 
         o_valid = Signal()
         o_amp = Signal(unsigned(aw))
@@ -350,11 +421,14 @@ class PeakSearch(wiring.Component):
 
         # -- output filter: drop the peaks a side lobe clearly exceeds ----------------------
         q = inner.o.payload
-        if not p.pair_checks:
-            keep = (q.amplitude << 3) >= q.partner * Const(p.pair_keep, unsigned(4))
-            m.d.sync += [self.o.valid.eq(inner.o.valid & keep),
-                         self.o.payload.amplitude.eq(q.amplitude >> 1),
-                         self.o.payload.timestamp.eq(q.timestamp)]
+        if not p.pair_checks:   # the pulse and its partner's product registered, then the rule
+            a, ts, v = Signal(unsigned(aw + 1)), Signal(unsigned(p.ts_bits)), Signal()
+            kp = Signal(unsigned(aw + 5))
+            m.d.sync += [v.eq(inner.o.valid), a.eq(q.amplitude), ts.eq(q.timestamp),
+                         kp.eq(const_mul(q.partner, p.pair_keep))]
+            m.d.sync += [self.o.valid.eq(v & ((a << 3) >= kp)),
+                         self.o.payload.amplitude.eq(a >> 1),
+                         self.o.payload.timestamp.eq(ts)]
             return m
         self._pair_checks(m, inner)
         return m
@@ -383,12 +457,8 @@ class PeakSearch(wiring.Component):
         # the taps n_max + k; n_max mod depth from the timestamp (n_max * ts_step)
         q = inner.o.payload
         n_lo = q.timestamp[step:step + abits]
-        # the inputs written so far are n < cnt; n_max = cnt - ((wp - n_max) mod depth) while
-        # cnt < depth, and every tap is at or after the first sample once cnt = depth
-        dist = Signal(abits)
-        m.d.comb += dist.eq(wp - n_lo)
-        n_max = Signal(range(depth + 1))
-        m.d.comb += n_max.eq(cnt - dist)
+        # until the history is full (cnt < depth) every sample written has an index < depth,
+        # so n_max = n_lo; once it is full every tap is at or after the first sample
         full = cnt == depth
         offsets = [0, -D]
         if w:
@@ -404,26 +474,38 @@ class PeakSearch(wiring.Component):
             else:
                 ok = Signal(name=f"tap_ok_m{-k}")
                 with m.If(inner.o.valid):
-                    m.d.sync += ok.eq(full | (n_max >= -k))
+                    m.d.sync += ok.eq(full | (n_lo >= -k))
                 taps[k] = Mux(ok, rd.data, 0)
 
-        # the registered pulse (the reads' cycle)
+        # the registered pulse (the reads' cycle); its constant products are registered for
+        # the next cycle, beside the taps (block RAM data registered in the fabric)
         a = Signal(unsigned(aw + 1))
         pt = Signal(unsigned(aw + 1))
         ts = Signal(unsigned(p.ts_bits))
         v = Signal()
         m.d.sync += [v.eq(inner.o.valid), a.eq(q.amplitude), pt.eq(q.partner), ts.eq(q.timestamp)]
+        a2 = Signal(unsigned(aw + 1))
+        ts2 = Signal(unsigned(p.ts_bits))
+        v2 = Signal()
+        kp = Signal(unsigned(aw + 5))
+        m.d.sync += [v2.eq(v), a2.eq(a), ts2.eq(ts), kp.eq(const_mul(pt, p.pair_keep))]
+        t = {}
+        for k, val in taps.items():
+            t[k] = Signal(unsigned(aw), name=f"tap_{'m' if k < 0 else ''}{abs(k)}")
+            m.d.sync += t[k].eq(val)
 
-        keep = (a << 3) >= pt * Const(p.pair_keep, unsigned(4))
+        keep = (a2 << 3) >= kp
         if p.pair_balance:
-            e0, eD = taps[0], taps[-D]
+            bp = Signal(unsigned(aw + 5))
+            m.d.sync += bp.eq(const_mul(a, p.pair_balance))
+            e0, eD = t[0], t[-D]
             lo = Mux(e0 < eD, e0, eD)
-            keep = keep & ((lo << 4) >= a * Const(p.pair_balance, unsigned(4)))
+            keep = keep & ((lo << 4) >= bp)
         if w:
             s1 = Signal(unsigned(aw + 1))
             s2 = Signal(unsigned(aw + 1))
-            m.d.comb += [s1.eq(taps[w] + taps[-D - w]), s2.eq(taps[-w] + taps[-D + w])]
-            keep = keep & (a >= s1) & (a >= s2)
-        m.d.sync += [self.o.valid.eq(v & keep),
-                     self.o.payload.amplitude.eq(a >> 1),
-                     self.o.payload.timestamp.eq(ts)]
+            m.d.comb += [s1.eq(t[w] + t[-D - w]), s2.eq(t[-w] + t[-D + w])]
+            keep = keep & (a2 >= s1) & (a2 >= s2)
+        m.d.sync += [self.o.valid.eq(v2 & keep),
+                     self.o.payload.amplitude.eq(a2 >> 1),
+                     self.o.payload.timestamp.eq(ts2)]

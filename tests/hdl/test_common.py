@@ -9,7 +9,7 @@ from amaranth.sim import Simulator
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, shift_right
 from hdl.cic import Cic
-from hdl.common import check_bool, check_params, fit_width, round_shift
+from hdl.common import check_bool, check_params, const_mul, fit_width, round_shift
 from hdl.ddc import Ddc
 from hdl.envelope import Envelope
 from hdl.fir import Fir
@@ -46,6 +46,21 @@ def test_round_shift_equals_dsp_fixed(rounding, drop):
     xs = np.arange(-128, 128)
     got = _comb_eval(8, lambda v: round_shift(v, drop, rounding), xs)
     np.testing.assert_array_equal(got, shift_right(xs, drop, rounding))
+
+
+@pytest.mark.parametrize("c", list(range(0, 12)) + [15, 52, 255])
+def test_const_mul(c):
+    """Every 8-bit unsigned input: shifts and adds give x * c; up to 10 (the peak search's
+    pair_keep and pair_balance) at most two terms, one adder."""
+    xs = np.arange(256)
+    got = _comb_eval(9, lambda v: const_mul(v.as_unsigned(), c), xs)
+    np.testing.assert_array_equal(got, xs * c)
+    if 0 < c <= 10:
+        assert len(list(const_mul(Signal(8), c)._rhs_signals())) == 1    # x only
+        assert str(const_mul(Signal(8), c)).count("(+") + str(
+            const_mul(Signal(8), c)).count("(-") <= 1, c
+    with pytest.raises(ValueError, match="integer constant >= 0"):
+        const_mul(Signal(8), -1)
 
 
 @pytest.mark.parametrize("overflow", OVERFLOWS)

@@ -146,7 +146,7 @@ def test_sim_matches_model_realistic_quick():
 
 
 @pytest.mark.parametrize("kw", [
-    dict(block_log2=1, hold=1, max_len=2),
+    dict(block_log2=2, hold=1, max_len=2),
     dict(block_log2=3, hold=2, max_len=7, ts_bits=8, ts_step=5),   # timestamp wraps
     dict(block_log2=6, smooth_log2=0, clip_log2=0, thr_mult=5, thr_frac=0),
     dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12),
@@ -157,7 +157,7 @@ def test_sim_matches_model_realistic_quick():
     dict(block_log2=3, hold=2, max_len=7, pair_offset=1),
     dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12, pair_offset=20),
     # the floor with fraction bits (floor_frac)
-    dict(block_log2=1, hold=1, max_len=2, floor_frac=True),
+    dict(block_log2=2, hold=1, max_len=2, floor_frac=True),
     dict(block_log2=6, smooth_log2=0, clip_log2=0, thr_mult=5, thr_frac=0, floor_frac=True),
     dict(block_log2=4, smooth_log2=5, clip_log2=3, thr_min=900, amp_width=12, floor_frac=True),
     dict(block_log2=5, smooth_log2=3, clip_to_floor=True, thr_mult=52, floor_frac=True),
@@ -177,6 +177,16 @@ def test_sim_matches_model_variants(kw):
         assert not np.array_equal(ref.thresholds, plain.thresholds)
 
 
+def test_hdl_needs_two_bits_of_block():
+    """The HDL defers a block's first two samples (the new floor is not in place for them):
+    block_log2 = 1 is the model's only, refused with the reason."""
+    for p in (PeakParams(block_log2=1, hold=1, max_len=2),
+              PeakParams(block_log2=1, hold=1, max_len=2, pair_offset=3)):
+        with pytest.raises(ValueError, match=r"PeakSearch needs peak block_log2 >= 2 .*not 1"):
+            PeakSearch(p)
+    peak_search(np.arange(50), PeakParams(block_log2=1, hold=1, max_len=2))   # the model runs
+
+
 def test_gaps_in_valid():
     rng = np.random.default_rng(203)
     e = realistic_envelope(rng, 3000)
@@ -191,7 +201,7 @@ def test_gaps_in_valid_with_floor_frac():
     rng = np.random.default_rng(206)
     e = realistic_envelope(rng, 3000)
     for p in (replace(SMALL, smooth_log2=5, floor_frac=True),
-              PeakParams(block_log2=1, hold=1, max_len=2, smooth_log2=3, floor_frac=True)):
+              PeakParams(block_log2=2, hold=1, max_len=2, smooth_log2=3, floor_frac=True)):
         _check_sim(p, e, rng.random(9000) < 0.35)
         _check_sim(p, e, np.repeat(rng.random(900) < 0.5, 10))
 
@@ -528,7 +538,7 @@ def test_pair_detection_ports():
     assert [(k, Shape.cast(v).width) for k, v in dut.out_layout.members.items()] \
         == [(k, w) for k, w, _ in p.out_layout] == [("amplitude", 17), ("timestamp", 20)]
     assert dut.i.payload.shape() == unsigned(17)
-    assert p.latency == 8 and p.emit_delay == 60
+    assert p.latency == 11 and p.emit_delay == 60
     Fragment.get(dut, None)   # elaborates
 
 
@@ -663,7 +673,7 @@ PAIR_CHECK_SETS = [
     PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_spread=3),
     PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_balance=7, pair_spread=2),
     # max_len such that pair_history + inner latency = 64, the history's depth: exactly
-    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=41, pair_balance=6, pair_spread=3),
+    PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=39, pair_balance=6, pair_spread=3),
     replace(PAIR_CHECKED, pair_balance=4, pair_spread=8),
     PeakParams(pair_offset=7, block_log2=5, hold=3, max_len=24, pair_balance=6, pair_spread=3,
                smooth_log2=6, floor_frac=True),
@@ -687,24 +697,24 @@ def test_sim_matches_model_pair_checks(k):
 
 def test_pair_check_history_depth():
     """The history holds pair_history + the inner latency samples rounded up to a power of
-    two (here exactly: 2 * 7 + 41 + 3 + 6 = 64)."""
+    two (here exactly: 2 * 7 + 39 + 3 + 8 = 64)."""
     assert PAIR_CHECK_SETS[3].pair_check_depth == 64
     assert PAIR_CHECK_SETS[3].pair_history + PAIR_CHECK_SETS[3].search_params.latency == 64
     assert replace(TACAN_X_PAIR, pair_balance=4, pair_spread=8).pair_check_depth == 512
 
 
-@pytest.mark.parametrize("max_len", [41, 42])
+@pytest.mark.parametrize("max_len", [39, 40])
 def test_pair_check_history_worst_case(max_len):
     """The oldest tap of the worst case: a max_len cut whose max is its first sample c, valid
     on every cycle. Its tap e[c - D - w] (0) is read when the samples up to c + max_len - 1 +
-    D + inner latency (6) are in (with max_len 41 that is c + 54, exactly 64 = depth after
-    c - 10: the history is full); a spike at c + 54 written over it would make
-    e[c + w] + e[c - D - w] 6400 > s[c] = 5000 and drop the pair c - D, c (max_len 42: the
+    D + inner latency (8) are in (with max_len 39 that is c + 53, the history full at 64 =
+    depth words from c - 10); a spike at c + 54 written over it would make
+    e[c + w] + e[c - D - w] 6400 > s[c] = 5000 and drop the pair c - D, c (max_len 40: the
     need is 65 words, the depth 128)."""
     p = replace(PAIR_CHECK_SETS[3], max_len=max_len)
     D, w = p.pair_offset, p.pair_spread
     assert (p.pair_history + p.search_params.latency, p.pair_check_depth) \
-        == ((64, 64) if max_len == 41 else (65, 128))
+        == ((64, 64) if max_len == 39 else (65, 128))
     c = 4 * p.block_len + 10
     e = np.full(c + 200, 50, dtype=np.int64)
     e[c - D - w] = 0
@@ -718,7 +728,7 @@ def test_pair_check_history_worst_case(max_len):
     assert ref.end_index[i] == c + max_len - 1 and ref.amplitude[i] == 5000 >> 1
     plain, _ = peak_search(e, replace(p, pair_spread=0))
     assert plain.index.tolist() == ref.index.tolist()
-    # (checked by hand: a history one word short of the need, 64 with max_len 42, fails here)
+    # (checked by hand: a history one word short of the need, 64 with max_len 40, fails here)
 
 
 def test_gaps_in_valid_with_pair_checks():
@@ -766,7 +776,7 @@ def test_pair_checks_ports():
     p = replace(TACAN_X_PAIR, pair_balance=4, pair_spread=8)
     dut = PeakSearch(p)
     assert [(k, w) for k, w, _ in p.out_layout] == [("amplitude", 19), ("timestamp", 32)]
-    assert p.latency == 9 and p.emit_delay == 60
+    assert p.latency == 12 and p.emit_delay == 60
     Fragment.get(dut, None)   # elaborates
 
 

@@ -450,14 +450,14 @@ def _pair_sum_peaks(p: TacanFrontendParams, x):
 
 def test_pair_detection_params_and_words():
     """Pair detection at 60 envelope samples: the FIFO word is unchanged (amplitude, here
-    the pair's mean, | timestamp), 2 cycles more latency; on a TACAN record the filter keeps
+    the pair's mean, | timestamp), 5 cycles more latency; on a TACAN record the filter keeps
     one pulse per pair (the s peak at the second pulse) and drops the side lobes."""
     p = PAIR
     assert p.peak.pair_offset == 60 and p.peak.partner_offset == 0
     assert p.peak.out_layout == [("amplitude", p.peak.amp_width, False),
                                  ("timestamp", p.peak.ts_bits, False)]
     assert p.fifo.width == p.peak.amp_width + p.peak.ts_bits == P.fifo.width
-    assert p.latency == P.latency + 2
+    assert p.latency == P.latency + 5
     x = tacan_record(400_000, seed=7)
     pk, _ = TacanFrontendModel(p).run(x)
     _, inner = _pair_sum_peaks(p, x)
@@ -534,9 +534,10 @@ def test_exported_top_lints_clean_pair_detection(tmp_path):
 def _both_params(cic_rate: int = 4, checks: bool = True, **kw) -> TacanFrontendParams:
     """The front end with both searches (``config.pair_peak``, as ``--detector both``): the
     single-pulse search and the pair detector (:data:`PAIR_DETECTOR`, its pair checks on
-    unless ``checks=False``) at the X-mode spacing. ``cic_rate=2`` (decimation 2) is the only
-    structure where a pulse word and a pair word can meet in one cycle (see
-    :func:`test_collisions_need_decimation_at_most_the_latency_difference`)."""
+    unless ``checks=False``) at the X-mode spacing. With ``cic_rate=2`` (decimation 2) a pulse
+    word and a pair word meet in one cycle with a sample on every cycle (checks on) or with
+    gaps; at decimation 4 only with gaps (see
+    :func:`test_collisions_follow_the_latency_difference`)."""
     sig = TacanSignalConfig()
     cfg = FrontendConfig.for_signal(sig, cic_rate=cic_rate, peak=PeakParams(ts_step=cic_rate))
     base = replace(PAIR_DETECTOR, ts_step=cfg.peak.ts_step)
@@ -568,11 +569,16 @@ def _triples(shifts, seed: int = 0, start: int = 4096, every: int = 1600) -> np.
     return np.clip(np.round(x), -2048, 2047).astype(np.int64)
 
 
-#: 16 triples (C at +9 .. +16 ADC samples, twice): 2 collisions on each of the two merges
-#: below (the test asserts it).
+#: 16 triples (C at +9 .. +16 ADC samples, twice): at decimation 2, 2 collisions with the
+#: pair checks on and valid on every cycle, 4 with the checks off and :data:`VALID_11101`
+#: (:data:`COLLISIONS`; the tests assert them).
 TRIPLES = _triples(list(range(9, 17)) * 2)
-#: ADC valid 2 cycles in 3 for TRIPLES: every envelope sample (2 ADC samples) takes 3 cycles.
-VALID_101 = np.resize(np.array([1, 0, 1], bool), TRIPLES.size * 3 // 2 + 2)
+#: ADC valid 4 cycles in 5 for TRIPLES: envelope samples 3 and 2 cycles apart in turn, so
+#: two of them can be 5 cycles apart, the latency difference with the pair checks off (at
+#: decimation 2 on every cycle they are an even number of cycles apart).
+VALID_11101 = np.resize(np.array([1, 1, 1, 0, 1], bool), TRIPLES.size * 5 // 4 + 2)
+#: pair checks on -> (ADC valid, collisions of TRIPLES) at decimation 2
+COLLISIONS = {True: (None, 2), False: (VALID_11101, 4)}
 
 
 def _collisions(m: TacanFrontendModel, pk, in_valid=None) -> int:
@@ -596,7 +602,7 @@ def test_both_searches_params_and_words():
     assert p.source_bits == 1 and P.source_bits == 0 and P.pair_peak is None
     assert p.fifo.width == p.peak.amp_width + p.peak.ts_bits + 1 == P.fifo.width + 1
     assert p.latency == P.latency and p.peak_latency == P.peak_latency
-    assert p.pair_peak_latency == p.chain_latency + p.pair_peak.latency == p.peak_latency + 3
+    assert p.pair_peak_latency == p.chain_latency + p.pair_peak.latency == p.peak_latency + 6
     assert P.pair_peak_latency is None
     m = TacanFrontendModel(p)
     pk, _ = m.run(tacan_record(40_000, seed=2))
@@ -648,21 +654,28 @@ def test_both_searches_model_is_each_search_alone():
     np.testing.assert_array_equal(fast.words(FrontendPeaks.concat(parts)), fast.words(pk))
 
 
-def test_collisions_need_decimation_at_most_the_latency_difference():
-    """The pair search emits 3 cycles (2 without the checks) later than the pulse search
-    after the same envelope sample, and envelope samples are >= decimation cycles apart: at
-    decimation 4 the two never meet, at 2 they do (gaps in valid included)."""
-    assert BOTH.pair_peak_latency - BOTH.peak_latency == 3
+def test_collisions_follow_the_latency_difference():
+    """The pair search emits 6 cycles (5 without the checks) later than the pulse search
+    after the same envelope sample: a pulse word and a pair word meet when their envelope
+    samples are that many cycles apart. At decimation 4 with a sample on every cycle they are
+    a multiple of 4 apart and never meet; gaps in valid make it possible. At decimation 2
+    :data:`COLLISIONS`, and each difference never meets the other pattern (6 is no sum of
+    consecutive gaps 3, 2, 3, ...; 5 is odd)."""
+    assert BOTH.pair_peak_latency - BOTH.peak_latency == 6
     m = TacanFrontendModel(BOTH)
     x = tacan_record(400_000, seed=3)
     pk, _ = m.run(x)
     gaps = np.random.default_rng(3).random(len(x) * 2) < 0.6
-    assert _collisions(m, pk) == 0 and _collisions(m, pk, gaps) == 0
+    assert _collisions(m, pk) == 0 and _collisions(m, pk, gaps) == 1
     assert len(pk) > 200
-    for checks, valid in ((False, None), (True, VALID_101)):
+    assert _both_params(cic_rate=2, checks=False).pair_peak_latency \
+        - _both_params(cic_rate=2, checks=False).peak_latency == 5
+    for checks, (valid, n) in COLLISIONS.items():
         m = TacanFrontendModel(_both_params(cic_rate=2, checks=checks))
         pk, _ = m.run(TRIPLES)
-        assert _collisions(m, pk, valid) == 2, checks
+        assert _collisions(m, pk, valid) == n, checks
+        other = None if valid is not None else VALID_11101
+        assert _collisions(m, pk, other) == 0, checks
 
 
 def test_pysim_equals_model_both_searches():
@@ -714,10 +727,10 @@ def test_pysim_both_searches_gaps_in_valid_and_dsp_stalls():
 
 
 def test_pysim_merge_collision():
-    """Decimation 2, pair checks off (the pair search 2 cycles behind): a pulse word and a
+    """Decimation 2, pair checks on (the pair search 6 cycles behind): a pulse word and a
     pair word in the same cycle, the pair word written from the hold register the next
     cycle -- the first 8 triples of :data:`TRIPLES` (one collision), word for word."""
-    p = _both_params(cic_rate=2, checks=False)
+    p = _both_params(cic_rate=2)
     x = TRIPLES[:4096 + 8 * 1600 + 1000]
     m = TacanFrontendModel(p)
     pk, _ = m.run(x)
@@ -744,7 +757,7 @@ def test_both_searches_chunking_across_a_collision():
     whose pulse word of the same cycle comes from the next call's first sample. With
     ``final=False`` the pair word is held and the outputs put together equal one call's;
     with ``final=True`` it comes out before the pulse (the test can tell)."""
-    m = TacanFrontendModel(_both_params(cic_rate=2, checks=False))
+    m = TacanFrontendModel(_both_params(cic_rate=2))
     pk, _ = m.run(TRIPLES)
     cuts = _collision_cuts(m, pk)
     assert len(cuts) == 4
@@ -763,15 +776,16 @@ def test_both_searches_chunking_across_a_collision():
 
 def test_model_session_both_searches_in_steps():
     """The model session (streaming: emit cycles carried between steps) == the model on the
-    whole record: steps cut at the collisions, and steps of 2 samples with an idle cycle
-    between (:data:`VALID_101`)."""
+    whole record: steps cut at the collisions (checks on, a sample on every cycle), and steps
+    of 4 samples with an idle cycle in them (checks off, :data:`VALID_11101`)."""
     from cosim.tacan.session import TacanModelSession
     n_flush = 800
     for checks in (False, True):
         p = _both_params(cic_rate=2, checks=checks)
         m = TacanFrontendModel(p)
         pk, _ = m.run(TRIPLES)
-        if not checks:
+        valid, n = COLLISIONS[checks]
+        if valid is None:
             in_valid = np.ones(TRIPLES.size, bool)
             # after the emitting envelope sample; and a step ending with the collision's
             # cycle or the one before (one sample per cycle: the cycle is the sample index)
@@ -780,9 +794,9 @@ def test_model_session_both_searches_in_steps():
             late = cyc[cyc != em]
             cuts = _collision_cuts(m, pk) + [7, 12_345] + [int(c) for c in np.r_[late, late - 1]]
         else:
-            in_valid = VALID_101[:np.flatnonzero(VALID_101)[TRIPLES.size - 1] + 1]
+            in_valid = valid[:np.flatnonzero(valid)[TRIPLES.size - 1] + 1]
             cuts = []
-        assert _collisions(m, pk, in_valid) == 2
+        assert _collisions(m, pk, in_valid) == n
         # runs of in_valid, valid runs also cut at `cuts` (ADC sample indices)
         edges = np.flatnonzero(np.diff(in_valid.astype(np.int8))) + 1
         idx = np.cumsum(in_valid) - in_valid                 # ADC index at each cycle
@@ -819,16 +833,16 @@ def test_verilator_equals_model_both_searches(samples, stall):
 
 @pytest.mark.verilator
 @verilator
-@pytest.mark.parametrize("checks, pattern", [(False, None), (True, VALID_101)])
-def test_verilator_merge_collisions(checks, pattern):
-    """Decimation 2: the collisions of :data:`TRIPLES` (with the checks on they need the
+@pytest.mark.parametrize("checks", [True, False])
+def test_verilator_merge_collisions(checks):
+    """Decimation 2: the collisions of :data:`TRIPLES` (with the checks off they need the
     gaps in valid), with DSP stalls, on the Verilated top: word for word and cycle."""
     from cosim.verilator import VerilatorStreamSim
     p = _both_params(cic_rate=2, checks=checks, fifo_depth=8)
     m = TacanFrontendModel(p)
     pk, _ = m.run(TRIPLES)
-    in_valid = pattern
-    assert _collisions(m, pk, in_valid) == 2
+    in_valid, hits = COLLISIONS[checks]
+    assert _collisions(m, pk, in_valid) == hits
     n = TRIPLES.size * 3 // 2 + 2000
     ready = stall_pattern(n, seed=5, burst=600)
     sim = VerilatorStreamSim(TacanFrontEnd(p), name="tacan_frontend_both_d2")
