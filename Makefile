@@ -79,12 +79,12 @@ study-wordlength: setup  ## word-length proposal for the default scenario (one p
 	  --out build/studies/wordlength
 	$(call PUBLISH,wordlength,study_wordlength)
 
-faults: setup  ## bit-error studies (ADC, FIFO with/without parity, NCO register, DSP state also with --detector both; BER 1e-6..1e-3) -> results/faults
+faults: setup  ## bit-error studies (ADC, FIFO with/without parity, NCO register, DSP state also with --detector pulse; BER 1e-6..1e-3) -> results/faults
 	for t in adc fifo register dsp-state; do \
 	  $(PY) -m cosim faults tacan --target $$t --ber 1e-6:1e-3 --trials 3 --out results/faults || exit 1; \
 	done
 	$(PY) -m cosim faults tacan --target fifo --fifo-parity --ber 1e-6:1e-3 --trials 3 --out results/faults
-	$(PY) -m cosim faults tacan --target dsp-state --detector both --ber 1e-6:1e-3 --trials 3 --out results/faults
+	$(PY) -m cosim faults tacan --target dsp-state --detector pulse --ber 1e-6:1e-3 --trials 3 --out results/faults
 	rm -f results/faults/*.json
 
 verilog: setup  ## export every HDL block and the TACAN top to build/verilog and lint them

@@ -2,14 +2,14 @@
 command (registered in :data:`cosim.bench.BENCHMARKS`).
 
 ``tacan-accuracy``: bearing RMSE and mean error of the end-to-end TACAN chain (IF samples ->
-golden front end -> Kalman DSP) versus SNR at 90 and 270 degrees, with the default detector
-(single pulses) and with both searches (``--detector both``); every bearing 0-359 at 10 dB,
-and at 0 dB with both detectors; the Cramer-Rao bound for the filter's memory; the
+golden front end -> Kalman DSP) versus SNR at 90 and 270 degrees, with the single-pulse
+search (``--detector pulse``) and with both searches (``--detector both``, the default);
+every bearing 0-359 at 10 dB (single pulses), and at 0 dB with both detectors; the Cramer-Rao bound for the filter's memory; the
 pulse-level fast path at 10/15/20 dB over several seeds, looking for 40-degree sector
 slips; and the robustness table.
 
 ``tacan-robustness``: the robustness table alone (rotation off 15 Hz, a -6 dB echo), with
-the default detector and with ``--detector both``.
+``--detector pulse`` and with ``--detector both``.
 
 ``tacan-detector``: the single-pulse search's options near the noise floor (``--amplitude
 partner``, ``--noise-floor censored``) and ``--detector pair``, 0-10 dB, 90 and 270 deg,
@@ -136,9 +136,10 @@ def _snr_rows(runs: list, snrs, crbs: dict) -> list:
 
 
 def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
-    """The receiver's accuracy with the default detector (single pulses) and with both
-    searches (``--detector both``): SNR -3..20 dB at 90 / 270 deg, every bearing at 10 dB
-    and at 0 dB, the pulse-level fast path and the robustness table."""
+    """The receiver's accuracy with the single-pulse search (``--detector pulse``, the default
+    until 2026-12-05) and with both searches (``--detector both``, the default): SNR -3..20
+    dB at 90 / 270 deg, every bearing at 0 dB; with single pulses also every bearing at 10
+    dB, the pulse-level fast path and the robustness table (``tacan-robustness`` has both)."""
     from dsp.tacan.kalman import KalmanConfig
     from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
     from .detector import detector_bounds
@@ -150,7 +151,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     kc = KalmanConfig()
     crbs = {s: crb_deg(TacanSignalConfig(snr_db=float(s)).matched_filter_rel_sigma(), 0.21, 0.21,
                        kc.n_eff) for s in snrs}
-    # the default (single pulses): 2 records per point (seeds 100-101); both searches: 4
+    # single pulses: 2 records per point (seeds 100-101); both searches (the default): 4
     # (seeds 100-103; tacan-sensitivity has 8 at fewer SNRs)
     sweeps = {}
     for det, trials in (("pulse", 1 if quick else 2), ("both", 1 if quick else 4)):
@@ -158,7 +159,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
                       detector=det) for s in snrs for b in (90.0, 270.0) for k in range(trials)]
         sweeps[det] = _snr_rows(map_jobs(jobs, _one_run, items, f"SNR sweep (--detector {det})"),
                                 snrs, crbs)
-    # what the default (single-pulse) search's output allows at each SNR (dsp.tacan.bounds)
+    # what the single-pulse search's output allows at each SNR (dsp.tacan.bounds)
     ops = map_jobs(jobs, _operating_point, [dict(snr_db=float(s), noise_floor="clipped")
                                             for s in snrs], "detector operating points")
     for row in sweeps["pulse"]:
@@ -169,8 +170,8 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
 
     step = 15 if quick else 2
     bearings = np.arange(0, 360, step, dtype=float)
-    sweep_items = [dict(bearing_deg=float(b), snr_db=10.0, duration_s=1.6, seed=1000 + int(b))
-                   for b in bearings]
+    sweep_items = [dict(bearing_deg=float(b), snr_db=10.0, duration_s=1.6, seed=1000 + int(b),
+                        detector="pulse") for b in bearings]
     sweep = map_jobs(jobs, _one_run, sweep_items, "bearing sweep (IF, 10 dB)")
     brg_rows = [{"bearing_deg": r["bearing_deg"], "locked": r["locked"], "rmse_deg": r["rmse_deg"],
                  "mean_error_deg": r["mean_error_deg"], "max_abs_error_deg": r["max_abs_error_deg"]}
@@ -179,9 +180,9 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
 
     # 0 dB, every bearing in 2 deg steps: a bearing, no sector slip, RMSE within 2x the bound
     crb0 = crb_deg(TacanSignalConfig(snr_db=0.0).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
-    sweep_0db, rows0 = _sweep_0db(30 if quick else 2, crb0, jobs)
+    sweep_0db, rows0 = _sweep_0db(30 if quick else 2, crb0, jobs, detector="pulse")
     sweep_0db_both, rows0_both = _sweep_0db(30 if quick else 2, crb0, jobs, detector="both")
-    robust = _robustness(quick, jobs)
+    robust = _robustness(quick, jobs, detector="pulse")
 
     # Pulse-level fast path: all bearings as one batch per SNR and seed.
     pl_rows = []
@@ -256,7 +257,7 @@ def _plot_accuracy(path: Path, snr_rows, brg_rows, both_rows=()):
     a1.semilogy([r["snr_db"] for r in rs], [r["crb_deg"] for r in rs], "k--", label="Cramer-Rao bound")
     if all("amplitude_bound_deg" in r for r in rs):
         a1.semilogy([r["snr_db"] for r in rs], [r["amplitude_bound_deg"] for r in rs], "k:",
-                    label="bound of an amplitude fit (default detector output)")
+                    label="bound of an amplitude fit (single-pulse search output)")
     a1.axhline(0.61, color="r", ls=":", label="seed hardware, 10 dB (0.61)")
     a1.set_xlabel("SNR (dB, peak pulse power / noise in 2 MHz)")
     a1.set_ylabel("bearing error (deg)")
@@ -299,17 +300,20 @@ def _accuracy_markdown(s: dict) -> str:
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
     lines = [f"TACAN bearing accuracy, golden chain (`{m['command']}`, {m['date']}, {m['cpu']}, "
              f"commit {m['commit']}, {s['elapsed_s']:.0f} s)", "",
-             "The default detector (single pulses):", ""] + _snr_table(s["snr_sweep"], bounds=True)
-    lines += ["", "Bounds: what the default detector's output allows (`dsp.tacan.bounds`, "
+             "The single-pulse search alone (`--detector pulse`, the default until "
+             "2026-12-05):", ""] + _snr_table(s["snr_sweep"], bounds=True)
+    lines += ["", "Bounds: what the single-pulse search's output allows (`dsp.tacan.bounds`, "
               "operating point measured per SNR by `cosim.tacan.detector`): a DSP using the "
               "detections' times and amplitudes, and one fitting the detected amplitudes only "
               "(ours)."]
     if s.get("snr_sweep_both"):
-        lines += ["", "With `--detector both` (the single-pulse and the pulse-pair searches in "
-                  "the FPGA; references decoded on the pulses, the bearing measured on the pairs "
-                  "with their bias model):", ""] + _snr_table(s["snr_sweep_both"])
+        lines += ["", "Both searches (`--detector both`, the default: the single-pulse and the "
+                  "pulse-pair searches in the FPGA; references decoded on the pulses, the bearing "
+                  "measured on the pairs with their bias model):", ""] \
+            + _snr_table(s["snr_sweep_both"])
     b = s["bearing_sweep_if_10db"]
-    lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB (IF chain, "
+    lines += ["", f"Every bearing 0-359 deg in {360 // b['bearings']} deg steps at 10 dB, single "
+              f"pulses (IF chain, "
               f"{b['duration_s']:g} s each, {b['locked']}/{b['bearings']} locked): "
               f"RMSE {f(b['rmse_deg'], '.3f')} deg, worst error {f(b['max_abs_error_deg'], '.3f')} deg, "
               f"sector slips {b['sector_slips']}.", "",
@@ -318,7 +322,7 @@ def _accuracy_markdown(s: dict) -> str:
     for r in s["bearing_sweep_pulse_level"]:
         lines.append(f"| {r['snr_db']:g} | {r['bearings']} x {r['seeds']} | {r['rmse_deg']:.3f} | "
                      f"{r['max_abs_error_deg']:.3f} | {r['crb_deg']:.3f} |")
-    for key, what in (("bearing_sweep_if_0db", ""),
+    for key, what in (("bearing_sweep_if_0db", " with `--detector pulse`"),
                       ("bearing_sweep_if_0db_both", " with `--detector both`")):
         z = s.get(key)
         if z is None:
@@ -334,13 +338,13 @@ def _accuracy_markdown(s: dict) -> str:
                   f"bearings shown valid: RMSE {f(z.get('valid_rmse_deg'), '.3f')} deg, "
                   f"misleading (valid, > 20 deg off) {z.get('misleading_bearings', '-')}."]
     if s.get("robustness_10db"):
-        lines += _robustness_markdown(s["robustness_10db"])
+        lines += _robustness_markdown(s["robustness_10db"], ", `--detector pulse`")
     return "\n".join(lines) + "\n"
 
 
-def _robustness_markdown(rows) -> list:
+def _robustness_markdown(rows, what: str = "") -> list:
     f = lambda v, fmt: "-" if v is None else format(v, fmt)
-    out = ["", "Robustness at 10 dB (IF chain, golden, 3 s; the bias is the mean error over "
+    out = ["", f"Robustness at 10 dB{what} (IF chain, golden, 3 s; the bias is the mean error over "
            "the trials after settling):", "",
            "| case | bearing | locked | mean error deg | RMSE deg | max err deg | rotation estimated Hz |",
            "|---|---:|---:|---:|---:|---:|---:|"]
@@ -357,7 +361,7 @@ def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) ->
     """The robustness table of ``tacan-accuracy`` alone (rotation off 15 Hz, echo), and the
     same with ``--detector both``."""
     t_start = time.perf_counter()
-    rows = _robustness(quick, jobs)
+    rows = _robustness(quick, jobs, detector="pulse")
     rows_both = _robustness(quick, jobs, detector="both")
     summary = {"benchmark": "tacan-robustness", "machine": machine_info(), "quick": quick,
                "elapsed_s": time.perf_counter() - t_start, "robustness_10db": rows,
@@ -369,16 +373,18 @@ def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) ->
             f"commit {m['commit']}, {summary['elapsed_s']:.0f} s)"]
     both = ["", "With `--detector both` (both searches in the FPGA):"] \
         + _robustness_markdown(rows_both)[1:]
-    (out / "tacan_robustness.md").write_text("\n".join(head + _robustness_markdown(rows) + both)
+    (out / "tacan_robustness.md").write_text("\n".join(head + _robustness_markdown(
+        rows, ", `--detector pulse`") + both)
                                              + "\n")
     return summary
 
 
 #: The detector variants of ``tacan-detector``: (label, TacanRunConfig options).
-DETECTOR_VARIANTS = (("default (peak, clipped floor)", {}),
-                     ("--amplitude partner", {"amplitude": "partner"}),
-                     ("--noise-floor censored", {"noise_floor": "censored"}),
-                     ("both", {"amplitude": "partner", "noise_floor": "censored"}),
+DETECTOR_VARIANTS = (("default (peak, clipped floor)", {"detector": "pulse"}),
+                     ("--amplitude partner", {"detector": "pulse", "amplitude": "partner"}),
+                     ("--noise-floor censored", {"detector": "pulse", "noise_floor": "censored"}),
+                     ("both", {"detector": "pulse", "amplitude": "partner",
+                               "noise_floor": "censored"}),
                      ("--detector pair", {"detector": "pair"}))
 
 

@@ -119,15 +119,17 @@ class TacanRunConfig:
                 "the detection, so not censored by the threshold near the noise floor; the "
                 "DSP then measures every pulse outside the bursts below ~1 dB)",
         "choices": ("peak", "partner"), "case": "lower"})
-    detector: str = field(default="pulse", metadata={
-        "help": "what the FPGA detects. pulse (default): single pulses. both: a "
-                "single-pulse search and a pulse-pair search side by side (the envelope "
-                "summed with itself one pair spacing earlier: both pulses of a pair "
-                "integrated; censored slow floor, its own threshold), one tagged FIFO "
-                "stream; the DSP decodes the references on the single pulses and measures "
-                "the bearing on the pairs, correcting their bias near the threshold "
-                "(dsp.tacan.peakbias): 1.2-1.5x the bound from 0 to 20 dB. pair: the pair search alone, experimental (fewer records "
-                "acquired at 0 dB, and an X beacon heard by a Y receiver at 10 dB passes it)",
+    detector: str = field(default="both", metadata={
+        "help": "what the FPGA detects. both (default): a single-pulse search and a "
+                "pulse-pair search side by side (the envelope summed with itself one pair "
+                "spacing earlier: both pulses of a pair integrated; censored slow floor, its "
+                "own threshold), one tagged FIFO stream; the DSP decodes the references on "
+                "the single pulses and measures the bearing on the pairs, correcting their "
+                "bias near the threshold (dsp.tacan.peakbias): 1.1-1.6x the bound from 0 to "
+                "20 dB. pulse: the single-pulse search alone (the receiver before issue 18: "
+                "no bearing at 0-2 dB at some bearings; needed by --amplitude partner). pair: "
+                "the pair search alone, experimental (fewer records acquired at 0 dB, and an "
+                "X beacon heard by a Y receiver at 10 dB passes it)",
         "choices": DETECTORS, "case": "lower"})
     frontend_changes: tuple = ()
     hdl_changes: tuple = ()
@@ -173,10 +175,10 @@ class TacanRunConfig:
                              "--amplitude or a 'peak' in frontend_changes")
         if self.detector == "both" and (self.amplitude != "peak"
                                         or "pair_peak" in dict(self.frontend_changes)):
-            raise ValueError("with --detector both the bearing is measured on the pair "
-                             "search's amplitudes: --amplitude partner is an option of the "
-                             "single-pulse search alone, and give no 'pair_peak' in "
-                             "frontend_changes")
+            raise ValueError("with --detector both (the default) the bearing is measured on "
+                             "the pair search's amplitudes: --amplitude partner is an option "
+                             "of the single-pulse search alone (add --detector pulse), and "
+                             "give no 'pair_peak' in frontend_changes")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
         if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):

@@ -99,10 +99,13 @@ def test_both_searches_run_config():
     rc = run.receiver
     assert rc.peak_bias is BOTH_PEAK_BIAS and not rc.pair_reports
     assert BOTH_PEAK_BIAS.noise_rule(1.0) == (1.15, 1.8) and PAIR_PEAK_BIAS.noise_rule(1.0) is None
-    assert TacanRunConfig().frontend.pair_peak is None                  # the default: pulse
-    with pytest.raises(ValueError, match="option of the single-pulse search alone"):
-        TacanRunConfig(detector="both", amplitude="partner")
-    assert TacanRunConfig(amplitude="partner").frontend.pair_peak is None
+    assert TacanRunConfig().frontend.pair_peak == fe.pair_peak          # the default: both
+    assert TacanRunConfig().detector == "both"
+    assert TacanRunConfig(detector="pulse").frontend.pair_peak is None
+    with pytest.raises(ValueError, match=r"option of the single-pulse search alone \(add "
+                                         r"--detector pulse\)"):
+        TacanRunConfig(amplitude="partner")
+    assert TacanRunConfig(detector="pulse", amplitude="partner").frontend.pair_peak is None
 
 
 @pytest.mark.slow   # 18 s; bench tacan-sensitivity measures it on 16 records
