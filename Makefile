@@ -53,6 +53,7 @@ bench: setup  ## run every benchmark but suite-time (~4.7 h on 2 cores); results
 	$(PY) -m cosim bench tacan-robustness
 	$(PY) -m cosim bench tacan-detector
 	$(PY) -m cosim bench tacan-sensitivity
+	$(PY) -m cosim bench tacan-confidence
 	$(PY) -m cosim bench gnss-speed
 	$(PY) -m cosim bench gnss-tracking
 	$(PY) -m cosim bench aukf

@@ -68,7 +68,7 @@ def _add_adc_loss(sub):
 #: Benchmarks that spread over worker processes (--jobs); the others measure one core or
 #: size their own pool.
 _BENCH_JOBS = ("tacan-accuracy", "tacan-robustness", "tacan-detector", "tacan-sensitivity",
-               "ins")
+               "tacan-confidence", "ins")
 
 
 def _add_bench(sub):

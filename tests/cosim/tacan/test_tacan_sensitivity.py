@@ -107,3 +107,22 @@ def test_a_slot_once_auxiliary_is_never_declared_the_main_one():
         assert r["misleading_bearings"] == 0, (floor, amplitude, det)
         if floor == "clipped":
             assert r["first_valid_bearing_s"] is not None and r["max_abs_error_deg"] < 5.0
+
+
+def test_confidence_bench_quick(tmp_path):
+    """`bench tacan-confidence` in its quick form (2 records at 3 dB per bearing): every point
+    has its interval around the ratio, the verdict follows the criterion, and the report
+    names the seeds and the verdict."""
+    from cosim.tacan.bench import (CRITERION_MEAN_DEG, CRITERION_RMSE_OVER_CRB,
+                                   tacan_confidence)
+    s = tacan_confidence(tmp_path, quick=True, jobs=1)
+    assert [(r["snr_db"], r["bearing_deg"]) for r in s["rows"]] == [(3.0, 90.0), (3.0, 270.0)]
+    for r in s["rows"]:
+        assert r["records"] == 2 and r["locked"] == 2
+        lo, hi = r["ci95"]
+        assert lo <= r["rmse_over_crb"] <= hi
+        assert r["meets"] == (r["rmse_over_crb"] <= CRITERION_RMSE_OVER_CRB
+                              and abs(r["mean_error_deg"]) <= CRITERION_MEAN_DEG)
+    md = (tmp_path / "tacan_confidence.md").read_text()
+    assert "seeds 100-101" in md and md.count("| 3 | ") == 2
+    assert (tmp_path / "tacan_confidence.json").exists()
