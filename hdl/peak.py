@@ -135,12 +135,11 @@ class PeakSearch(wiring.Component):
     def __init__(self, params: PeakParams | None = None):
         self.params = check_params(self, PeakParams() if params is None else params, PeakParams)
         p = self.params
-        for q in (p, p.search_params) if p.pair_offset else (p,):
-            if q.block_log2 < 2:
-                self._MustUse__silence = True     # never elaborated (hdl.common.check_params)
-                raise ValueError(f"PeakSearch needs peak block_log2 >= 2 (a block's first two "
-                                 f"samples wait for the new floor; the model takes 1), not "
-                                 f"{q.block_log2}")
+        if p.block_log2 < 2:     # (the pair detection's inner search has the same blocks)
+            self._MustUse__silence = True     # never elaborated (hdl.common.check_params)
+            raise ValueError(f"PeakSearch needs peak block_log2 >= 2 (a block's first two "
+                             f"samples wait for the new floor; the model takes 1), not "
+                             f"{p.block_log2}")
         fields = {"amplitude": unsigned(p.amp_width), "timestamp": unsigned(p.ts_bits)}
         if p.partner_offset:
             fields.update(partner=unsigned(p.amp_width), partner_late=unsigned(1))

@@ -640,23 +640,22 @@ def tacan_confidence(out: Path, quick: bool = False, jobs: int | None = None) ->
         crb = crb_deg(TacanSignalConfig(snr_db=s).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
         for b in (90.0, 270.0):
             got = [r for r, it in zip(runs, items) if it["snr_db"] == s and it["bearing_deg"] == b]
-            ok = [r for r in got if r["locked"]]
-            row = {"snr_db": s, "bearing_deg": b, "records": len(got), "locked": len(ok),
-                   "crb_deg": crb}
-            if ok:
+            p = _pool(got)          # pooled RMSE and mean error of the locked records
+            row = {"snr_db": s, "bearing_deg": b, "records": len(got), "locked": p["locked"],
+                   "crb_deg": crb, "rmse_deg": p["rmse_deg"], "mean_error_deg": p["mean_error_deg"],
+                   "rmse_over_crb": None, "ci95": None, "mean_error_se_deg": None, "meets": False}
+            if p["locked"]:
+                ok = [r for r in got if r["locked"] and r["rmse_deg"] is not None]
                 ms = np.array([r["rmse_deg"] for r in ok]) ** 2
                 me = np.array([r["mean_error_deg"] for r in ok])
                 boot = np.sqrt(ms[rng.integers(0, ms.size, (2000, ms.size))].mean(axis=1)) / crb
-                ratio = float(np.sqrt(ms.mean()) / crb)
-                se = float(me.std(ddof=1) / np.sqrt(me.size)) if me.size > 1 else None
-                row.update(rmse_deg=float(np.sqrt(ms.mean())), rmse_over_crb=ratio,
+                ratio = p["rmse_deg"] / crb
+                row.update(rmse_over_crb=ratio,
                            ci95=[float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
-                           mean_error_deg=float(me.mean()), mean_error_se_deg=se,
-                           meets=bool(len(ok) == len(got) and ratio <= CRITERION_RMSE_OVER_CRB
-                                      and abs(me.mean()) <= CRITERION_MEAN_DEG))
-            else:
-                row.update(rmse_deg=None, rmse_over_crb=None, ci95=None, mean_error_deg=None,
-                           mean_error_se_deg=None, meets=False)
+                           mean_error_se_deg=float(me.std(ddof=1) / np.sqrt(me.size))
+                           if me.size > 1 else None,
+                           meets=bool(p["locked"] == len(got) and ratio <= CRITERION_RMSE_OVER_CRB
+                                      and abs(p["mean_error_deg"]) <= CRITERION_MEAN_DEG))
             rows.append(row)
     summary = {"benchmark": "tacan-confidence", "machine": machine_info(), "quick": quick,
                "elapsed_s": time.perf_counter() - t_start, "seeds": [seeds[0], seeds[-1]],
