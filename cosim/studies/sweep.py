@@ -530,52 +530,81 @@ def _confirms(row: dict, target_rel: float) -> bool:
     return row["ratio_to_golden"] is not None and row["ratio_to_golden"] <= 1 + target_rel
 
 
-def _step_up(cfg: SweepConfig, params: dict) -> dict:
-    """Every numeric parameter one swept value wider (where there is one)."""
-    out = dict(params)
+def _shortfall(rows: list[dict], target_rel: float) -> tuple:
+    """How far a confirmation run is from confirming, to rank the candidates of a round
+    (smaller is nearer): the SNRs that fail, the filter re-initialisations beyond the golden
+    chain's, the worst measured ratio."""
+    bad = sum(1 for r in rows if not _confirms(r, target_rel))
+    extra = sum(max(0, int((r.get("dsp_events") or {}).get("reinit", 0))
+                    - int(r.get("golden_reinit", 0))) for r in rows)
+    worst = max((r["ratio_to_golden"] for r in rows if r.get("ratio_to_golden") is not None),
+                default=math.inf)
+    return bad, extra, worst
+
+
+def _widen_one(cfg: SweepConfig, params: dict) -> list[tuple[str, dict]]:
+    """Each numeric parameter alone one swept value wider (where there is one)."""
+    out = []
     for n, vals in cfg.params:
-        if n in out and all(isinstance(x, (int, float)) for x in vals):
-            larger = sorted(v for v in vals if v > out[n])
+        if n in params and all(isinstance(x, (int, float)) for x in vals):
+            larger = sorted(v for v in vals if v > params[n])
             if larger:
-                out[n] = larger[0]
+                out.append((n, {**params, n: larger[0]}))
     return out
 
 
 def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler="local",
             progress=True, max_backoff: int = 3) -> dict:
     """Re-run the proposed combination (all proposed values together) on fresh seeds and
-    check it against the golden chain with the stricter :func:`_confirms`. Word lengths
-    that each pass alone can fail together (their losses add up): then every parameter is
-    widened by one swept step and the check repeated, up to ``max_backoff`` times. Returns
-    the summary: ``confirmed``, the ``params`` finally confirmed (or last tried), the
-    ``attempts`` (params and rows of each run)."""
+    check it against the golden chain with the stricter :func:`_confirms`.
+
+    Word lengths that each pass alone can fail together (their losses add up). Then each
+    parameter in turn is widened by one swept step, the others kept, and each of these
+    candidates re-run: the one that confirms is the answer (of several, the one with the
+    smallest worst ratio); when none does, the nearest by :func:`_shortfall` is kept and the
+    next round widens from it, up to ``max_backoff`` rounds. So only the widths that
+    matter grow: a filter gain one step too short costs one parameter a step, not all of
+    them. Should no round confirm, every parameter at its widest swept value (the sweep's
+    reference) is the last attempt. Returns the summary: ``confirmed``, the ``params``
+    finally confirmed (or last tried), the ``attempts`` (params, rows, and the parameter
+    each candidate widened)."""
     if not proposal or any(v is None for v in proposal.values()):
         return {"confirmed": False, "reason": "no complete proposal (some parameter never "
                                              "meets the target in the swept range)",
                 "attempts": []}
     ref = cfg.reference
-    params = {n: (proposal[n] if n in proposal else ref[n]) for n, _ in cfg.params}
     attempts = []
-    for k in range(max_backoff + 1):
+
+    def attempt(params: dict, widened: str | None) -> dict:
         fixed = tuple((n, (params[n],)) for n, _ in cfg.params)
         ccfg = replace(cfg, params=fixed, seed=cfg.seed + 1, recheck=0, design="grid")
         s = run_sweep(ccfg, out / "confirm", jobs=jobs, scheduler=scheduler, progress=progress)
         rows = s["rows"]
-        ok = all(_confirms(r, cfg.target_rel) for r in rows)
-        attempts.append({"params": dict(params), "confirmed": bool(ok), "rows": rows})
-        if ok:
+        a = {"params": dict(params), "widened": widened, "rows": rows,
+             "confirmed": bool(all(_confirms(r, cfg.target_rel) for r in rows))}
+        attempts.append(a)
+        return a
+
+    best = attempt({n: (proposal[n] if n in proposal else ref[n]) for n, _ in cfg.params},
+                   None)
+    for _ in range(max_backoff):
+        if best["confirmed"]:
             break
-        wider = _step_up(cfg, params)
-        if wider == params:
+        cands = [attempt(p, n) for n, p in _widen_one(cfg, best["params"])]
+        if not cands:
             break
-        params = wider
-    last = attempts[-1]
-    res = {"confirmed": last["confirmed"], "params": last["params"], "seed": cfg.seed + 1,
-           "rows": last["rows"], "attempts": attempts}
+        best = min(cands, key=lambda a: (not a["confirmed"],
+                                         _shortfall(a["rows"], cfg.target_rel)))
+    if not best["confirmed"]:
+        widest = {n: ref[n] for n, _ in cfg.params}
+        if widest != best["params"]:
+            best = attempt(widest, "all")
+    res = {"confirmed": best["confirmed"], "params": best["params"], "seed": cfg.seed + 1,
+           "rows": best["rows"], "attempts": attempts}
     model = sweep_model(cfg.receiver)
     if cfg.recheck > 0 and model.confirm_recheck is not None:
         # the combination proposed is the one to build: prove its bits on the RTL too
-        combo = tuple((n, last["params"][n]) for n, _ in cfg.params)
+        combo = tuple((n, best["params"][n]) for n, _ in cfg.params)
         res["recheck"] = {"combo": [list(c) for c in combo], **model.confirm_recheck(cfg, combo)}
     return res
 
@@ -746,13 +775,19 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
         c = s["confirmation"]
         lines += ["", f"Confirmation re-run (fresh seeds, all values together; stricter: the "
                       f"measured ratio itself within {100 * cfg.target_rel:g} %, no more "
-                      f"filter re-initialisations than the golden chain; on failure every "
-                      f"parameter one swept step wider): "
+                      f"filter re-initialisations than the golden chain; on failure each "
+                      f"parameter alone one swept step wider, the nearest kept for the next "
+                      f"round; last, every parameter at its widest): "
                       f"**{'confirmed' if c['confirmed'] else 'NOT confirmed'}**"
-                  + (f" ({c.get('reason')})" if c.get("reason") else "")]
+                  + (f" ({c.get('reason')})" if c.get("reason") else "")
+                  + (": " + ", ".join(f"`{n}`={v}" for n, v in c["params"].items())
+                     if c.get("confirmed") else "")]
         for i, a in enumerate(c.get("attempts", [])):
-            lines += ["", f"Attempt {i + 1}: " + ", ".join(f"`{n}`={v}" for n, v in
-                                                         a["params"].items())
+            w = a.get("widened")
+            how = "" if w is None else (" (every parameter at its widest)" if w == "all"
+                                        else f" (`{w}` one step wider)")
+            lines += ["", f"Attempt {i + 1}{how}: " + ", ".join(f"`{n}`={v}" for n, v in
+                                                                a["params"].items())
                       + f" -- {'confirmed' if a['confirmed'] else 'not confirmed'}"]
             for r in a["rows"]:
                 ev = r.get("dsp_events") or {}

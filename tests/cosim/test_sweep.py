@@ -194,29 +194,59 @@ def test_one_at_a_time_design():
         SweepConfig(design="random")
 
 
-def test_confirmation_widens_every_parameter_until_it_holds(monkeypatch, tmp_path):
-    """Widths that pass one at a time can fail together: the confirmation widens all of
-    them one swept step and tries again, and is strict about the measured ratio and about
-    filter re-initialisations."""
-    cfg = SweepConfig(params=(("adc_bits", (4, 6, 8)), ("dsp.P", (34, 38, 46))), recheck=0,
-                      design="oat")
+def _fake_confirmation(monkeypatch, reinits):
+    """run_sweep replaced by one row per run: ``reinits(params)`` filter re-initialisations
+    (0: confirms); returns the list of the params tried."""
     tried = []
 
     def fake_run_sweep(ccfg, out, **kw):
         p = {n: v[0] for n, v in ccfg.params}
         tried.append(p)
-        good = p["adc_bits"] >= 8 and p["dsp.P"] >= 38
+        k = reinits(p)
         row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10,
-               "golden_locked": 10, "golden_reinit": 0,
-               "dsp_events": {"reinit": 0 if good else 3},
-               "ratio_to_golden": 1.01 if good else 1.04, "ratio_ci95": [0.9, 1.1]}
+               "golden_locked": 10, "golden_reinit": 0, "dsp_events": {"reinit": k},
+               "ratio_to_golden": 1.01 if k == 0 else 1.04, "ratio_ci95": [0.9, 1.1]}
         return {"rows": [row]}
     monkeypatch.setattr(sw, "run_sweep", fake_run_sweep)
+    return tried
+
+
+def test_confirmation_widens_only_the_parameter_that_fails(monkeypatch, tmp_path):
+    """Widths that pass one at a time can fail together: the confirmation widens each
+    parameter alone one swept step and keeps the one that confirms -- not every parameter."""
+    cfg = SweepConfig(params=(("adc_bits", (4, 6, 8)), ("dsp.P", (34, 38, 46))), recheck=0,
+                      design="oat")
+    tried = _fake_confirmation(monkeypatch, lambda p: 0 if p["dsp.P"] >= 38 else 3)
     c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False)
-    assert tried == [{"adc_bits": 4, "dsp.P": 34}, {"adc_bits": 6, "dsp.P": 38},
-                     {"adc_bits": 8, "dsp.P": 46}]
-    assert c["confirmed"] and c["params"] == {"adc_bits": 8, "dsp.P": 46}
+    assert tried == [{"adc_bits": 4, "dsp.P": 34}, {"adc_bits": 6, "dsp.P": 34},
+                     {"adc_bits": 4, "dsp.P": 38}]
+    assert c["confirmed"] and c["params"] == {"adc_bits": 4, "dsp.P": 38}
+    assert [a["widened"] for a in c["attempts"]] == [None, "adc_bits", "dsp.P"]
     assert [a["confirmed"] for a in c["attempts"]] == [False, False, True]
+
+
+def test_confirmation_keeps_the_nearest_and_widens_again(monkeypatch, tmp_path):
+    """When no single widening confirms, the nearest (fewest re-initialisations) is kept and
+    the next round widens from it; when no round confirms, the widest values are tried."""
+    cfg = SweepConfig(params=(("adc_bits", (4, 6, 8)), ("dsp.P", (34, 38, 46))), recheck=0,
+                      design="oat")
+    tried = _fake_confirmation(monkeypatch, lambda p: (p["adc_bits"] < 6) + 2 * (p["dsp.P"] < 38))
+    c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False)
+    assert tried == [{"adc_bits": 4, "dsp.P": 34}, {"adc_bits": 6, "dsp.P": 34},
+                     {"adc_bits": 4, "dsp.P": 38}, {"adc_bits": 6, "dsp.P": 38},
+                     {"adc_bits": 4, "dsp.P": 46}]
+    assert c["confirmed"] and c["params"] == {"adc_bits": 6, "dsp.P": 38}
+    tried = _fake_confirmation(monkeypatch, lambda p: 0 if p == {"adc_bits": 8, "dsp.P": 46}
+                               else 1 + (p["dsp.P"] < 46))
+    c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False, max_backoff=1)
+    assert tried[-1] == {"adc_bits": 8, "dsp.P": 46} and c["attempts"][-1]["widened"] == "all"
+    assert c["confirmed"] and c["params"] == {"adc_bits": 8, "dsp.P": 46}
+    tried = _fake_confirmation(monkeypatch, lambda p: 1)
+    c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False, max_backoff=1)
+    assert not c["confirmed"] and c["params"] == {"adc_bits": 8, "dsp.P": 46}
+
+
+def test_confirmation_is_stricter_than_the_proposal():
     row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
            "golden_reinit": 0, "dsp_events": {}, "ratio_to_golden": 1.07,
            "ratio_ci95": [1.0, 1.1]}
