@@ -268,9 +268,14 @@ def check_points(cfg: SweepConfig) -> None:
 
 
 def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:
+    """The cache key of a point: its configuration and the project's sources
+    (:func:`dsp.jit.source_hash`), so that a cached point never outlives the code that
+    computed it (a new default detector, a new lock rule)."""
+    from dsp.jit import PROJECT_PACKAGES, PROJECT_ROOT, source_hash
+    code = source_hash(tuple(str(PROJECT_ROOT / p) for p in PROJECT_PACKAGES))
     d = {"receiver": cfg.receiver, "combo": [list(c) for c in combo], "snr_db": float(snr_db),
          "trial": trial, "duration_s": cfg.duration_s, "memory_s": cfg.memory_s,
-         "seed": cfg.seed, "version": 1}
+         "seed": cfg.seed, "code": code}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:20]
 
 

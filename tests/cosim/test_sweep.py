@@ -264,3 +264,15 @@ def test_trial_signal_seeds_are_deterministic_and_distinct_for_negative_snr():
     assert len(set(seeds.values())) == 5
     assert trial_signal(cfg, -3.0, 0).seed == seeds[-3.0]
     assert seeds[3.0] == int(np.random.default_rng([1, 0, 3000]).integers(1 << 31))
+
+
+def test_a_cached_point_does_not_outlive_the_code(monkeypatch):
+    """The point cache is keyed by the project's sources: after a code change (a new default
+    detector, a new lock rule) a study recomputes its points instead of reusing old ones."""
+    import dsp.jit
+    cfg = SweepConfig(params=(("adc_bits", (6, 8)),), recheck=0)
+    combo = (("adc_bits", 6),)
+    k = sw.point_key(cfg, combo, 10.0, 0)
+    assert k == sw.point_key(cfg, combo, 10.0, 0) != sw.point_key(cfg, combo, 10.0, 1)
+    monkeypatch.setattr(dsp.jit, "source_hash", lambda dirs: "another version of the code")
+    assert sw.point_key(cfg, combo, 10.0, 0) != k
