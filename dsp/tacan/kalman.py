@@ -11,10 +11,10 @@ run in one call (``x`` is ``(B, 5)``, ``P`` ``(B, 5, 5)``).
 
 One source, two arithmetics (data-type override)
 -----------------------------------------------
-The filter is written once (:func:`_trial`) in terms of the operators of :mod:`dsp.qops`.
-numba compiles it for ``float64`` state -- the golden filter: every operator is the real
-operation -- and for ``int64`` state -- the fixed-point DSP core: every operator quantises
-to the formats of :class:`KalmanFixedConfig`. :class:`EnvelopeKalman` picks the arithmetic
+The filter is written once (:func:`dsp.tacan.kalman_kernel._trial`) in terms of the
+operators of :mod:`dsp.qops`. numba compiles it for ``float64`` state -- the golden filter:
+every operator is the real operation -- and for ``int64`` state -- the fixed-point DSP
+core: every operator quantises to the formats of :class:`KalmanFixedConfig`. :class:`EnvelopeKalman` picks the arithmetic
 from its configuration: a :class:`KalmanConfig` runs in float, a :class:`KalmanFixedConfig`
 (which contains the :class:`KalmanConfig`) in fixed point. The two therefore differ only
 where quantisation happens.
@@ -94,15 +94,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from ..fixed import FixedFormat
-from ..jit import njit_cached
-from ..qops import (PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, align, div_norm,
-                    div_square, ewma, floor_one, lut_index, mac2, mulw, new_event_array,
-                    rate_dt, rs, sat,
-                    scale_sat, sincos_dt, snorm)
+from ..qops import PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, new_event_array
+from .kalman_kernel import EVENT_NAMES  # noqa: F401 (re-exported: the event counters' names)
+from .kalman_kernel import _EV, _run_parallel, _run_serial, _step_consts
+from .kalman_monitor import StateMonitor
 from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
 
 #: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
@@ -111,10 +109,6 @@ Q_EXTRA = 16
 #: Largest dt in ticks (2^38 ticks: 3.8 h at 20 MHz).
 MAX_TICKS = 1 << 38
 
-EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
-               "p_clamps", "p_neg", "reinit", "gated", "implausible", "noise_reports",
-               "state_faults")
-_EV = {n: i for i, n in enumerate(EVENT_NAMES)}
 #: Signals whose range the fixed-point core logs (event index -> format name): every store
 #: of that format goes through a saturating operator with that index (r also holds e2).
 RANGE_SIGNALS = {0: "y", 1: "x", 2: "P", 3: "K", 4: "innov", 5: "r", 6: "rmult"}
@@ -294,216 +288,7 @@ def _float_consts(k: KalmanConfig) -> np.ndarray:
                      math.nan])                                      # "no measurement"
 
 
-# ---------------------------------------------------------------------------------------
-# The filter (one source; numba compiles it for float64 and for int64 state)
-# ---------------------------------------------------------------------------------------
-_jit = njit_cached(nogil=True)
-# Index of each format's (frac, min, max, half) in the integer constants.
-_Y, _X, _P, _K, _CS, _IV, _R = 5, 9, 13, 17, 21, 25, 29
-
-
-@_jit
-def _step_consts(lut, dts, rms, ci, cv, out):
-    """Per-step values shared by all trials: out[k] = (sa, ca, sb, cb, q_rot, q_dc, r_mult)."""
-    csf, csh, ph = ci[_CS], ci[_CS + 3], ci[_P + 3]
-    for k in range(dts.size):
-        dt = dts[k]
-        out[k, 0], out[k, 1] = sincos_dt(lut, dt, cv[0], csf, csh)
-        out[k, 2], out[k, 3] = sincos_dt(lut, dt, cv[1], csf, csh)
-        out[k, 4] = rate_dt(cv[2], dt, ci[4], ph)
-        out[k, 5] = rate_dt(cv[3], dt, ci[4], ph)
-        out[k, 6] = rms[k]
-
-
-@_jit
-def _reset(x, P, p0):
-    for i in range(5):
-        x[i] = p0 - p0
-        for j in range(5):
-            P[i, j] = p0 if i == j else p0 - p0
-
-
-@_jit
-def _predict_only(x, P, xp, Pp):
-    """The step keeps the prediction (no measurement, a gated or a noise report)."""
-    for i in range(5):
-        x[i] = xp[i]
-        for j in range(5):
-            P[i, j] = Pp[i, j]
-
-
-@_jit
-def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
-    """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
-    gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
-    minimum) or NaN (float) is no measurement: predict only. ``bt`` (empty: none) is the
-    expected measurement bias at the predicted amplitude, a table of step ``2**bs`` in the
-    ``x`` format's units; with it, a measurement below ``nq[0]`` while the predicted
-    amplitude is ``nq[1]`` or more (``nq[1] > 0``) is a noise report: predict only
-    (:meth:`EnvelopeKalman.set_peak_bias`)."""
-    yf = ci[_Y]
-    xf, xlo, xhi, xh = ci[_X], ci[_X + 1], ci[_X + 2], ci[_X + 3]
-    pf, plo, phi, ph = ci[_P], ci[_P + 1], ci[_P + 2], ci[_P + 3]
-    kf, klo, khi, kh = ci[_K], ci[_K + 1], ci[_K + 2], ci[_K + 3]
-    csf = ci[_CS]
-    ivf, ivlo, ivhi, ivh = ci[_IV], ci[_IV + 1], ci[_IV + 2], ci[_IV + 3]
-    rf, rlo, rhi, rh = ci[_R], ci[_R + 1], ci[_R + 2], ci[_R + 3]
-    kw_bits = 1
-    kv = khi
-    while kv > 0:
-        kv >>= 1
-        kw_bits += 1
-    ksplit = min(62 - kw_bits, kf)
-    warmup, max_rej, r_smooth, gfrac = ci[0], ci[1], ci[2], ci[3]
-    p0, g2, skip = cv[4], cv[5], cv[7]
-    zero = p0 - p0
-    M = np.empty_like(P)
-    Pp = np.empty_like(P)
-    xp = np.empty_like(x)
-    PH = np.empty_like(x)
-    K = np.empty_like(x)
-    A = np.zeros_like(P)
-    A[4, 4] = align(zero + 1, csf)
-    for k in range(ys.size):
-        sa, ca, sb, cb = sc[k, 0], sc[k, 1], sc[k, 2], sc[k, 3]
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = ca, sa, -sa, ca
-        A[2, 2], A[2, 3], A[3, 2], A[3, 3] = cb, sb, -sb, cb
-        # -- predict x
-        for i in range(0, 4, 2):
-            a0, a1 = A[i, i], A[i, i + 1]
-            xp[i] = sat(rs(a0 * x[i] + a1 * x[i + 1], csf, xh), xlo, xhi, ev, 1)
-            xp[i + 1] = sat(rs(-a1 * x[i] + a0 * x[i + 1], csf, xh), xlo, xhi, ev, 1)
-        xp[4] = x[4]
-        # -- predict P: M = A P (rounded to P), Pp = M A^T + Q (upper triangle, mirrored)
-        # (only the columns the upper triangle of Pp reads: j >= the block of i)
-        for i in range(5):
-            bi = i - (i & 1) if i < 4 else 4
-            for j in range(bi, 5):
-                if i == 4:
-                    M[i, j] = P[i, j]
-                else:
-                    M[i, j] = sat(mac2(P[bi, j], A[i, bi], P[bi + 1, j], A[i, bi + 1],
-                                       csf, csf, ph), plo, phi, ev, 2)
-        for i in range(5):
-            for j in range(i, 5):
-                if j == 4:
-                    v = M[i, 4]
-                else:
-                    bj = j - (j & 1)
-                    v = mac2(M[i, bj], A[j, bj], M[i, bj + 1], A[j, bj + 1], csf, csf, ph)
-                if i == j:
-                    v += sc[k, 4] if i < 4 else sc[k, 5]
-                v = sat(v, plo, phi, ev, 2)
-                Pp[i, j] = v
-                Pp[j, i] = v
-        y = ys[k]
-        if y != y or y == skip:     # implausible input: not a measurement
-            ev[11] += 1
-            cnt[2] += 1
-            _predict_only(x, P, xp, Pp)
-            continue
-        cnt[2] = 0
-        yh = xp[0] + xp[2] + xp[4]
-        if bt.size and nq[1] > 0 and yh >= nq[1] and align(y, xf - yf) < nq[0]:
-            ev[12] += 1             # a noise report where the signal stands clear of it
-            _predict_only(x, P, xp, Pp)
-            continue
-        # -- innovation, S, e2 = innov^2 / S
-        for i in range(5):
-            PH[i] = Pp[i, 0] + Pp[i, 2] + Pp[i, 4]
-        S = PH[0] + PH[2] + PH[4] + sc[k, 6]
-        if bt.size:                 # what the front end reports at that amplitude
-            j = lut_index(yh, bs)
-            yh = yh + bt[min(max(j, 0), bt.size - 1)]
-        iv = sat(rs(align(y, xf - yf) - yh, xf - ivf, ivh), ivlo, ivhi, ev, 4)
-        r = r_st[0]
-        n = cnt[0]
-        if not S > 0:
-            ev[8] += 1
-            ev[9] += 1
-            _reset(x, P, p0)
-            cnt[0] = 0
-            cnt[1] = 0
-            continue
-        Sn, nb = snorm(S)
-        e2 = div_square(iv, Sn, nb, rf - 2 * ivf + pf, rh, rhi, ev, 5)
-        thr = scale_sat(g2, r, gfrac, rhi)     # gate^2 r
-        warm = n >= warmup
-        gated = warm and e2 > thr
-        if gated:
-            _predict_only(x, P, xp, Pp)
-        else:
-            for i in range(5):
-                K[i] = div_norm(PH[i], Sn, nb, kf, kh, klo, khi, ev, 3)
-            sh_x = kf + ivf - xf
-            for i in range(5):
-                x[i] = sat(xp[i] + rs(K[i] * iv, sh_x, xh), xlo, xhi, ev, 1)
-            bad = False
-            for i in range(5):
-                for j in range(i, 5):
-                    v = sat(Pp[i, j] - mulw(PH[j], K[i], kf, ksplit, ph), plo, phi, ev, 2)
-                    if i == j:
-                        if v < 0:
-                            bad = True
-                        else:
-                            v = floor_one(v, ev, 7)
-                    P[i, j] = v
-                    P[j, i] = v
-            if bad:
-                ev[8] += 1
-                ev[9] += 1
-                _reset(x, P, p0)
-                cnt[0] = 0
-                cnt[1] = 0
-                continue
-        # r estimate: running mean over the second half of the warm-up, then an EWMA of the
-        # innovation power clipped at the gate
-        if (not gated) and n >= warmup // 2:
-            if warm:
-                acc = e2 if e2 < thr else thr
-                m = r_smooth
-            else:
-                acc = e2
-                m = max(1, n - warmup // 2 + 1)
-            r_st[0] = ewma(r, acc, m, rh, rlo, rhi, ev, 5)
-        cnt[0] = n + 1
-        if gated:
-            ev[10] += 1
-            cnt[1] += 1
-            if cnt[1] >= max_rej:
-                ev[9] += 1
-                _reset(x, P, p0)
-                cnt[0] = 0
-                cnt[1] = 0
-        else:
-            cnt[1] = 0
-
-
-#: Steps per block: all trials run one block of the shared per-step values (7 words a
-#: step) while it is in cache.
-BLOCK = 2048
-
-
-@_jit
-def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
-    for k0 in range(0, ys.shape[1], BLOCK):
-        k1 = min(k0 + BLOCK, ys.shape[1])
-        for b in range(ys.shape[0]):
-            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
-                   bt, bs, nq)
-
-
-@njit_cached(nogil=True, parallel=True)
-def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
-    for k0 in range(0, ys.shape[1], BLOCK):
-        k1 = min(k0 + BLOCK, ys.shape[1])
-        for b in numba.prange(ys.shape[0]):
-            _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
-                   bt, bs, nq)
-
-
-# ---------------------------------------------------------------------------------------
-class EnvelopeKalman:
+class EnvelopeKalman(StateMonitor):
     """Batched envelope Kalman filter, float (golden) or fixed point by configuration.
 
     Parameters
@@ -525,6 +310,9 @@ class EnvelopeKalman:
         Raw state (float64, or int64 codes in the formats of ``cfg``).
     arithmetic : str
         ``"float"`` or ``"fixed"``.
+
+    The state monitor (checkpoints, continuity checks, recovery) and the upset injection
+    of the bit-error studies come from :class:`dsp.tacan.kalman_monitor.StateMonitor`.
     """
 
     def __init__(self, cfg: KalmanConfig | KalmanFixedConfig | None = None, batch: int = 1, *,
@@ -652,167 +440,6 @@ class EnvelopeKalman:
             self._adv = [(self._adv[i] + tot * int(self._cv[i])) & m for i in range(2)]
             self._elapsed_ticks += tot
             self._elapsed_s = self._elapsed_ticks / self.tick_hz
-
-    def _block_tr(self, P=None) -> np.ndarray:
-        """Per trial, the covariance's trace over each of the state's three blocks -- the
-        15 Hz pair, the 135 Hz pair, the DC level -- in units of ``r`` ((B, 3)): invariant
-        under the model's rotations. ``P``: its float readout, when the caller has it."""
-        d = np.diagonal(self.P_float() if P is None else P, axis1=1, axis2=2)
-        return np.stack([d[:, 0] + d[:, 1], d[:, 2] + d[:, 3], d[:, 4]], axis=1)
-
-    def checkpoint(self) -> None:
-        """Remember the state for :meth:`state_jump`, :meth:`covariance_fault` and
-        :meth:`recover` (the stored ``x`` and ``P``, the block traces of ``P``, the
-        re-initialisation count) and restart the time and phase advance."""
-        self._ck = (self.x_float(), self._block_tr(), self._ev[:, _EV["reinit"]].copy(),
-                    self.x.copy(), self.P.copy())
-        self._adv = [0, 0] if self.fixed is not None else [0.0, 0.0]
-        self._elapsed_s = 0.0
-        self._elapsed_ticks = 0
-
-    def _judged(self) -> np.ndarray:
-        """Trials whose change since the checkpoint can be judged: not re-initialised since
-        (the warm-up is judged too: a state corrupted there would be carried past it)."""
-        return self._ev[:, _EV["reinit"]] == self._ck[2]
-
-    def covariance_fault(self) -> np.ndarray:
-        """Per trial: the covariance changed since the :meth:`checkpoint` in a way the filter
-        cannot change it. Between checkpoints ``P`` only rotates (which keeps each block's
-        trace), grows by the process noise (``q_rates`` times the time, per state) and
-        shrinks with each update; so a block trace above its checkpoint value plus 1.5 x
-        the process noise (and rounding), or an off-diagonal term beyond the Cauchy-Schwarz
-        bound ``P_ij^2 <= P_ii P_jj`` of a covariance, is a corrupted word. A float
-        readout, for monitoring only; False where :meth:`state_jump` is not judged."""
-        if self._ck is None:
-            return np.zeros(self.batch, bool)
-        grow = 1.5 * self._elapsed_s * self._q_block()
-        lsb = 0.0 if self.fixed is None else math.ldexp(64.0, -self.fixed.P.frac)
-        tr0 = self._ck[1]
-        P = self.P_float()
-        up = (self._block_tr(P) > tr0 * (1 + 1e-6) + grow + lsb).any(axis=1)
-        d = np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0)
-        cs = (P * P > d[:, :, None] * d[:, None, :] * (1 + 1e-6) + lsb * lsb).any(axis=(1, 2))
-        return (up | cs) & self._judged()
-
-    def state_jump(self) -> np.ndarray:
-        """Per trial: how far the state has moved since the :meth:`checkpoint` beyond what
-        the transition model explains, against what the measurements since can move it.
-
-        Between two checkpoints the state may only rotate (the model) and take the
-        measurements' corrections ``K * innovation``. Rotated back, the change of each
-        block (15 Hz pair, 135 Hz pair, DC) is the sum of those corrections, whose variance
-        is the information the block gained: ``r`` times (its covariance trace then, plus
-        the process noise since, minus its trace now). A state word changed by anything
-        else -- an upset of the DSP's memory -- moves a block by far more. Returned: the
-        largest block change in standard deviations of that variance (~1.5-2 in normal
-        operation: the largest of three). 0 where it cannot be judged (no checkpoint, or the
-        filter re-initialised since). A float readout, for monitoring only."""
-        if self._ck is None:
-            return np.zeros(self.batch)
-        x0, tr0 = self._ck[:2]
-        if self.fixed is None:
-            ang = np.array(self._adv, dtype=np.float64)
-        else:
-            ang = np.array(self._adv, dtype=np.float64) * (2.0 * math.pi / 2.0 ** PHASE_BITS)
-        x = self.x_float()
-        pred = x0.copy()
-        for b, a in enumerate(ang):          # x_pred = A x0: R(a) = [[c, s], [-s, c]]
-            c, s = math.cos(a), math.sin(a)
-            u, v = x0[:, 2 * b], x0[:, 2 * b + 1]
-            pred[:, 2 * b], pred[:, 2 * b + 1] = c * u + s * v, -s * u + c * v
-        d = x - pred
-        d2 = np.stack([d[:, 0] ** 2 + d[:, 1] ** 2, d[:, 2] ** 2 + d[:, 3] ** 2, d[:, 4] ** 2],
-                      axis=1)
-        # the information gained: trace then, plus the process noise since, minus trace now
-        # (floored at 1e-4 of the trace then: no update since, or rounding)
-        tr = self._block_tr()
-        gained = np.maximum(tr0 + self._elapsed_s * self._q_block() - tr, 1e-4 * np.abs(tr0))
-        var = np.maximum(self.r, 0.0)[:, None] * gained
-        z = np.full(d2.shape, np.inf)
-        np.divide(d2, var, out=z, where=var > 0)
-        z[d2 == 0] = 0.0
-        return np.where(self._judged(), np.sqrt(z.max(axis=1)), 0.0)
-
-    def _q_block(self) -> np.ndarray:
-        """The process noise per second over each block's trace (units of r)."""
-        q_rot, q_dc = self.kalman.q_rates()
-        return np.array([2 * q_rot, 2 * q_rot, q_dc])
-
-    def recover(self, faulty) -> None:
-        """The answer to a failed continuity check (:meth:`state_jump`,
-        :meth:`covariance_fault`) on the trials of ``faulty``, each counted as
-        ``state_faults``: the state and covariance stored at the :meth:`checkpoint`, which
-        passed its own check, are restored and predicted to now -- the core's own
-        prediction, one step over the time since, as through a gap: the measurements since
-        are lost, nothing else. A trial whose previous check failed too (its checkpoint is
-        not trusted: e.g. a state refitted to garbage that the good pulses now pull back)
-        is re-initialised instead (counted as ``reinit``; warm-up again)."""
-        m = np.asarray(faulty, bool)
-        again = m & self._failed
-        self._failed = m.copy()
-        if not m.any():
-            return
-        self._ev[m, _EV["state_faults"]] += 1
-        if again.any():
-            self.reset(again)
-            self._ev[again, _EV["reinit"]] += 1
-        back = m & ~again
-        if not back.any():
-            return
-        x, P = self._ck[3][back], self._ck[4][back]
-        t = np.array([self._elapsed_ticks if self.fixed is not None else self._elapsed_s],
-                     dtype=np.int64 if self.fixed is not None else np.float64)
-        sc = np.empty((1, 7), self.x.dtype)
-        _step_consts(SIN_LUT, t, np.ones(1, self.x.dtype) if self.fixed is None
-                     else np.array([1 << self.fixed.P.frac], np.int64), self._ci, self._cv, sc)
-        nb = int(back.sum())
-        no_y = np.full((nb, 1), self._cv[7], self.x.dtype)      # no measurement: predict
-        cnt, ev = self._cnt[back].copy(), self._ev[back].copy()   # counters untouched
-        _run_serial(x, P, self._r[back].copy(), cnt, ev, sc, no_y, self._ci, self._cv,
-                    self._bt, self._bs, self._nq)
-        self.x[back], self.P[back] = x, P
-
-    # -- upsets (bit-error studies) -------------------------------------------------------
-    #: Words of the state as the DSP stores it: ``x[0..4]``, then the upper triangle of
-    #: ``P`` row by row (``P`` is symmetric, one word per pair).
-    STATE_WORDS = tuple(("x", i, i) for i in range(5)) + tuple(
-        ("P", i, j) for i in range(5) for j in range(i, 5))
-
-    def schedule_upsets(self, steps, words, bits) -> None:
-        """Flip state bits during later :meth:`run` calls (single-event upsets of the DSP's
-        memory; fixed point only). Upset ``k`` flips bit ``bits[k]`` of the stored word
-        ``words[k]`` (an index into :attr:`STATE_WORDS`; a ``P`` word flips both mirrored
-        entries) of every trial just before update number ``steps[k]`` (counted like
-        :attr:`n_updates`). Replaces any schedule not yet applied."""
-        if self.fixed is None:
-            raise ValueError("upsets flip bits of the fixed-point state: use a KalmanFixedConfig")
-        st = np.asarray(steps, dtype=np.int64).ravel()
-        wd = np.asarray(words, dtype=np.int64).ravel()
-        bt = np.asarray(bits, dtype=np.int64).ravel()
-        if not (st.size == wd.size == bt.size):
-            raise ValueError("steps, words and bits must have the same length")
-        if st.size and (np.any(np.diff(st) < 0) or st[0] < self.n_updates):
-            raise ValueError(f"upset steps must be sorted and >= n_updates ({self.n_updates})")
-        if wd.size and (wd.min() < 0 or wd.max() >= len(self.STATE_WORDS)):
-            raise ValueError(f"upset words must lie in 0..{len(self.STATE_WORDS) - 1}")
-        widths = np.array([self.fixed.x.width if n == "x" else self.fixed.P.width
-                           for n, _, _ in self.STATE_WORDS])
-        if bt.size and (bt.min() < 0 or np.any(bt >= widths[wd])):
-            raise ValueError("upset bit positions must lie inside the word (0 = LSB)")
-        self._upsets = (st, wd, bt, 0)
-
-    def _flip(self, word: int, bit: int) -> None:
-        name, i, j = self.STATE_WORDS[word]
-        w = (self.fixed.x if name == "x" else self.fixed.P).width
-        arr = self.x[:, i] if name == "x" else self.P[:, i, j]
-        u = (arr & np.int64((1 << w) - 1)) ^ np.int64(1 << bit)
-        v = np.where(u >= np.int64(1 << (w - 1)), u - np.int64(1 << w), u)
-        if name == "x":
-            self.x[:, i] = v
-        else:
-            self.P[:, i, j] = v
-            self.P[:, j, i] = v
-        self.upsets_applied += 1
 
     # -- boundary conversions ----------------------------------------------------------------
     def _ticks(self, dts) -> np.ndarray:
