@@ -550,15 +550,9 @@ def tacan_sensitivity(out: Path, quick: bool = False, jobs: int | None = None) -
                                  for s in snrs for b in (90.0, 270.0) for k in seeds],
                 f"SNR sweep (--detector {det})")
     kc = KalmanConfig()
-    rows, n, i = [], len(seeds), 0
-    for s in snrs:
-        crb = crb_deg(TacanSignalConfig(snr_db=s).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
-        for b in (90.0, 270.0):
-            p = _pool(runs[i:i + n])
-            i += n
-            rows.append({"snr_db": s, "bearing_deg": b, **p, "crb_deg": crb,
-                         "rmse_over_crb": p["rmse_deg"] / crb if p["rmse_deg"] is not None
-                         else None})
+    crbs = {s: crb_deg(TacanSignalConfig(snr_db=s).matched_filter_rel_sigma(), 0.21, 0.21,
+                       kc.n_eff) for s in snrs}
+    rows = _snr_rows(runs, snrs, crbs)
     crb0 = crb_deg(TacanSignalConfig(snr_db=0.0).matched_filter_rel_sigma(), 0.21, 0.21, kc.n_eff)
     sweep0, rows0 = _sweep_0db(30 if quick else 2, crb0, jobs, detector=det)
     dur = 10.0 if quick else 60.0

@@ -62,6 +62,17 @@ def _predict_only(x, P, xp, Pp):
 
 
 @_jit
+def _restart(x, P, p0, cnt, ev):
+    """Re-initialise after a numerical fault (``S <= 0`` or a negative variance): counted
+    as ``p_neg`` and ``reinit``; the warm-up starts again."""
+    ev[8] += 1
+    ev[9] += 1
+    _reset(x, P, p0)
+    cnt[0] = 0
+    cnt[1] = 0
+
+
+@_jit
 def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
     gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
@@ -148,11 +159,7 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
         r = r_st[0]
         n = cnt[0]
         if not S > 0:
-            ev[8] += 1
-            ev[9] += 1
-            _reset(x, P, p0)
-            cnt[0] = 0
-            cnt[1] = 0
+            _restart(x, P, p0, cnt, ev)
             continue
         Sn, nb = snorm(S)
         e2 = div_square(iv, Sn, nb, rf - 2 * ivf + pf, rh, rhi, ev, 5)
@@ -179,11 +186,7 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
                     P[i, j] = v
                     P[j, i] = v
             if bad:
-                ev[8] += 1
-                ev[9] += 1
-                _reset(x, P, p0)
-                cnt[0] = 0
-                cnt[1] = 0
+                _restart(x, P, p0, cnt, ev)
                 continue
         # r estimate: running mean over the second half of the warm-up, then an EWMA of the
         # innovation power clipped at the gate
