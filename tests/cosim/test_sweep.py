@@ -276,3 +276,15 @@ def test_a_cached_point_does_not_outlive_the_code(monkeypatch):
     assert k == sw.point_key(cfg, combo, 10.0, 0) != sw.point_key(cfg, combo, 10.0, 1)
     monkeypatch.setattr(dsp.jit, "source_hash", lambda dirs: "another version of the code")
     assert sw.point_key(cfg, combo, 10.0, 0) != k
+
+
+def test_a_width_that_makes_the_filter_diverge_is_not_proposed():
+    """A re-initialisation is the fixed-point filter diverging, not trial noise: a width
+    with more of them than the golden filter is refused even when the ratio's interval
+    reaches the target (one divergent trial in ten widens it down to ~0.9)."""
+    row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
+           "golden_reinit": 0, "dsp_events": {"reinit": 1}, "ratio_to_golden": 37.4,
+           "ratio_ci95": [0.94, 75.2]}
+    assert not sw._passes(row, 0.05)
+    assert sw._passes({**row, "dsp_events": {"reinit": 0}}, 0.05)
+    assert sw._passes({**row, "golden_reinit": 1}, 0.05)
