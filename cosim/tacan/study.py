@@ -15,6 +15,9 @@ Parameters (``--param NAME=VALUES``)
                           change.
 ``dsp.<fmt>.rounding``    rounding of that format (``floor`` / ``half_up``).
 ``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
+``detector``              what the FPGA detects (``both``, the default; ``pulse``; ``pair``):
+                          one value per study, since the golden chain detects the same way
+                          (a quantisation study of the single-pulse receiver: ``detector=pulse``).
 """
 from __future__ import annotations
 
@@ -25,7 +28,7 @@ import numpy as np
 
 from ..receivers import SweepModel
 
-__all__ = ["GOLDEN_ADC_BITS", "FORMATS", "check_param", "trial_signal", "run_config",
+__all__ = ["GOLDEN_ADC_BITS", "FORMATS", "check_param", "trial_signal", "run_config", "study_detector",
            "recheck_point", "TacanSweepRecord", "SWEEP_MODEL"]
 
 #: ADC word length of the float golden chain's record.
@@ -39,7 +42,7 @@ def check_param(name: str) -> None:
     from dsp.tacan.kalman import KalmanConfig
     from hdl.tacan.model import TacanFrontendParams
     hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
-    if name == "adc_bits" or name in hdl_fields:
+    if name in ("adc_bits", "detector") or name in hdl_fields:
         return
     parts = name.split(".")
     if parts[0] == "dsp" and len(parts) in (2, 3) and parts[1] in FORMATS and \
@@ -48,7 +51,7 @@ def check_param(name: str) -> None:
     if parts[0] == "kalman" and len(parts) == 2 and parts[1] in {f.name for f in fields(KalmanConfig)}:
         return
     raise ValueError(
-        f"unknown parameter {name!r}: use adc_bits, a TacanFrontendParams field "
+        f"unknown parameter {name!r}: use adc_bits, detector, a TacanFrontendParams field "
         f"({', '.join(sorted(hdl_fields))}), dsp.<fmt>[.rounding] with fmt in {FORMATS}, "
         f"or kalman.<field>")
 
@@ -73,11 +76,14 @@ def run_config(cfg, combo: tuple, sig):
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
     from ..validate import check_choice, check_int
     from .run import TacanRunConfig
-    hdl, kal, fmts = {}, {"memory_s": cfg.memory_s}, {}
+    from .run import DETECTORS
+    hdl, kal, fmts, opts = {}, {"memory_s": cfg.memory_s}, {}, {}
     base = KalmanFixedConfig()
     for name, v in combo:
         if name == "adc_bits":
             sig = replace(sig, adc_bits=check_int("adc_bits", v, 1, 24))
+        elif name == "detector":
+            opts["detector"] = check_choice("detector", v, tuple(DETECTORS))
         elif name.startswith("dsp."):
             parts = name.split(".")
             f = fmts.get(parts[1], getattr(base, parts[1]))
@@ -95,13 +101,29 @@ def run_config(cfg, combo: tuple, sig):
     kalman = KalmanConfig(**kal)
     fixed = KalmanFixedConfig(kalman=kalman, **fmts)
     run = TacanRunConfig(signal=sig, backend="model", dsp="fixed", kalman=kalman, fixed=fixed,
-                         hdl_changes=tuple(sorted(hdl.items())))
+                         hdl_changes=tuple(sorted(hdl.items())), **opts)
     run.hdl_params  # validates the word lengths (headroom, widths)
     return run
 
 
+def study_detector(cfg) -> str:
+    """The detector of every point and of the golden chain (``detector`` swept with one
+    value, else the default); ValueError for several values: each record's golden run is
+    shared by all its points, so they must detect alike."""
+    from .run import TacanRunConfig
+    vals = dict(cfg.params).get("detector")
+    if vals is None:
+        return TacanRunConfig().detector
+    if len(vals) != 1:
+        raise ValueError(f"detector={','.join(map(str, vals))}: one detector per study (the "
+                         f"golden chain of each record detects the same way); run one study "
+                         f"per detector")
+    return vals[0]
+
+
 def check_point(cfg, combo: tuple) -> None:
     """Build and validate a point's run configuration (ValueError if refused)."""
+    study_detector(cfg)
     run_config(cfg, combo, trial_signal(cfg, cfg.snr_db[0], 0))
 
 
@@ -170,7 +192,7 @@ class TacanSweepRecord:
         gs = self.signals[GOLDEN_ADC_BITS]
         grun = tr.TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
                                  kalman=KalmanConfig(memory_s=self.cfg.memory_s),
-                                 require_bearing=False)
+                                 detector=study_detector(self.cfg), require_bearing=False)
         g = tr.run_tacan(grun, gs)
         return {**_score(g), "locked": _shows_bearing(g)}
 

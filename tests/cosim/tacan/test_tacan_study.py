@@ -18,3 +18,25 @@ def test_a_record_whose_bearings_are_all_flagged_is_not_locked():
     five = rec.point((("adc_bits", 5),))
     assert five["locked"] and five["n_valid_bearings"] > 0 and five["rmse_deg"] < 0.1
     assert five["misleading_bearings"] == 0
+
+
+def test_a_study_chooses_one_detector_for_its_points_and_its_golden_chain():
+    """``detector`` is a study parameter with one value: each record's golden run is shared
+    by all its points, so a study of the single-pulse receiver runs its golden chain with
+    single pulses too; several values are refused before any point runs."""
+    import pytest
+
+    from cosim.studies.sweep import check_points
+    from cosim.tacan.study import run_config, study_detector, trial_signal
+    cfg = SweepConfig(params=(("adc_bits", (5, 6)), ("detector", ("pulse",))), recheck=0)
+    assert study_detector(cfg) == "pulse"
+    assert study_detector(SweepConfig(params=(("adc_bits", (5, 6)),), recheck=0)) == "both"
+    check_points(cfg)
+    combo = cfg.combos[0]
+    assert run_config(cfg, combo, trial_signal(cfg, 10.0, 0)).detector == "pulse"
+    two = SweepConfig(params=(("adc_bits", (5,)), ("detector", ("pulse", "both"))), recheck=0)
+    with pytest.raises(ValueError, match="one detector per study"):
+        check_points(two)
+    bad = SweepConfig(params=(("detector", ("pulses",)),), recheck=0)
+    with pytest.raises(ValueError, match="detector"):
+        check_points(bad)
