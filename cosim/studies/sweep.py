@@ -573,9 +573,9 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
 
     Word lengths that each pass alone can fail together (their losses add up). Then each
     parameter in turn is widened by one swept step, the others kept, and each of these
-    candidates re-run: the one that confirms is the answer (of several, the one with the
-    smallest worst ratio); when none does, the nearest by :func:`_shortfall` is kept and the
-    next round widens from it, up to ``max_backoff`` rounds. So only the widths that
+    candidates re-run: the one that confirms is the answer (of several, the one that widens
+    least -- one more bit before two -- then the one with the smallest worst ratio); when
+    none does, the nearest by :func:`_shortfall` is kept and the next round widens from it, up to ``max_backoff`` rounds. So only the widths that
     matter grow: a filter gain one step too short costs one parameter a step, not all of
     them. Should no round confirm, every parameter at its widest swept value (the sweep's
     reference) is the last attempt. Returns the summary: ``confirmed``, the ``params``
@@ -607,6 +607,8 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
         if not cands:
             break
         best = min(cands, key=lambda a: (not a["confirmed"],
+                                         a["params"][a["widened"]] - best["params"][a["widened"]]
+                                         if a["confirmed"] else 0,
                                          _shortfall(a["rows"], cfg.target_rel)))
     if not best["confirmed"]:
         widest = {n: ref[n] for n, _ in cfg.params}

@@ -288,3 +288,25 @@ def test_a_width_that_makes_the_filter_diverge_is_not_proposed():
     assert not sw._passes(row, 0.05)
     assert sw._passes({**row, "dsp_events": {"reinit": 0}}, 0.05)
     assert sw._passes({**row, "golden_reinit": 1}, 0.05)
+
+
+def test_of_several_confirming_widenings_the_smallest_is_kept(monkeypatch, tmp_path):
+    """When widening either of two parameters confirms, the one that adds fewer bits wins
+    (ADC 4 -> 5 before P 34 -> 38), even though the other's ratio is better."""
+    cfg = SweepConfig(params=(("adc_bits", (4, 5, 6)), ("dsp.P", (34, 38, 46))), recheck=0,
+                      design="oat")
+    _fake_confirmation(monkeypatch, lambda p: 0 if p["adc_bits"] >= 5 or p["dsp.P"] >= 38 else 2)
+    ratio = {5: 1.04, 4: 1.0}
+
+    real = sw.run_sweep
+
+    def with_ratios(ccfg, out, **kw):
+        s = real(ccfg, out, **kw)
+        p = {n: v[0] for n, v in ccfg.params}
+        if s["rows"][0]["dsp_events"]["reinit"] == 0:
+            s["rows"][0]["ratio_to_golden"] = ratio[p["adc_bits"]]
+        return s
+    monkeypatch.setattr(sw, "run_sweep", with_ratios)
+    c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False)
+    assert [a["confirmed"] for a in c["attempts"]] == [False, True, True]
+    assert c["confirmed"] and c["params"] == {"adc_bits": 5, "dsp.P": 34}
