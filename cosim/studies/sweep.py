@@ -19,7 +19,13 @@ Execution: tasks are (SNR, trial) records -- one signal generation, the golden c
 then every parameter combination -- run on a local process pool (default: all cores) or a
 Dask cluster (``scheduler="dask"`` starts a local one, or give a scheduler address). Every
 point is cached as ``points/<key>.json`` under the output directory, so an interrupted sweep
-resumes where it stopped; the key hashes everything that defines the point.
+resumes where it stopped; the key hashes everything that defines the point, the project's
+sources included.
+
+Proposal and confirmation: the proposal takes each parameter alone to its smallest value
+that locks, re-initialises and scores like the golden chain (:func:`propose`); the
+confirmation re-runs the proposal on fresh seeds, all values together, and where the losses
+add up widens the parameter whose widening confirms (:func:`confirm`).
 """
 from __future__ import annotations
 
@@ -696,6 +702,8 @@ def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
     ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0] for n, v in cfg.params}
     files = []
     for n, vals in cfg.params:
+        if len(vals) < 2:           # held fixed (e.g. detector=pulse): nothing to plot
+            continue
         fig, ax = plt.subplots(figsize=(7, 4.5))
         numeric = all(isinstance(x, (int, float)) for x in vals)
         xs = list(vals) if numeric else list(range(len(vals)))

@@ -310,3 +310,11 @@ def test_of_several_confirming_widenings_the_smallest_is_kept(monkeypatch, tmp_p
     c = sw.confirm(cfg, {"adc_bits": 4, "dsp.P": 34}, tmp_path, progress=False)
     assert [a["confirmed"] for a in c["attempts"]] == [False, True, True]
     assert c["confirmed"] and c["params"] == {"adc_bits": 5, "dsp.P": 34}
+
+
+def test_a_parameter_held_at_one_value_gets_no_plot(tmp_path):
+    cfg = SweepConfig(params=(("adc_bits", (6, 8)), ("detector", ("pulse",))), recheck=0)
+    rows = [{"adc_bits": b, "detector": "pulse", "snr_db": float(s), "rmse_deg": 0.1,
+             "golden_rmse_deg": 0.1, "crb_deg": 0.09} for b in (6, 8) for s in cfg.snr_db]
+    assert sw._plot(cfg, rows, tmp_path) == ["rmse_vs_adc_bits.png"]
+    assert not (tmp_path / "rmse_vs_detector.png").exists()
