@@ -581,12 +581,12 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
     parameter in turn is widened by one swept step, the others kept, and each of these
     candidates re-run: the one that confirms is the answer (of several, the one that widens
     least -- one more bit before two -- then the one with the smallest worst ratio); when
-    none does, the nearest by :func:`_shortfall` is kept and the next round widens from it, up to ``max_backoff`` rounds. So only the widths that
-    matter grow: a filter gain one step too short costs one parameter a step, not all of
-    them. Should no round confirm, every parameter at its widest swept value (the sweep's
-    reference) is the last attempt. Returns the summary: ``confirmed``, the ``params``
-    finally confirmed (or last tried), the ``attempts`` (params, rows, and the parameter
-    each candidate widened)."""
+    none does, the nearest by :func:`_shortfall` is kept and the next round widens from it,
+    up to ``max_backoff`` rounds. So only the widths that matter grow: a filter gain one
+    step too short costs one parameter a step, not all of them. Should no round confirm,
+    every parameter at its widest swept value (the sweep's reference) is the last attempt.
+    Returns the summary: ``confirmed``, the ``params`` finally confirmed (or last tried),
+    the ``attempts`` (params, rows, and the parameter each candidate widened)."""
     if not proposal or any(v is None for v in proposal.values()):
         return {"confirmed": False, "reason": "no complete proposal (some parameter never "
                                              "meets the target in the swept range)",
@@ -784,9 +784,10 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
     lines += ["", "## Word-length proposal", "",
               f"Smallest value of each parameter (the others at their largest swept value) such "
               f"that it and every larger value lock as often as the golden chain, re-initialise "
-              f"the filter no more often than it, and keep the paired RMSE within {100 * cfg.target_rel:g} % of it -- or not significantly "
-              f"above (the lower end of the ratio's 95 % bootstrap interval over the trials "
-              f"is) -- at every SNR where the golden chain locks on >= 80 % of the trials:",
+              f"the filter no more often than it, and keep the paired RMSE within "
+              f"{100 * cfg.target_rel:g} % of it -- or not significantly above (the lower end "
+              f"of the ratio's 95 % bootstrap interval over the trials is) -- at every SNR "
+              f"where the golden chain locks on >= 80 % of the trials:",
               ""]
     lows = {n: min(v) for n, v in cfg.params if all(isinstance(x, (int, float)) for x in v)}
     for n, v in s["proposal"].items():

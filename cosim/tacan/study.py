@@ -17,7 +17,7 @@ Parameters (``--param NAME=VALUES``)
 ``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
 ``detector``              what the FPGA detects (``both``, the default; ``pulse``; ``pair``):
                           one value per study, since the golden chain detects the same way
-                          (a quantisation study of the single-pulse receiver: ``detector=pulse``).
+                          (the single-pulse receiver's study: ``detector=pulse``).
 """
 from __future__ import annotations
 
@@ -28,8 +28,8 @@ import numpy as np
 
 from ..receivers import SweepModel
 
-__all__ = ["GOLDEN_ADC_BITS", "FORMATS", "check_param", "trial_signal", "run_config", "study_detector",
-           "recheck_point", "TacanSweepRecord", "SWEEP_MODEL"]
+__all__ = ["GOLDEN_ADC_BITS", "FORMATS", "check_param", "trial_signal", "run_config",
+           "study_detector", "recheck_point", "TacanSweepRecord", "SWEEP_MODEL"]
 
 #: ADC word length of the float golden chain's record.
 GOLDEN_ADC_BITS = 16
