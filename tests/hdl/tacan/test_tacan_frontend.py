@@ -856,6 +856,32 @@ def test_verilator_merge_collisions(checks):
 
 @pytest.mark.verilator
 @verilator
+def test_verilator_merge_collision_at_decimation_4():
+    """Decimation 4, the default: a pulse word and a pair word meet only when valid has
+    gaps (once in this 400k-sample record, :func:`test_collisions_follow_the_latency_difference`);
+    the Verilated top, with DSP stalls, holds the pair word as the model does: word for word
+    and cycle."""
+    from cosim.verilator import VerilatorStreamSim
+    p = _both_params(fifo_depth=8)
+    m = TacanFrontendModel(p)
+    x = tacan_record(400_000, seed=3)
+    pk, _ = m.run(x)
+    gaps = np.random.default_rng(3).random(len(x) * 2) < 0.6
+    assert _collisions(m, pk, gaps) == 1
+    n = int(np.flatnonzero(gaps)[len(x) - 1]) + 2000
+    in_valid = gaps[:n]
+    ready = stall_pattern(n, seed=5, burst=600)
+    sim = VerilatorStreamSim(TacanFrontEnd(p), name="tacan_frontend_both_d4")
+    res = sim.run(x, in_valid=in_valid, out_ready=ready, n_cycles=n,
+                  inputs={"freq": p.nco_freq_word})
+    ref = m.fifo_output(pk, n, in_valid=in_valid, out_ready=ready)
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(res.cycles, ref.cycles)
+    assert len(ref.words) > 200
+
+
+@pytest.mark.verilator
+@verilator
 def test_exported_top_lints_clean_both_searches(tmp_path):
     from cosim.verilog import export_verilog, lint
     for name, p in (("tacan_frontend_both", BOTH),
