@@ -19,7 +19,11 @@ Nothing is taken on trust, because the link may carry bit errors:
   (``ts_rejected``). A corrupted timestamp
   costs its own word; after ``resync_after`` consecutive rejections the receiver
   re-synchronises (``ts_resyncs``): a real outage longer than ``max_gap_ticks`` costs
-  ``resync_after`` peaks;
+  ``resync_after`` peaks. With two searches a timeline re-synchronises on the other's
+  (the references come from one, the measurements from the other: an offset between them
+  would be a bearing error), and its words behind a tick already handed on -- after a
+  corrupted word that got through, up to its error -- are held back and counted as
+  rejected;
 * marker payloads add to ``dropped_reported``; a marker claiming more drops than the link
   can produce (``max_marker``) is counted as ``bad_markers`` instead.
 
@@ -48,6 +52,9 @@ class RxTrack:
     last_tick: int = 0
     rejects: int = 0
     pending: tuple | None = None   # (wrapped timestamp, amplitude, data word number)
+    #: the last tick handed on; after a re-anchoring behind it, words are held back until
+    #: the timeline passes it (the ticks handed on only ascend)
+    emitted_tick: int = -(1 << 62)
 
 
 @dataclass
@@ -68,7 +75,22 @@ class RxState:
 
 
 # Columns of the kernel's per-track state rows.
-_LAST_W, _LAST_T, _REJ, _HAVE_C, _C_TS, _C_AMP, _C_SEQ = range(7)
+_LAST_W, _LAST_T, _REJ, _HAVE_C, _C_TS, _C_AMP, _C_SEQ, _EMIT_T = range(8)
+
+
+@njit_cached(nogil=True)
+def _anchor(st, s, c_ts, tmask):
+    """With two searches: ``(True, tick)`` of the wrapped timestamp ``c_ts`` of track ``s``
+    unwrapped next to the other track's timeline when that one is running (the two
+    searches' timestamps are close in time, far less than half a wrap apart), else
+    ``(False, 0)``."""
+    o = 1 - s
+    if st.shape[0] == 2 and st[o, _LAST_W] >= 0:
+        d = (c_ts - st[o, _LAST_W]) & tmask
+        if d > (tmask >> 1):
+            d -= tmask + 1
+        return True, st[o, _LAST_T] + d
+    return False, np.int64(0)
 
 
 @njit_cached(nogil=True)
@@ -78,18 +100,14 @@ def _decide(st, s, n_ts, last, tmask, max_gap, resync_after, out_t, out_a, out_i
     alone, ``last``); append it to the outputs if accepted; return the new output count."""
     c_ts = st[s, _C_TS]
     last_w, last_t, rej = st[s, _LAST_W], st[s, _LAST_T], st[s, _REJ]
+    counted = False             # already counted as rejected (the word that resynchronises)
     d_cn = (n_ts - c_ts) & tmask
     p_cn = last or (0 < d_cn <= max_gap)
     if last_w < 0:
         accept, t = p_cn, c_ts
-        o = 1 - s
-        if st.shape[0] == 2 and st[o, _LAST_W] >= 0:
-            # The other search's timeline is running: unwrap next to it (the two searches'
-            # timestamps are close in time, far less than half a wrap apart).
-            d = (c_ts - st[o, _LAST_W]) & tmask
-            if d > (tmask >> 1):
-                d -= tmask + 1
-            t = st[o, _LAST_T] + d
+        other, ta = _anchor(st, s, c_ts, tmask)
+        if other:               # the other search's timeline is running: unwrap next to it
+            t = ta
         if not accept:
             stats[5] += 1
     else:
@@ -108,7 +126,15 @@ def _decide(st, s, n_ts, last, tmask, max_gap, resync_after, out_t, out_a, out_i
                 stats[6] += 1
                 rej = 0
                 accept = True
-                if tmask + 1 - d_ac <= max_gap:
+                counted = True
+                other, ta = _anchor(st, s, c_ts, tmask)
+                if other:
+                    # Two searches: re-anchor on the other's timeline. An offset between
+                    # the two would put the measurements (pairs) off the references'
+                    # timing (single pulses): a constant bearing error, shown valid (the
+                    # FIFO fault study at 1e-3 without parity: 40 % misleading).
+                    t = ta
+                elif tmask + 1 - d_ac <= max_gap:
                     # C is a little *behind* A: A itself was a corrupted word that
                     # got through. Re-anchor just after it rather than jump a wrap
                     # ahead; later ticks keep a constant offset (harmless: the DSP
@@ -119,6 +145,13 @@ def _decide(st, s, n_ts, last, tmask, max_gap, resync_after, out_t, out_a, out_i
     st[s, _REJ] = rej
     if accept:
         st[s, _LAST_W], st[s, _LAST_T] = c_ts, t
+        if t <= st[s, _EMIT_T]:
+            # behind a tick already handed on (re-anchored behind a corrupted word that got
+            # through): held back, counted as rejected, until the timeline passes it
+            if not counted:
+                stats[5] += 1
+            return n
+        st[s, _EMIT_T] = t
         out_t[n] = t
         out_a[n] = st[s, _C_AMP]
         out_i[n] = st[s, _C_SEQ]
@@ -259,7 +292,7 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
     else:
         src = np.zeros(data.size, np.int64)
     st = np.array([[t.last_wrapped, t.last_tick, t.rejects, t.pending is not None,
-                    *(t.pending if t.pending is not None else (0, 0, 0))]
+                    *(t.pending if t.pending is not None else (0, 0, 0)), t.emitted_tick]
                    for t in state.tracks], np.int64)
     cap = data.size + n_tracks
     out_t, out_a, out_i, out_s = (np.empty(cap, np.int64) for _ in range(4))
@@ -273,7 +306,8 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
         stats[STAT_NAMES.index(name)] = ls[generic]
     for t, row in zip(state.tracks, st):
         t.last_wrapped, t.last_tick, t.rejects = (int(v) for v in row[:3])
-        t.pending = tuple(int(v) for v in row[_C_TS:]) if row[_HAVE_C] else None
+        t.pending = tuple(int(v) for v in row[_C_TS:_EMIT_T]) if row[_HAVE_C] else None
+        t.emitted_tick = int(row[_EMIT_T])
     state.n_data += int(data.size)
     for name, v in zip(STAT_NAMES, stats):
         state.stats[name] += int(v)
