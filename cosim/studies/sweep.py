@@ -22,10 +22,7 @@ point is cached as ``points/<key>.json`` under the output directory, so an inter
 resumes where it stopped; the key hashes everything that defines the point, the project's
 sources included.
 
-Proposal and confirmation: the proposal takes each parameter alone to its smallest value
-that locks, re-initialises and scores like the golden chain (:func:`propose`); the
-confirmation re-runs the proposal on fresh seeds, all values together, and where the losses
-add up widens the parameter whose widening confirms (:func:`confirm`).
+Proposal and confirmation: :mod:`cosim.studies.proposal`.
 """
 from __future__ import annotations
 
@@ -36,12 +33,15 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from cosim.validate import check_jobs, dumps
+
+# the proposal and its confirmation (also the names the tests reach through this module)
+from .proposal import _confirms, _passes, _ratio_ci, aggregate, confirm, propose  # noqa: F401
 
 #: CPU seconds one point costs per second of record (TACAN's: model front end, FIFO, fixed
 #: DSP and its share of the golden chain; measured ~1 s, with margin; a receiver gives its
@@ -415,219 +415,6 @@ def _cfg_dict(cfg: SweepConfig) -> dict:
     d["params"] = [[n, list(v)] for n, v in cfg.params]
     d["snr_db"] = list(cfg.snr_db)
     return d
-
-
-# ---------------------------------------------------------------------------------------
-# Aggregation, proposal, report
-# ---------------------------------------------------------------------------------------
-def _ratio_ci(pairs, key: str, n_boot: int = 2000, fig: str = "rmse_deg") -> list[float] | None:
-    """95 % bootstrap interval (over trials, paired) of the RMSE ratio point / golden.
-
-    Within one trial the bearings are strongly correlated (the filter's memory spans a good
-    part of the scored time), so the trials are the independent samples; resampling them
-    in pairs keeps the cancellation of the common noise. Seeded from ``key``: the same
-    results give the same interval."""
-    if len(pairs) < 3:
-        return None
-    a = np.array([r[fig] ** 2 for r, _ in pairs])
-    b = np.array([g[fig] ** 2 for _, g in pairs])
-    seed = int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "little")
-    idx = np.random.default_rng(seed).integers(0, len(pairs), (n_boot, len(pairs)))
-    ratio = np.sqrt(a[idx].mean(axis=1) / np.maximum(b[idx].mean(axis=1), 1e-300))
-    lo, hi = np.quantile(ratio, [0.025, 0.975])
-    return [float(lo), float(hi)]
-
-
-def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
-    """Per (combo, SNR): RMSE over the trials (locked ones), lock rate, the paired golden
-    RMSE on the same records, CRB, events, drops."""
-    P = primary_key(cfg.receiver)
-    gold = {(r["snr_db"], r["trial"]): r for r in results if r.get("kind") == "golden"}
-    pts = [r for r in results if r.get("kind") == "point"]
-    rows = []
-    for combo in cfg.combos:
-        cl = [list(c) for c in combo]
-        for snr in cfg.snr_db:
-            rs = [r for r in pts if r["combo"] == cl and r["snr_db"] == float(snr)]
-            if not rs:
-                continue
-            err = [r.get("error") for r in rs if r.get("error")]
-            ok = [r for r in rs if r["locked"] and r.get(P) is not None]
-            gok = [gold.get((r["snr_db"], r["trial"])) for r in ok]
-            paired = [(r, g) for r, g in zip(ok, gok) if g and g.get("locked")]
-            ev: dict = {}
-            for r in rs:
-                for k, v in (r.get("dsp_events") or {}).items():
-                    ev[k] = ev.get(k, 0) + int(v)
-            rmse = float(np.sqrt(np.mean([r[P] ** 2 for r in ok]))) if ok else None
-            g_rmse = float(np.sqrt(np.mean([g[P] ** 2 for _, g in paired]))) if paired else None
-            p_rmse = float(np.sqrt(np.mean([r[P] ** 2 for r, _ in paired]))) if paired else None
-            ng = sum(1 for r in rs if (gold.get((r["snr_db"], r["trial"])) or {}).get("locked"))
-            g_reinit = sum(int(((gold.get((r["snr_db"], r["trial"])) or {}).get("dsp_events")
-                                or {}).get("reinit", 0)) for r in rs)
-            row = {**{n: v for n, v in combo}, "snr_db": float(snr), "trials": len(rs),
-                   "invalid": err[0] if err else None,
-                   "locked": len(ok), "golden_locked": ng, "golden_reinit": g_reinit,
-                   P: rmse, "golden_" + P: g_rmse,
-                   "ratio_to_golden": (p_rmse / g_rmse) if (paired and g_rmse) else None,
-                   "ratio_ci95": _ratio_ci(paired, json.dumps([cl, float(snr)]), fig=P),
-                   "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in ok]))
-                   if ok and all(r.get("mean_error_deg") is not None for r in ok) else None,
-                   "crb_deg": rs[0].get("crb_deg") or (gold.get((rs[0]["snr_db"], rs[0]["trial"])) or {}).get("crb_deg"),
-                   "adc_clipped": int(sum(r.get("adc_clipped") or 0 for r in rs)),
-                   "fifo_dropped": int(sum(r.get("fifo_dropped") or 0 for r in rs)),
-                   "dsp_events": ev}
-            rows.append(row)
-    return rows
-
-
-def _reinit_beyond_golden(row: dict) -> bool:
-    """The fixed-point filter was re-initialised more often than the golden one."""
-    return (row.get("dsp_events") or {}).get("reinit", 0) > row.get("golden_reinit", 0)
-
-
-def _passes(row: dict, target_rel: float) -> bool:
-    """A point meets the target at one SNR: it locks as often as the golden chain, its
-    filter is not re-initialised more often than the golden one, and its paired RMSE ratio
-    to the golden one is within ``1 + target_rel`` -- or not significantly above it (the
-    lower end of its 95 % bootstrap interval is): at low SNR the trial-to-trial spread of a
-    short run is several per cent, and a width must not be refused for noise the study
-    cannot resolve (the report shows the intervals). A re-initialisation is not that noise:
-    it is the fixed-point filter diverging (``P`` 34 bits: one in 10 trials, a 37x ratio
-    whose interval still reached 0.94), and it refuses the width. SNRs where the golden
-    chain does not lock on most trials are not judged."""
-    if row["invalid"]:
-        return False
-    if row["golden_locked"] < 0.8 * row["trials"]:
-        return True
-    if row["locked"] < row["golden_locked"] or _reinit_beyond_golden(row):
-        return False
-    r = row["ratio_to_golden"]
-    if r is None:
-        return False
-    ci = row.get("ratio_ci95")
-    return r <= 1 + target_rel or (ci is not None and ci[0] <= 1 + target_rel)
-
-
-def propose(cfg: SweepConfig, rows: list[dict]) -> dict:
-    """Smallest value of each numeric swept parameter (the others at their largest swept
-    value) such that it and every larger value pass at every SNR (see :func:`_passes`)."""
-    names = [n for n, _ in cfg.params]
-    ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0]
-           for n, v in cfg.params}
-    out = {}
-    for n, vals in cfg.params:
-        if not all(isinstance(x, (int, float)) for x in vals):
-            continue
-        ok_vals = []
-        for v in sorted(vals):
-            sel = [r for r in rows if r[n] == v and all(r[m] == ref[m] for m in names if m != n)]
-            ok_vals.append((v, bool(sel) and all(_passes(r, cfg.target_rel) for r in sel)))
-        best = None
-        for v, ok in reversed(ok_vals):
-            if not ok:
-                break
-            best = v
-        out[n] = best
-    return out
-
-
-def _confirms(row: dict, target_rel: float) -> bool:
-    """The confirmation's test at one SNR, stricter than the proposal's: the measured paired
-    ratio itself must be within ``1 + target_rel``; as in the proposal, the lock count that
-    of the golden chain and no more re-initialisations than the golden filter (a combination
-    of word lengths that makes the filter diverge now and then is not confirmed by a lucky
-    RMSE)."""
-    if row["invalid"]:
-        return False
-    if row["golden_locked"] < 0.8 * row["trials"]:
-        return True
-    if row["locked"] < row["golden_locked"]:
-        return False
-    if _reinit_beyond_golden(row):
-        return False
-    return row["ratio_to_golden"] is not None and row["ratio_to_golden"] <= 1 + target_rel
-
-
-def _shortfall(rows: list[dict], target_rel: float) -> tuple:
-    """How far a confirmation run is from confirming, to rank the candidates of a round
-    (smaller is nearer): the SNRs that fail, the filter re-initialisations beyond the golden
-    chain's, the worst measured ratio."""
-    bad = sum(1 for r in rows if not _confirms(r, target_rel))
-    extra = sum(max(0, int((r.get("dsp_events") or {}).get("reinit", 0))
-                    - int(r.get("golden_reinit", 0))) for r in rows)
-    worst = max((r["ratio_to_golden"] for r in rows if r.get("ratio_to_golden") is not None),
-                default=math.inf)
-    return bad, extra, worst
-
-
-def _widen_one(cfg: SweepConfig, params: dict) -> list[tuple[str, dict]]:
-    """Each numeric parameter alone one swept value wider (where there is one)."""
-    out = []
-    for n, vals in cfg.params:
-        if n in params and all(isinstance(x, (int, float)) for x in vals):
-            larger = sorted(v for v in vals if v > params[n])
-            if larger:
-                out.append((n, {**params, n: larger[0]}))
-    return out
-
-
-def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler="local",
-            progress=True, max_backoff: int = 3) -> dict:
-    """Re-run the proposed combination (all proposed values together) on fresh seeds and
-    check it against the golden chain with the stricter :func:`_confirms`.
-
-    Word lengths that each pass alone can fail together (their losses add up). Then each
-    parameter in turn is widened by one swept step, the others kept, and each of these
-    candidates re-run: the one that confirms is the answer (of several, the one that widens
-    least -- one more bit before two -- then the one with the smallest worst ratio); when
-    none does, the nearest by :func:`_shortfall` is kept and the next round widens from it,
-    up to ``max_backoff`` rounds. So only the widths that matter grow: a filter gain one
-    step too short costs one parameter a step, not all of them. Should no round confirm,
-    every parameter at its widest swept value (the sweep's reference) is the last attempt.
-    Returns the summary: ``confirmed``, the ``params`` finally confirmed (or last tried),
-    the ``attempts`` (params, rows, and the parameter each candidate widened)."""
-    if not proposal or any(v is None for v in proposal.values()):
-        return {"confirmed": False, "reason": "no complete proposal (some parameter never "
-                                             "meets the target in the swept range)",
-                "attempts": []}
-    ref = cfg.reference
-    attempts = []
-
-    def attempt(params: dict, widened: str | None) -> dict:
-        fixed = tuple((n, (params[n],)) for n, _ in cfg.params)
-        ccfg = replace(cfg, params=fixed, seed=cfg.seed + 1, recheck=0, design="grid")
-        s = run_sweep(ccfg, out / "confirm", jobs=jobs, scheduler=scheduler, progress=progress)
-        rows = s["rows"]
-        a = {"params": dict(params), "widened": widened, "rows": rows,
-             "confirmed": bool(all(_confirms(r, cfg.target_rel) for r in rows))}
-        attempts.append(a)
-        return a
-
-    best = attempt({n: (proposal[n] if n in proposal else ref[n]) for n, _ in cfg.params},
-                   None)
-    for _ in range(max_backoff):
-        if best["confirmed"]:
-            break
-        cands = [attempt(p, n) for n, p in _widen_one(cfg, best["params"])]
-        if not cands:
-            break
-        best = min(cands, key=lambda a: (not a["confirmed"],
-                                         a["params"][a["widened"]] - best["params"][a["widened"]]
-                                         if a["confirmed"] else 0,
-                                         _shortfall(a["rows"], cfg.target_rel)))
-    if not best["confirmed"]:
-        widest = {n: ref[n] for n, _ in cfg.params}
-        if widest != best["params"]:
-            best = attempt(widest, "all")
-    res = {"confirmed": best["confirmed"], "params": best["params"], "seed": cfg.seed + 1,
-           "rows": best["rows"], "attempts": attempts}
-    model = sweep_model(cfg.receiver)
-    if cfg.recheck > 0 and model.confirm_recheck is not None:
-        # the combination proposed is the one to build: prove its bits on the RTL too
-        combo = tuple((n, best["params"][n]) for n, _ in cfg.params)
-        res["recheck"] = {"combo": [list(c) for c in combo], **model.confirm_recheck(cfg, combo)}
-    return res
 
 
 def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: float = 0.0) -> dict:

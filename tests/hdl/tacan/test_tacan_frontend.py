@@ -831,27 +831,33 @@ def test_verilator_equals_model_both_searches(samples, stall):
         assert r["dropped"] > 0 and r["markers"] > 0
 
 
+def _verilator_words_with_stalls(p, m, pk, x, in_valid, n, name):
+    """The Verilated top on ``x`` (valid ``in_valid``, DSP stalls) against the model's FIFO
+    words for the peaks ``pk``: word for word and cycle; returns the model's words."""
+    from cosim.verilator import VerilatorStreamSim
+    ready = stall_pattern(n, seed=5, burst=600)
+    res = VerilatorStreamSim(TacanFrontEnd(p), name=name).run(
+        x, in_valid=in_valid, out_ready=ready, n_cycles=n, inputs={"freq": p.nco_freq_word})
+    ref = m.fifo_output(pk, n, in_valid=in_valid, out_ready=ready)
+    np.testing.assert_array_equal(res.words, ref.words)
+    np.testing.assert_array_equal(res.cycles, ref.cycles)
+    return ref.words
+
+
 @pytest.mark.verilator
 @verilator
 @pytest.mark.parametrize("checks", [True, False])
 def test_verilator_merge_collisions(checks):
     """Decimation 2: the collisions of :data:`TRIPLES` (with the checks off they need the
     gaps in valid), with DSP stalls, on the Verilated top: word for word and cycle."""
-    from cosim.verilator import VerilatorStreamSim
     p = _both_params(cic_rate=2, checks=checks, fifo_depth=8)
     m = TacanFrontendModel(p)
     pk, _ = m.run(TRIPLES)
     in_valid, hits = COLLISIONS[checks]
     assert _collisions(m, pk, in_valid) == hits
-    n = TRIPLES.size * 3 // 2 + 2000
-    ready = stall_pattern(n, seed=5, burst=600)
-    sim = VerilatorStreamSim(TacanFrontEnd(p), name="tacan_frontend_both_d2")
-    res = sim.run(TRIPLES, in_valid=in_valid, out_ready=ready, n_cycles=n,
-                  inputs={"freq": p.nco_freq_word})
-    ref = m.fifo_output(pk, n, in_valid=in_valid, out_ready=ready)
-    np.testing.assert_array_equal(res.words, ref.words)
-    np.testing.assert_array_equal(res.cycles, ref.cycles)
-    assert len(ref.words) > 50
+    words = _verilator_words_with_stalls(p, m, pk, TRIPLES, in_valid,
+                                         TRIPLES.size * 3 // 2 + 2000, "tacan_frontend_both_d2")
+    assert len(words) > 50
 
 
 @pytest.mark.verilator
@@ -861,7 +867,6 @@ def test_verilator_merge_collision_at_decimation_4():
     gaps (once in this 400k-sample record, :func:`test_collisions_follow_the_latency_difference`);
     the Verilated top, with DSP stalls, holds the pair word as the model does: word for word
     and cycle."""
-    from cosim.verilator import VerilatorStreamSim
     p = _both_params(fifo_depth=8)
     m = TacanFrontendModel(p)
     x = tacan_record(400_000, seed=3)
@@ -869,15 +874,8 @@ def test_verilator_merge_collision_at_decimation_4():
     gaps = np.random.default_rng(3).random(len(x) * 2) < 0.6
     assert _collisions(m, pk, gaps) == 1
     n = int(np.flatnonzero(gaps)[len(x) - 1]) + 2000
-    in_valid = gaps[:n]
-    ready = stall_pattern(n, seed=5, burst=600)
-    sim = VerilatorStreamSim(TacanFrontEnd(p), name="tacan_frontend_both_d4")
-    res = sim.run(x, in_valid=in_valid, out_ready=ready, n_cycles=n,
-                  inputs={"freq": p.nco_freq_word})
-    ref = m.fifo_output(pk, n, in_valid=in_valid, out_ready=ready)
-    np.testing.assert_array_equal(res.words, ref.words)
-    np.testing.assert_array_equal(res.cycles, ref.cycles)
-    assert len(ref.words) > 200
+    words = _verilator_words_with_stalls(p, m, pk, x, gaps[:n], n, "tacan_frontend_both_d4")
+    assert len(words) > 200
 
 
 @pytest.mark.verilator
