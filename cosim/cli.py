@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .receivers import add_options, get, parse_finite, parse_int, receivers
-from .validate import check_jobs, check_out_dir, dumps
+from .core.receivers import add_options, get, parse_finite, parse_int, receivers
+from .core.validate import check_jobs, check_out_dir, dumps
 
 #: Errors a user can cause (bad input, a full disk, a run too big): one line on stderr and
 #: exit 2; the traceback only with --debug.
@@ -33,7 +33,7 @@ def _parser(sub, name, **kw):
 
 def _add_receivers(sub):
     """``python -m cosim <receiver>``, ``sweep <receiver>`` and ``faults <receiver>``: one
-    subcommand per registered receiver (:mod:`cosim.receivers`), its options derived from
+    subcommand per registered receiver (:mod:`cosim.core.receivers`), its options derived from
     its configuration dataclasses."""
     rx = receivers()
     for r in rx:
@@ -65,41 +65,45 @@ def _add_adc_loss(sub):
                                     "`python -m cosim adc-loss --help`", add_help=False)
 
 
-#: Benchmarks that spread over worker processes (--jobs); the others measure one core or
-#: size their own pool.
-_BENCH_JOBS = ("tacan-accuracy", "tacan-robustness", "tacan-detector", "tacan-sensitivity",
-               "tacan-confidence", "ins")
-
-
 def _add_bench(sub):
     p = _parser(sub, "bench", help="run a benchmark and write its results under results/")
-    from .bench import BENCHMARKS
-    p.add_argument("name", type=str.lower, choices=sorted(BENCHMARKS), help="benchmark")
+    from .tools.bench import benchmarks
+    known = benchmarks()
+    p.add_argument("name", type=str.lower, choices=sorted(known), help="benchmark")
     p.add_argument("--quick", action="store_true",
                    help="reduced sweep (smoke test); written to build/bench_quick unless "
                         "--out is given, never to results/")
     p.add_argument("--out", default=None,
                    help="output directory (default results, or build/bench_quick with --quick)")
     p.add_argument("--jobs", type=parse_int, default=None,
-                   help=f"worker processes, 1 .. the cores ({', '.join(_BENCH_JOBS)}; default: "
-                        f"all cores)")
+                   help=f"worker processes, 1 .. the cores ({', '.join(_jobs_benchmarks())}; "
+                        f"default: all cores)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=_cmd_bench)
 
 
+def _jobs_benchmarks() -> list[str]:
+    """Benchmarks that spread over worker processes (--jobs); the others measure one core
+    or size their own pool."""
+    from .tools.bench import benchmarks
+    return [name for name, b in benchmarks().items() if b.jobs]
+
+
 def _cmd_bench(a) -> int:
     from pathlib import Path
-    from . import bench
+    from .core.provenance import REPO_ROOT
+    from .tools.bench import run
     out = a.out or ("build/bench_quick" if a.quick else "results")
-    if a.quick and Path(out).resolve() == (bench._REPO / "results").resolve():
+    if a.quick and Path(out).resolve() == (REPO_ROOT / "results").resolve():
         raise ValueError("--quick results are a smoke test: they must not overwrite the "
                          "published results/ (use another --out)")
-    if a.jobs is not None and a.name not in _BENCH_JOBS:
+    jobs_benchmarks = _jobs_benchmarks()
+    if a.jobs is not None and a.name not in jobs_benchmarks:
         raise ValueError(f"--jobs has no effect on bench {a.name} (only on "
-                         f"{', '.join(_BENCH_JOBS)})")
+                         f"{', '.join(jobs_benchmarks)})")
     jobs = check_jobs(a.jobs) if a.jobs is not None else None
     check_out_dir(out, "--out")
-    summary = bench.run(a.name, out=out, quick=a.quick, jobs=jobs)
+    summary = run(a.name, out=out, quick=a.quick, jobs=jobs)
     if a.json:
         print(dumps(summary))
     return 0
@@ -152,7 +156,7 @@ def _add_hdl(sub):
 
 
 def _cmd_check_equivalence(a) -> int:
-    from .equivalence import BACKENDS, check_record_size
+    from .tools.equivalence import BACKENDS, check_record_size
     backends = tuple(b.strip().lower() for b in a.backends.split(",") if b.strip())
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
@@ -212,7 +216,7 @@ def hdl_blocks() -> dict:
 
 def _cmd_verilog(a) -> int:
     import shutil
-    from .verilog import export_verilog, lint
+    from .tools.verilog import export_verilog, lint
     check_out_dir(a.out, "--out")
     out, bad = [], 0
     do_lint = not a.no_lint and shutil.which("verilator") is not None
@@ -237,7 +241,7 @@ def _cmd_verilog(a) -> int:
 
 def _cmd_synth(a) -> int:
     import time
-    from .synth import synth, tool_versions
+    from .tools.synth import synth, tool_versions
     check_out_dir(a.out, "--out")
     if a.results is not None:
         check_out_dir(a.results, "--results")
@@ -264,7 +268,7 @@ def _cmd_synth(a) -> int:
              **{k: r[k] for k in ("lut4", "ff", "mult18", "bram", "fmax_mhz")}}
     if a.results:
         from pathlib import Path
-        from .bench import machine_info
+        from .core.provenance import machine_info
         Path(a.results).mkdir(parents=True, exist_ok=True)
         rec = {**short, "device": r["device"], "target_mhz": r["target_mhz"],
                "timing_met": r["timing_met"], "seed": a.seed, "router": a.router,
@@ -297,7 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    from .bench import source_commit
+    from .core.provenance import source_commit
     source_commit()         # results name the code this run started with
     if argv[:1] == ["adc-loss"]:        # its own parser (python -m cosim.studies.adc_loss)
         from .studies.adc_loss import main as adc_loss_main

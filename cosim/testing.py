@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .pysim import StreamResult, resolve_port, run_stream
-from .verilog import REPO_ROOT
+from .backends.pysim import StreamResult, resolve_port, run_stream
+from .core.provenance import REPO_ROOT
 
 __all__ = ["check_stream", "StreamCheck", "StreamMismatch", "BACKENDS"]
 
@@ -255,7 +255,7 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
             pkw = dict(kw, probe={k: resolve_port(component, v) for k, v in (probe or {}).items()})
             return run_stream(component, stimulus, vcd=wave, **pkw)
         if backend not in sims:
-            from .verilator import VerilatorStreamSim
+            from .backends.verilator import VerilatorStreamSim
             sims[backend] = VerilatorStreamSim(component, vname)
         return sims[backend].run(stimulus, trace=wave, **kw)
 
@@ -266,7 +266,7 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     failed: list[str] = []
     for b in backends:
         if b == "verilator":
-            from .verilator import verilator_available
+            from .backends.verilator import verilator_available
             if not verilator_available():
                 check.skipped[b] = "Verilator, make or a C++ compiler not found on PATH"
                 continue

@@ -18,22 +18,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bench import machine_info
+from ..core.provenance import machine_info
 
 #: Real-time sample rate of the default front end (S/s).
 REAL_TIME_SPS = 16.368e6
 
 
 def gnss_speed(out: Path, quick: bool = False, duration_s: float | None = None) -> dict:
-    from ..verilator import verilator_available
-    from .run import DynamicsChoice, GnssRunConfig, _acquire, adc_words, closed_loop
+    from ..backends.verilator import verilator_available
+    from .run import DynamicsChoice, GnssRunConfig, acquire_signal, adc_words, closed_loop
     from .signal import GnssSignalConfig, GnssSignalGenerator
     dur = duration_s if duration_s is not None else (0.1 if quick else 1.0)
     sig = DynamicsChoice("seed002").apply(GnssSignalConfig(prn=7, cn0_dbhz=45.0,
                                                            duration_s=dur + 0.05))
     run = GnssRunConfig(dsp="fixed", tracker="pll3", bn_hz=15.0)
     gen = GnssSignalGenerator(sig)
-    _, hand = _acquire(gen, run)
+    _, hand = acquire_signal(gen, run)
     p = run.hdl_params(sig)
     n = int(round(dur * sig.fs_hz))
     x = adc_words(gen.samples(0, n)[0])

@@ -25,7 +25,7 @@ import numpy as np
 from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
 from hdl.gnss.model import GnssChannelParams
 
-from ..equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
+from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
 
 __all__ = ["check_gnss_equivalence", "gnss_equivalence_stimulus", "EQUIV_PARAMS", "EQUIV_PRN"]
 

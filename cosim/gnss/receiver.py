@@ -4,10 +4,10 @@
 channel's front end for :func:`cosim.session.open_frontend`, and its HDL top."""
 from __future__ import annotations
 
-from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
-                         parse_int, register)
-from ..studies.sweep import SweepConfig
-from ..validate import check_jobs, check_out_dir, dumps
+from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
+                              config_kwargs, parse_int, register)
+from ..studies.spec import SweepConfig
+from ..core.validate import check_jobs, check_out_dir, dumps
 from .study import SWEEP_MODEL
 from .run import SCENARIOS, DynamicsChoice, GnssRunConfig, run_gnss
 from .signal import GnssSignalConfig
@@ -76,7 +76,8 @@ SWEEP_OPTIONS = (
 
 
 def cmd_sweep(a) -> int:
-    from ..studies.sweep import check_points, parse_param, parse_values, study
+    from ..studies.spec import parse_param, parse_values
+    from ..studies.sweep import check_points, study
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
     params = tuple(parse_param(t, "gnss") for t in a.param)
@@ -154,6 +155,31 @@ def _equivalence(**kw) -> dict:
     return check_gnss_equivalence(**kw)
 
 
+def _gnss_speed(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench import gnss_speed
+    return gnss_speed(out, quick=quick)
+
+
+def _gnss_tracking(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench import gnss_tracking
+    return gnss_tracking(out, quick=quick)
+
+
+def _aukf(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .study_aukf import bench as aukf_bench
+    return aukf_bench(out, quick=quick)
+
+
+def _aukf_convergence(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .study_aukf import bench_convergence
+    return bench_convergence(out, quick=quick)
+
+
+#: ``python -m cosim bench <name>`` of the GNSS receiver (the seed-002 AUKF's among them).
+BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_gnss_tracking),
+              "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence)}
+
+
 def _frontend():
     from hdl.gnss.model import GnssChannelParams
     return Frontend(params=GnssChannelParams, component=_component, model=_model_session,
@@ -173,4 +199,5 @@ GNSS = register(Receiver(
                 cmd_sweep, model=SWEEP_MODEL),
     tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)},
     array_top=_top,
-    equivalence=_equivalence))
+    equivalence=_equivalence,
+    benchmarks=BENCHMARKS))

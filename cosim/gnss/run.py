@@ -47,7 +47,7 @@ import numpy as np
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 from dsp.gnss.trackers import tracker_names
 
-from ..validate import check_float, check_int, check_memory
+from ..core.validate import check_float, check_int, check_memory
 from .signal import GnssSignalConfig, GnssSignalGenerator
 
 __all__ = ["GnssRunConfig", "DynamicsChoice", "run_gnss", "closed_loop", "ClosedLoop",
@@ -261,7 +261,7 @@ class GnssRunConfig:
 
     def service(self, fs_hz: float):
         """The DSP's FIFO service at the channel clock ``fs_hz``."""
-        from ..link import DspServiceConfig
+        from ..core.link import DspServiceConfig
         return DspServiceConfig(period_cycles=max(1, round(self.service_period_us * 1e-6 * fs_hz)),
                                 latency_cycles=self.service_latency_cycles,
                                 batch_words=self.service_batch_words, cycles_per_word=4)
@@ -279,7 +279,11 @@ class GnssRunConfig:
 
 
 # -- acquisition and hand-over ---------------------------------------------------------------
-def _acquire(gen: GnssSignalGenerator, run: GnssRunConfig) -> tuple[dict, dict]:
+def acquire_signal(gen: GnssSignalGenerator, run: GnssRunConfig) -> tuple[dict, dict]:
+    """Acquire the generator's PRN on a snapshot at the start of the record (FFT search, then
+    the Doppler refined); ValueError when the record is shorter than the snapshot or nothing
+    is detected. Returns the acquisition's figures against the truth and the hand-over
+    (``doppler_hz``, ``code_phase_chips``) for :func:`handover_writes`."""
     from dsp.gnss.acquisition import acquire, refine_doppler
     sig = gen.cfg
     n_ms = max(run.acq_coherent_ms * run.acq_noncoherent, run.refine_ms)
@@ -401,7 +405,7 @@ class _PipelineDsp:
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
             d = unpack_record(v, p)
-            # (the boundary sample is not in the record: _boundaries recomputes it)
+            # (the boundary sample is not in the record: dump_boundaries recomputes it)
             r = self.track.record(None, d["carr_phase"] / 2.0 ** p.carr_phase_bits,
                                   d["code_phase"] / 2.0 ** p.code_phase_bits,
                                   [d[k] for k in ACC_FIELDS])
@@ -431,7 +435,7 @@ def closed_loop(backend: str, p, run: GnssRunConfig, blocks, doppler_hz: float,
     """Track on channel ``p`` (a session on ``backend``) fed ``blocks`` (iterable of ADC
     word arrays, one word per cycle), started by :func:`handover_writes`, the DSP service
     and tracker of ``run``, its writes decided on the fly."""
-    from ..pipeline import Pipeline
+    from ..core.pipeline import Pipeline
     from .session import open_gnss
     spacing = p.el_spacing_samples * CHIP_RATE_HZ / p.fs_hz
     tracker, arith = _make_tracker(run, p.fs_hz, p.if_hz, inverted, cn0_dbhz, doppler_hz,
@@ -457,7 +461,7 @@ def adc_words(codes) -> np.ndarray:
     return (np.asarray(codes).astype(np.int64) - 1) >> 1
 
 
-def _boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
+def dump_boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
     """Dump-boundary sample of the records ``1 .. n_records`` of the HDL channel, from the
     code NCO's words in force (replayed exactly: the code generator's epochs only depend on
     the code word, PRN-independent, and the slew)."""
@@ -617,7 +621,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
         raise ValueError(f"duration_s {sig.duration_s:g} s leaves nothing after settle_s "
                          f"{run.settle_s:g} s")
     gen = GnssSignalGenerator(sig)
-    acq, hand = _acquire(gen, run)
+    acq, hand = acquire_signal(gen, run)
     extra = None if tracker_setup is None else tracker_setup(gen, p, hand, run.backend)
     result = {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz, "duration_s": sig.duration_s,
               "tracker": run.tracker, "bn_hz": run.bn_hz, "backend": run.backend,
@@ -635,7 +639,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
                          hand["code_phase_chips"], inverted=sig.spectrum_inverted,
                          cn0_dbhz=sig.cn0_dbhz, keep_words=keep_words, tracker_extra=extra)
         track, pres, bus, rx = cl.track, cl.pipeline, cl.bus_writes, cl.rx_stats
-        n_b = _boundaries(p, bus, track.n_seen, sig.n_samples)[SKIP_RECORDS:]
+        n_b = dump_boundaries(p, bus, track.n_seen, sig.n_samples)[SKIP_RECORDS:]
         result.update(fifo_dropped=int(pres.overflow_count),
                       dropped_reported=int(rx["dropped_reported"]),
                       broken_records=int(rx["broken_records"]))

@@ -1,6 +1,6 @@
 """The bit-exact GNSS channel as a persistent session, and the register view of any session.
 
-:class:`GnssModelSession` is the ``model`` backend of :func:`cosim.session.open_frontend`
+:class:`GnssModelSession` is the ``model`` backend of :func:`cosim.backends.factory.open_frontend`
 for :class:`hdl.gnss.model.GnssChannelParams`: the bit-exact channel
 (:class:`~hdl.gnss.model.GnssChannelModel`, its state carried) and its record FIFO
 (:func:`~hdl.model.fifo.fifo_model_events`, its state carried). It has the ports of
@@ -26,17 +26,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from hdl.model.fifo import FifoState
+from ..backends.factory import open_frontend
+from ..core.session import BusModelSession, FrontendSession, RegisterSession, fifo_step
 
-from ..session import FrontendSession, RegisterSession, fifo_step, open_frontend
-
-__all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss", "BUS_PORTS"]
-
-#: The register bus ports of :class:`hdl.gnss.channel.GnssChannel`.
-BUS_PORTS = ("reg_we", "reg_addr", "reg_data")
+__all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss"]
 
 
-class GnssModelSession(FrontendSession):
+class GnssModelSession(BusModelSession):
     """The bit-exact model of :class:`hdl.gnss.channel.GnssChannel` as a session (module
     doc). Samples are offered one per cycle while queued; cycles without a queued sample
     have ``i.valid`` low.
@@ -46,11 +42,12 @@ class GnssModelSession(FrontendSession):
     params : GnssChannelParams
         A single channel (``channel_bits == 0``).
     log_ranges : bool
-        Accepted for :func:`cosim.session.open_frontend`; the GNSS model keeps no range log
+        Accepted for :func:`cosim.backends.factory.open_frontend`; the GNSS model keeps no range log
         (its accumulators are sized never to overflow), so it must be False.
     """
 
     backend = "model"
+    what = "GNSS channel model"
 
     def __init__(self, params, *, log_ranges: bool = False):
         from hdl.gnss.model import GnssChannelModel, GnssChannelParams
@@ -64,8 +61,6 @@ class GnssModelSession(FrontendSession):
         super().__init__()
         self.params = params
         self.model = GnssChannelModel(params)
-        self._fifo_state = FifoState()
-        self._bus = {"reg_we": 0, "reg_addr": 0, "reg_data": 0}
         self._widths = {"reg_we": 1, "reg_addr": 2, "reg_data": params.reg_data_width}
         self._fifo = params.fifo        # derived properties: computed once, not per step
         rw = self._fifo.record_words
@@ -74,23 +69,6 @@ class GnssModelSession(FrontendSession):
         #: Bus writes ``(cycle, reg, value)`` the model has been given.
         self.bus_writes: list[tuple[int, int, int]] = []
         self.n_records = 0
-
-    @property
-    def fifo_state(self) -> FifoState:
-        return self._fifo_state
-
-    def _check_port(self, port) -> None:
-        if port not in BUS_PORTS:
-            raise KeyError(f"the GNSS channel model's writable ports are "
-                           f"{', '.join(BUS_PORTS)}, not {port!r}")
-
-    def _read(self, port):
-        if port == "overflow_count":
-            return self._fifo_state.overflow
-        if port in self._bus:
-            return self._bus[port]
-        raise KeyError(f"the GNSS channel model reads overflow_count and "
-                       f"{', '.join(BUS_PORTS)}, not {port!r}")
 
     def _bus_cycles(self, writes, start, stop):
         """Bus writes ``(cycle, reg, value)`` of the cycles ``start .. stop - 1``."""
@@ -136,7 +114,7 @@ class GnssModelSession(FrontendSession):
 class GnssRegisterSession(RegisterSession):
     """Register-level writes (``carr_freq``, ``code_freq``, ``prn``, ``slew``) on a GNSS
     channel session of any backend, as bus pulses (module doc;
-    :class:`cosim.session.RegisterSession`).
+    :class:`cosim.core.session.RegisterSession`).
 
     Parameters
     ----------
@@ -153,5 +131,5 @@ class GnssRegisterSession(RegisterSession):
 
 def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:
     """A GNSS channel on ``backend`` (``model``, ``pysim``, ``verilator``) with register-level
-    writes: :func:`cosim.session.open_frontend` wrapped in a :class:`GnssRegisterSession`."""
+    writes: :func:`cosim.backends.factory.open_frontend` wrapped in a :class:`GnssRegisterSession`."""
     return GnssRegisterSession(open_frontend(backend, params, **kw), params)

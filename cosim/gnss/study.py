@@ -26,7 +26,7 @@ from dataclasses import fields, replace
 
 import numpy as np
 
-from ..receivers import SweepModel
+from ..core.receivers import SweepModel
 
 __all__ = ["FORMATS", "check_param", "formats_of", "check_point", "GnssSweepRecord", "SWEEP_MODEL"]
 
@@ -55,7 +55,7 @@ def formats_of(combo: tuple):
     """The :class:`~dsp.gnss.aukf.AukfFormats` of a point: each swept width with its
     format's integer bits kept (ValueError if refused)."""
     from dsp.gnss.aukf import AukfFormats, QFormat
-    from ..validate import check_int
+    from ..core.validate import check_int
     base = AukfFormats()
     kw = {}
     for name, v in combo:
@@ -106,9 +106,9 @@ class GnssSweepRecord:
     def _run(self, arith) -> dict:
         from dsp.gnss.trackers import make_tracker
         from .loopsim import cycle_slips, track_fast
-        from .study_aukf import _Recorder
+        from .study_aukf import DopplerRecorder
         n = int(round(self.cfg.duration_s / 1e-3))
-        trk = _Recorder(make_tracker("aukf", self.ctx, arith))
+        trk = DopplerRecorder(make_tracker("aukf", self.ctx, arith))
         r = track_fast(self.truth, self.cn0, n, shape=(1,), seed=self.seed, tracker=trk)
         h = n // 2
         pe = r.phase_err_cycles[h:, 0]

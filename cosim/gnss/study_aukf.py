@@ -24,7 +24,7 @@ from .loopsim import cycle_slips, track_fast, truth_for
 Q0 = 5.0
 
 
-class _Recorder:
+class DopplerRecorder:
     """A tracker wrapper keeping ``doppler_hz()`` after every step (the estimate for the
     epoch just dumped)."""
 
@@ -67,7 +67,7 @@ def run_point(q_true: float, cn0_dbhz: float, trackers=("aukf", "ukf", "pll3"), 
                          doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
     for t in trackers:
         opts = (tracker_opts or {}) if t in ("aukf", "ukf") else {}
-        trk = _Recorder(make_tracker(t, ctx, FLOAT if arith is None else arith, **opts))
+        trk = DopplerRecorder(make_tracker(t, ctx, FLOAT if arith is None else arith, **opts))
         r = track_fast(truth, cn0_dbhz, n, shape=(n_runs,), seed=seed, tracker=trk)
         # the tracker's Doppler estimate at epoch k's midpoint against the epoch's mean
         # true frequency (= freq_err + the replica Doppler in force)
@@ -115,7 +115,7 @@ def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_r
                          doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for t in ("ukf", "aukf"):
-        trk = _Recorder(make_tracker(t, ctx, FLOAT))
+        trk = DopplerRecorder(make_tracker(t, ctx, FLOAT))
         r = track_fast(truth, cn0_dbhz, n, shape=(n_runs,), seed=seed, tracker=trk)
         err = r.freq_err_hz + r.doppler_hz - np.array(trk.est)
         w = 50
@@ -181,7 +181,7 @@ def bench(out, quick: bool = False) -> dict:
     from pathlib import Path
     from dsp.gnss.aukf import AukfFormats
     from dsp.gnss.loops_fixed import FLOAT, FixedArith
-    from ..bench import machine_info
+    from ..core.provenance import machine_info
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     n_runs, dur = (10, 2.0) if quick else (100, 10.0)
@@ -232,7 +232,7 @@ def bench_convergence(out, quick: bool = False) -> dict:
     import time
     from pathlib import Path
     from dsp.gnss.loops_fixed import FixedArith
-    from ..bench import machine_info
+    from ..core.provenance import machine_info
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     n_runs, durs = (10, (2.0, 4.0)) if quick else (100, CONVERGENCE_S)

@@ -62,7 +62,7 @@ def ins_bench(out: Path, quick: bool = False, jobs: int | None = None, *,
     points not run yet listed as pending."""
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     import multiprocessing as mp
-    from cosim.bench import machine_info
+    from cosim.core.provenance import machine_info
     out.mkdir(parents=True, exist_ok=True)
     dur, trials = (35.0, 4) if quick else (150.0, 20)
     th = dict(THRESHOLD, duration_s=35.0, trials=2, resolution_db=4.0) if quick else THRESHOLD

@@ -1,4 +1,4 @@
-"""Seed 003's entry in the receiver registry (:mod:`cosim.receivers`): ``python -m cosim
+"""Seed 003's entry in the receiver registry (:mod:`cosim.core.receivers`): ``python -m cosim
 ins`` runs one of the three carrier loops (INS-aided Kalman, aided PLL, unaided Kalman)
 over the seed's trajectory on the GNSS channel (:func:`cosim.ins.run.run_ins`); its options
 are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP fields of
@@ -6,8 +6,8 @@ are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP field
 from __future__ import annotations
 
 from ..gnss.run import GnssRunConfig
-from ..receivers import Arg, Figure, Option, Receiver, config_kwargs, register
-from ..validate import dumps
+from ..core.receivers import Arg, Benchmark, Figure, Option, Receiver, config_kwargs, register
+from ..core.validate import dumps
 from .run import InsRunConfig, run_ins
 
 _INS, _RUN = InsRunConfig, GnssRunConfig
@@ -52,6 +52,11 @@ def cmd_ins(a) -> int:
     return 0
 
 
+def _bench(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench import ins_bench
+    return ins_bench(out, quick=quick, jobs=jobs)
+
+
 INS = register(Receiver(
     name="ins", help="seed 003: INS-aided Kalman carrier loop, aided PLL or unaided Kalman "
                      "loop over the seed's trajectory on the GNSS channel; LOS velocity and "
@@ -59,4 +64,5 @@ INS = register(Receiver(
     config=InsRunConfig, options=OPTIONS, run=cmd_ins,
     metrics=("vel_err_std_mps", "vel_err_mean_mps", "range_err_std_m", "range_err_mean_m",
              "lock_fraction", "cycle_slips"),
-    primary=Figure("vel_err_std_mps", "LOS velocity error std", "m/s")))
+    primary=Figure("vel_err_std_mps", "LOS velocity error std", "m/s"),
+    benchmarks={"ins": Benchmark(_bench, jobs=True)}))

@@ -33,7 +33,7 @@ import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S
 
-from ..validate import check_float, check_int
+from ..core.validate import check_float, check_int
 from .study import CHIP_M, LOOPS
 from .trajectory import L1_WAVELENGTH_M, Geometry, Scenario, SeedTrajectory
 
@@ -132,7 +132,7 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     channel the end of record ``SKIP_RECORDS`` (the channel model replayed on the
     hand-over writes), on the golden chain the end of its first record (its local code
     starts at the acquired code phase)."""
-    from cosim.gnss.run import SKIP_RECORDS, _boundaries, handover_writes
+    from cosim.gnss.run import SKIP_RECORDS, dump_boundaries, handover_writes
     from hdl.gnss.model import REG_NAMES
     if backend == "golden":
         kf = CHIP_RATE_HZ * (1 + hand["doppler_hz"] / 1575.42e6)
@@ -140,7 +140,7 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     w = [(c, REG_NAMES[r], v) for c, r, v in handover_writes(p, hand["doppler_hz"],
                                                              hand["code_phase_chips"], inverted)]
     n = int((SKIP_RECORDS + 2) * CODE_PERIOD_S * p.fs_hz)
-    return float(_boundaries(p, w, SKIP_RECORDS, n)[-1]) / p.fs_hz
+    return float(dump_boundaries(p, w, SKIP_RECORDS, n)[-1]) / p.fs_hz
 
 
 def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:

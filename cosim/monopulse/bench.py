@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bench import machine_info, source_commit
+from ..core.provenance import machine_info, source_commit
 from .run import TRACK, MonopulseRunConfig, run_monopulse
 
 KEYS = ("az_meas_rms_deg", "az_track_rms_deg", "az_crb_deg", "az_meas_over_crb",
@@ -64,7 +64,7 @@ def _hdl_cost(duration_s):
     """Closed loop on the HDL backends (model, Verilator when installed) and the golden IF
     chain over the same ``duration_s`` of the default scenario: wall seconds, measurements
     (blocks) and ADC samples per wall second, and whether the backends gave the same bits."""
-    from ..verilator import verilator_available
+    from ..backends.verilator import verilator_available
     rows, digests = [], {}
     for be in ("golden", "model") + (("verilator",) if verilator_available() else ()):
         cfg = MonopulseRunConfig(duration_s=duration_s, settle_s=0.005, backend=be, seed=3)

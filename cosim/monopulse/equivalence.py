@@ -19,8 +19,8 @@ import numpy as np
 from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
                                  dc_word, pack_input)
 
-from ..equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
-from .session import write_register
+from ..core.session import write_register
+from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
 
 __all__ = ["check_monopulse_equivalence", "EQUIV_PARAMS"]
 
@@ -54,7 +54,7 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
     """The keys of :func:`cosim.equivalence.check_equivalence` (``peaks``: measurement records
     of the model; ``markers``: 0, the monopulse FIFO drops whole records and counts them in
     ``overflow_count``, which is compared; ``dropped``: the model's overflow count)."""
-    from ..session import open_frontend
+    from ..backends.factory import open_frontend
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
         raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
     unknown = [b for b in backends if b not in BACKENDS]

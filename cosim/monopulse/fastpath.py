@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from .array import N_CHANNELS
-from .signal import (STREAM_FAST, MonopulseSignalConfig, _steering_array, block_truth,
-                     channel_snapshots)
+from .signal import (STREAM_FAST, MonopulseSignalConfig, block_truth, channel_snapshots,
+                     steering_array)
 
 
 def noise_variance(cfg: MonopulseSignalConfig) -> np.ndarray:
@@ -36,7 +36,7 @@ def noise_variance(cfg: MonopulseSignalConfig) -> np.ndarray:
 def mean_outputs(cfg: MonopulseSignalConfig, steering, first_block=0, n_blocks=1,
                  calibration=None):
     """Noise-free corrected S (K, 4), and the correction k (K, 4) used."""
-    steering = _steering_array(steering, n_blocks)
+    steering = steering_array(steering, n_blocks)
     su, sv, *_ = block_truth(cfg, first_block, n_blocks)
     h = channel_snapshots(cfg, steering, su, sv).mean(axis=1)  # (K, 4)
     k = cfg.array.steering_correction(steering[:, 0], steering[:, 1])

@@ -22,8 +22,8 @@ import traceback
 
 import numpy as np
 
-from ..receivers import FaultModel
-from ..studies.faults import _flip_signed, flip_bits
+from ..core.receivers import FaultModel
+from ..studies.faults import flip_bits, flip_signed
 
 __all__ = ["TARGETS", "check", "check_size", "word_width", "record", "FAULT_MODEL"]
 
@@ -106,7 +106,7 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
 
         def adc(k, codes):      # (4, N D): flipped as one flat word array
             c = np.asarray(codes)
-            x, wi, _ = _flip_signed(c.ravel(), run.adc_bits, ber, rng, fc.bits)
+            x, wi, _ = flip_signed(c.ravel(), run.adc_bits, ber, rng, fc.bits)
             flips[0] += int(wi.size)
             return x.reshape(c.shape)
 

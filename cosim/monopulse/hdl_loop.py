@@ -79,7 +79,7 @@ def record_gain(p, adc_step: float) -> float:
 
 
 def _service(run):
-    from ..link import DspServiceConfig
+    from ..core.link import DspServiceConfig
     return DspServiceConfig(period_cycles=run.service_period_cycles,
                             latency_cycles=run.service_latency_cycles,
                             batch_words=run.service_batch_words, cycles_per_word=CYCLES_PER_WORD)
@@ -266,8 +266,9 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
     arrays and returns the FIFO/pipeline figures (``fifo_dropped``, digests, writes; with
     ``faults``: the bad and missing records and the record receiver's counters)."""
     from hdl.monopulse.model import REG_NAMES, pack_input
-    from ..pipeline import Pipeline
-    from ..session import RegisterSession, open_frontend
+    from ..core.pipeline import Pipeline
+    from ..core.session import RegisterSession
+    from ..backends.factory import open_frontend
     from .signal import generate
     p = hdl_params(run, sig)
     check_hdl_timing(run, p)

@@ -10,11 +10,11 @@ import dataclasses
 
 import sys
 
-from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
-                         parse_finite, parse_int, register)
+from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
+                              config_kwargs, parse_finite, parse_int, register)
 from ..studies.faults import FaultConfig
-from ..studies.sweep import SweepConfig
-from ..validate import check_out_dir, dumps
+from ..studies.spec import SweepConfig
+from ..core.validate import check_out_dir, dumps
 from .faults import FAULT_MODEL, TARGETS
 from .run import MonopulseRunConfig, run_monopulse
 from .study import SWEEP_MODEL
@@ -98,8 +98,9 @@ SWEEP_OPTIONS = (
 
 
 def cmd_sweep(a) -> int:
-    from ..studies.sweep import check_points, parse_param, parse_values, study
-    from ..validate import check_jobs
+    from ..studies.spec import parse_param, parse_values
+    from ..studies.sweep import check_points, study
+    from ..core.validate import check_jobs
     if a.recheck < 0:
         raise ValueError(f"--recheck must be >= 0 (points re-checked), not {a.recheck}")
     if a.recheck == 0 and a.recheck_backend is not None:
@@ -180,6 +181,11 @@ def _equivalence(**kw) -> dict:
     return check_monopulse_equivalence(**kw)
 
 
+def _bench(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench import bench as monopulse_bench
+    return monopulse_bench(out, quick=quick)
+
+
 def _frontend():
     from hdl.monopulse.model import MonopulseFrontendParams
     return Frontend(params=MonopulseFrontendParams, component=_component, model=_model_session,
@@ -203,4 +209,5 @@ MONOPULSE = register(Receiver(
                 SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),
     faults=Study("bit-error study: flip bits in the ADC samples or the FIFO words of the "
                  "closed loop", FAULT_OPTIONS, cmd_faults, model=FAULT_MODEL),
+    benchmarks={"monopulse": Benchmark(_bench)},
 ))

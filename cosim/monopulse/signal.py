@@ -250,7 +250,10 @@ class MonopulseRecord:
     clipped: np.ndarray
 
 
-def _steering_array(steering, n_blocks):
+def steering_array(steering, n_blocks):
+    """The beam steering ``(u0, v0)`` per block, shape ``(n_blocks, 2)``, from one direction
+    or one per block (ValueError for another shape or a direction outside the visible
+    region)."""
     s = np.asarray(steering, float)
     if s.shape == (2,):
         s = np.broadcast_to(s, (n_blocks, 2))
@@ -290,7 +293,7 @@ def generate(cfg: MonopulseSignalConfig, steering, first_block: int = 0,
         raise ValueError(f"first_block must be an integer >= 0, not {first_block!r}")
     if isinstance(n_blocks, bool) or not isinstance(n_blocks, (int, np.integer)) or n_blocks < 1:
         raise ValueError(f"n_blocks must be an integer >= 1, not {n_blocks!r}")
-    steering = _steering_array(steering, n_blocks)
+    steering = steering_array(steering, n_blocks)
     su, sv, tc, u, v = block_truth(cfg, first_block, n_blocks)
     az, el = angles_from_uv(u, v)
     h = channel_snapshots(cfg, steering, su, sv)  # (K, N, 4)

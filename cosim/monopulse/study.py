@@ -27,7 +27,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from ..receivers import SweepModel
+from ..core.receivers import SweepModel
 
 __all__ = ["GOLDEN_ADC_BITS", "FIXED_BY_SCENARIO", "check_param", "run_config", "check_point",
            "MonopulseSweepRecord", "SWEEP_MODEL"]
@@ -67,7 +67,7 @@ def trial_seed(cfg, snr_db: float, trial: int) -> int:
 def run_config(cfg, combo: tuple, snr_db: float, trial: int, **kw):
     """The :class:`~cosim.monopulse.run.MonopulseRunConfig` of a point (ValueError if
     refused): the model backend, fixed-point tracker, the swept values."""
-    from ..validate import check_int
+    from ..core.validate import check_int
     from .run import MonopulseRunConfig
     hdl, dsp, adc = {}, {}, 12
     for name, v in combo:

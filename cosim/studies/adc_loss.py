@@ -107,8 +107,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.special import ndtr
 
-from cosim.validate import (MAX_LIST_VALUES, check_choice, check_float, check_int,
-                            check_memory, check_out_dir, dumps)
+from cosim.core.validate import (MAX_LIST_VALUES, check_choice, check_float, check_int,
+                                 check_memory, check_out_dir, dumps)
 
 #: Largest ADC word length accepted (as :class:`cosim.tacan.signal.TacanSignalConfig`).
 MAX_BITS = 24
@@ -662,7 +662,7 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
                                "seed", "freq")}
     if elapsed_s is not None:
         meta["elapsed_s"] = round(float(elapsed_s), 2)
-    from cosim.bench import machine_info
+    from cosim.core.provenance import machine_info
     machine = machine_info()
     meta["machine"] = machine
     checks = []

@@ -48,7 +48,7 @@ TARGETS = ("adc", "fifo", "register", "dsp-state")
 
 def fault_model(receiver: str):
     """The :class:`~cosim.receivers.FaultModel` of a registered receiver (ValueError if none)."""
-    from cosim.receivers import get
+    from cosim.core.receivers import get
     r = get(receiver)
     if r.faults is None or r.faults.model is None:
         raise ValueError(f"receiver {receiver!r} has no fault study model")
@@ -70,7 +70,7 @@ def finish(a, fc: "FaultConfig", s: dict, row_text) -> int:
     object; otherwise ``row_text(row)`` per BER) and the report's path; exit 1 when any run
     raised or gave a NaN estimate (the receiver must give neither)."""
     import sys
-    from cosim.validate import dumps
+    from cosim.core.validate import dumps
     if a.json:
         print(dumps({"target": fc.target, "rows": s["rows"], "elapsed_s": s["elapsed_s"],
                      "report": f"{a.out}/{report_stem(fc)}.md"}, default=str))
@@ -136,8 +136,11 @@ def flip_bits(words, width: int, ber: float, rng, bits=None):
     return w, wi, bi
 
 
-def _flip_signed(codes, width, ber, rng, bits=None):
-    """Flips in two's complement codes of ``width`` bits."""
+def flip_signed(codes, width, ber, rng, bits=None):
+    """Bit flips (:func:`flip_bits`) in two's complement codes of ``width`` bits.
+
+    Returns the flipped codes (signed, the dtype of ``codes``) and the word and bit indices
+    of the flips, as :func:`flip_bits` does."""
     c = np.asarray(codes).astype(np.int64)
     m = (np.int64(1) << width) - 1
     u, wi, bi = flip_bits(c & m, width, ber, rng, bits)
@@ -251,7 +254,7 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
             "state_faults": ev.get("state_faults"),      # None: the receiver has no such check
             "saturations": sum(v for k, v in ev.items() if k.startswith("sat_")),
             "rx": rx})
-    from cosim.bench import machine_info
+    from cosim.core.provenance import machine_info
     summary = {"study": "faults", "machine": machine_info(), "config": asdict(fc),
                "elapsed_s": time.perf_counter() - t0, "rows": rows,
                "records": [{k: v for k, v in r.items() if k != "traceback"} for r in recs]}
@@ -288,7 +291,7 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     model = fault_model(fc.receiver)
     stem = report_stem(fc)
-    from cosim.validate import dumps
+    from cosim.core.validate import dumps
     (out / f"{stem}.json").write_text(dumps(s, indent=1, default=str))
     keys = ["ber", "trials", "exceptions", "nan_bearings", "flips", "rmse_deg",
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",

@@ -1,33 +1,28 @@
 """What a sweep's points say about word lengths: the rows per (combination, SNR), the
-proposal and its confirmation (:mod:`cosim.studies.sweep` runs the points and writes the
-report).
+proposal and the tests of its confirmation (:mod:`cosim.studies.sweep` runs the points,
+writes the report and runs the confirmation, :func:`cosim.studies.sweep.confirm`).
 
 * :func:`aggregate` pools a combination's trials at one SNR and pairs them with the golden
-  chain on the same records (:func:`_ratio_ci`: the paired ratio's bootstrap interval).
+  chain on the same records (:func:`ratio_ci`: the paired ratio's bootstrap interval).
 * :func:`propose` takes each parameter alone to its smallest value that locks,
-  re-initialises and scores like the golden chain (:func:`_passes`).
-* :func:`confirm` re-runs the proposal on fresh seeds, all values together, with the
-  stricter :func:`_confirms`, and where the losses add up widens the parameter whose
-  widening confirms.
+  re-initialises and scores like the golden chain (:func:`passes`).
+* :func:`confirms` is the stricter test a confirmation run (the proposal re-run on fresh
+  seeds, all values together) must pass; :func:`shortfall` ranks the runs that fail and
+  :func:`widen_one` gives the candidates of the next round.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import math
-from dataclasses import replace
-from pathlib import Path
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-if TYPE_CHECKING:
-    from .sweep import SweepConfig
+from .spec import SweepConfig, primary_key
 
-__all__ = ["aggregate", "propose", "confirm"]
+__all__ = ["aggregate", "propose", "ratio_ci", "passes", "confirms", "shortfall", "widen_one"]
 
 
-def _ratio_ci(pairs, key: str, n_boot: int = 2000, fig: str = "rmse_deg") -> list[float] | None:
+def ratio_ci(pairs, key: str, n_boot: int = 2000, fig: str = "rmse_deg") -> list[float] | None:
     """95 % bootstrap interval (over trials, paired) of the RMSE ratio point / golden.
 
     Within one trial the bearings are strongly correlated (the filter's memory spans a good
@@ -48,7 +43,6 @@ def _ratio_ci(pairs, key: str, n_boot: int = 2000, fig: str = "rmse_deg") -> lis
 def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
     """Per (combo, SNR): RMSE over the trials (locked ones), lock rate, the paired golden
     RMSE on the same records, CRB, events, drops."""
-    from .sweep import primary_key
     P = primary_key(cfg.receiver)
     gold = {(r["snr_db"], r["trial"]): r for r in results if r.get("kind") == "golden"}
     pts = [r for r in results if r.get("kind") == "point"]
@@ -78,7 +72,7 @@ def aggregate(cfg: SweepConfig, results: list[dict]) -> list[dict]:
                    "locked": len(ok), "golden_locked": ng, "golden_reinit": g_reinit,
                    P: rmse, "golden_" + P: g_rmse,
                    "ratio_to_golden": (p_rmse / g_rmse) if (paired and g_rmse) else None,
-                   "ratio_ci95": _ratio_ci(paired, json.dumps([cl, float(snr)]), fig=P),
+                   "ratio_ci95": ratio_ci(paired, json.dumps([cl, float(snr)]), fig=P),
                    "mean_error_deg": float(np.mean([r["mean_error_deg"] for r in ok]))
                    if ok and all(r.get("mean_error_deg") is not None for r in ok) else None,
                    "crb_deg": rs[0].get("crb_deg") or (gold.get((rs[0]["snr_db"], rs[0]["trial"])) or {}).get("crb_deg"),
@@ -100,7 +94,7 @@ def _reinit_beyond_golden(row: dict) -> bool:
     return _excess_reinit(row) > 0
 
 
-def _passes(row: dict, target_rel: float) -> bool:
+def passes(row: dict, target_rel: float) -> bool:
     """A point meets the target at one SNR: it locks as often as the golden chain, its
     filter is not re-initialised more often than the golden one, and its paired RMSE ratio
     to the golden one is within ``1 + target_rel`` -- or not significantly above it (the
@@ -125,7 +119,7 @@ def _passes(row: dict, target_rel: float) -> bool:
 
 def propose(cfg: SweepConfig, rows: list[dict]) -> dict:
     """Smallest value of each numeric swept parameter (the others at their largest swept
-    value) such that it and every larger value pass at every SNR (see :func:`_passes`)."""
+    value) such that it and every larger value pass at every SNR (see :func:`passes`)."""
     names = [n for n, _ in cfg.params]
     ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0]
            for n, v in cfg.params}
@@ -136,7 +130,7 @@ def propose(cfg: SweepConfig, rows: list[dict]) -> dict:
         ok_vals = []
         for v in sorted(vals):
             sel = [r for r in rows if r[n] == v and all(r[m] == ref[m] for m in names if m != n)]
-            ok_vals.append((v, bool(sel) and all(_passes(r, cfg.target_rel) for r in sel)))
+            ok_vals.append((v, bool(sel) and all(passes(r, cfg.target_rel) for r in sel)))
         best = None
         for v, ok in reversed(ok_vals):
             if not ok:
@@ -146,7 +140,7 @@ def propose(cfg: SweepConfig, rows: list[dict]) -> dict:
     return out
 
 
-def _confirms(row: dict, target_rel: float) -> bool:
+def confirms(row: dict, target_rel: float) -> bool:
     """The confirmation's test at one SNR, stricter than the proposal's: the measured paired
     ratio itself must be within ``1 + target_rel``; as in the proposal, the lock count that
     of the golden chain and no more re-initialisations than the golden filter (a combination
@@ -163,18 +157,18 @@ def _confirms(row: dict, target_rel: float) -> bool:
     return row["ratio_to_golden"] is not None and row["ratio_to_golden"] <= 1 + target_rel
 
 
-def _shortfall(rows: list[dict], target_rel: float) -> tuple:
+def shortfall(rows: list[dict], target_rel: float) -> tuple:
     """How far a confirmation run is from confirming, to rank the candidates of a round
     (smaller is nearer): the SNRs that fail, the filter re-initialisations beyond the golden
     chain's, the worst measured ratio."""
-    bad = sum(1 for r in rows if not _confirms(r, target_rel))
+    bad = sum(1 for r in rows if not confirms(r, target_rel))
     extra = sum(_excess_reinit(r) for r in rows)
     worst = max((r["ratio_to_golden"] for r in rows if r.get("ratio_to_golden") is not None),
                 default=math.inf)
     return bad, extra, worst
 
 
-def _widen_one(cfg: SweepConfig, params: dict) -> list[tuple[str, dict]]:
+def widen_one(cfg: SweepConfig, params: dict) -> list[tuple[str, dict]]:
     """Each numeric parameter alone one swept value wider (where there is one)."""
     out = []
     for n, vals in cfg.params:
@@ -183,63 +177,3 @@ def _widen_one(cfg: SweepConfig, params: dict) -> list[tuple[str, dict]]:
             if larger:
                 out.append((n, {**params, n: larger[0]}))
     return out
-
-
-def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler="local",
-            progress=True, max_backoff: int = 3) -> dict:
-    """Re-run the proposed combination (all proposed values together) on fresh seeds and
-    check it against the golden chain with the stricter :func:`_confirms`.
-
-    Word lengths that each pass alone can fail together (their losses add up). Then each
-    parameter in turn is widened by one swept step, the others kept, and each of these
-    candidates re-run: the one that confirms is the answer (of several, the one that widens
-    least -- one more bit before two -- then the one with the smallest worst ratio); when
-    none does, the nearest by :func:`_shortfall` is kept and the next round widens from it,
-    up to ``max_backoff`` rounds. So only the widths that matter grow: a filter gain one
-    step too short costs one parameter a step, not all of them. Should no round confirm,
-    every parameter at its widest swept value (the sweep's reference) is the last attempt.
-    Returns the summary: ``confirmed``, the ``params`` finally confirmed (or last tried),
-    the ``attempts`` (params, rows, and the parameter each candidate widened)."""
-    from . import sweep     # the engine (run_sweep, sweep_model): imported here, it imports us
-    if not proposal or any(v is None for v in proposal.values()):
-        return {"confirmed": False, "reason": "no complete proposal (some parameter never "
-                                             "meets the target in the swept range)",
-                "attempts": []}
-    ref = cfg.reference
-    attempts = []
-
-    def attempt(params: dict, widened: str | None) -> dict:
-        fixed = tuple((n, (params[n],)) for n, _ in cfg.params)
-        ccfg = replace(cfg, params=fixed, seed=cfg.seed + 1, recheck=0, design="grid")
-        s = sweep.run_sweep(ccfg, out / "confirm", jobs=jobs, scheduler=scheduler,
-                            progress=progress)
-        rows = s["rows"]
-        a = {"params": dict(params), "widened": widened, "rows": rows,
-             "confirmed": bool(all(_confirms(r, cfg.target_rel) for r in rows))}
-        attempts.append(a)
-        return a
-
-    best = attempt({n: (proposal[n] if n in proposal else ref[n]) for n, _ in cfg.params},
-                   None)
-    for _ in range(max_backoff):
-        if best["confirmed"]:
-            break
-        cands = [attempt(p, n) for n, p in _widen_one(cfg, best["params"])]
-        if not cands:
-            break
-        best = min(cands, key=lambda a: (not a["confirmed"],
-                                         a["params"][a["widened"]] - best["params"][a["widened"]]
-                                         if a["confirmed"] else 0,
-                                         _shortfall(a["rows"], cfg.target_rel)))
-    if not best["confirmed"]:
-        widest = {n: ref[n] for n, _ in cfg.params}
-        if widest != best["params"]:
-            best = attempt(widest, "all")
-    res = {"confirmed": best["confirmed"], "params": best["params"], "seed": cfg.seed + 1,
-           "rows": best["rows"], "attempts": attempts}
-    model = sweep.sweep_model(cfg.receiver)
-    if cfg.recheck > 0 and model.confirm_recheck is not None:
-        # the combination proposed is the one to build: prove its bits on the RTL too
-        combo = tuple((n, best["params"][n]) for n, _ in cfg.params)
-        res["recheck"] = {"combo": [list(c) for c in combo], **model.confirm_recheck(cfg, combo)}
-    return res

@@ -7,8 +7,8 @@ chain run on the *same* record (paired comparison: the trial-to-trial noise canc
 ratio), and writes CSV/JSON of every point, plots, and a Markdown report with the range and
 saturation log and a word-length proposal.
 
-The receiver is a registered one (:mod:`cosim.receivers`) whose ``sweep`` study has a
-:class:`~cosim.receivers.SweepModel`: it names the parameters (``--param NAME=VALUES``;
+The receiver is a registered one (:mod:`cosim.core.receivers`) whose ``sweep`` study has a
+:class:`~cosim.core.receivers.SweepModel`: it names the parameters (``--param NAME=VALUES``;
 TACAN's: :mod:`cosim.tacan.study`), runs one record (the point runner: swept values + SNR +
 trial seed -> metrics with the primary figure, and the golden run of the same record) and
 keeps its own front-end cache; everything else here is generic.
@@ -22,227 +22,32 @@ point is cached as ``points/<key>.json`` under the output directory, so an inter
 resumes where it stopped; the key hashes everything that defines the point, the project's
 sources included.
 
-Proposal and confirmation: :mod:`cosim.studies.proposal`.
+The sweep's configuration and parameter lists: :mod:`cosim.studies.spec`; the proposal and
+the tests of its confirmation: :mod:`cosim.studies.proposal`; the confirmation run:
+:func:`confirm`.
 """
 from __future__ import annotations
 
 import csv
 import hashlib
-import itertools
 import json
-import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
-from cosim.validate import check_jobs, dumps
+from cosim.core.validate import check_jobs, dumps
 
-# the proposal and its confirmation (also the names the tests reach through this module)
-from .proposal import _confirms, _passes, _ratio_ci, aggregate, confirm, propose  # noqa: F401
+from .proposal import aggregate, confirms, propose, shortfall, widen_one
+from .spec import SweepConfig, primary_key, sweep_model
 
 #: CPU seconds one point costs per second of record (TACAN's: model front end, FIFO, fixed
 #: DSP and its share of the golden chain; measured ~1 s, with margin; a receiver gives its
 #: own in ``SweepModel.cpu_s_per_record_s``) and the longest study started.
 CPU_S_PER_RECORD_S = 1.5
 MAX_STUDY_H = 48.0
-
-
-def sweep_model(receiver: str):
-    """The :class:`~cosim.receivers.SweepModel` of a registered receiver (ValueError if it
-    has none)."""
-    from cosim.receivers import get
-    r = get(receiver)
-    if r.sweep is None or r.sweep.model is None:
-        raise ValueError(f"receiver {receiver!r} has no sweep study model")
-    return r.sweep.model
-
-
-def primary_key(receiver: str) -> str:
-    """The receiver's primary figure (``Receiver.primary.key``), e.g. ``rmse_deg``."""
-    from cosim.receivers import get
-    return get(receiver).primary.key
-
-
-# ---------------------------------------------------------------------------------------
-# Parameter specifications
-# ---------------------------------------------------------------------------------------
-def parse_values(spec: str, option: str = "values") -> tuple:
-    """``"4:14"`` -> 4..14, ``"0:20:5"`` -> 0, 5, ..., 20, ``"8,12,16"`` or ``"floor,half_up"``
-    -> the list (numbers where they parse); at most :data:`cosim.validate.MAX_LIST_VALUES`
-    values (counted before any list is built)."""
-    from cosim.validate import MAX_LIST_VALUES
-    spec = spec.strip()
-    if not spec:
-        raise ValueError(f"{option}: empty value list")
-    if ":" in spec:
-        parts = spec.split(":")
-        if len(parts) not in (2, 3):
-            raise ValueError(f"range must be a:b or a:b:step, not {spec!r}")
-        try:
-            nums = [float(p) for p in parts]
-        except ValueError:
-            raise ValueError(f"range bounds must be numbers, not {spec!r}") from None
-        a, b = nums[0], nums[1]
-        st = nums[2] if len(nums) == 3 else 1.0
-        if not all(math.isfinite(v) for v in nums) or st <= 0 or b < a:
-            raise ValueError(f"range {spec!r} must have finite a <= b and step > 0")
-        n = math.floor((b - a) / st + 1e-9) + 1
-        if n > MAX_LIST_VALUES:
-            raise ValueError(f"{option} {spec!r} gives {n:,} values; at most "
-                             f"{MAX_LIST_VALUES} (use a larger step)")
-        vals = [a + i * st for i in range(n)]
-        if all(float(v).is_integer() for v in nums):
-            return tuple(int(round(v)) for v in vals)
-        return tuple(round(v, 12) for v in vals)
-    out = []
-    items = spec.split(",")
-    if len(items) > MAX_LIST_VALUES:
-        raise ValueError(f"{option} gives {len(items):,} values; at most {MAX_LIST_VALUES}")
-    for p in items:
-        p = p.strip()
-        if not p:
-            raise ValueError(f"{option}: empty item in {spec!r}")
-        try:
-            v = float(p)
-            out.append(int(v) if v.is_integer() and "." not in p else v)
-        except ValueError:
-            out.append(p)
-    return tuple(out)
-
-
-def parse_param(text: str, receiver: str = "tacan") -> tuple[str, tuple]:
-    """``"NAME=VALUES"`` -> ``(NAME, values)`` (name checked by :func:`check_param`)."""
-    if "=" not in text:
-        raise ValueError(f"--param must be NAME=VALUES, not {text!r}")
-    name, spec = text.split("=", 1)
-    name = name.strip()
-    check_param(name, receiver)
-    return name, parse_values(spec, f"--param {name}")
-
-
-def check_param(name: str, receiver: str = "tacan") -> None:
-    """Refuse a parameter the receiver's sweep model does not know (ValueError)."""
-    sweep_model(receiver).check_param(name)
-
-
-# ---------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SweepConfig:
-    """One sweep (see the module doc).
-
-    Parameters
-    ----------
-    receiver : str
-        A registered receiver whose sweep study has a model (:mod:`cosim.receivers`).
-    params : tuple of (name, values)
-        Swept parameters (crossed). Default: the receiver's ``SweepModel.default_params``
-        (TACAN: ``adc_bits`` 4..14).
-    snr_db : tuple of float
-    trials : int
-        Monte Carlo records per SNR (independent seeds; bearing drawn per trial).
-    duration_s, memory_s : float
-        Record length and the Kalman filter memory (bearings after ``2 memory_s`` count).
-    seed : int
-        Base seed: the same sweep gives the same bits.
-    recheck : int
-        Points re-run on the cycle-accurate backend (``recheck_backend``: ``"verilator"``,
-        ``"pysim"``, or ``"auto"``, Verilator when installed) over the first
-        ``recheck_samples`` ADC samples (default 1,000,000 with Verilator, 60,000 with the
-        much slower Amaranth simulation), comparing FIFO words and cycles with the model.
-    target_rel : float
-        Word-length proposal: RMSE within ``(1 + target_rel)`` of the float golden.
-    design : {"grid", "oat"}
-        ``grid``: every combination of the swept values; ``oat``: one parameter at a time,
-        the others at their reference (largest) value -- what the proposal reads, at the
-        cost of a sum instead of a product of the value counts.
-    """
-
-    receiver: str = "tacan"
-    params: tuple = ()
-    snr_db: tuple = (0.0, 5.0, 10.0, 15.0, 20.0)
-    trials: int = 20
-    duration_s: float = 1.0
-    memory_s: float = 0.25
-    seed: int = 0
-    recheck: int = 2
-    recheck_backend: str = "auto"
-    recheck_samples: int | None = None
-    target_rel: float = 0.05
-    design: str = "grid"
-
-    def __post_init__(self):
-        model = sweep_model(self.receiver)    # a registered receiver with a sweep model
-        if not self.params:
-            object.__setattr__(self, "params", tuple(model.default_params))
-        names = [n for n, _ in self.params]
-        if len(set(names)) != len(names):
-            raise ValueError(f"parameter given twice: {names}")
-        for n, vals in self.params:
-            check_param(n, self.receiver)
-            if not vals:
-                raise ValueError(f"parameter {n} has no values")
-        if not self.snr_db or not all(isinstance(s, (int, float)) and math.isfinite(s)
-                                      for s in self.snr_db):
-            raise ValueError(f"snr_db must be finite numbers, not {self.snr_db!r}")
-        if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
-            raise ValueError(f"trials must be an integer >= 1, not {self.trials!r}")
-        if not (math.isfinite(self.memory_s) and self.memory_s > 0):
-            raise ValueError(f"memory_s must be > 0, not {self.memory_s}")
-        if not (math.isfinite(self.duration_s) and self.duration_s > 2 * self.memory_s + 0.1):
-            raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s "
-                             f"({2 * self.memory_s + 0.1:g} s), not {self.duration_s}")
-        if self.recheck_backend not in ("auto", "pysim", "verilator"):
-            raise ValueError(f"recheck_backend must be 'auto', 'pysim' or 'verilator', not "
-                             f"{self.recheck_backend!r}")
-        if self.recheck_samples is not None and (
-                isinstance(self.recheck_samples, bool) or
-                not isinstance(self.recheck_samples, int) or self.recheck_samples < 1000):
-            raise ValueError(f"recheck_samples must be an integer >= 1000, not "
-                             f"{self.recheck_samples!r}")
-        if not (0 < self.target_rel < 10):
-            raise ValueError(f"target_rel must be in (0, 10), not {self.target_rel}")
-        if self.design not in ("grid", "oat"):
-            raise ValueError(f"design must be 'grid' (every combination) or 'oat' (one "
-                             f"parameter at a time), not {self.design!r}")
-
-    @property
-    def recheck_plan(self) -> tuple[str, int]:
-        """(backend, samples) the re-checks use."""
-        be = self.recheck_backend
-        if be == "auto":
-            from cosim.verilator import verilator_available
-            be = "verilator" if verilator_available() else "pysim"
-        n = self.recheck_samples or (1_000_000 if be == "verilator" else 60_000)
-        return be, n
-
-    @property
-    def reference(self) -> dict:
-        """Each parameter's reference value: its largest swept value (numeric), else its
-        first; the one-at-a-time design holds the others there."""
-        return {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0]
-                for n, v in self.params}
-
-    @property
-    def combos(self) -> list[tuple]:
-        names = [n for n, _ in self.params]
-        if self.design == "grid":
-            return [tuple(zip(names, vals))
-                    for vals in itertools.product(*(v for _, v in self.params))]
-        ref = self.reference
-        out = []
-        for n, vals in self.params:
-            for v in vals:
-                c = tuple((m, v if m == n else ref[m]) for m in names)
-                if c not in out:
-                    out.append(c)
-        return out
-
-    @property
-    def n_points(self) -> int:
-        return len(self.combos) * len(self.snr_db) * self.trials
 
 
 # ---------------------------------------------------------------------------------------
@@ -254,7 +59,7 @@ def check_points(cfg: SweepConfig) -> None:
     word too narrow for its signal) stops the study here, with the message, instead of
     ending up as an "invalid" row of the report. Also refuses a study too big to start
     (points x record length)."""
-    from cosim.validate import check_memory
+    from cosim.core.validate import check_memory
     model = sweep_model(cfg.receiver)
     for combo in cfg.combos:
         try:
@@ -265,7 +70,7 @@ def check_points(cfg: SweepConfig) -> None:
     # the summary holds every point (a few kB each with its range log)
     check_memory(cfg.n_points * 20e3, f"{cfg.n_points:,} points", "the swept values, "
                  "--snr-db or --trials")
-    from cosim.validate import cores
+    from cosim.core.validate import cores
     hours = cfg.n_points * cfg.duration_s * model.cpu_s_per_record_s / cores() / 3600
     if hours > MAX_STUDY_H:
         raise ValueError(f"{cfg.n_points:,} points of {cfg.duration_s:g} s would take about "
@@ -418,7 +223,7 @@ def _cfg_dict(cfg: SweepConfig) -> dict:
 
 
 def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: float = 0.0) -> dict:
-    from cosim.bench import machine_info
+    from cosim.core.provenance import machine_info
     out = Path(out)
     P = primary_key(cfg.receiver)
     rows = aggregate(cfg, results)
@@ -483,7 +288,7 @@ def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from cosim.receivers import get
+    from cosim.core.receivers import get
     P, fig_m = primary_key(cfg.receiver), get(cfg.receiver).primary
     names = [n for n, _ in cfg.params]
     ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0] for n, v in cfg.params}
@@ -626,6 +431,65 @@ def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
 
 def _ci_text(ci) -> str:
     return "-" if not ci else f"{ci[0]:.3f}-{ci[1]:.3f}"
+
+
+def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler="local",
+            progress=True, max_backoff: int = 3) -> dict:
+    """Re-run the proposed combination (all proposed values together) on fresh seeds and
+    check it against the golden chain with the stricter :func:`confirms`.
+
+    Word lengths that each pass alone can fail together (their losses add up). Then each
+    parameter in turn is widened by one swept step, the others kept, and each of these
+    candidates re-run: the one that confirms is the answer (of several, the one that widens
+    least -- one more bit before two -- then the one with the smallest worst ratio); when
+    none does, the nearest by :func:`shortfall` is kept and the next round widens from it,
+    up to ``max_backoff`` rounds. So only the widths that matter grow: a filter gain one
+    step too short costs one parameter a step, not all of them. Should no round confirm,
+    every parameter at its widest swept value (the sweep's reference) is the last attempt.
+    Returns the summary: ``confirmed``, the ``params`` finally confirmed (or last tried),
+    the ``attempts`` (params, rows, and the parameter each candidate widened)."""
+    if not proposal or any(v is None for v in proposal.values()):
+        return {"confirmed": False, "reason": "no complete proposal (some parameter never "
+                                             "meets the target in the swept range)",
+                "attempts": []}
+    ref = cfg.reference
+    attempts = []
+
+    def attempt(params: dict, widened: str | None) -> dict:
+        fixed = tuple((n, (params[n],)) for n, _ in cfg.params)
+        ccfg = replace(cfg, params=fixed, seed=cfg.seed + 1, recheck=0, design="grid")
+        s = run_sweep(ccfg, out / "confirm", jobs=jobs, scheduler=scheduler,
+                            progress=progress)
+        rows = s["rows"]
+        a = {"params": dict(params), "widened": widened, "rows": rows,
+             "confirmed": bool(all(confirms(r, cfg.target_rel) for r in rows))}
+        attempts.append(a)
+        return a
+
+    best = attempt({n: (proposal[n] if n in proposal else ref[n]) for n, _ in cfg.params},
+                   None)
+    for _ in range(max_backoff):
+        if best["confirmed"]:
+            break
+        cands = [attempt(p, n) for n, p in widen_one(cfg, best["params"])]
+        if not cands:
+            break
+        best = min(cands, key=lambda a: (not a["confirmed"],
+                                         a["params"][a["widened"]] - best["params"][a["widened"]]
+                                         if a["confirmed"] else 0,
+                                         shortfall(a["rows"], cfg.target_rel)))
+    if not best["confirmed"]:
+        widest = {n: ref[n] for n, _ in cfg.params}
+        if widest != best["params"]:
+            best = attempt(widest, "all")
+    res = {"confirmed": best["confirmed"], "params": best["params"], "seed": cfg.seed + 1,
+           "rows": best["rows"], "attempts": attempts}
+    model = sweep_model(cfg.receiver)
+    if cfg.recheck > 0 and model.confirm_recheck is not None:
+        # the combination proposed is the one to build: prove its bits on the RTL too
+        combo = tuple((n, best["params"][n]) for n, _ in cfg.params)
+        res["recheck"] = {"combo": [list(c) for c in combo], **model.confirm_recheck(cfg, combo)}
+    return res
 
 
 def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bench import machine_info, map_jobs
+from ..core.provenance import machine_info, map_jobs
 
 
 def _one_run(kw: dict) -> dict:
@@ -517,14 +517,14 @@ def _other_mode(kw: dict) -> dict:
     dB under the noise) heard by a receiver of mode ``rx`` with ``detector`` (golden chain,
     90 deg, seed 5): the references it decodes and the bearings it shows valid."""
     from dataclasses import replace
-    from .run import TacanRunConfig, _golden, run_dsp
+    from .run import TacanRunConfig, golden_frontend, run_dsp
     from .signal import TacanSignalConfig, generate
     beacon, rx = kw["beacon"], kw["rx"]
     sig = TacanSignalConfig(mode=beacon or rx, bearing_deg=90.0, duration_s=kw["duration_s"],
                             seed=5, snr_db=kw["snr_db"] if beacon else -60.0)
     run = TacanRunConfig(signal=replace(sig, mode=rx), detector=kw["detector"],
                          require_bearing=False)
-    fo = _golden(generate(sig).samples, run)
+    fo = golden_frontend(generate(sig).samples, run)
     tr = run_dsp(fo, run, sig.fs_hz)
     return {**kw, "peaks": int(fo.ticks.size), "main_refs": int(tr.n_main_refs),
             "aux_refs": int(tr.n_aux_refs), "bearings": int(tr.times_s.size),

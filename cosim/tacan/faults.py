@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..receivers import FaultModel
-from ..studies.faults import _flip_signed, flip_bits
+from ..core.receivers import FaultModel
+from ..studies.faults import flip_bits, flip_signed
 
 __all__ = ["TARGETS", "check", "check_size", "word_width", "record", "FAULT_MODEL"]
 
@@ -102,7 +102,7 @@ def _score(fc, run, track, truth_deg) -> dict:
 def record(fc, ber: float, trial: int, cache: dict) -> dict:
     """One run of the study (BER, trial): the point runner; never raises (an exception is
     reported in the record)."""
-    from .run import FRONTENDS, _dsp_receive, run_dsp
+    from .run import FRONTENDS, dsp_receive, run_dsp
     from .signal import TacanSignal, generate
     run = _run_cfg(fc, trial)
     rng = np.random.default_rng([fc.seed, trial, int(round(ber * 1e12)), 99])
@@ -116,7 +116,7 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
     try:
         p = run.hdl_params
         if fc.target == "adc":
-            x, wi, _ = _flip_signed(s.samples, run.signal.adc_bits, ber, rng, fc.bits)
+            x, wi, _ = flip_signed(s.samples, run.signal.adc_bits, ber, rng, fc.bits)
             rec["flips"] = int(wi.size)
             fo = FRONTENDS["model"](x, run)
             track = run_dsp(fo, run, run.signal.fs_hz)
@@ -127,7 +127,7 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
             fo0 = cache[fkey]
             w, wi, _ = flip_bits(fo0.words, p.fifo.word_width, ber, rng, fc.bits)
             rec["flips"] = int(wi.size)
-            fo = _dsp_receive(w, fo0.cycles, p, fo0.n_cycles, fo0.fifo_dropped)
+            fo = dsp_receive(w, fo0.cycles, p, fo0.n_cycles, fo0.fifo_dropped)
             rec["rx"] = fo.extra.get("rx")
             track = run_dsp(fo, run, run.signal.fs_hz)
         elif fc.target == "register":

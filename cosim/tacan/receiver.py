@@ -11,12 +11,12 @@ import sys
 from dsp.tacan.frontend import DETECTORS
 from dsp.tacan.kalman import KalmanConfig
 
-from ..link import DspServiceConfig
-from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,
-                         parse_int, register)
+from ..core.link import DspServiceConfig
+from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
+                              config_kwargs, parse_int, register)
 from ..studies.faults import FaultConfig
-from ..studies.sweep import SweepConfig
-from ..validate import check_jobs, check_out_dir, check_out_file, dumps, warn
+from ..studies.spec import SweepConfig
+from ..core.validate import check_jobs, check_out_dir, check_out_file, dumps, warn
 from .run import TacanRunConfig
 from .signal import TacanSignalConfig
 from .faults import FAULT_MODEL, TARGETS
@@ -84,7 +84,7 @@ def tacan_run_config(a) -> TacanRunConfig:
     """The :class:`cosim.tacan.run.TacanRunConfig` of ``tacan`` arguments, every option checked
     against the others before any work starts (an option that cannot affect the run is
     refused, not ignored)."""
-    from ..link import DSP_PRESETS
+    from ..core.link import DSP_PRESETS
 
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
@@ -254,7 +254,8 @@ SWEEP_OPTIONS = (
 
 def cmd_sweep(a) -> int:
     import re
-    from ..studies.sweep import check_points, parse_param, parse_values, study
+    from ..studies.spec import parse_param, parse_values
+    from ..studies.sweep import check_points, study
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
     if a.recheck < 0:
@@ -366,7 +367,7 @@ def _top():
 
 
 def _equivalence(**kw) -> dict:
-    from ..equivalence import check_equivalence
+    from .equivalence import check_equivalence
     return check_equivalence(top="tacan", **kw)
 
 
@@ -378,6 +379,38 @@ def _component(params):
 def _model_session(params, **kw):
     from .session import TacanModelSession
     return TacanModelSession(params, **kw)
+
+
+def _tacan_bench(name: str):
+    def bench(out, quick: bool = False, jobs: int | None = None) -> dict:
+        from . import bench as tacan_bench
+        return getattr(tacan_bench, name)(out, quick=quick, jobs=jobs)
+    bench.__name__ = name
+    return bench
+
+
+def _dsp_speed(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_dsp import dsp_speed
+    return dsp_speed(out, quick=quick)
+
+
+def _dsp_hour(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_dsp import dsp_hour
+    return dsp_hour(out, quick=quick)
+
+
+def _sim_speed(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_sim import sim_speed
+    return sim_speed(out, quick=quick)
+
+
+#: ``python -m cosim bench <name>`` of the TACAN receiver.
+BENCHMARKS = {
+    **{f"tacan-{k}": Benchmark(_tacan_bench(f"tacan_{k}"), jobs=True)
+       for k in ("accuracy", "robustness", "detector", "sensitivity", "confidence")},
+    "dsp-speed": Benchmark(_dsp_speed), "dsp-hour": Benchmark(_dsp_hour),
+    "sim-speed": Benchmark(_sim_speed),
+}
 
 
 def _frontend():
@@ -403,4 +436,5 @@ TACAN = register(Receiver(
                 "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),
     faults=Study("bit-error study: flip bits in the ADC samples, FIFO words, the NCO register "
                  "or the DSP state", FAULT_OPTIONS, cmd_faults, model=FAULT_MODEL),
+    benchmarks=BENCHMARKS,
 ))

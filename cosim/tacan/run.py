@@ -37,7 +37,8 @@ from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, b
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.decode import DecoderConfig
 from dsp.tacan.fifo_rx import receive_words
-from ..link import ControlPath, DspServiceConfig
+from ..core.control import ControlPath
+from ..core.link import DspServiceConfig
 from .signal import TacanSignalConfig, generate
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
@@ -296,7 +297,9 @@ class FrontendOutput:
 # ---------------------------------------------------------------------------------------
 # Front-end backends
 # ---------------------------------------------------------------------------------------
-def _golden(samples, run: TacanRunConfig) -> FrontendOutput:
+def golden_frontend(samples, run: TacanRunConfig) -> FrontendOutput:
+    """The float golden front end (:func:`dsp.tacan.frontend.run_golden_frontend`) on
+    ``samples``: the peaks' ticks, amplitudes and sources."""
     pk = run_golden_frontend(samples, run.frontend, run.signal.adc_bits)
     return FrontendOutput(ticks=np.asarray(pk.timestamps, np.int64),
                           amplitude_fs=np.asarray(pk.amplitudes, np.float64), source=pk.source)
@@ -314,7 +317,7 @@ def _freq_segments(run: TacanRunConfig, params, n_cycles: int):
     return ctl
 
 
-def _dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
+def dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
     """The DSP side of the link: tagged words -> peaks (unwrapped ticks, amplitudes; with
     two searches their sources, each search's timestamps checked on their own)."""
     out = receive_words(words, width=params.fifo.width, amp_width=params.peak.amp_width,
@@ -336,8 +339,8 @@ def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOut
     session (:func:`cosim.session.open_frontend`) fed the record and ``_n_cycles - len``
     idle cycles to flush the last peak, the DSP reading with ``run.service``, the
     ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after)."""
-    from ..pipeline import Pipeline
-    from ..session import open_frontend
+    from ..core.pipeline import Pipeline
+    from ..backends.factory import open_frontend
     p = run.hdl_params
     n_cycles = _n_cycles(samples, p)
     ctl = _freq_segments(run, p, n_cycles)
@@ -351,7 +354,7 @@ def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOut
         pipe.feed(samples)
         pipe.idle(n_cycles - len(samples))
         res = pipe.result()
-        fo = _dsp_receive(res.words, res.cycles, p, n_cycles, res.overflow_count)
+        fo = dsp_receive(res.words, res.cycles, p, n_cycles, res.overflow_count)
         if backend == "model":
             fo.extra["ranges"] = fe.ranges()
             fo.extra["fifo_max_level"] = int(fe.fifo_state.max_level)
@@ -367,7 +370,7 @@ def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
         return _session_frontend(samples, run, kind)
     # A Verilator waveform needs the one-shot run (a session's time base is per step).
     from hdl.tacan.frontend import TacanFrontEnd
-    from ..verilator import VerilatorStreamSim
+    from ..backends.verilator import VerilatorStreamSim
     p = run.hdl_params
     n_cycles = _n_cycles(samples, p)
     ctl = _freq_segments(run, p, n_cycles)
@@ -378,10 +381,10 @@ def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
                   inputs={"freq": p.nco_freq_word}, writes=writes,
                   final={"overflow_count": "overflow_count"},
                   trace=run.trace, trace_window=run.trace_window)
-    return _dsp_receive(res.words, res.cycles, p, n_cycles, res.final["overflow_count"])
+    return dsp_receive(res.words, res.cycles, p, n_cycles, res.final["overflow_count"])
 
 
-FRONTENDS = {"golden": _golden, "model": _model,
+FRONTENDS = {"golden": golden_frontend, "model": _model,
              "pysim": lambda s, r: _hdl_sim(s, r, "pysim"),
              "verilator": lambda s, r: _hdl_sim(s, r, "verilator")}
 
@@ -439,7 +442,7 @@ def check_run_size(run: TacanRunConfig) -> None:
     """Refuse, before any work, a run that cannot fit this machine: the memory its record
     needs (:data:`BYTES_PER_SAMPLE`) and, on a cycle-accurate backend, the simulation time
     (:data:`CYCLES_PER_S`, at most :data:`MAX_WALL_S`). The message names the option."""
-    from ..validate import check_memory
+    from ..core.validate import check_memory
     sig = run.signal
     n = sig.duration_s * sig.fs_hz
     per = BYTES_PER_SAMPLE[run.backend] + (16 if run.compare else 0)
@@ -552,7 +555,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
     if run.compare == "golden":
         bar.stage("golden chain")
         t4 = time.perf_counter()
-        gfo = _golden(s.samples, run)
+        gfo = golden_frontend(s.samples, run)
         gold = run_dsp(gfo, TacanRunConfig(**{**_fields(run), "backend": "golden",
                                                "dsp": "float", "compare": None,
                                                "recheck": None}), sig.fs_hz)
@@ -630,7 +633,7 @@ def recheck_cycle_accurate(run: TacanRunConfig, samples, backend: str = "auto",
     ``backend``: ``"verilator"``, ``"pysim"`` or ``"auto"`` (Verilator when installed);
     ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with pysim.
     """
-    from ..verilator import verilator_available
+    from ..backends.verilator import verilator_available
     if backend == "auto":
         backend = "verilator" if verilator_available() else "pysim"
     if backend not in ("pysim", "verilator"):

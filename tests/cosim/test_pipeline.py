@@ -9,13 +9,14 @@ they reached the HDL at the modelled cycles.
 import numpy as np
 import pytest
 
-from cosim.link import DspServiceConfig, run_link
-from cosim.pipeline import Pipeline
-from cosim.session import open_frontend, ready_window
+from cosim.core.link import DspServiceConfig, run_link
+from cosim.core.pipeline import Pipeline
+from cosim.backends.factory import open_frontend
+from cosim.core.session import ready_window
 from cosim.tacan.session import TacanModelSession
 from cosim.tacan.run import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
-from cosim.verilator import verilator_available
+from cosim.backends.verilator import verilator_available
 from dsp.tacan.kalman import KalmanConfig
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
@@ -142,7 +143,7 @@ def test_closed_loop_with_drops_model_and_verilator(long_record, n_blocks):
 def test_loop_writes_replayed_in_a_one_shot_run_give_the_same_words(long_record):
     """The writes the loop decided at run time, given up front to the old one-shot harness
     (``VerilatorStreamSim.run(writes=...)``): the same words on the same cycles."""
-    from cosim.verilator import VerilatorStreamSim
+    from cosim.backends.verilator import VerilatorStreamSim
     from hdl.tacan.frontend import TacanFrontEnd
     params, x = long_record
     svc = DspServiceConfig().with_stalls((60_000, 100_000))
@@ -208,7 +209,7 @@ def _old_chain(simulated_s, block_s, batch_s):
     """The chain ``dsp-hour`` ran before the pipeline (bench_dsp at a2c3ba2), blocks and
     batch length as parameters: front-end model, run_link and the FIFO receiver per block,
     all with carried state, the DSP per batch."""
-    from cosim.bench_dsp import _if_block
+    from cosim.tacan.bench_dsp import _if_block
     from dsp.tacan.bearing import wrap_deg
     from dsp.tacan.fifo_rx import receive_words
     from dsp.tacan.frontend import FrontendConfig
@@ -265,7 +266,7 @@ def test_dsp_hour_short_form_on_the_pipeline_matches_the_old_chain(tmp_path):
     """``dsp-hour`` for 2 simulated seconds (1 s blocks, 1 s DSP batches): the same peaks,
     FIFO words, receiver statistics, Kalman updates and per-batch bearing figures as the
     block-by-block chain it replaced; results files written."""
-    from cosim.bench_dsp import dsp_hour
+    from cosim.tacan.bench_dsp import dsp_hour
     s = dsp_hour(tmp_path, simulated_s=2.0, block_s=1.0, batch_s=1.0)
     ref = _old_chain(2.0, 1.0, 1.0)
     assert (tmp_path / "dsp_hour.json").exists() and (tmp_path / "dsp_hour.md").exists()
@@ -322,8 +323,8 @@ def test_stream_session_in_blocks_equals_one_run_stream(backend):
     """Any stream component: a session stepped in uneven blocks, with back-pressure on both
     sides (words not accepted carry over to the next step) and register writes between and
     inside steps, gives :func:`cosim.pysim.run_stream`'s words and cycles (seed 5)."""
-    from cosim.pysim import run_stream
-    from cosim.session import open_stream_session
+    from cosim.backends.pysim import run_stream
+    from cosim.backends.factory import open_stream_session
     rng = np.random.default_rng(5)
     words = rng.integers(0, 256, 500)
     n = 900

@@ -8,10 +8,10 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from cosim import receivers as reg
+from cosim.core import receivers as reg
 from cosim.cli import build_parser, hdl_blocks, main
-from cosim.receivers import (Arg, Figure, Frontend, Option, Receiver, Study, SweepModel,
-                             config_kwargs)
+from cosim.core.receivers import (Arg, Figure, Frontend, Option, Receiver, Study, SweepModel,
+                                  config_kwargs)
 
 
 @dataclass(frozen=True)
@@ -201,7 +201,7 @@ def _gain_component(p: GainParams):
 
 def _gain_model_session(p: GainParams, log_ranges: bool = False):
     import numpy as np
-    from cosim.session import FrontendSession, ready_window
+    from cosim.core.session import FrontendSession, ready_window
 
     class GainModelSession(FrontendSession):
         backend = "model"
@@ -253,7 +253,7 @@ class _GainRecord:
 
     def point(self, combo, recheck=False):
         import numpy as np
-        from cosim.session import open_frontend
+        from cosim.backends.factory import open_frontend
         p = GainParams(**dict(combo))
         codes = np.round(self.x * ((1 << p.in_bits) - 1)).astype(np.int64)
         with open_frontend("model", p) as fe:
@@ -290,7 +290,8 @@ GAIN_SWEEP = (Option(GainSweep, "trials"), Option(GainSweep, "out"),
 
 
 def _gain_sweep(a) -> int:
-    from cosim.studies.sweep import SweepConfig, check_points, parse_param, study
+    from cosim.studies.spec import SweepConfig, parse_param
+    from cosim.studies.sweep import check_points, study
     cfg = SweepConfig(receiver="gain", params=tuple(parse_param(t, "gain") for t in a.param),
                       snr_db=(10.0, 30.0), trials=a.trials, duration_s=1.0, memory_s=0.25,
                       recheck=0, target_rel=0.05)
@@ -317,7 +318,7 @@ def test_open_frontend_finds_a_registered_front_end(gain):
     numpy model session and the Amaranth block on pysim give the same words and cycles,
     a register write included."""
     import numpy as np
-    from cosim.session import open_frontend
+    from cosim.backends.factory import open_frontend
     p = GainParams(in_bits=6, gain=5)
     x = np.random.default_rng(1).integers(0, 64, 200)
     ready = np.random.default_rng(2).random(300) < 0.7
@@ -342,7 +343,7 @@ def test_a_registered_sweep_model_runs_through_the_generic_engine(gain, tmp_path
     """``sweep gain`` validates its parameters up front through its model, then runs the
     generic engine (grid, cache, paired golden, proposal, confirmation, report)."""
     import csv
-    from cosim.studies.sweep import SweepConfig
+    from cosim.studies.spec import SweepConfig
     with pytest.raises(ValueError, match="unknown parameter 'adc_bits': use in_bits or gain"):
         SweepConfig(receiver="gain", params=(("adc_bits", (4,)),))
     with pytest.raises(ValueError, match="no receiver named"):

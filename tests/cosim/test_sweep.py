@@ -7,8 +7,10 @@ import pytest
 import cosim.studies.sweep as sw
 import cosim.tacan.run
 from cosim.cli import main
-from cosim.studies.sweep import SweepConfig, parse_param, parse_values, propose, study
-from cosim.verilator import verilator_available
+from cosim.studies.proposal import confirms, passes, propose, ratio_ci
+from cosim.studies.spec import SweepConfig, parse_param, parse_values
+from cosim.studies.sweep import study
+from cosim.backends.verilator import verilator_available
 
 SMALL = dict(params=(("adc_bits", (4, 10)),), snr_db=(15.0,), trials=2, duration_s=0.7,
              memory_s=0.15, recheck=0)
@@ -75,10 +77,10 @@ def test_proposal_does_not_refuse_a_width_for_unresolved_noise():
 def test_ratio_interval_is_paired_and_deterministic():
     pairs = [({"rmse_deg": 0.2 * (1 + 0.1 * k)}, {"rmse_deg": 0.2 * (1 + 0.1 * k) / 1.05})
              for k in range(10)]
-    ci = sw._ratio_ci(pairs, "x")
-    assert ci == sw._ratio_ci(pairs, "x")
+    ci = ratio_ci(pairs, "x")
+    assert ci == ratio_ci(pairs, "x")
     assert ci[0] == pytest.approx(1.05) and ci[1] == pytest.approx(1.05)  # exact pairing
-    assert sw._ratio_ci(pairs[:2], "x") is None
+    assert ratio_ci(pairs[:2], "x") is None
 
 
 @pytest.fixture(scope="module")
@@ -250,7 +252,7 @@ def test_confirmation_is_stricter_than_the_proposal():
     row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
            "golden_reinit": 0, "dsp_events": {}, "ratio_to_golden": 1.07,
            "ratio_ci95": [1.0, 1.1]}
-    assert sw._passes(row, 0.05) and not sw._confirms(row, 0.05)
+    assert passes(row, 0.05) and not confirms(row, 0.05)
 
 
 def test_trial_signal_seeds_are_deterministic_and_distinct_for_negative_snr():
@@ -285,9 +287,9 @@ def test_a_width_that_makes_the_filter_diverge_is_not_proposed():
     row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
            "golden_reinit": 0, "dsp_events": {"reinit": 1}, "ratio_to_golden": 37.4,
            "ratio_ci95": [0.94, 75.2]}
-    assert not sw._passes(row, 0.05)
-    assert sw._passes({**row, "dsp_events": {"reinit": 0}}, 0.05)
-    assert sw._passes({**row, "golden_reinit": 1}, 0.05)
+    assert not passes(row, 0.05)
+    assert passes({**row, "dsp_events": {"reinit": 0}}, 0.05)
+    assert passes({**row, "golden_reinit": 1}, 0.05)
 
 
 def test_of_several_confirming_widenings_the_smallest_is_kept(monkeypatch, tmp_path):

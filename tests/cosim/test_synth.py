@@ -4,8 +4,8 @@ from amaranth.hdl import Fragment, Module, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-import cosim.synth as synth_mod
-from cosim.synth import synth, yowasp_available
+import cosim.tools.synth as synth_mod
+from cosim.tools.synth import synth, yowasp_available
 from test_verilator import AccDemo
 
 pytestmark = [pytest.mark.synth,

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from cosim.testing import StreamMismatch, check_stream
-from cosim.verilator import verilator_available
+from cosim.backends.verilator import verilator_available
 from hdl.model.fifo import ReadySchedule
 
-from cosim.verilog import REPO_ROOT
+from cosim.core.provenance import REPO_ROOT
 
 
 def _example():
@@ -96,7 +96,7 @@ def test_schedule_and_probe_and_bad_arguments():
 
 
 def test_without_verilator_pysim_is_checked_then_skipped(monkeypatch):
-    import cosim.verilator
+    import cosim.backends.verilator
     monkeypatch.setattr(cosim.verilator, "verilator_available", lambda: False)
     x, ready = _stim(6, 100)
     want = EX.fir_model(EX.TAPS, x)

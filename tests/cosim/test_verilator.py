@@ -12,9 +12,9 @@ from amaranth.hdl import Cat, Module, Signal, signed, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-import cosim.verilator as vl
-from cosim.pysim import run_stream
-from cosim.verilator import VerilatorStreamSim, verilator_available
+import cosim.backends.verilator as vl
+from cosim.backends.pysim import run_stream
+from cosim.backends.verilator import VerilatorStreamSim, verilator_available
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator (and make, g++) not found on PATH")

@@ -7,7 +7,8 @@ from amaranth.hdl import Fragment, Module, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from cosim.verilog import LINT_WAIVERS, component_ports, export_verilog, lint, verilog_text
+from cosim.tools.verilog import LINT_WAIVERS, export_verilog, lint
+from cosim.backends.verilog import component_ports, verilog_text
 from test_verilator import AccDemo, DropFifoDemo, FifoDemo, Wide64Demo
 
 needs_verilator = pytest.mark.skipif(shutil.which("verilator") is None,

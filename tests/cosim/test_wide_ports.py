@@ -9,7 +9,7 @@ from amaranth.hdl import Module, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from cosim.pysim import pack_fields, unpack_fields
+from cosim.backends.pysim import pack_fields, unpack_fields
 from cosim.testing import check_stream
 
 

@@ -16,9 +16,10 @@ from amaranth.hdl import Module, ResetInserter
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 
-from cosim.pysim import StreamResult
-from cosim.verilator import VerilatorStreamSim, verilator_available
-from cosim.verilog import export_verilog, lint, verilator_missing_message
+from cosim.backends.pysim import StreamResult
+from cosim.backends.verilator import VerilatorStreamSim, verilator_available
+from cosim.tools.verilog import export_verilog, lint
+from cosim.backends.verilog import verilator_missing_message
 
 __all__ = ["WithClear", "accepted_cycles", "assert_lints_clean", "needs_verilator",
            "verilator_sim", "assert_same_stream"]
@@ -109,7 +110,7 @@ def channel_layout(width: int, channels: int):
 
 def pack_channels(x: np.ndarray, width: int, channels: int) -> np.ndarray:
     """Samples (n,) or (n, 2) -> packed payload words."""
-    from cosim.pysim import pack_fields
+    from cosim.backends.pysim import pack_fields
     if channels == 1:
         return pack_fields({"i": x}, channel_layout(width, 1))
     return pack_fields({"i": x[:, 0], "q": x[:, 1]}, channel_layout(width, 2))
@@ -117,7 +118,7 @@ def pack_channels(x: np.ndarray, width: int, channels: int) -> np.ndarray:
 
 def unpack_channels(words: np.ndarray, width: int, channels: int) -> np.ndarray:
     """Packed payload words -> samples (n,) or (n, 2)."""
-    from cosim.pysim import unpack_fields
+    from cosim.backends.pysim import unpack_fields
     f = unpack_fields(words, channel_layout(width, channels))
     return f["i"] if channels == 1 else np.stack([f["i"], f["q"]], axis=1)
 

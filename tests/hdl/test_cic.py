@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.pysim import pack_fields, run_stream, unpack_fields
+from cosim.backends.pysim import pack_fields, run_stream, unpack_fields
 from dsp.design import cic_taps
 from hdl.cic import Cic
 from hdl.model.cic import CicParams, cic_init_state, cic_model, hogenauer_f2
@@ -364,7 +364,8 @@ def test_bad_model_inputs():
                                                              diff_delay=2)),
                                     ("cic_wrap", CONFIGS[5])])
 def test_verilog_lint(name, p):
-    from cosim.verilog import REPO_ROOT, export_verilog, lint
+    from cosim.core.provenance import REPO_ROOT
+    from cosim.tools.verilog import export_verilog, lint
     path = export_verilog(Cic(p), name=name, out_dir=REPO_ROOT / "build" / "verilog" / "test")
     assert lint(path) == []
 

@@ -10,7 +10,7 @@ from amaranth.hdl import Module, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from cosim.pysim import run_stream, unpack_fields
+from cosim.backends.pysim import run_stream, unpack_fields
 from hdl.ddc import Ddc
 from hdl.common import iq_layout
 from hdl.model.ddc import DdcModel, DdcParams

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.pysim import pack_fields, run_stream
+from cosim.backends.pysim import pack_fields, run_stream
 from hdl.envelope import Envelope
 from hdl.model.envelope import EnvelopeParams, envelope_model, envelope_model_numpy
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from amaranth.hdl import Fragment
 
-from cosim.link import DspServiceConfig, run_link
+from cosim.core.link import DspServiceConfig, run_link
 from cosim.testing import check_stream
 from dsp.records import receive_records
 from hdl.fifo import DspFifo

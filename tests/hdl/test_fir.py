@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from cosim.pysim import pack_fields, run_stream, unpack_fields
+from cosim.backends.pysim import pack_fields, run_stream, unpack_fields
 from dsp.design import design_pulse_fir
 from hdl.fir import Fir
 from hdl.model.fir import (FirParams, default_fir_taps, fir_float_reference, fir_init_state,
@@ -340,7 +340,8 @@ def test_bad_model_inputs():
                                     ("fir_lowpass_wrap", CONFIGS[1]), ("fir_3tap", CONFIGS[3]),
                                     ("fir_shared4", SHARED[0]), ("fir_shared_one", SHARED[3])])
 def test_verilog_lint(name, p):
-    from cosim.verilog import REPO_ROOT, export_verilog, lint
+    from cosim.core.provenance import REPO_ROOT
+    from cosim.tools.verilog import export_verilog, lint
     path = export_verilog(Fir(p), name=name, out_dir=REPO_ROOT / "build" / "verilog" / "test")
     assert lint(path) == []
 

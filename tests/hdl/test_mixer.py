@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from cosim.pysim import pack_fields, run_stream, unpack_fields
+from cosim.backends.pysim import pack_fields, run_stream, unpack_fields
 from cosim.testing import check_stream
 from hdl.mixer import Mixer
 from hdl.model.mixer import MixerModel, MixerParams

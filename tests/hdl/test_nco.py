@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.pysim import run_stream, unpack_fields
+from cosim.backends.pysim import run_stream, unpack_fields
 from hdl.model.nco import (LFSR_BITS, NcoModel, NcoParams, NcoState, lfsr_bits,
                            nco_freq_word, nco_full_tables, nco_quarter_table)
 from hdl.nco import Nco

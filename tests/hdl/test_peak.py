@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from amaranth.hdl import Fragment, Shape, unsigned
 
-from cosim.pysim import run_stream, unpack_fields
+from cosim.backends.pysim import run_stream, unpack_fields
 from hdl.model.peak import (PeakParams, PeakState, peak_search, peak_search_float,
                             peak_search_numpy)
 from hdl.peak import PeakSearch

@@ -17,7 +17,7 @@ from cosim.cli import main
 from cosim.gnss.run import SCENARIOS, GnssRunConfig, run_gnss
 from cosim.gnss.signal import GnssSignalConfig
 from cosim.gnss.dynamics import seed002
-from cosim.verilator import verilator_available
+from cosim.backends.verilator import verilator_available
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

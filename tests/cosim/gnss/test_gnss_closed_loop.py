@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cosim.gnss.run import SKIP_RECORDS, GnssRunConfig, closed_loop
-from cosim.verilator import verilator_available
+from cosim.backends.verilator import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.model import GnssChannelParams
 

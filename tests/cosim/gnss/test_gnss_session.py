@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from cosim.gnss.session import GnssModelSession, GnssRegisterSession
-from cosim.link import DspServiceConfig
-from cosim.session import open_stream_session
+from cosim.core.link import DspServiceConfig
+from cosim.backends.factory import open_stream_session
 from hdl.gnss.model import GnssArrayModel, GnssChannelParams, REG_CODE_FREQ, REG_CARR_FREQ
 
 #: Reduced rate (as tests/hdl/gnss/test_channel.py): 2 samples per chip, 2046 per epoch.

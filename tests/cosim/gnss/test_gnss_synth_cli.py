@@ -7,8 +7,8 @@ import json
 import pytest
 
 from cosim.cli import main
-from cosim.receivers import get
-from cosim.synth import yowasp_available
+from cosim.core.receivers import get
+from cosim.tools.synth import yowasp_available
 from hdl.gnss.channel import GnssChannel, GnssChannelArray
 
 
@@ -35,7 +35,7 @@ def test_registry_builds_the_array_top():
      "error: --timeout-min must be in (0, 1440] minutes, not 0"),
 ])
 def test_bad_arguments_refused_before_work(argv, msg, capsys, monkeypatch, tmp_path):
-    import cosim.synth as synth_mod
+    import cosim.tools.synth as synth_mod
 
     def never(*a, **k):
         raise AssertionError("synthesis started")

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from cosim import receivers
+from cosim.core import receivers
 from cosim.cli import main
 from cosim.monopulse.run import MonopulseRunConfig
 
@@ -51,11 +51,11 @@ def test_bad_input_exits_2_with_an_error_line(argv, msg, capsys):
 
 
 def test_registry_declares_the_front_end_its_top_and_the_bench():
-    from cosim.bench import BENCHMARKS
+    from cosim.tools.bench import benchmarks
     from cosim.cli import build_parser, hdl_blocks
     from cosim.monopulse.session import MonopulseModelSession
-    from cosim.receivers import get
-    from cosim.session import open_frontend
+    from cosim.core.receivers import get
+    from cosim.backends.factory import open_frontend
     from hdl.monopulse.frontend import MonopulseFrontEnd
     from hdl.monopulse.model import MonopulseFrontendParams
     p = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
@@ -70,7 +70,7 @@ def test_registry_declares_the_front_end_its_top_and_the_bench():
     sub = next(a for a in build_parser()._actions if a.dest == "command").choices
     top = next(a for a in sub["synth"]._actions if a.dest == "top")
     assert "monopulse" in top.choices
-    assert "monopulse" in BENCHMARKS
+    assert "monopulse" in benchmarks()
 
 
 def test_synth_timeout_is_validated_before_work(capsys, tmp_path):

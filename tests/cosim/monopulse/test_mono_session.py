@@ -3,8 +3,9 @@ and the same words on the same cycles as the Amaranth simulation session."""
 import numpy as np
 import pytest
 
-from cosim.monopulse.session import MonopulseModelSession, write_register
-from cosim.session import open_stream_session
+from cosim.backends.factory import open_stream_session
+from cosim.core.session import write_register
+from cosim.monopulse.session import MonopulseModelSession
 from hdl.monopulse.frontend import MonopulseFrontEnd
 from hdl.monopulse.model import (REG_COEF, REG_U0, MonopulseFrontendParams, coef_word,
                                  dc_word, pack_input)

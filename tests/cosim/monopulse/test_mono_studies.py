@@ -11,7 +11,8 @@ import pytest
 
 from cosim.cli import main
 from cosim.studies.faults import FaultConfig
-from cosim.studies.sweep import SweepConfig, check_points, parse_param
+from cosim.studies.spec import SweepConfig, parse_param
+from cosim.studies.sweep import check_points
 
 SHORT = ["--duration-s", "0.115", "--memory-s", "0.005", "--trials", "1"]
 

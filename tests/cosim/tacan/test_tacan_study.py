@@ -1,5 +1,5 @@
 """The TACAN sweep's records: what counts as a lock."""
-from cosim.studies.sweep import SweepConfig
+from cosim.studies.spec import SweepConfig
 from cosim.tacan.study import TacanSweepRecord
 
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from _util import assert_lints_clean, needs_verilator, verilator_sim  # tests/hdl/conftest.py
-from cosim.pysim import run_stream
+from cosim.backends.pysim import run_stream
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
 from hdl.gnss.model import (REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssArrayModel,
@@ -314,7 +314,7 @@ def test_verilator_default_front_end_long_run():
 @pytest.mark.synth
 @pytest.mark.slow
 def test_synth_one_channel_meets_100mhz():
-    from cosim.synth import synth, yowasp_available
+    from cosim.tools.synth import synth, yowasp_available
     if not yowasp_available():
         pytest.skip("YoWASP yosys/nextpnr not installed")
     from hdl.gnss.channel import gnss_top

@@ -9,7 +9,7 @@ import pytest
 from _util import assert_lints_clean, needs_verilator, verilator_sim  # tests/hdl/conftest.py
 from cosim.monopulse.signal import MonopulseSignalConfig, generate
 from cosim.monopulse.trajectory import ConstantRate
-from cosim.pysim import run_stream
+from cosim.backends.pysim import run_stream
 from dsp.monopulse.angles import direction_cosines
 from dsp.monopulse.golden import golden_chain
 from hdl.gnss.model import bus_writes
@@ -335,7 +335,7 @@ def test_noise_free_angle_matches_the_float_equations(du, dv):
 @pytest.mark.synth
 @pytest.mark.slow
 def test_synth_meets_100mhz():
-    from cosim.synth import synth, yowasp_available
+    from cosim.tools.synth import synth, yowasp_available
     if not yowasp_available():
         pytest.skip("YoWASP yosys/nextpnr not installed")
     from hdl.monopulse.frontend import monopulse_top

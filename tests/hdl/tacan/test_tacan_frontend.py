@@ -11,8 +11,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cosim.equivalence import check_equivalence, stall_pattern, tacan_record
-from cosim.pysim import run_stream
+from cosim.tacan.equivalence import check_equivalence, tacan_record
+from cosim.tools.equivalence import stall_pattern
+from cosim.backends.pysim import run_stream
 from cosim.tacan.signal import TacanSignalConfig, generate
 from dsp.fixed import shift_right
 from dsp.tacan.frontend import (PAIR_DETECTOR, SOURCE_PAIR, SOURCE_PULSE, FrontendConfig,
@@ -327,7 +328,7 @@ def test_verilator_equals_model(samples, stall):
 @pytest.mark.verilator
 @verilator
 def test_exported_top_lints_clean(tmp_path):
-    from cosim.verilog import export_verilog, lint
+    from cosim.tools.verilog import export_verilog, lint
     path = export_verilog(TacanFrontEnd(P), name="tacan_frontend", out_dir=tmp_path)
     assert lint(path) == []
 
@@ -521,7 +522,7 @@ def test_verilator_equals_model_pair_detection(samples, stall, checks):
 @pytest.mark.verilator
 @verilator
 def test_exported_top_lints_clean_pair_detection(tmp_path):
-    from cosim.verilog import export_verilog, lint
+    from cosim.tools.verilog import export_verilog, lint
     path = export_verilog(TacanFrontEnd(PAIR), name="tacan_frontend_pair", out_dir=tmp_path)
     assert lint(path) == []
     path = export_verilog(TacanFrontEnd(PAIR_CHECKED), name="tacan_frontend_pair_checked",
@@ -834,7 +835,7 @@ def test_verilator_equals_model_both_searches(samples, stall):
 def _verilator_words_with_stalls(p, m, pk, x, in_valid, n, name):
     """The Verilated top on ``x`` (valid ``in_valid``, DSP stalls) against the model's FIFO
     words for the peaks ``pk``: word for word and cycle; returns the model's words."""
-    from cosim.verilator import VerilatorStreamSim
+    from cosim.backends.verilator import VerilatorStreamSim
     ready = stall_pattern(n, seed=5, burst=600)
     res = VerilatorStreamSim(TacanFrontEnd(p), name=name).run(
         x, in_valid=in_valid, out_ready=ready, n_cycles=n, inputs={"freq": p.nco_freq_word})
@@ -881,7 +882,7 @@ def test_verilator_merge_collision_at_decimation_4():
 @pytest.mark.verilator
 @verilator
 def test_exported_top_lints_clean_both_searches(tmp_path):
-    from cosim.verilog import export_verilog, lint
+    from cosim.tools.verilog import export_verilog, lint
     for name, p in (("tacan_frontend_both", BOTH),
                     ("tacan_frontend_both_d2", _both_params(cic_rate=2, checks=False))):
         assert lint(export_verilog(TacanFrontEnd(p), name=name, out_dir=tmp_path)) == [], name

@@ -1,9 +1,11 @@
-"""Equivalence of the bit-exact model, the Amaranth simulation and the Verilated Verilog.
+"""Equivalence of the TACAN front end's bit-exact model, Amaranth simulation and Verilated
+Verilog (``python -m cosim check-equivalence --top tacan``).
 
-``check_equivalence(top="tacan", samples=N)`` feeds one realistic TACAN IF record (seeded
-:func:`cosim.tacan.signal.generate`, SNR 10 dB) through every backend and compares every
-FIFO word (amplitude, timestamp, tag) and the cycle it leaves on. With ``stall=True`` the DSP
-side's ``ready`` follows a seeded on/off pattern and the FIFO is made shallow, so drops,
+:func:`check_equivalence` feeds one realistic TACAN IF record (seeded
+:func:`cosim.tacan.signal.generate`, SNR 10 dB; :func:`tacan_record`) through every backend
+and compares every FIFO word (amplitude, timestamp, tag) and the cycle it leaves on. With
+``stall=True`` the DSP side's ``ready`` follows a seeded on/off pattern
+(:func:`cosim.tools.equivalence.stall_pattern`) and the FIFO is made shallow, so drops,
 markers and the overflow counter are exercised too.
 """
 from __future__ import annotations
@@ -12,43 +14,21 @@ import time
 
 import numpy as np
 
-__all__ = ["check_equivalence", "check_record_size", "compare_backends", "PYSIM_MAX_SAMPLES", "TOPS"]
+from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, stall_pattern
+from .signal import TacanSignalConfig, generate
 
-#: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
-PYSIM_MAX_SAMPLES = 40_000
+__all__ = ["check_equivalence", "tacan_record", "TOPS"]
+
 #: Cycles run after the last ADC sample so that every peak leaves the pipeline.
 FLUSH_CYCLES = 400
+#: The tops this check runs.
 TOPS = ("tacan",)
-BACKENDS = ("model", "pysim", "verilator")
-
-
-#: Memory per ADC sample of a check (the IF record, the codes, the model's working arrays
-#: and the backends' outputs; bytes, with margin).
-BYTES_PER_SAMPLE = 64
-
-
-def check_record_size(samples) -> int:
-    """Refuse, before any work, a record that is not a positive integer or cannot fit this
-    machine's memory."""
-    from .validate import check_int, check_memory
-    n = check_int("--samples", samples, 1)
-    check_memory(n * BYTES_PER_SAMPLE, f"--samples {n:,}", "--samples")
-    return n
 
 
 def tacan_record(samples: int, seed: int, snr_db: float | None = 10.0) -> np.ndarray:
     """``samples`` ADC codes of the default TACAN scenario (X mode, bearing 90 deg)."""
-    from .tacan.signal import TacanSignalConfig, generate
     cfg = TacanSignalConfig(duration_s=samples / 20e6 + 1e-6, snr_db=snr_db, seed=seed)
     return generate(cfg).samples[:samples].astype(np.int64)
-
-
-def stall_pattern(n_cycles: int, seed: int, *, p_ready: float = 0.5,
-                  burst: int = 4000) -> np.ndarray:
-    """DSP ``ready`` per cycle: off/on bursts (mean ``burst`` cycles), on with ``p_ready``."""
-    rng = np.random.default_rng(seed + 7919)
-    on = np.repeat(rng.random(n_cycles // burst + 1) < p_ready, burst)[:n_cycles]
-    return on & (rng.random(n_cycles) < 0.5)
 
 
 def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
@@ -96,7 +76,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
     if params is None:      # the default receiver's front end
         from dataclasses import replace
-        from .tacan.run import TacanRunConfig
+        from .run import TacanRunConfig
         params = TacanRunConfig().hdl_params
         if stall:
             params = replace(params, fifo_depth=4)
@@ -135,15 +115,15 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                                 f"(~3e3 cycles/s for the whole top)")
         else:
             from hdl.tacan.frontend import TacanFrontEnd
-            from .pysim import run_stream
+            from ..backends.pysim import run_stream
             t = time.perf_counter()
             res = run_stream(TacanFrontEnd(params), x, out_ready=ready, n_cycles=n_cycles,
                              inputs={"freq": freq})
             compare("pysim", res, time.perf_counter() - t)
     if "verilator" in backends:
-        from .verilator import VerilatorStreamSim, verilator_available
+        from ..backends.verilator import VerilatorStreamSim, verilator_available
         if not verilator_available():
-            from .verilog import verilator_missing_message
+            from ..backends.verilog import verilator_missing_message
             skipped["verilator"] = verilator_missing_message()
         else:
             from hdl.tacan.frontend import TacanFrontEnd
@@ -185,56 +165,3 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         "dropped": int(ref.dropped.sum()),
         "per_backend": per,
     }
-
-
-def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall: bool,
-                     empty_hint: str, record_words: int = 1,
-                     pysim_max_samples: int = PYSIM_MAX_SAMPLES) -> dict:
-    """The comparison and verdict of a session-based check (a receiver's
-    ``Receiver.equivalence``): ``run(backend) -> (words, cycles, overflow_count, seconds)``
-    for the same stimulus on each backend; the model is the reference, every FIFO word, its
-    cycle and the overflow counter are compared. ``pysim`` is skipped above
-    ``pysim_max_samples``, ``verilator`` when it is not installed (both noted).
-    ``empty_hint`` ends the verdict when the model gave no word. Returns the keys of
-    :func:`check_equivalence` (``peaks``: the model's records, ``markers``: 0,
-    ``dropped``: the model's overflow count)."""
-    unknown = [b for b in backends if b not in BACKENDS]
-    if unknown:
-        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
-    ref_w, ref_c, ref_ovf, secs = run("model")
-    per = {"model": {"mismatches": 0, "words": int(len(ref_w)), "seconds": secs}}
-    ran, skipped = ["model"], {}
-    for name in [b for b in BACKENDS if b in backends and b != "model"]:
-        if name == "pysim" and samples > pysim_max_samples:
-            skipped["pysim"] = f"pysim runs only for samples <= {pysim_max_samples}"
-            continue
-        if name == "verilator":
-            from .verilator import verilator_available
-            if not verilator_available():
-                from .verilog import verilator_missing_message
-                skipped["verilator"] = verilator_missing_message()
-                continue
-        w, c, ovf, secs = run(name)
-        n = min(len(w), len(ref_w))
-        bad = int(np.count_nonzero(w[:n] != ref_w[:n]) + np.count_nonzero(c[:n] != ref_c[:n]))
-        bad += abs(len(w) - len(ref_w)) + int(ovf != ref_ovf)
-        per[name] = {"mismatches": bad, "words": int(len(w)), "seconds": secs}
-        ran.append(name)
-    compared = [f"{k} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
-                f"{v['mismatches']} mismatches" for k, v in per.items() if k != "model"]
-    total = int(sum(v["mismatches"] for v in per.values()))
-    if len(ran) < 2:
-        verdict = (f"nothing was compared: only {', '.join(ran)} ran"
-                   + "".join(f"; {k} skipped: {w}" for k, w in skipped.items()))
-    elif len(ref_w) == 0:
-        verdict = f"nothing was compared: the {samples} samples gave no FIFO word ({empty_hint})"
-    elif total:
-        verdict = f"{total} mismatches ({'; '.join(compared)})"
-    else:
-        verdict = f"equivalent: {'; '.join(compared)}"
-    return {"top": top, "samples": int(samples), "mismatches": total,
-            "equivalent": bool(len(ran) >= 2 and len(ref_w) > 0 and total == 0),
-            "verdict": verdict, "compared": compared, "backends": ran, "skipped": skipped,
-            "stall": bool(stall), "seed": int(seed),
-            "peaks": int(len(ref_w) // record_words), "words": int(len(ref_w)),
-            "markers": 0, "dropped": int(ref_ovf), "per_backend": per}

@@ -20,7 +20,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .verilog import REPO_ROOT, verilog_text
+from ..core.provenance import REPO_ROOT
+from ..backends.verilog import verilog_text
 
 __all__ = ["synth", "yowasp_available", "tool_versions", "DEVICES"]
 

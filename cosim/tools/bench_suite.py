@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from .bench import _REPO, machine_info
+from ..core.provenance import REPO_ROOT, machine_info
 
 #: The reference commit (``a2c3ba2``: the last commit before the closed-loop core).
 BASELINE = "a2c3ba2"
@@ -27,7 +27,7 @@ _QUICK_TARGET = "tests/dsp/test_fixed.py"
 
 def _time_clone(ref: str, root: Path, quick: bool) -> dict:
     work = root / ref.replace("/", "_")
-    subprocess.run(["git", "clone", "-q", str(_REPO), str(work)], check=True)
+    subprocess.run(["git", "clone", "-q", str(REPO_ROOT), str(work)], check=True)
     subprocess.run(["git", "checkout", "-q", ref], cwd=work, check=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=work, check=True,
                             capture_output=True, text=True).stdout.strip()

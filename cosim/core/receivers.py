@@ -318,6 +318,25 @@ class Study:
 
 
 @dataclass(frozen=True)
+class Benchmark:
+    """One benchmark, ``python -m cosim bench <name>`` (a receiver's ``benchmarks`` maps the
+    name to this; :mod:`cosim.tools.bench` dispatches).
+
+    Parameters
+    ----------
+    run : callable
+        ``run(out, quick=False, jobs=None) -> dict``: writes its results under the directory
+        ``out`` (a :class:`pathlib.Path`) and returns the summary.
+    jobs : bool
+        True when the benchmark spreads over ``--jobs`` worker processes (the others
+        measure one core or size their own pool).
+    """
+
+    run: Callable[..., dict]
+    jobs: bool = False
+
+
+@dataclass(frozen=True)
 class Receiver:
     """Everything the command line needs to know about one receiver.
 
@@ -335,7 +354,7 @@ class Receiver:
         ``run(args) -> exit code``: the subcommand.
     frontend : Frontend, optional
         The front end: its parameter class, Amaranth top, bit-exact model session and
-        Verilog name (:func:`cosim.session.open_frontend` opens it on every backend).
+        Verilog name (:func:`cosim.backends.factory.open_frontend` opens it on every backend).
     tops : dict, optional
         Verilog module name -> a function building the top with default parameters
         (``verilog`` exports and lints each; ``synth --top <name>`` synthesises the first).
@@ -346,13 +365,15 @@ class Receiver:
     equivalence : callable, optional
         ``equivalence(samples=, backends=, seed=, stall=, progress=) -> dict`` for
         ``check-equivalence --top <name>`` (the keys of
-        :func:`cosim.equivalence.check_equivalence`).
+        :func:`cosim.tools.equivalence.compare_backends`).
     metrics : tuple of str
         Keys of the run's JSON result that score it.
     primary : Figure
         The figure that says how good the receiver is.
     sweep, faults : Study, optional
         ``sweep <name>`` and ``faults <name>``.
+    benchmarks : dict, optional
+        Benchmark name -> :class:`Benchmark` (``python -m cosim bench <name>``).
     """
 
     name: str
@@ -368,6 +389,7 @@ class Receiver:
     equivalence: Callable[..., dict] | None = None
     sweep: Study | None = None
     faults: Study | None = None
+    benchmarks: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if not re.fullmatch(r"[a-z][a-z0-9-]*", self.name):
@@ -376,6 +398,10 @@ class Receiver:
         if self.frontend is not None and not isinstance(self.frontend, Frontend):
             raise TypeError(f"Receiver.frontend must be a Frontend, not "
                             f"{type(self.frontend).__name__}")
+        for name, b in self.benchmarks.items():
+            if not re.fullmatch(r"[a-z][a-z0-9-]*", name) or not isinstance(b, Benchmark):
+                raise ValueError(f"Receiver.benchmarks maps lower-case names to Benchmark, not "
+                                 f"{name!r}: {type(b).__name__}")
         if self.primary.key not in self.metrics:
             raise ValueError(f"the primary figure {self.primary.key!r} must be one of the "
                              f"metrics {list(self.metrics)}")

@@ -19,7 +19,7 @@ otherwise, as in ``run_stream``) and ``o.ready``, evaluate with ``clk`` low, sam
 then raise ``clk`` and evaluate the edge. ``rst`` is held low, as ``amaranth.sim`` does.
 
 Speed (what is compiled is equivalent to the exported Verilog, bit for bit; see
-:func:`cosim.verilator_harness._verilator_source`):
+:func:`cosim.backends.verilator_harness.verilator_source`):
 
 - ``rst``, and any other top-level input the harness never drives, is tied to 0 in a thin
   wrapper module instead of being an input held at 0. Every register's next-state logic
@@ -50,12 +50,12 @@ import numpy as np
 from amaranth.hdl import Value
 
 from . import verilator_harness as _harness
-from .pysim import StreamResult, _items
-from .verilog import REPO_ROOT, PortInfo, component_ports, verilator_missing_message, verilog_text
-from .verilator_harness import (_CFLAGS, _HARNESS_TEMPLATE, _MAKE_OPTS, HARNESS_VERSION, _as_value,
-                                _limbs, _parse_header_ports, _payload_get_code, _payload_set_code,
-                                _RunArgs, _verilator_source, verilator_available,
-                                verilator_version)
+from .pysim import StreamResult, input_items
+from ..core.provenance import REPO_ROOT
+from .verilog import PortInfo, component_ports, verilator_missing_message, verilog_text
+from .verilator_harness import (CFLAGS, HARNESS_TEMPLATE, MAKE_OPTS, HARNESS_VERSION, as_value,
+                                limbs, parse_header_ports, payload_get_code, payload_set_code,
+                                RunArgs, verilator_source, verilator_available, verilator_version)
 
 __all__ = ["verilator_available", "verilator_version", "VerilatorStreamSim"]
 
@@ -163,8 +163,8 @@ class VerilatorStreamSim:
         lib.sim_get.restype = ctypes.c_uint64
         lib.sim_get.argtypes = [ctypes.c_void_p, ctypes.c_int32]
         lib.sim_run.restype = ctypes.c_int32
-        lib.sim_run.argtypes = [ctypes.c_void_p, ctypes.POINTER(_RunArgs)]
-        if lib.sim_args_size() != ctypes.sizeof(_RunArgs):
+        lib.sim_run.argtypes = [ctypes.c_void_p, ctypes.POINTER(RunArgs)]
+        if lib.sim_args_size() != ctypes.sizeof(RunArgs):
             raise RuntimeError(f"harness ABI mismatch in {lib_path}: delete {self._build_dir}")
         self._libs[key] = lib
         return lib_path
@@ -174,7 +174,7 @@ class VerilatorStreamSim:
         tmp = Path(tempfile.mkdtemp(prefix=out.name[:16] + ".tmp-", dir=out.parent))
         try:
             (tmp / f"{self.name}.v").write_text(self.verilog)
-            source, top = _verilator_source(self.verilog, self.name, {p.name for p in self.ports})
+            source, top = verilator_source(self.verilog, self.name, {p.name for p in self.ports})
             (tmp / "vlsim.v").write_text(source)
             harness = tmp / "harness.cpp"
             harness.write_text("// placeholder, written after Verilating\n")
@@ -187,23 +187,23 @@ class VerilatorStreamSim:
             cmd = ["verilator", "--cc", "--exe", str(harness), "-O3", "--x-assign", "fast",
                    "-Wno-fatal", "-Wno-lint", "-Wno-style", "--top-module", top,
                    "--prefix", "Vdut", "-Mdir", str(tmp / "obj"), *trace_args,
-                   "-CFLAGS", _CFLAGS, "-LDFLAGS", " ".join(["-shared", *ldflags]),
+                   "-CFLAGS", CFLAGS, "-LDFLAGS", " ".join(["-shared", *ldflags]),
                    "-o", "libsim.so", str(tmp / "vlsim.v")]
             log = [" ".join(cmd)]
             self._run_logged(cmd, log, tmp)
             header = (tmp / "obj" / "Vdut.h").read_text()
             direct_eval = any("void Vdut___024root___eval(Vdut___024root* vlSelf)" in f.read_text()
                               for f in (tmp / "obj").glob("Vdut___024root__DepSet_*.cpp"))
-            harness.write_text(self._harness_source(_parse_header_ports(header), trace_kind,
+            harness.write_text(self._harness_source(parse_header_ports(header), trace_kind,
                                                     direct_eval))
             # The C++ optimisation level (verilated.mk defaults to -Os) matters for speed.
             make = ["make", "-C", str(tmp / "obj"), "-f", "Vdut.mk", f"-j{self._jobs}",
-                    *_MAKE_OPTS]
+                    *MAKE_OPTS]
             # The Verilator runtime (verilated.cpp, ...) takes most of the compile time and
             # does not depend on the design: reuse its objects from an earlier build with the
             # same Verilator, flags and trace kind (make skips them when they are newer).
             runtime = self._build_dir / "_runtime" / hashlib.sha256("\0".join(
-                [verilator_version(), _CFLAGS, *_MAKE_OPTS, trace_kind or "notrace"]
+                [verilator_version(), CFLAGS, *MAKE_OPTS, trace_kind or "notrace"]
             ).encode()).hexdigest()[:16]
             if runtime.is_dir():
                 for f in sorted(runtime.iterdir(), key=lambda f: f.suffix != ".d"):
@@ -260,8 +260,8 @@ class VerilatorStreamSim:
         # A zero-width input payload (a bare strobe stream) is not a port: only valid is driven.
         has_in = "i__valid" in cxx
         has_i_payload = has_in and "i__payload" in cxx
-        i_set = _payload_set_code(c("i__payload"), cxx["i__payload"][2]) if has_i_payload else ""
-        o_get = _payload_get_code(c("o__payload"), cxx["o__payload"][2])
+        i_set = payload_set_code(c("i__payload"), cxx["i__payload"][2]) if has_i_payload else ""
+        o_get = payload_get_code(c("o__payload"), cxx["o__payload"][2])
         subs = {
             "@VERSION@": HARNESS_VERSION,
             "@TRACED@": "1" if trace_kind else "0",
@@ -284,7 +284,7 @@ class VerilatorStreamSim:
             "@O_PAYLOAD@": c("o__payload"),
             "@O_READY@": c("o__ready") if "o__ready" in cxx else "",
         }
-        src = _HARNESS_TEMPLATE
+        src = HARNESS_TEMPLATE
         for k, v in subs.items():
             src = src.replace(k, v)
         return src
@@ -298,7 +298,7 @@ class VerilatorStreamSim:
                 raise KeyError(f"no port named {port!r}; ports: {sorted(self._by_name)}")
             idx = self._by_name[port]
         else:
-            value = _as_value(port)
+            value = as_value(port)
             if id(value) not in self._by_id:
                 raise KeyError(f"{port!r} is not a port of the component (ports are its "
                                f"signature members: {sorted(self._by_name)})")
@@ -321,8 +321,8 @@ class VerilatorStreamSim:
         # The harness masks to the port width, so int64/uint64 arrays are passed as they are
         # (two's complement bits, as amaranth.sim truncates negative values).
         words = np.asarray(words)
-        if width > 64:   # _limbs(width) uint64 entries per word, LSB first
-            nl, m64 = _limbs(width), (1 << 64) - 1
+        if width > 64:   # limbs(width) uint64 entries per word, LSB first
+            nl, m64 = limbs(width), (1 << 64) - 1
             mask = (1 << width) - 1
             return np.array([(int(w) & mask) >> (64 * j) & m64 for w in words.ravel()
                              for j in range(nl)], dtype=np.uint64)
@@ -338,7 +338,7 @@ class VerilatorStreamSim:
     @staticmethod
     def _from_u64(raw: np.ndarray, width: int, signed: bool) -> np.ndarray:
         if width > 64:
-            nl = _limbs(width)
+            nl = limbs(width)
             ints = [sum(int(v) << (64 * j) for j, v in enumerate(row))
                     for row in raw.reshape(-1, nl)]
             if signed:
@@ -401,13 +401,13 @@ class VerilatorStreamSim:
             words_u64 = self._to_u64(in_words, pin.width)
         else:
             words_u64 = np.zeros(0, dtype=np.uint64)
-        n_in = len(words_u64) // (_limbs(self.ports[self._by_name["i__payload"]].width)
+        n_in = len(words_u64) // (limbs(self.ports[self._by_name["i__payload"]].width)
                                   if has_in and "i__payload" in self._by_name else 1)
         valid_u8 = np.zeros(0, np.uint8) if in_valid is None else \
             np.ascontiguousarray(np.asarray(in_valid, dtype=bool).astype(np.uint8))
         ready_u8 = np.zeros(0, np.uint8) if out_ready is None else \
             np.ascontiguousarray(np.asarray(out_ready, dtype=bool).astype(np.uint8))
-        const_inputs = [(self._input_index(p), int(v)) for p, v in _items(inputs)]
+        const_inputs = [(self._input_index(p), int(v)) for p, v in input_items(inputs)]
         write_list = sorted(((int(c), self._input_index(p), int(v)) for c, p, v in (writes or [])),
                             key=lambda w: w[0])
         probe = dict(probe or {})
@@ -418,7 +418,7 @@ class VerilatorStreamSim:
         if n_cycles is not None and n_cycles < 0:
             raise ValueError(f"n_cycles must be >= 0, not {n_cycles}")
 
-        a = _RunArgs()
+        a = RunArgs()
         a.in_words, a.n_in, a.has_in = words_u64.ctypes.data, n_in, int(has_in)
         a.in_valid, a.n_valid = valid_u8.ctypes.data, len(valid_u8)
         a.out_ready, a.n_ready = ready_u8.ctypes.data, len(ready_u8)
@@ -434,7 +434,7 @@ class VerilatorStreamSim:
         probe_buf = np.zeros((chunk_max, max(n_probe, 1)), dtype=np.uint64)
         a.probe_buf = probe_buf.ctypes.data
 
-        o_nl = _limbs(self.ports[self._by_name["o__payload"]].width)
+        o_nl = limbs(self.ports[self._by_name["o__payload"]].width)
 
         def new_out_buffer():
             ow = np.empty(out_cap * o_nl, dtype=np.uint64)
@@ -497,7 +497,7 @@ class VerilatorStreamSim:
 
 # -- persistent sessions ---------------------------------------------------------------------
 # Imported here, not at the top: cosim.session imports nothing from this module at load time.
-from .session import FrontendSession, ready_window  # noqa: E402
+from ..core.session import FrontendSession, ready_window
 
 __all__ += ["VerilatorSession"]
 
@@ -524,7 +524,7 @@ class VerilatorSession(FrontendSession):
         self._pin = sim.ports[sim._by_name["i__payload"]] if "i__payload" in sim._by_name \
             else None
         self._pout = sim.ports[sim._by_name["o__payload"]]
-        const = [(sim._input_index(p), int(v)) for p, v in _items(inputs)]
+        const = [(sim._input_index(p), int(v)) for p, v in input_items(inputs)]
         self._handle = self._lib.sim_new(None)
         for idx, v in const:
             self._lib.sim_set(self._handle, idx, v & 0xFFFF_FFFF_FFFF_FFFF)
@@ -551,7 +551,7 @@ class VerilatorSession(FrontendSession):
         ready_u8 = np.zeros(0, np.uint8) if r is None else np.ascontiguousarray(r.astype(np.uint8))
         valid_u8 = np.zeros(0, np.uint8)
         wl = [(c - start, sim._input_index(p), v) for c, p, v in writes]
-        a = _RunArgs()
+        a = RunArgs()
         a.in_words, a.n_in, a.has_in = words_u64.ctypes.data, len(words_u64), int(self._has_in)
         a.in_valid, a.n_valid = valid_u8.ctypes.data, 0
         a.out_ready, a.n_ready = ready_u8.ctypes.data, len(ready_u8)

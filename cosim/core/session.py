@@ -14,7 +14,7 @@ Interface (:class:`FrontendSession`)::
         fe.write("freq", word, cycle=fe.cycle + 40)      # applied before that cycle's edge
         fe.read("overflow_count")                        # port value after the last edge
 
-Conventions (those of :func:`cosim.pysim.run_stream`): cycles are counted from reset; input
+Conventions (those of :func:`cosim.backends.pysim.run_stream`): cycles are counted from reset; input
 words are offered one per cycle, in order, while any are queued (an always-ready input such
 as the ADC takes one per cycle, so sample ``k`` is offered at cycle ``k``); a write
 ``(cycle, port, value)`` sets ``port`` before the clock edge of ``cycle``; output words are
@@ -22,33 +22,31 @@ the packed ``o`` payloads of the cycles where ``o.valid and o.ready``.
 
 ``ready`` (the DSP's ``o.ready``) is given per step as a bool array (one entry per cycle of
 the step; cycles past its end are ready), ``None`` (always ready), or a
-:class:`~cosim.link.DspServiceConfig` / :class:`~hdl.model.fifo.ReadySchedule`, a pattern in
+:class:`~cosim.core.link.DspServiceConfig` / :class:`~hdl.model.fifo.ReadySchedule`, a pattern in
 cycles from reset (the bit-exact model then steps event by event, without per-cycle arrays).
 
 Backends: a receiver's bit-exact model session (a :class:`FrontendSession` subclass in its
-own package, ``cosim/<receiver>/session.py``), :class:`PysimSession` (one
+own package, ``cosim/<receiver>/session.py``; :class:`BusModelSession` gives a model with a
+register bus its bus ports), :class:`cosim.backends.pysim.PysimSession` (one
 ``amaranth.sim`` simulator kept running; any stream component),
-:class:`cosim.verilator.VerilatorSession` (the compiled model kept alive; any stream
-component). :func:`open_frontend` opens the right one for a front end's parameters, looked up
-in the receiver registry (``Receiver.frontend``, a :class:`cosim.receivers.Frontend`).
+:class:`cosim.backends.verilator.VerilatorSession` (the compiled model kept alive; any stream
+component). :func:`cosim.backends.factory.open_frontend` opens the right one for a front
+end's parameters, looked up in the receiver registry (``Receiver.frontend``, a
+:class:`cosim.core.receivers.Frontend`). This module holds the interface every backend
+implements and imports none of them.
 """
 from __future__ import annotations
 
 import bisect
-import contextlib
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-from amaranth.hdl import Value
 
 from dsp.fixed import check_int as _int
 from hdl.model.fifo import ReadySchedule
 
-__all__ = ["StepResult", "FrontendSession", "PysimSession", "ready_window", "open_frontend", "open_stream_session", "RegisterSession", "FRONTEND_TYPES",
-           "BACKENDS"]
-
-BACKENDS = ("model", "pysim", "verilator")
+__all__ = ["StepResult", "FrontendSession", "RegisterSession", "BusModelSession", "BUS_PORTS",
+           "write_register", "ready_window", "fifo_step"]
 
 
 @dataclass
@@ -83,7 +81,7 @@ class StepResult:
 def ready_window(ready, start: int, n_cycles: int) -> np.ndarray | None:
     """``ready`` for the cycles ``start .. start + n_cycles - 1`` as a bool array (``None``
     stays ``None``: always ready). ``ready``: a bool array for exactly these cycles (shorter:
-    ready after its end), a :class:`~cosim.link.DspServiceConfig` (its stalls applied) or a
+    ready after its end), a :class:`~cosim.core.link.DspServiceConfig` (its stalls applied) or a
     :class:`~hdl.model.fifo.ReadySchedule`."""
     from .link import DspServiceConfig
     if ready is None:
@@ -248,7 +246,7 @@ class FrontendSession:
         pass
 
 
-# -- Amaranth simulation ------------------------------------------------------------------------
+# -- register-level writes ----------------------------------------------------------------------
 class RegisterSession(FrontendSession):
     """Register-level writes on a front end with a ``reg_we``, ``reg_addr``, ``reg_data``
     bus (any backend): a write of register ``name`` taking effect at cycle ``e`` is the bus
@@ -319,177 +317,56 @@ class RegisterSession(FrontendSession):
         self.inner.close()
 
 
-class PysimSession(FrontendSession):
-    """A stream component in one ``amaranth.sim`` simulator, kept running across steps.
+# -- register bus -------------------------------------------------------------------------------
+#: The register bus ports of a front end with a register bus (the only writable ports of its
+#: bit-exact model).
+BUS_PORTS = ("reg_we", "reg_addr", "reg_data")
 
-    The testbench is the per-cycle loop of :func:`cosim.pysim.run_stream` (same sampling,
-    same results), fed from the session: when it reaches the last cycle of a step it waits,
-    in simulated time, a quarter period after the clock edge, and :meth:`step` runs the
-    simulator (``run_until``) to an eighth of a period after the edge of the step's last
-    cycle, i.e. before that wait ends. The next step hands the testbench its stimulus and
-    runs on; the waiting only moves when the testbench drives the next cycle's inputs
-    within the cycle (before the next edge either way), so the bits are those of one run.
 
-    Parameters
-    ----------
-    dut : wiring.Component
-        Output stream ``o``, optionally an input stream ``i`` (``run_stream``'s convention).
-    inputs : dict of port name -> int, optional
-        Values set once at reset.
-    clk_hz : float
-    vcd : path, optional
-        Waveform of the whole session (opt-in; written when the session is closed).
+def write_register(fe: FrontendSession, reg: int, value: int, cycle: int | None = None) -> int:
+    """One bus write on any backend's session: ``reg_we`` high in ``cycle`` (default the
+    session's next cycle) with ``reg_addr = reg``, ``reg_data = value``, low again the cycle
+    after. Returns the cycle."""
+    c = fe.write("reg_addr", reg, cycle)
+    fe.write("reg_data", value, c)
+    fe.write("reg_we", 1, c)
+    fe.write("reg_we", 0, c + 1)
+    return c
+
+
+class BusModelSession(FrontendSession):
+    """The port side of a bit-exact model session whose front end has a register bus
+    (:data:`BUS_PORTS`) and a record FIFO: writes go to the bus ports only; reads are
+    ``overflow_count`` (records the FIFO dropped) and the bus ports' current values.
+
+    A subclass sets :attr:`what` (its name in error messages), calls ``super().__init__()``
+    and implements :meth:`_step`; it keeps its FIFO state in ``_fifo_state`` (a
+    :class:`hdl.model.fifo.FifoState`, exposed as :attr:`fifo_state`) and the bus values in
+    ``_bus`` (set up here, all zero).
     """
 
-    backend = "pysim"
+    #: The model's name in error messages.
+    what = "front-end model"
 
-    def __init__(self, dut, *, inputs: dict | None = None, clk_hz: float = 20e6,
-                 vcd: str | Path | None = None):
-        from amaranth.sim import Simulator
-        from .pysim import _items, resolve_port
+    def __init__(self):
+        from hdl.model.fifo import FifoState
         super().__init__()
-        self.dut = dut
-        self._resolve = lambda p: resolve_port(dut, p)
-        self._inputs = [(resolve_port(dut, p), int(v)) for p, v in _items(inputs)]
-        self._has_in = hasattr(dut, "i")
-        self._i_payload = Value.cast(dut.i.payload) if self._has_in else None
-        self._o_payload = Value.cast(dut.o.payload)
-        self._o_ready_const = not hasattr(dut.o, "ready") or isinstance(dut.o.ready, int) or \
-            getattr(dut.o.signature, "always_ready", False)
-        self._i_has_ready = self._has_in and not getattr(dut.i.signature, "always_ready", False)
-        # Per-step feed, read by the testbench.
-        self._feed = {"stop": 0, "queue": np.zeros(0, np.int64), "ready": None, "start": 0,
-                      "writes": [], "accepted": 0, "words": [], "cycles": []}
-        self._ctx = None
-        self._period = 1.0 / clk_hz
-        self._sim = Simulator(dut)
-        self._sim.add_clock(self._period)
-        self._sim.add_testbench(self._testbench, background=True)
-        # Rising edge of cycle k, as the simulator's clock computes it (integer femtoseconds).
-        period_fs = int(self._period * 1e15)
-        self._phase_fs, self._half_fs = int(self._period / 2 * 1e15), period_fs // 2
-        self._stack = contextlib.ExitStack()
-        if vcd is not None:
-            Path(vcd).parent.mkdir(parents=True, exist_ok=True)
-            self._stack.enter_context(self._sim.write_vcd(str(vcd)))
+        self._fifo_state = FifoState()
+        self._bus = {port: 0 for port in BUS_PORTS}
 
-    def _edge_s(self, k: int) -> float:
-        return (self._phase_fs + 2 * k * self._half_fs) / 1e15
-
-    async def _testbench(self, ctx):
-        self._ctx = ctx
-        f = self._feed
-        dut = self.dut
-        for port, value in self._inputs:
-            ctx.set(port, value)
-        cyc = 0
-        wait = self._period / 4
-        while True:
-            while cyc >= f["stop"]:           # end of the step: wait for the next one
-                await ctx.delay(wait)
-            writes = f["writes"]
-            while writes and writes[0][0] <= cyc:
-                _, port, value = writes.pop(0)
-                ctx.set(port, value)
-            offer = False
-            if self._has_in:
-                k = f["accepted"]
-                offer = k < len(f["queue"])
-                ctx.set(dut.i.valid, 1 if offer else 0)
-                if offer:
-                    ctx.set(self._i_payload, int(f["queue"][k]))
-            if not self._o_ready_const:
-                r = f["ready"]
-                rdy = True if r is None else bool(r[cyc - f["start"]])
-                ctx.set(dut.o.ready, 1 if rdy else 0)
-            sampled = [dut.o.valid, self._o_payload]
-            if not self._o_ready_const:
-                sampled.append(dut.o.ready)
-            if self._i_has_ready:
-                sampled.append(dut.i.ready)
-            res = await ctx.tick().sample(*sampled)
-            vals = list(res[-len(sampled):])
-            o_valid, o_pay = vals[0], vals[1]
-            idx = 2
-            o_rdy = 1
-            if not self._o_ready_const:
-                o_rdy = vals[idx]
-                idx += 1
-            i_rdy = vals[idx] if self._i_has_ready else 1
-            if o_valid and o_rdy:
-                f["words"].append(int(o_pay))
-                f["cycles"].append(cyc)
-            if offer and i_rdy:
-                f["accepted"] += 1
-            cyc += 1
+    @property
+    def fifo_state(self):
+        return self._fifo_state
 
     def _check_port(self, port) -> None:
-        self._resolve(port)
-
-    def _step(self, queue, ready, n, writes):
-        f = self._feed
-        start = self.cycle
-        f.update(stop=start + n, queue=queue, ready=ready_window(ready, start, n), start=start,
-                 writes=[(c, self._resolve(p), v) for c, p, v in writes], accepted=0,
-                 words=[], cycles=[])
-        self._sim.run_until(self._edge_s(start + n - 1) + self._period / 8)
-        if f["writes"]:
-            raise RuntimeError("internal: writes left over after a pysim step")
-        wide = len(self._o_payload) > 63
-        words = np.array(f["words"], dtype=object if wide else np.int64)
-        return words, f["cycles"], f["accepted"]
+        if port not in BUS_PORTS:
+            raise KeyError(f"the {self.what}'s writable ports are "
+                           f"{', '.join(BUS_PORTS)}, not {port!r}")
 
     def _read(self, port):
-        if self._ctx is None:       # nothing simulated yet: the reset value
-            sig = self._resolve(port)
-            return getattr(sig, "init", 0)
-        return self._ctx.get(self._resolve(port))
-
-    def _close(self):
-        self._stack.close()
-
-
-# -- opening sessions ---------------------------------------------------------------------------
-#: Front ends :func:`open_frontend` knows besides the registered receivers' (parameter
-#: class -> :class:`cosim.receivers.Frontend`); a receiver declares its front end in its
-#: registry entry (``Receiver.frontend``), which is looked up after this dict.
-FRONTEND_TYPES: dict = {}
-
-
-def _frontend_entry(params):
-    for cls, entry in FRONTEND_TYPES.items():
-        if isinstance(params, cls):
-            return entry
-    from .receivers import frontend_for
-    return frontend_for(params)
-
-
-def open_stream_session(backend: str, dut, *, name: str = "dut", inputs: dict | None = None,
-                        vcd: str | Path | None = None, **kw) -> FrontendSession:
-    """A session of any stream component on ``"pysim"`` or ``"verilator"``."""
-    if backend == "pysim":
-        return PysimSession(dut, inputs=inputs, vcd=vcd, **kw)
-    if backend == "verilator":
-        if vcd is not None:
-            raise NotImplementedError("waveforms of a Verilator session: use "
-                                      "VerilatorStreamSim.run(trace=...) for one run")
-        from .verilator import VerilatorStreamSim
-        return VerilatorStreamSim(dut, name=name, **kw).open(inputs=inputs)
-    raise ValueError(f"backend must be pysim or verilator for a component, not {backend!r}")
-
-
-def open_frontend(backend: str, params, *, log_ranges: bool = False,
-                  vcd: str | Path | None = None) -> FrontendSession:
-    """A front-end session for ``params`` (an instance of a registered front end's parameter
-    class, :class:`cosim.receivers.Frontend`) on ``backend`` (``"model"``, ``"pysim"`` or
-    ``"verilator"``), reset, with its control ports at their reset values
-    (``Frontend.inputs``)."""
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
-    entry = _frontend_entry(params)
-    if backend == "model":
-        if vcd is not None:
-            raise ValueError("the bit-exact model has no waveform; use pysim or verilator")
-        return entry.model(params, log_ranges=log_ranges)
-    return open_stream_session(backend, entry.component(params), name=entry.verilog_name,
-                               inputs=entry.reset_inputs(params), vcd=vcd)
+        if port == "overflow_count":
+            return self._fifo_state.overflow
+        if port in self._bus:
+            return self._bus[port]
+        raise KeyError(f"the {self.what} reads overflow_count and "
+                       f"{', '.join(BUS_PORTS)}, not {port!r}")

@@ -39,7 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dsp.fixed import check_int as _int
-from .link import ControlPath, DspServiceConfig
+from .control import ControlPath
+from .link import DspServiceConfig
 from .session import FrontendSession
 
 __all__ = ["ServiceCall", "Pipeline", "PipelineResult"]

@@ -14,21 +14,19 @@ Both write ``results/<name>.json`` and ``.md`` with the machine, date and comman
 """
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .bench import machine_info
+from ..core.provenance import machine_info, write_result
 
 TICK_HZ = 20e6
 
 
 def _pulses(duration_s: float, bearings, seed: int = 1, snr_db: float = 10.0):
-    from .tacan.signal import TacanSignalConfig, pulse_observations
+    from .signal import TacanSignalConfig, pulse_observations
     cfg = TacanSignalConfig(duration_s=duration_s, snr_db=snr_db, seed=seed)
     t, amps, _ = pulse_observations(cfg, np.asarray(bearings, dtype=float))
     ticks = np.round(t * TICK_HZ).astype(np.int64)
@@ -129,7 +127,7 @@ def dsp_speed(out: Path, quick: bool = False) -> dict:
         "targets": {"fixed_single": 36_000, "fixed_batched_aggregate": 3_600_000},
     }
     summary["elapsed_s"] = time.perf_counter() - t_start
-    _write(out, "dsp_speed", summary, _speed_md(summary))
+    write_result(out, "dsp_speed", summary, _speed_md(summary))
     return summary
 
 
@@ -158,7 +156,7 @@ def _if_block(k: int, block_s: float, bearing: float, snr_db: float) -> np.ndarr
     """ADC codes of block ``k`` (worker process): an independent 3 s record whose main
     references continue the rotation of the blocks before it (an integer number of 15 Hz
     periods per block), so the blocks play back as one continuous beacon."""
-    from .tacan.signal import TacanSignalConfig, generate
+    from .signal import TacanSignalConfig, generate
     cfg = TacanSignalConfig(duration_s=block_s, snr_db=snr_db, seed=10_000 + k,
                             bearing_deg=bearing)
     return generate(cfg).samples
@@ -242,10 +240,10 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig
     from hdl.tacan.model import TacanFrontendParams
-    from .link import DspServiceConfig
-    from .pipeline import Pipeline
-    from .session import open_frontend
-    from .tacan.signal import TacanSignalConfig
+    from ..core.link import DspServiceConfig
+    from ..core.pipeline import Pipeline
+    from ..backends.factory import open_frontend
+    from .signal import TacanSignalConfig
     from dsp.tacan.frontend import FrontendConfig
 
     t_start = time.perf_counter()
@@ -314,7 +312,7 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
         "minutes": rows,
     }
     if out is not None:
-        _write(out, "dsp_hour", summary, _hour_md(summary))
+        write_result(out, "dsp_hour", summary, _hour_md(summary))
     return summary
 
 
@@ -342,9 +340,3 @@ def _hour_md(s: dict) -> str:
             f"{sec['frontend_model']:.0f} s, "
             f"FIFO receiver {sec['link_and_rx']:.0f} s, DSP {sec['dsp']:.0f} s (the IF "
             f"generation runs in a second process).\n")
-
-
-def _write(out: Path, stem: str, summary: dict, md: str) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f"{stem}.json").write_text(json.dumps(summary, indent=1))
-    (out / f"{stem}.md").write_text(md)

@@ -16,8 +16,7 @@ import numpy as np
 
 from dsp.jit import njit_cached
 
-from .bench import machine_info
-from .bench_dsp import _write
+from ..core.provenance import machine_info, write_result
 
 TARGET_UPS = 1000.0 * 12
 
@@ -54,8 +53,8 @@ def _rate(make, z, warm, n_updates: int, reps: int) -> float:
 
 def estimation_speed(out: Path, quick: bool = False) -> dict:
     from dsp.estimation import (AlphaBetaFilter, AlphaBetaFormats, KalmanFilter, KalmanFormats,
-                                NonlinearModel, UkfFormats, UnscentedKalmanFilter, kalata, tracking_index,
-                                white_jerk)
+                                NonlinearModel, UkfFormats, UnscentedKalmanFilter, kalata,
+                                tracking_index, white_jerk)
     t_start = time.perf_counter()
     steps = 20_000 if quick else 200_000
     trials = 64 if quick else 256
@@ -135,7 +134,7 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
                             "alpha_beta": "Kalata gains, fixed and adaptive (window 4, manoeuvre estimate)",
                             "single_stream_steps": steps, "batch_trials": trials},
                "rows": rows}
-    _write(out, "estimation_speed", summary, _md(summary))
+    write_result(out, "estimation_speed", summary, _md(summary))
     return summary
 
 

@@ -8,16 +8,21 @@ Verilator backend and the bit-exact models. Other input ports can be held at con
 (``inputs``) or changed at given cycles (``writes``: register writes from the DSP side).
 
 This backend steps Python once per clock. It is the reference for the compiled backend and
-for short runs only (about 1e4..1e5 cycles/s).
+for short runs only (about 1e4..1e5 cycles/s). :func:`run_stream` runs one record;
+:class:`PysimSession` keeps one simulator running across steps
+(:class:`cosim.core.session.FrontendSession`).
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from amaranth.hdl import Value, ValueCastable
 from amaranth.sim import Simulator
+
+from ..core.session import FrontendSession, ready_window
 
 
 @dataclass
@@ -104,9 +109,10 @@ def resolve_port(dut, port):
     return port
 
 
-def _items(inputs):
-    # Amaranth values are unhashable, so `inputs` keyed by Value objects can only be given as
-    # (port, value) pairs; a dict is fine with port names as keys.
+def input_items(inputs) -> list:
+    """Constant ``inputs`` as a list of ``(port, value)`` pairs: a dict (port names as keys)
+    or already pairs (Amaranth values are unhashable, so inputs keyed by ``Value`` objects
+    come as pairs); ``None`` is no input."""
     if inputs is None:
         return []
     return list(inputs.items()) if isinstance(inputs, dict) else list(inputs)
@@ -151,7 +157,7 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
     out_ready = None if out_ready is None else np.asarray(out_ready, dtype=bool)
     writes = sorted(((c, resolve_port(dut, p), v) for c, p, v in (writes or [])),
                     key=lambda w: w[0])
-    inputs = [(resolve_port(dut, p), v) for p, v in _items(inputs)]
+    inputs = [(resolve_port(dut, p), v) for p, v in input_items(inputs)]
     probe = dict(probe or {})
     final = {k: resolve_port(dut, v) for k, v in (final or {}).items()}
     final_vals: dict[str, int] = {}
@@ -243,3 +249,132 @@ def run_stream(dut, in_words=None, *, in_valid=None, out_ready=None, n_cycles=No
                         n_cycles=state["cycles"], in_accepted=state["accepted"],
                         probes={k: np.array(v, dtype=np.int64) for k, v in probe_vals.items()},
                         final=final_vals)
+
+
+# -- a simulator kept running across steps ---------------------------------------------------
+class PysimSession(FrontendSession):
+    """A stream component in one ``amaranth.sim`` simulator, kept running across steps.
+
+    The testbench is the per-cycle loop of :func:`run_stream` (same sampling,
+    same results), fed from the session: when it reaches the last cycle of a step it waits,
+    in simulated time, a quarter period after the clock edge, and :meth:`step` runs the
+    simulator (``run_until``) to an eighth of a period after the edge of the step's last
+    cycle, i.e. before that wait ends. The next step hands the testbench its stimulus and
+    runs on; the waiting only moves when the testbench drives the next cycle's inputs
+    within the cycle (before the next edge either way), so the bits are those of one run.
+
+    Parameters
+    ----------
+    dut : wiring.Component
+        Output stream ``o``, optionally an input stream ``i`` (``run_stream``'s convention).
+    inputs : dict of port name -> int, optional
+        Values set once at reset.
+    clk_hz : float
+    vcd : path, optional
+        Waveform of the whole session (opt-in; written when the session is closed).
+    """
+
+    backend = "pysim"
+
+    def __init__(self, dut, *, inputs: dict | None = None, clk_hz: float = 20e6,
+                 vcd: str | Path | None = None):
+        super().__init__()
+        self.dut = dut
+        self._resolve = lambda p: resolve_port(dut, p)
+        self._inputs = [(resolve_port(dut, p), int(v)) for p, v in input_items(inputs)]
+        self._has_in = hasattr(dut, "i")
+        self._i_payload = Value.cast(dut.i.payload) if self._has_in else None
+        self._o_payload = Value.cast(dut.o.payload)
+        self._o_ready_const = not hasattr(dut.o, "ready") or isinstance(dut.o.ready, int) or \
+            getattr(dut.o.signature, "always_ready", False)
+        self._i_has_ready = self._has_in and not getattr(dut.i.signature, "always_ready", False)
+        # Per-step feed, read by the testbench.
+        self._feed = {"stop": 0, "queue": np.zeros(0, np.int64), "ready": None, "start": 0,
+                      "writes": [], "accepted": 0, "words": [], "cycles": []}
+        self._ctx = None
+        self._period = 1.0 / clk_hz
+        self._sim = Simulator(dut)
+        self._sim.add_clock(self._period)
+        self._sim.add_testbench(self._testbench, background=True)
+        # Rising edge of cycle k, as the simulator's clock computes it (integer femtoseconds).
+        period_fs = int(self._period * 1e15)
+        self._phase_fs, self._half_fs = int(self._period / 2 * 1e15), period_fs // 2
+        self._stack = contextlib.ExitStack()
+        if vcd is not None:
+            Path(vcd).parent.mkdir(parents=True, exist_ok=True)
+            self._stack.enter_context(self._sim.write_vcd(str(vcd)))
+
+    def _edge_s(self, k: int) -> float:
+        return (self._phase_fs + 2 * k * self._half_fs) / 1e15
+
+    async def _testbench(self, ctx):
+        self._ctx = ctx
+        f = self._feed
+        dut = self.dut
+        for port, value in self._inputs:
+            ctx.set(port, value)
+        cyc = 0
+        wait = self._period / 4
+        while True:
+            while cyc >= f["stop"]:           # end of the step: wait for the next one
+                await ctx.delay(wait)
+            writes = f["writes"]
+            while writes and writes[0][0] <= cyc:
+                _, port, value = writes.pop(0)
+                ctx.set(port, value)
+            offer = False
+            if self._has_in:
+                k = f["accepted"]
+                offer = k < len(f["queue"])
+                ctx.set(dut.i.valid, 1 if offer else 0)
+                if offer:
+                    ctx.set(self._i_payload, int(f["queue"][k]))
+            if not self._o_ready_const:
+                r = f["ready"]
+                rdy = True if r is None else bool(r[cyc - f["start"]])
+                ctx.set(dut.o.ready, 1 if rdy else 0)
+            sampled = [dut.o.valid, self._o_payload]
+            if not self._o_ready_const:
+                sampled.append(dut.o.ready)
+            if self._i_has_ready:
+                sampled.append(dut.i.ready)
+            res = await ctx.tick().sample(*sampled)
+            vals = list(res[-len(sampled):])
+            o_valid, o_pay = vals[0], vals[1]
+            idx = 2
+            o_rdy = 1
+            if not self._o_ready_const:
+                o_rdy = vals[idx]
+                idx += 1
+            i_rdy = vals[idx] if self._i_has_ready else 1
+            if o_valid and o_rdy:
+                f["words"].append(int(o_pay))
+                f["cycles"].append(cyc)
+            if offer and i_rdy:
+                f["accepted"] += 1
+            cyc += 1
+
+    def _check_port(self, port) -> None:
+        self._resolve(port)
+
+    def _step(self, queue, ready, n, writes):
+        f = self._feed
+        start = self.cycle
+        f.update(stop=start + n, queue=queue, ready=ready_window(ready, start, n), start=start,
+                 writes=[(c, self._resolve(p), v) for c, p, v in writes], accepted=0,
+                 words=[], cycles=[])
+        self._sim.run_until(self._edge_s(start + n - 1) + self._period / 8)
+        if f["writes"]:
+            raise RuntimeError("internal: writes left over after a pysim step")
+        wide = len(self._o_payload) > 63
+        words = np.array(f["words"], dtype=object if wide else np.int64)
+        return words, f["cycles"], f["accepted"]
+
+    def _read(self, port):
+        if self._ctx is None:       # nothing simulated yet: the reset value
+            sig = self._resolve(port)
+            return getattr(sig, "init", 0)
+        return self._ctx.get(self._resolve(port))
+
+    def _close(self):
+        self._stack.close()
