@@ -1,8 +1,8 @@
 """Check your own Amaranth stream block against your numpy model, on every simulator.
 
 One call from a pytest test runs a component on the Amaranth simulator
-(:func:`cosim.pysim.run_stream`) and on Verilator (:class:`cosim.verilator.VerilatorStreamSim`)
-with the same stimulus and the same back-pressure, and asserts that both give the words
+(:func:`cosim.backends.pysim.run_stream`) and on Verilator
+(:class:`cosim.backends.verilator.VerilatorStreamSim`) with the same stimulus and the same back-pressure, and asserts that both give the words
 your model predicts -- and the same words on the same cycles as each other::
 
     from cosim.testing import check_stream
@@ -12,12 +12,12 @@ your model predicts -- and the same words on the same cycles as each other::
         check_stream(MyFir(taps), lambda x: my_model(taps, x), x,
                      ready=rng.random(3000) < 0.7)
 
-The component follows the convention of :mod:`cosim.pysim`: a ``sync``-domain
+The component follows the convention of :mod:`cosim.backends.pysim`: a ``sync``-domain
 ``wiring.Component`` with an input stream ``i`` (optional) and an output stream ``o``
 (``amaranth.lib.stream``), payloads as packed integers (the bits of
 ``Value.cast(payload)``; a signed payload as signed integers; wider than 63 bits as Python
-ints). :func:`cosim.pysim.pack_fields` / :func:`~cosim.pysim.unpack_fields` convert struct
-payloads.
+ints). :func:`cosim.backends.pysim.pack_fields` / :func:`~cosim.backends.pysim.unpack_fields`
+convert struct payloads.
 
 On a mismatch it raises :class:`StreamMismatch` (an ``AssertionError``, so pytest shows it
 as a failure) saying which backend, the first differing output index, the cycle it came
@@ -180,8 +180,8 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     model : callable or array
         ``model(stimulus)`` (or the expected output itself), returning the expected output
         words (array), or ``(words, cycles)``, or a dict / object with ``words`` and
-        optionally ``cycles`` and ``probes`` (e.g. a :class:`~cosim.pysim.StreamResult` or a
-        block model's result). Cycles, when given, are compared too; the backends are always
+        optionally ``cycles`` and ``probes`` (e.g. a
+        :class:`~cosim.backends.pysim.StreamResult` or a block model's result). Cycles, when given, are compared too; the backends are always
         compared with each other on words *and* cycles.
     stimulus : array of int, optional
         Packed input payloads, offered in order on ``i``.

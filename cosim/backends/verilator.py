@@ -1,14 +1,14 @@
 """Compiled cycle-accurate simulation of a stream component with Verilator.
 
-Same convention and the same results as :func:`cosim.pysim.run_stream` (words *and* cycles,
+Same convention and the same results as :func:`cosim.backends.pysim.run_stream` (words *and* cycles,
 bit for bit), but the clock loop runs in C++: the component is exported to Verilog
-(:mod:`cosim.verilog`), Verilated, compiled with a generated harness into a shared library
+(:mod:`cosim.backends.verilog`), Verilated, compiled with a generated harness into a shared library
 and driven through ``ctypes`` with numpy buffers. Python only runs between chunks: at the
 cycles of register writes, when the output buffer is full, and every ``_CHUNK_CYCLES``
 cycles so that Ctrl-C works.
 
 Builds are cached under ``build/verilator/<sha256>/`` keyed on the Verilog text, the
-harness (this file and :mod:`cosim.verilator_harness`, which generates the C++), the
+harness (this file and :mod:`cosim.backends.verilator_harness`, which generates the C++), the
 Verilator version and the trace kind; constructing a simulator
 for a design that has been built before only loads the library.
 
@@ -49,15 +49,16 @@ from pathlib import Path
 import numpy as np
 from amaranth.hdl import Value
 
+from ..core.provenance import REPO_ROOT
+from ..core.session import FrontendSession, ready_window
 from . import verilator_harness as _harness
 from .pysim import StreamResult, input_items
-from ..core.provenance import REPO_ROOT
 from .verilog import PortInfo, component_ports, verilator_missing_message, verilog_text
 from .verilator_harness import (CFLAGS, HARNESS_TEMPLATE, MAKE_OPTS, HARNESS_VERSION, as_value,
                                 limbs, parse_header_ports, payload_get_code, payload_set_code,
                                 RunArgs, verilator_source, verilator_available, verilator_version)
 
-__all__ = ["verilator_available", "verilator_version", "VerilatorStreamSim"]
+__all__ = ["verilator_available", "verilator_version", "VerilatorStreamSim", "VerilatorSession"]
 
 #: Longest stretch of cycles one call into C runs, so Python can react to Ctrl-C (~1 s).
 _CHUNK_CYCLES = 1 << 24
@@ -69,7 +70,7 @@ _PROBE_CHUNK = 1 << 18
 _STATUS_DONE, _STATUS_PAUSED, _STATUS_FULL = 0, 1, 2
 
 class VerilatorStreamSim:
-    """A component compiled with Verilator, run like :func:`cosim.pysim.run_stream`.
+    """A component compiled with Verilator, run like :func:`cosim.backends.pysim.run_stream`.
 
     Parameters
     ----------
@@ -360,12 +361,12 @@ class VerilatorStreamSim:
             probe: dict | None = None, final: dict | None = None,
             trace: str | Path | None = None,
             trace_window: tuple[int, int] | None = None) -> StreamResult:
-        """Run from reset; same arguments and result as :func:`cosim.pysim.run_stream`.
+        """Run from reset; same arguments and result as :func:`cosim.backends.pysim.run_stream`.
 
         Parameters
         ----------
         in_words, in_valid, out_ready, n_cycles, flush_cycles
-            As in :func:`cosim.pysim.run_stream`.
+            As in :func:`cosim.backends.pysim.run_stream`.
         inputs : dict of port name -> int, or list of (port, int)
             Constant values of other input ports: Verilog names such as ``"freq"`` as dict
             keys, or ``Value`` objects of the component in pairs (Amaranth values are
@@ -496,10 +497,6 @@ class VerilatorStreamSim:
 
 
 # -- persistent sessions ---------------------------------------------------------------------
-# Imported here, not at the top: cosim.session imports nothing from this module at load time.
-from ..core.session import FrontendSession, ready_window
-
-__all__ += ["VerilatorSession"]
 
 
 class VerilatorSession(FrontendSession):
@@ -509,7 +506,7 @@ class VerilatorSession(FrontendSession):
     step's words and ``ready`` pattern, counting that call's cycles from 0; the model, its
     registers and the payload it was last offered persist between calls, so N steps give the
     bits of one :meth:`VerilatorStreamSim.run` (same per-cycle protocol). Implements
-    :class:`cosim.session.FrontendSession`. No waveform (a trace's time base is per call:
+    :class:`cosim.core.session.FrontendSession`. No waveform (a trace's time base is per call:
     use :meth:`VerilatorStreamSim.run` with ``trace=``).
     """
 

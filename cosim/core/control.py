@@ -124,7 +124,7 @@ class ControlPath:
 
     def writes(self) -> list[tuple[int, str, int]]:
         """``(cycle, port_name, value)`` in effect order: the ``writes=`` argument of
-        :func:`cosim.pysim.run_stream` and ``VerilatorStreamSim.run`` (both apply a write
+        :func:`cosim.backends.pysim.run_stream` and ``VerilatorStreamSim.run`` (both apply a write
         before the clock edge of its cycle, in list order)."""
         return list(self._writes)
 

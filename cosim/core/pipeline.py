@@ -7,9 +7,9 @@
           |                                          v
     session.write(reg, value, cycle)  <--  dsp(call) every loop period, at its service time
 
-The front end is a :class:`cosim.session.FrontendSession` on any backend (the bit-exact
+The front end is a :class:`cosim.core.session.FrontendSession` on any backend (the bit-exact
 model, ``amaranth.sim``, Verilator); the FIFO's DSP side reads with the ``ready`` pattern of
-a :class:`~cosim.link.DspServiceConfig`, the same pattern on every backend. Every state --
+a :class:`~cosim.core.link.DspServiceConfig`, the same pattern on every backend. Every state --
 front end, FIFO, pending peaks and writes, the DSP's own -- is carried across blocks, so a
 record fed in any number of blocks gives the same bits.
 
@@ -22,7 +22,7 @@ Timing of the loop (cycles from reset). The DSP runs once per *loop period* of
 * it runs at ``issue = window_end + compute_cycles`` (the DSP's processing time); the
   pipeline steps the front end exactly up to that cycle, then calls the DSP;
 * each write it returns is issued at ``issue`` and reaches the HDL register at
-  ``issue + control_latency_cycles`` (:class:`~cosim.link.ControlPath`), i.e. it is applied
+  ``issue + control_latency_cycles`` (:class:`~cosim.core.control.ControlPath`), i.e. it is applied
   before that cycle's clock edge, never earlier -- whatever the block boundaries.
 
 The DSP is called every loop period, also inside a stall of the FIFO service

@@ -182,7 +182,7 @@ class Figure:
 
 @dataclass(frozen=True)
 class Frontend:
-    """A receiver's front end, as :func:`cosim.session.open_frontend` opens it.
+    """A receiver's front end, as :func:`cosim.backends.factory.open_frontend` opens it.
 
     Parameters
     ----------
@@ -194,7 +194,7 @@ class Frontend:
         and ``verilator`` sessions run it).
     model : callable
         ``model(params, log_ranges=False)`` -> the bit-exact model as a
-        :class:`cosim.session.FrontendSession` (the ``model`` backend).
+        :class:`cosim.core.session.FrontendSession` (the ``model`` backend).
     verilog_name : str
         The Verilog module name of the top (Verilator sessions).
     inputs : callable, optional

@@ -2,7 +2,7 @@
 Verilog (``python -m cosim check-equivalence --top gnss``): one seeded GPS L1 C/A record with
 register writes through the three sessions (:func:`cosim.gnss.session.open_gnss`), every
 FIFO word, the cycle it leaves on and the overflow counter compared with the model's
-(:func:`cosim.equivalence.compare_backends`).
+(:func:`cosim.tools.equivalence.compare_backends`).
 
 The record: PRN 7 at 45 dB-Hz, 2-bit ADC, 900 m/s closing with 10 m/s^2, from the signal
 generator (:mod:`cosim.gnss.signal`) at a reduced rate (:data:`EQUIV_PARAMS`: 5.115 MS/s,
@@ -12,7 +12,7 @@ seeded writes from the third code period on, every :data:`WRITE_SPACING` cycles 
 carrier words within +-300 Hz of the true Doppler, code words within +-20 Hz, slews of 0-4
 samples, and PRN changes (another PRN, then back to 7), so every register and the double
 buffering are exercised on a signal that correlates (the prompt on the peak, E = L).
-``stall=True``: the DSP ``ready`` follows :func:`cosim.equivalence.stall_pattern` and the
+``stall=True``: the DSP ``ready`` follows :func:`cosim.tools.equivalence.stall_pattern` and the
 FIFO holds one record and a marker (``record_words + 2`` words: records dropped, the counter compared).
 """
 from __future__ import annotations
@@ -85,7 +85,7 @@ def check_gnss_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: in
                            stall: bool = False, params: GnssChannelParams | None = None,
                            pysim_max_samples: int = PYSIM_MAX_SAMPLES,
                            progress: bool = False) -> dict:
-    """The keys of :func:`cosim.equivalence.check_equivalence` (``peaks``: the model's
+    """The keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's
     records; ``dropped``: its overflow count) for the GNSS channel (module doc)."""
     from .session import open_gnss
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:

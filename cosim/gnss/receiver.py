@@ -1,7 +1,7 @@
-"""GNSS's entry in the receiver registry (:mod:`cosim.receivers`): the ``gnss`` command
+"""GNSS's entry in the receiver registry (:mod:`cosim.core.receivers`): the ``gnss`` command
 (options derived from :class:`~cosim.gnss.signal.GnssSignalConfig`,
 :class:`~cosim.gnss.run.DynamicsChoice` and :class:`~cosim.gnss.run.GnssRunConfig`), the
-channel's front end for :func:`cosim.session.open_frontend`, and its HDL top."""
+channel's front end for :func:`cosim.backends.factory.open_frontend`, and its HDL top."""
 from __future__ import annotations
 
 from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,

@@ -10,7 +10,7 @@ tracker -> NCO words back over the control path, closed loop.
    :data:`SKIP_RECORDS` records (the reset epoch and the epoch holding the slew) are not
    tracked. The acquisition is thus treated as if its snapshot had been taken just before
    tracking starts (its own duration is not simulated).
-3. *Tracking* on the streaming pipeline (:class:`cosim.pipeline.Pipeline`): the channel
+3. *Tracking* on the streaming pipeline (:class:`cosim.core.pipeline.Pipeline`): the channel
    session (:func:`cosim.gnss.session.open_gnss`), the DSP reading the FIFO every
    ``service_period_us``; every record is reassembled (:func:`dsp.records.receive_records`)
    and given to the tracker (:func:`dsp.gnss.trackers.make_tracker`, float or fixed), whose
@@ -157,7 +157,7 @@ class GnssRunConfig:
     service_period_us : float
         The DSP's FIFO service period (us).
     service_latency_cycles, service_batch_words : int
-        The rest of the service (:class:`cosim.link.DspServiceConfig`, 4 cycles per word).
+        The rest of the service (:class:`cosim.core.link.DspServiceConfig`, 4 cycles per word).
     settle_s : float
         Records before this time are not scored.
     acq_coherent_ms, acq_noncoherent, acq_bin_hz, acq_pfa, refine_ms :

@@ -131,5 +131,6 @@ class GnssRegisterSession(RegisterSession):
 
 def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:
     """A GNSS channel on ``backend`` (``model``, ``pysim``, ``verilator``) with register-level
-    writes: :func:`cosim.backends.factory.open_frontend` wrapped in a :class:`GnssRegisterSession`."""
+    writes: :func:`cosim.backends.factory.open_frontend` wrapped in a
+    :class:`GnssRegisterSession`."""
     return GnssRegisterSession(open_frontend(backend, params, **kw), params)

@@ -1,6 +1,6 @@
 """Seed-003 benchmark: the seed's Table 2 beside ours, figures 6-7, the loops' cost.
 
-``python -m cosim bench ins`` (``cosim.bench`` entry ``ins``) writes ``results/ins.json``,
+``python -m cosim bench ins`` (the INS receiver's benchmark ``ins``) writes ``results/ins.json``,
 ``results/ins.md`` and ``results/ins_fig6_7.png``: for 40 dB-Hz and 35 dB-Hz, TCXO and OCXO,
 the three loops over the seed's trajectory (150 s; ``quick``: 35 s, 4 trials), 20 Monte
 Carlo trials each on the fast path, velocity-error and range-error mean/std along the line

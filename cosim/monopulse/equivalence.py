@@ -1,13 +1,13 @@
 """Equivalence of the monopulse front end's bit-exact model, Amaranth simulation and Verilated
 Verilog (``python -m cosim check-equivalence --top monopulse``): the same seeded record through
-the three sessions (:func:`cosim.session.open_frontend`), every FIFO word and the cycle it
+the three sessions (:func:`cosim.backends.factory.open_frontend`), every FIFO word and the cycle it
 leaves on compared with the model's.
 
 The record: full-scale random ADC codes on the 4 channels and random replica bits, with
 seeded register writes (channel coefficients, steering u0/v0) spread over it; the reduced
 block (:data:`EQUIV_PARAMS`: 12 snapshots of 4 samples) gives one measurement every 48
 samples so a 20,000-sample record holds about 400. ``stall=True``: the DSP ``ready`` follows
-:func:`cosim.equivalence.stall_pattern` and the FIFO holds one record and a marker
+:func:`cosim.tools.equivalence.stall_pattern` and the FIFO holds one record and a marker
 (``record_words + 2`` words: records dropped, the overflow counter compared too)."""
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
                                 stall: bool = False, params=None,
                                 pysim_max_samples: int = PYSIM_MAX_SAMPLES,
                                 progress: bool = False) -> dict:
-    """The keys of :func:`cosim.equivalence.check_equivalence` (``peaks``: measurement records
+    """The keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: measurement records
     of the model; ``markers``: 0, the monopulse FIFO drops whole records and counts them in
     ``overflow_count``, which is compared; ``dropped``: the model's overflow count)."""
     from ..backends.factory import open_frontend

@@ -9,9 +9,9 @@
         |   analog phase shifters                                               v
     steering (u0, v0) + 4 coefficients  <--  ControlPath  <--  DSP: tracker / search (run._Loop)
 
-One front-end session (:func:`cosim.session.open_frontend` on the backend, register writes
-by :class:`cosim.session.RegisterSession`) in the streaming pipeline
-(:class:`cosim.pipeline.Pipeline`): every DSP service reads the FIFO words, reassembles the
+One front-end session (:func:`cosim.backends.factory.open_frontend` on the backend, register writes
+by :class:`cosim.core.session.RegisterSession`) in the streaming pipeline
+(:class:`cosim.core.pipeline.Pipeline`): every DSP service reads the FIFO words, reassembles the
 records (:func:`dsp.records.receive_records`) and, per record, runs the same loop step as the
 fast and golden paths (:class:`cosim.monopulse.run._Loop`); its steering command goes back as
 register writes (``u0``, ``v0`` and the four channel coefficients ``exp(j phi_i0) c_i`` of

@@ -1,4 +1,4 @@
-"""The monopulse entry in the receiver registry (:mod:`cosim.receivers`): ``python -m cosim
+"""The monopulse entry in the receiver registry (:mod:`cosim.core.receivers`): ``python -m cosim
 monopulse``, its options derived from :class:`~cosim.monopulse.run.MonopulseRunConfig` (every
 default written once, there), its HDL front end (:class:`hdl.monopulse.frontend.MonopulseFrontEnd`,
 the ``model`` backend :class:`~cosim.monopulse.session.MonopulseModelSession`), its top, and

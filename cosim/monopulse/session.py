@@ -19,8 +19,8 @@ class MonopulseModelSession(BusModelSession):
     Input words are :func:`~hdl.monopulse.model.pack_input` words, one offered per cycle
     while queued. Writes are port writes on :data:`cosim.core.session.BUS_PORTS` (as the
     HDL sessions take them; :func:`cosim.core.session.write_register` makes one bus write); a
-    register write happens in every cycle ``reg_we`` is high, with the ``reg_addr`` / ``reg_data`` of that cycle. Each step
-    processes the snapshots that reach the correction stage before its last cycle (a later
+    register write happens in every cycle ``reg_we`` is high, with the ``reg_addr`` /
+    ``reg_data`` of that cycle. Each step processes the snapshots that reach the correction stage before its last cycle (a later
     write may still precede their block boundary); a record written to the FIFO after the
     step waits for the next. Reads: ``overflow_count`` and the bus ports.
 

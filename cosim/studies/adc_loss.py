@@ -130,7 +130,7 @@ _SQRT_2PI = math.sqrt(2.0 * math.pi)
 _BATCH_ELEMENTS = 1 << 19
 
 
-# -- argument checks (the shared rules of cosim.validate) ----------------------------------
+# -- argument checks (the shared rules of cosim.core.validate) -----------------------------
 def _check_bits(bits) -> int:
     return check_int("bits", bits, 1, MAX_BITS)
 

@@ -47,7 +47,8 @@ TARGETS = ("adc", "fifo", "register", "dsp-state")
 
 
 def fault_model(receiver: str):
-    """The :class:`~cosim.receivers.FaultModel` of a registered receiver (ValueError if none)."""
+    """The :class:`~cosim.core.receivers.FaultModel` of a registered receiver (ValueError if
+    none)."""
     from cosim.core.receivers import get
     r = get(receiver)
     if r.faults is None or r.faults.model is None:

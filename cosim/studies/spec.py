@@ -97,7 +97,7 @@ class SweepConfig:
     Parameters
     ----------
     receiver : str
-        A registered receiver whose sweep study has a model (:mod:`cosim.receivers`).
+        A registered receiver whose sweep study has a model (:mod:`cosim.core.receivers`).
     params : tuple of (name, values)
         Swept parameters (crossed). Default: the receiver's ``SweepModel.default_params``
         (TACAN: ``adc_bits`` 4..14).

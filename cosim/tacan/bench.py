@@ -1,5 +1,5 @@
 """The TACAN benchmarks: measured figures written to ``results/`` with the machine, date and
-command (registered in :data:`cosim.bench.BENCHMARKS`).
+command (registered in the TACAN receiver's entry, :mod:`cosim.tacan.receiver`).
 
 ``tacan-accuracy``: bearing RMSE and mean error of the end-to-end TACAN chain (IF samples ->
 golden front end -> Kalman DSP) versus SNR at 90 and 270 degrees, with the single-pulse

@@ -5,7 +5,7 @@
                core and on all cores; plus the naive fxpmath approach (quantise every
                operation with ``Fxp`` objects) on a short run, for comparison.
 ``dsp-hour``   one simulated hour through the whole bit-exact chain on the streaming
-               pipeline (:mod:`cosim.pipeline`): IF records (3 s each, a continuous
+               pipeline (:mod:`cosim.core.pipeline`): IF records (3 s each, a continuous
                rotation phase) -> HDL front-end model session -> FIFO model -> DSP FIFO
                receiver -> fixed-point DSP, all with carried state: bearing error per
                minute, core events, smallest eigenvalue of P, FIFO drops.
@@ -229,7 +229,7 @@ class _TacanBatchDsp:
 def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None = None,
              block_s: float = 3.0, batch_s: float = 60.0, loop_s: float = 0.1) -> dict:
     """One simulated hour through the whole bit-exact chain, on the streaming pipeline
-    (:class:`cosim.pipeline.Pipeline` with the front-end model session): IF blocks of
+    (:class:`cosim.core.pipeline.Pipeline` with the front-end model session): IF blocks of
     ``block_s`` -> front end + FIFO (default DSP service) -> the FIFO receiver every
     ``loop_s`` -> the fixed-point DSP every ``batch_s`` (a "minute" row each).
 

@@ -1,7 +1,7 @@
-"""TACAN's entry in the receiver registry (:mod:`cosim.receivers`): its command-line options
+"""TACAN's entry in the receiver registry (:mod:`cosim.core.receivers`): its command-line options
 (derived from :class:`~cosim.tacan.signal.TacanSignalConfig`,
 :class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman.KalmanConfig` and
-:class:`~cosim.link.DspServiceConfig`), the ``tacan`` command, its sweep and fault studies,
+:class:`~cosim.core.link.DspServiceConfig`), the ``tacan`` command, its sweep and fault studies,
 its HDL top and its equivalence check."""
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from .signal import TacanSignalConfig
 from .faults import FAULT_MODEL, TARGETS
 from .study import SWEEP_MODEL
 
-#: Clock the DSP service presets (``cosim.link.DSP_PRESETS``) are written for.
+#: Clock the DSP service presets (``cosim.core.link.DSP_PRESETS``) are written for.
 PRESET_CLK_HZ = 20e6
 
 _SIG, _RUN = TacanSignalConfig, TacanRunConfig

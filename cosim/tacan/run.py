@@ -4,7 +4,7 @@ Front-end backends (what turns ADC samples into pulse peaks):
 
 ``golden``     float64 model of the front end (:mod:`dsp.tacan.frontend`); no FIFO.
 ``model``      bit-exact numpy model of the HDL (:class:`hdl.tacan.model.TacanFrontendModel`)
-               and of its FIFO, read by the DSP service model of :mod:`cosim.link`.
+               and of its FIFO, read by the DSP service model of :mod:`cosim.core.link`.
 ``pysim``      the Amaranth design in ``amaranth.sim`` (cycle-accurate, ~1k cycles/s: short
                scenarios only).
 ``verilator``  the exported Verilog compiled with Verilator (cycle-accurate, compiled speed).
@@ -336,7 +336,7 @@ def dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
 
 def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOutput:
     """An HDL backend's output for one record, on the streaming pipeline: a front-end
-    session (:func:`cosim.session.open_frontend`) fed the record and ``_n_cycles - len``
+    session (:func:`cosim.backends.factory.open_frontend`) fed the record and ``_n_cycles - len``
     idle cycles to flush the last peak, the DSP reading with ``run.service``, the
     ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after)."""
     from ..core.pipeline import Pipeline

@@ -1,6 +1,6 @@
 """The bit-exact model of the TACAN front end as a persistent session
-(:class:`cosim.session.FrontendSession`), the ``model`` backend of
-:func:`cosim.session.open_frontend` for :class:`hdl.tacan.model.TacanFrontendParams`."""
+(:class:`cosim.core.session.FrontendSession`), the ``model`` backend of
+:func:`cosim.backends.factory.open_frontend` for :class:`hdl.tacan.model.TacanFrontendParams`."""
 from __future__ import annotations
 
 import numpy as np

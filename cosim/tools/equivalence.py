@@ -1,8 +1,8 @@
 """Equivalence of the bit-exact model, the Amaranth simulation and the Verilated Verilog:
 the generic part of ``python -m cosim check-equivalence``.
 
-A receiver's check (``Receiver.equivalence``, e.g. :func:`cosim.tacan.equivalence.check_equivalence`)
-runs its front end on every backend (:data:`BACKENDS`) on the same stimulus and hands the
+A receiver's check (``Receiver.equivalence``, e.g.
+:func:`cosim.tacan.equivalence.check_equivalence`) runs its front end on every backend (:data:`BACKENDS`) on the same stimulus and hands the
 outputs to :func:`compare_backends`, which compares every FIFO word, its cycle and the
 overflow counter against the model and states a verdict. :func:`stall_pattern` is the seeded
 DSP ``ready`` pattern with long stalls (drops, markers); :func:`check_record_size` refuses a
@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_record_size", "compare_backends", "stall_pattern", "PYSIM_MAX_SAMPLES", "BACKENDS"]
+__all__ = ["check_record_size", "compare_backends", "stall_pattern", "PYSIM_MAX_SAMPLES",
+           "BACKENDS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
@@ -51,8 +52,8 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
     cycle and the overflow counter are compared. ``pysim`` is skipped above
     ``pysim_max_samples``, ``verilator`` when it is not installed (both noted).
     ``empty_hint`` ends the verdict when the model gave no word. Returns the keys of
-    :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's records, ``markers``: 0,
-    ``dropped``: the model's overflow count)."""
+    :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's records,
+    ``markers``: 0, ``dropped``: the model's overflow count)."""
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")

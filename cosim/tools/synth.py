@@ -1,6 +1,7 @@
 """ECP5 synthesis and place-and-route of an Amaranth component with YoWASP yosys/nextpnr.
 
-The Verilog is the same text the Verilator backend simulates (:func:`cosim.verilog.verilog_text`).
+The Verilog is the same text the Verilator backend simulates
+(:func:`cosim.backends.verilog.verilog_text`).
 The tools are the YoWASP (WebAssembly) builds installed in the venv (``pip install -e .[synth]``),
 so no system install is needed.
 

@@ -4,6 +4,7 @@ import json
 import numpy as np
 import pytest
 
+from cosim.backends.verilator import verilator_available
 from cosim.cli import main
 from cosim.studies.faults import FaultConfig, flip_bits, flip_signed, parse_ber, run_faults
 from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
@@ -155,7 +156,7 @@ def test_cli_faults_json(tmp_path, capsys):
     assert main(["faults", "tacan", "--bits", "x,y"]) == 2
 
 
-@pytest.mark.skipif(not __import__("cosim.verilator").verilator.verilator_available(),
+@pytest.mark.skipif(not verilator_available(),
                     reason="Verilator not installed")
 def test_register_upsets_in_the_compiled_rtl_equal_the_model(tmp_path):
     """The same NCO-register upsets and scrubs, applied as port writes to the Verilated

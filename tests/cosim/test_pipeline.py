@@ -322,7 +322,7 @@ class _Scaler:
 def test_stream_session_in_blocks_equals_one_run_stream(backend):
     """Any stream component: a session stepped in uneven blocks, with back-pressure on both
     sides (words not accepted carry over to the next step) and register writes between and
-    inside steps, gives :func:`cosim.pysim.run_stream`'s words and cycles (seed 5)."""
+    inside steps, gives :func:`cosim.backends.pysim.run_stream`'s words and cycles (seed 5)."""
     from cosim.backends.pysim import run_stream
     from cosim.backends.factory import open_stream_session
     rng = np.random.default_rng(5)

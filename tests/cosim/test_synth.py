@@ -1,4 +1,4 @@
-"""ECP5 synthesis with YoWASP (cosim.synth). Kept short: two tiny designs, ~10 s each."""
+"""ECP5 synthesis with YoWASP (cosim.tools.synth). Kept short: two tiny designs, ~10 s each."""
 import pytest
 from amaranth.hdl import Fragment, Module, Signal, signed
 from amaranth.lib import stream, wiring

@@ -97,7 +97,7 @@ def test_schedule_and_probe_and_bad_arguments():
 
 def test_without_verilator_pysim_is_checked_then_skipped(monkeypatch):
     import cosim.backends.verilator
-    monkeypatch.setattr(cosim.verilator, "verilator_available", lambda: False)
+    monkeypatch.setattr(cosim.backends.verilator, "verilator_available", lambda: False)
     x, ready = _stim(6, 100)
     want = EX.fir_model(EX.TAPS, x)
     with pytest.raises(pytest.skip.Exception, match=r"verilator not run: Verilator, make or a "

@@ -1,4 +1,4 @@
-"""The Verilator backend gives the same bits and cycles as cosim.pysim.run_stream.
+"""The Verilator backend gives the same bits and cycles as cosim.backends.pysim.run_stream.
 
 The demo components here are small on purpose: they exercise the runner (valid gaps,
 back-pressure, control ports, register writes, signed and 64-bit payloads), not any block.

@@ -1,4 +1,4 @@
-"""Verilog export and Verilator lint (cosim.verilog)."""
+"""Verilog export and Verilator lint (cosim.tools.verilog)."""
 import re
 import shutil
 

@@ -1,9 +1,9 @@
 """Helpers shared by the HDL block tests (imported as ``_util``; see ``conftest.py``).
 
 - :class:`WithClear`: a block with a synchronous ``clear`` input (reset mid-run).
-- :func:`assert_lints_clean`: export with :mod:`cosim.verilog` and lint with Verilator.
+- :func:`assert_lints_clean`: export with :mod:`cosim.tools.verilog` and lint with Verilator.
 - :data:`needs_verilator`, :func:`verilator_sim`, :func:`assert_same_stream`: the
-  "exported Verilog simulates identically" checks against :func:`cosim.pysim.run_stream`.
+  "exported Verilog simulates identically" checks against :func:`cosim.backends.pysim.run_stream`.
 - :func:`accepted_cycles`: when ``run_stream`` transfers each input word.
 """
 from __future__ import annotations
@@ -64,7 +64,7 @@ def accepted_cycles(n: int, in_valid) -> np.ndarray:
 
 def assert_lints_clean(component: wiring.Component, name: str, *, check_width: bool = False):
     """Export ``component`` to ``build/verilog/<name>.v`` and assert Verilator ``-Wall``
-    finds nothing beyond :data:`cosim.verilog.LINT_WAIVERS`.
+    finds nothing beyond :data:`cosim.tools.verilog.LINT_WAIVERS`.
 
     ``check_width=True`` turns the ``WIDTH`` warning back on, for blocks whose Verilog is
     clean of it (their tests never waived it).

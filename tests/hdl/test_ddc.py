@@ -171,7 +171,7 @@ def test_bad_component_argument():
 
 @pytest.mark.verilator
 def test_verilog_lint():
-    # Waived: only cosim.verilog.LINT_WAIVERS less WIDTH (the DDC is clean of it).
+    # Waived: only cosim.tools.verilog.LINT_WAIVERS less WIDTH (the DDC is clean of it).
     assert_lints_clean(Ddc(DdcParams(nco=NcoParams(dither_bits=8))), "ddc", check_width=True)
 
 

@@ -184,7 +184,7 @@ def test_bad_params(kw, msg):
 @pytest.mark.verilator
 @pytest.mark.parametrize("kw", [dict(), dict(compensate=True, rounding="half_up")])
 def test_verilog_lints_clean(kw):
-    """Waived: cosim.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH: Amaranth
+    """Waived: cosim.tools.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH: Amaranth
     compares and extends with unsized 1-bit constants such as ``$signed(1'h0)``)."""
     assert_lints_clean(Envelope(EnvelopeParams(**kw)), "envelope" + ("_comp" if kw else ""))
 

@@ -324,7 +324,7 @@ class _TwoClocks(Elaboratable):
 
 
 def _run_async(p, words, in_valid, out_ready, w_hz, r_hz, r_cycles):
-    """Two-clock testbench (``cosim.pysim.run_stream`` drives one clock only)."""
+    """Two-clock testbench (``cosim.backends.pysim.run_stream`` drives one clock only)."""
     dut = DspFifo(p)
     out, ovf_trace = [], []
     sim = Simulator(_TwoClocks(dut))
@@ -435,7 +435,7 @@ def test_actual_depth():
 @pytest.mark.verilator
 @pytest.mark.parametrize("asynchronous, parity", [(False, False), (True, False), (False, True)])
 def test_verilog_lints_clean(asynchronous, parity):
-    """Waived: cosim.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH)."""
+    """Waived: cosim.tools.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH)."""
     p = FifoParams(depth=16, asynchronous=asynchronous, parity=parity)
     name = ("dsp_fifo_async" if asynchronous else "dsp_fifo") + ("_parity" if parity else "")
     # Exported on its own, the asynchronous FIFO gets its read domain as ports (dsp_clk,

@@ -36,7 +36,7 @@ def _stall_stimulus(p, rng, n_cycles, *, period=40, count=12, stall=(0.3, 0.6),
                     p_rec=0.08):
     """Records at random cycles for 90 % of the run (not always ``record_words`` apart, so
     some arrive while the hold register is busy), read by a DSP serving the FIFO from a
-    timer interrupt (:class:`cosim.link.DspServiceConfig`: ``count`` words every ``period``
+    timer interrupt (:class:`cosim.core.link.DspServiceConfig`: ``count`` words every ``period``
     cycles) that stalls (``ready`` low) for the fraction ``stall`` of the run."""
     in_valid = rng.random(n_cycles) < p_rec
     in_valid[int(0.9 * n_cycles):] = False      # the DSP catches up: queue drained at the end

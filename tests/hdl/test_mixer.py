@@ -199,7 +199,7 @@ def test_bad_component_argument():
     ("mixer_cplx_zero", MixerParams(complex_input=True, rounding="zero", overflow="wrap")),
 ])
 def test_verilog_lint(name, p):
-    # Waived: only cosim.verilog.LINT_WAIVERS less WIDTH (the mixer is clean of it).
+    # Waived: only cosim.tools.verilog.LINT_WAIVERS less WIDTH (the mixer is clean of it).
     assert_lints_clean(Mixer(p), name, check_width=True)
 
 

@@ -317,7 +317,7 @@ def test_bad_model_inputs():
 @pytest.mark.parametrize("name,p", [("nco", NcoParams()),
                                     ("nco_dither_phase", NcoParams(dither_bits=8, phase_port=True))])
 def test_verilog_lint(name, p):
-    # Waived: only cosim.verilog.LINT_WAIVERS less WIDTH (the NCO is clean of it).
+    # Waived: only cosim.tools.verilog.LINT_WAIVERS less WIDTH (the NCO is clean of it).
     assert_lints_clean(Nco(p), name, check_width=True)
 
 

@@ -979,7 +979,7 @@ def test_bad_params(kw, msg):
 
 @pytest.mark.verilator
 def test_verilog_lints_clean():
-    """Waived: cosim.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH)."""
+    """Waived: cosim.tools.verilog.LINT_WAIVERS (UNUSEDSIGNAL, DECLFILENAME, WIDTH)."""
     assert_lints_clean(PeakSearch(PeakParams()), "peak_search")
 
 

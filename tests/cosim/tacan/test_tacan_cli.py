@@ -5,6 +5,7 @@ import sys
 
 import pytest
 
+from cosim.backends.verilator import verilator_available
 from cosim.cli import main
 
 KEYS = {"bearing_true_deg", "bearing_est_deg", "rmse_deg", "mean_error_deg", "crb_deg",
@@ -78,7 +79,7 @@ def test_cli_bad_dsp_service(capsys, args, message):
     assert rc != 0 and message in cap.err and cap.out == ""
 
 
-@pytest.mark.skipif(not __import__("cosim.verilator").verilator.verilator_available(),
+@pytest.mark.skipif(not verilator_available(),
                     reason="Verilator not installed")
 def test_cli_waveform_window_from_verilator(tmp_path, capsys):
     f = tmp_path / "front.vcd"
