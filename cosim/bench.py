@@ -1,8 +1,8 @@
 """Benchmarks: measured figures written to ``results/`` with the machine, date and command.
 
 :data:`BENCHMARKS` names every benchmark (``python -m cosim bench <name>``); each lives with
-its receiver or subsystem (the TACAN ones in :mod:`cosim.tacan.bench`, GNSS in
-:mod:`cosim.gnss.bench`, ...). Here: the machine/commit record every result carries
+its receiver or subsystem (the TACAN ones one per module, ``cosim.tacan.bench_accuracy``
+and the other ``cosim.tacan.bench_*``; GNSS in :mod:`cosim.gnss.bench`, ...). Here: the machine/commit record every result carries
 (:func:`machine_info`) and the process pool the benchmarks share (:func:`map_jobs`).
 """
 from __future__ import annotations
@@ -134,19 +134,20 @@ def _aukf_convergence(out: Path, quick: bool = False, jobs: int | None = None) -
     return bench_convergence(out, quick=quick)
 
 
-def _tacan(name: str):
+def _tacan(module: str, name: str):
     def bench(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
-        from .tacan import bench as tacan_bench
-        return getattr(tacan_bench, name)(out, quick=quick, jobs=jobs)
+        from importlib import import_module
+        return getattr(import_module(f".tacan.{module}", __package__), name)(
+            out, quick=quick, jobs=jobs)
     bench.__name__ = name
     return bench
 
 
-BENCHMARKS = {"tacan-accuracy": _tacan("tacan_accuracy"),
-              "tacan-robustness": _tacan("tacan_robustness"),
-              "tacan-detector": _tacan("tacan_detector"),
-              "tacan-sensitivity": _tacan("tacan_sensitivity"),
-              "tacan-confidence": _tacan("tacan_confidence"),
+BENCHMARKS = {"tacan-accuracy": _tacan("bench_accuracy", "tacan_accuracy"),
+              "tacan-robustness": _tacan("bench_robustness", "tacan_robustness"),
+              "tacan-detector": _tacan("bench_detector", "tacan_detector"),
+              "tacan-sensitivity": _tacan("bench_sensitivity", "tacan_sensitivity"),
+              "tacan-confidence": _tacan("bench_confidence", "tacan_confidence"),
               "dsp-speed": _dsp_speed, "dsp-hour": _dsp_hour,
               "sim-speed": _sim_speed, "estimation": _estimation, "suite-time": _suite_time,
               "gnss-speed": _gnss_speed, "gnss-tracking": _gnss_tracking,

@@ -36,7 +36,7 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
     from hdl.tacan.frontend import TacanFrontEnd
     from .link import DspServiceConfig
     from .pysim import run_stream
-    from .tacan.run import TacanRunConfig
+    from .tacan.config import TacanRunConfig
     from .tacan.signal import TacanSignalConfig, generate
     from .verilator import VerilatorStreamSim, verilator_available, verilator_version
 
@@ -80,7 +80,7 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
               "build_or_load_s": t_build, "built": bool(sim.built),
               "version": verilator_version()}
     # -- agreement on the common part (pysim's cycles) ---------------------------------------
-    from .tacan.run import FRONTENDS
+    from .tacan.frontends import FRONTENDS
     short = FRONTENDS["model"](x[:n_pysim], run)
     words_model = short.words
     same_pysim = bool(np.array_equal(ps.words, words_model[:len(ps.words)])

@@ -1,6 +1,6 @@
 """TACAN's entry in the receiver registry (:mod:`cosim.receivers`): its command-line options
 (derived from :class:`~cosim.tacan.signal.TacanSignalConfig`,
-:class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman.KalmanConfig` and
+:class:`~cosim.tacan.config.TacanRunConfig`, :class:`~dsp.tacan.kalman.KalmanConfig` and
 :class:`~cosim.link.DspServiceConfig`), the ``tacan`` command, its sweep and fault studies,
 its HDL top and its equivalence check."""
 from __future__ import annotations
@@ -17,7 +17,7 @@ from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_
 from ..studies.faults import FaultConfig
 from ..studies.sweep import SweepConfig
 from ..validate import check_jobs, check_out_dir, check_out_file, dumps, warn
-from .run import TacanRunConfig
+from .config import TacanRunConfig
 from .signal import TacanSignalConfig
 from .faults import FAULT_MODEL, TARGETS
 from .study import SWEEP_MODEL
@@ -81,7 +81,7 @@ def _window(text: str, option: str) -> tuple[float, float]:
 
 
 def tacan_run_config(a) -> TacanRunConfig:
-    """The :class:`cosim.tacan.run.TacanRunConfig` of ``tacan`` arguments, every option checked
+    """The :class:`cosim.tacan.config.TacanRunConfig` of ``tacan`` arguments, every option checked
     against the others before any work starts (an option that cannot affect the run is
     refused, not ignored)."""
     from ..link import DSP_PRESETS

@@ -13,7 +13,7 @@ from cosim.link import DspServiceConfig, run_link
 from cosim.pipeline import Pipeline
 from cosim.session import open_frontend, ready_window
 from cosim.tacan.session import TacanModelSession
-from cosim.tacan.run import TacanRunConfig
+from cosim.tacan.config import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
 from cosim.verilator import verilator_available
 from dsp.tacan.kalman import KalmanConfig

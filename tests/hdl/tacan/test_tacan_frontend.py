@@ -416,7 +416,7 @@ def test_range_log_is_the_same_on_both_paths_and_fits_the_words():
 # -- pulse-pair detection in the front end ------------------------------------------------------
 def _pair_params(**kw) -> TacanFrontendParams:
     """The front end with the peak search's pulse-pair detection at the X-mode pair spacing
-    in envelope samples (12 us at 5 MHz = 60), as ``cosim.tacan.run`` builds its partner
+    in envelope samples (12 us at 5 MHz = 60), as ``cosim.tacan.config`` builds its partner
     mode, on the censored floor (smooth_log2 10, threshold 46/16 of the pair sum's floor)."""
     sig = TacanSignalConfig()
     cfg = FrontendConfig.for_signal(sig)
@@ -917,7 +917,8 @@ def test_pair_detector_floor_vs_golden():
     The integer floor without fraction bits (``floor_frac``) settled ~2**10 LSB below the
     golden's: 6528 reports against 6368, threshold estimate 0.129 against 0.150 FS; with
     them the report counts agree within 1 % and the thresholds within 2 %."""
-    from cosim.tacan.run import FRONTENDS, TacanRunConfig
+    from cosim.tacan.config import TacanRunConfig
+    from cosim.tacan.frontends import FRONTENDS
     assert PAIR_DETECTOR.floor_frac
     sig = TacanSignalConfig(duration_s=1.5, seed=1)
     assert sig.snr_db == 10.0
