@@ -1,6 +1,6 @@
 """GNSS's entry in the receiver registry (:mod:`cosim.receivers`): the ``gnss`` command
 (options derived from :class:`~cosim.gnss.signal.GnssSignalConfig`,
-:class:`~cosim.gnss.run.DynamicsChoice` and :class:`~cosim.gnss.run.GnssRunConfig`), the
+:class:`~cosim.gnss.config.DynamicsChoice` and :class:`~cosim.gnss.config.GnssRunConfig`), the
 channel's front end for :func:`cosim.session.open_frontend`, and its HDL top."""
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_
 from ..studies.sweep import SweepConfig
 from ..validate import check_jobs, check_out_dir, dumps
 from .study import SWEEP_MODEL
-from .run import SCENARIOS, DynamicsChoice, GnssRunConfig, run_gnss
+from .config import SCENARIOS, DynamicsChoice, GnssRunConfig
+from .run import run_gnss
 from .signal import GnssSignalConfig
 
 _SIG, _DYN, _RUN = GnssSignalConfig, DynamicsChoice, GnssRunConfig
