@@ -48,6 +48,10 @@ SKIP_RECORDS = 2
 
 
 def acquire_handover(gen: GnssSignalGenerator, run: GnssRunConfig) -> tuple[dict, dict]:
+    """Acquire the signal of ``gen`` on its first milliseconds and refine the Doppler (the
+    search of ``run``); returns the acquisition's record for the JSON and the hand-over
+    (``doppler_hz``, ``code_phase_chips``). ValueError if the record is shorter than the
+    snapshot or the PRN is not detected."""
     from dsp.gnss.acquisition import acquire, refine_doppler
     sig = gen.cfg
     n_ms = max(run.acq_coherent_ms * run.acq_noncoherent, run.refine_ms)
@@ -246,6 +250,9 @@ def record_boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
 
 
 def golden_track(gen, run, hand, arith_name, tracker_extra=None):
+    """Track the record of ``gen`` on the float64 correlator chain from the hand-over ``hand``,
+    the tracker of ``run`` in ``arith_name`` arithmetic, one epoch of loop latency; returns
+    the :class:`Tracking` and the dump-boundary sample of every tracked record."""
     from dsp.gnss.correlator import GoldenCorrelator
     sig = gen.cfg
     p = run.hdl_params(sig)

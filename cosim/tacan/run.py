@@ -25,8 +25,8 @@ from dsp.tacan.receiver import (BearingTrack, amplitude_codes, bearing_stats,
                                 ReceiverState, crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
 from .config import TacanRunConfig
-from .frontends import FRONTENDS, FrontendOutput, frontend_key, golden_frontend, \
-    recheck_cycle_accurate
+from .frontends import (FRONTENDS, FrontendOutput, frontend_key, golden_frontend,
+                        recheck_cycle_accurate)
 from .signal import generate
 
 #: Memory a run holds per ADC sample (bytes; measured ~14 on the model backend: the IF
