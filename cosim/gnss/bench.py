@@ -1,7 +1,7 @@
 """``python -m cosim bench gnss-speed``: closed-loop simulation speed of one GNSS channel.
 
 The same record (default scenario: PRN 7, 45 dB-Hz, seed-002 dynamics, 16.368 MS/s, 2-bit
-ADC) is tracked closed loop (:func:`cosim.gnss.run.closed_loop`: pipeline, FIFO service
+ADC) is tracked closed loop (:func:`cosim.gnss.tracking.closed_loop`: pipeline, FIFO service
 every 0.5 ms, fixed-point 3rd-order PLL writing the NCO words back) on the bit-exact model
 and on Verilator, after an untimed warm-up (numba compilation, the Verilator build). The
 ADC words are generated before the clock starts: the figure is the closed loop's (channel,
@@ -26,14 +26,15 @@ REAL_TIME_SPS = 16.368e6
 
 def gnss_speed(out: Path, quick: bool = False, duration_s: float | None = None) -> dict:
     from ..backends.verilator import verilator_available
-    from .run import DynamicsChoice, GnssRunConfig, acquire_signal, adc_words, closed_loop
+    from .config import DynamicsChoice, GnssRunConfig
+    from .tracking import acquire_handover, adc_words, closed_loop
     from .signal import GnssSignalConfig, GnssSignalGenerator
     dur = duration_s if duration_s is not None else (0.1 if quick else 1.0)
     sig = DynamicsChoice("seed002").apply(GnssSignalConfig(prn=7, cn0_dbhz=45.0,
                                                            duration_s=dur + 0.05))
     run = GnssRunConfig(dsp="fixed", tracker="pll3", bn_hz=15.0)
     gen = GnssSignalGenerator(sig)
-    _, hand = acquire_signal(gen, run)
+    _, hand = acquire_handover(gen, run)
     p = run.hdl_params(sig)
     n = int(round(dur * sig.fs_hz))
     x = adc_words(gen.samples(0, n)[0])

@@ -26,7 +26,7 @@ correlator's convention, ``dsp.gnss.correlator``), where
   AGC step (``cosim.gnss.signal.agc_step_sigma``) on noise-dominated samples passes the
   signal with gain ``g`` and white noise of variance ``Var Q(n)``, so the post-correlation
   SNR is multiplied by ``eta = g^2 sigma^2 / Var Q(n)`` (Bussgang; the theory and the
-  Gaussian cell sums are :mod:`cosim.studies.adc_loss`): 2 bits at Max's step 0.8812
+  Gaussian cell sums are :mod:`dsp.quantizer`): 2 bits at Max's step 0.8812
   (0.549 dB), 1 bit ``2/pi`` (1.961 dB). The quantised noise stays white, so the E/P/L
   noise correlation is the replicas' overlap as without the ADC;
 * ``sigma`` is the rms of each real noise component (1 by default); the noise is complex
@@ -55,7 +55,7 @@ def adc_efficiency(adc_bits: int | None,
     ``-10 log10(eta)`` is the quantisation loss in dB (0.549 dB at 2 bits)."""
     if adc_bits is None:
         return 1.0
-    from cosim.studies.adc_loss import quantizer_efficiency
+    from dsp.quantizer import quantizer_efficiency
     from .signal import agc_step_sigma
     b = adc_bits
     if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or not 1 <= b <= 16:

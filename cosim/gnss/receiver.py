@@ -9,7 +9,8 @@ from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver
 from ..studies.spec import SweepConfig
 from ..core.validate import check_jobs, check_out_dir, dumps
 from .study import SWEEP_MODEL
-from .run import SCENARIOS, DynamicsChoice, GnssRunConfig, run_gnss
+from .config import SCENARIOS, DynamicsChoice, GnssRunConfig
+from .run import run_gnss
 from .signal import GnssSignalConfig
 
 _SIG, _DYN, _RUN = GnssSignalConfig, DynamicsChoice, GnssRunConfig

@@ -5,7 +5,7 @@ are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP field
 :class:`~cosim.gnss.run.GnssRunConfig`. The front end is the GNSS channel's (``gnss``)."""
 from __future__ import annotations
 
-from ..gnss.run import GnssRunConfig
+from ..gnss.config import GnssRunConfig
 from ..core.receivers import Arg, Benchmark, Figure, Option, Receiver, config_kwargs, register
 from ..core.validate import dumps
 from .run import InsRunConfig, run_ins

@@ -43,7 +43,7 @@ OSCILLATORS = ("tcxo", "ocxo")
 @dataclass(frozen=True)
 class InsRunConfig:
     """One seed-003 run on the GNSS channel (the channel and DSP options are
-    :class:`cosim.gnss.run.GnssRunConfig`'s).
+    :class:`cosim.gnss.config.GnssRunConfig`'s).
 
     Parameters
     ----------
@@ -132,7 +132,7 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     channel the end of record ``SKIP_RECORDS`` (the channel model replayed on the
     hand-over writes), on the golden chain the end of its first record (its local code
     starts at the acquired code phase)."""
-    from cosim.gnss.run import SKIP_RECORDS, dump_boundaries, handover_writes
+    from cosim.gnss.tracking import SKIP_RECORDS, handover_writes, record_boundaries
     from hdl.gnss.model import REG_NAMES
     if backend == "golden":
         kf = CHIP_RATE_HZ * (1 + hand["doppler_hz"] / 1575.42e6)
@@ -140,7 +140,7 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     w = [(c, REG_NAMES[r], v) for c, r, v in handover_writes(p, hand["doppler_hz"],
                                                              hand["code_phase_chips"], inverted)]
     n = int((SKIP_RECORDS + 2) * CODE_PERIOD_S * p.fs_hz)
-    return float(dump_boundaries(p, w, SKIP_RECORDS, n)[-1]) / p.fs_hz
+    return float(record_boundaries(p, w, SKIP_RECORDS, n)[-1]) / p.fs_hz
 
 
 def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:
@@ -153,7 +153,8 @@ def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:
 
 def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     """One closed-loop run (module doc); the JSON-safe result (``_series`` for plots)."""
-    from cosim.gnss.run import GnssRunConfig, check_run_size, run_gnss
+    from cosim.gnss.config import GnssRunConfig, check_run_size
+    from cosim.gnss.run import run_gnss
     from .ins_error import EpochAiding, InsAiding, InsErrors
     if not isinstance(cfg, InsRunConfig):
         raise ValueError(f"cfg must be an InsRunConfig, not {type(cfg).__name__}")

@@ -17,7 +17,7 @@ from dsp.tacan.bounds import crb_deg, detected_fraction, detection_bound_deg
 from dsp.tacan.decode import _match
 from dsp.tacan.frontend import GoldenFrontend, record_chunks
 
-from .run import TacanRunConfig
+from .config import TacanRunConfig
 from .signal import generate
 
 #: A detection within this of a transmitted pulse's peak is that pulse (the peak time of a

@@ -76,7 +76,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
     if params is None:      # the default receiver's front end
         from dataclasses import replace
-        from .run import TacanRunConfig
+        from .config import TacanRunConfig
         params = TacanRunConfig().hdl_params
         if stall:
             params = replace(params, fifo_depth=4)

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..core.receivers import FaultModel
-from ..studies.faults import flip_bits, flip_signed
+from ..studies.faults import flip_signed, flip_bits
 
 __all__ = ["TARGETS", "check", "check_size", "word_width", "record", "FAULT_MODEL"]
 
@@ -54,7 +54,7 @@ def word_width(fc) -> int:
 
 def _run_cfg(fc, trial: int):
     from dsp.tacan.kalman import KalmanConfig
-    from .run import TacanRunConfig
+    from .config import TacanRunConfig
     from .signal import TacanSignalConfig
     rng = np.random.default_rng([fc.seed, trial, 31337])
     sig = TacanSignalConfig(snr_db=fc.snr_db, duration_s=fc.duration_s,
@@ -102,7 +102,8 @@ def _score(fc, run, track, truth_deg) -> dict:
 def record(fc, ber: float, trial: int, cache: dict) -> dict:
     """One run of the study (BER, trial): the point runner; never raises (an exception is
     reported in the record)."""
-    from .run import FRONTENDS, dsp_receive, run_dsp
+    from .frontends import FRONTENDS, dsp_receive
+    from .run import run_dsp
     from .signal import TacanSignal, generate
     run = _run_cfg(fc, trial)
     rng = np.random.default_rng([fc.seed, trial, int(round(ber * 1e12)), 99])
@@ -143,7 +144,8 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
 
 def _register_run(fc, run, s, p, ber, rng):
     """NCO frequency register upsets, scrubbed by the DSP every ``scrub_period_s``."""
-    from .run import FRONTENDS, run_dsp
+    from .frontends import FRONTENDS
+    from .run import run_dsp
     n = len(s.samples)
     period = max(1, int(round(fc.scrub_period_s * run.signal.fs_hz)))
     good = p.nco_freq_word
@@ -170,7 +172,8 @@ def _dsp_state_run(fc, run, s, ber, rng, cache, trial):
     """Single-event upsets of the Kalman core's stored state (``x`` and the upper triangle
     of ``P``): each bit of each word flips with probability ``ber`` per filter update, in
     the compiled core between two updates (:meth:`EnvelopeKalman.schedule_upsets`)."""
-    from .run import FRONTENDS, run_dsp
+    from .frontends import FRONTENDS
+    from .run import run_dsp
     from dsp.tacan.kalman import EnvelopeKalman
     from dsp.tacan.receiver import ReceiverState
     fkey = ("fo", trial)

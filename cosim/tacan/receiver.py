@@ -17,7 +17,7 @@ from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver
 from ..studies.faults import FaultConfig
 from ..studies.spec import SweepConfig
 from ..core.validate import check_jobs, check_out_dir, check_out_file, dumps, warn
-from .run import TacanRunConfig
+from .config import TacanRunConfig
 from .signal import TacanSignalConfig
 from .faults import FAULT_MODEL, TARGETS
 from .study import SWEEP_MODEL
@@ -383,9 +383,10 @@ def _model_session(params, **kw):
 
 def _tacan_bench(name: str):
     def bench(out, quick: bool = False, jobs: int | None = None) -> dict:
-        from . import bench as tacan_bench
-        return getattr(tacan_bench, name)(out, quick=quick, jobs=jobs)
-    bench.__name__ = name
+        from importlib import import_module
+        module = import_module(f"{__package__}.bench_{name}")
+        return getattr(module, f"tacan_{name}")(out, quick=quick, jobs=jobs)
+    bench.__name__ = f"tacan_{name}"
     return bench
 
 
@@ -406,7 +407,7 @@ def _sim_speed(out, quick: bool = False, jobs: int | None = None) -> dict:
 
 #: ``python -m cosim bench <name>`` of the TACAN receiver.
 BENCHMARKS = {
-    **{f"tacan-{k}": Benchmark(_tacan_bench(f"tacan_{k}"), jobs=True)
+    **{f"tacan-{k}": Benchmark(_tacan_bench(k), jobs=True)
        for k in ("accuracy", "robustness", "detector", "sensitivity", "confidence")},
     "dsp-speed": Benchmark(_dsp_speed), "dsp-hour": Benchmark(_dsp_hour),
     "sim-speed": Benchmark(_sim_speed),

@@ -1,18 +1,12 @@
 """End-to-end TACAN scenario: IF signal -> front end (a backend) -> FIFO link -> bearing DSP.
 
-Front-end backends (what turns ADC samples into pulse peaks):
-
-``golden``     float64 model of the front end (:mod:`dsp.tacan.frontend`); no FIFO.
-``model``      bit-exact numpy model of the HDL (:class:`hdl.tacan.model.TacanFrontendModel`)
-               and of its FIFO, read by the DSP service model of :mod:`cosim.core.link`.
-``pysim``      the Amaranth design in ``amaranth.sim`` (cycle-accurate, ~1k cycles/s: short
-               scenarios only).
-``verilator``  the exported Verilog compiled with Verilator (cycle-accurate, compiled speed).
-
-The three HDL backends produce the same FIFO words on the same cycles (the tests check it);
-the DSP side is common: it decodes the tagged FIFO words (data / gap markers), unwraps the
-32-bit timestamps, converts amplitudes to its input format and runs the bearing processor
-(:func:`dsp.tacan.receiver.process_peaks`) in float (golden) or fixed point (``dsp``).
+:func:`run_tacan` generates the record (:mod:`cosim.tacan.signal`), runs the front end of
+``run.backend`` on it (:mod:`cosim.tacan.frontends`: ``golden``, ``model``, ``pysim``,
+``verilator``), then the bearing DSP (:func:`run_dsp`: :func:`dsp.tacan.receiver.process_peaks`
+in float or fixed point, the amplitudes converted to its input format), and scores the
+bearings against the truth into a JSON-serialisable record (figures, range log, digests of
+the peaks, FIFO words and bearings). :func:`check_run_size` refuses, before any work, a run
+the machine cannot hold or simulate in time.
 
 ``compare="golden"`` also runs the golden chain (golden front end + float DSP) on the same
 samples and reports ``vs_golden_rms_deg``: the RMS difference of the bearings produced at the
@@ -23,26 +17,17 @@ from __future__ import annotations
 import hashlib
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from dsp.tacan.frontend import (BOTH_PAIR_SEARCH, DETECTORS, NOISE_FLOORS, PAIR_DETECTOR,
-                                FrontendConfig,
-                                pair_detector, pair_spacing_samples, run_golden_frontend)
-from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
-from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PAIR_PEAK_BIAS
-from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
+from dsp.tacan.receiver import (BearingTrack, amplitude_codes, bearing_stats,
                                 ReceiverState, crb_deg, process_peaks)
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.decode import DecoderConfig
-from dsp.tacan.fifo_rx import receive_words
-from ..core.control import ControlPath
-from ..core.link import DspServiceConfig
-from .signal import TacanSignalConfig, generate
-
-BACKENDS = ("golden", "model", "pysim", "verilator")
-DSP_MODES = ("float", "fixed")
+from .config import TacanRunConfig
+from .frontends import (FRONTENDS, FrontendOutput, frontend_key, golden_frontend,
+                        recheck_cycle_accurate)
+from .signal import generate
 
 #: Memory a run holds per ADC sample (bytes; measured ~14 on the model backend: the IF
 #: record, the ADC codes and the front end's working arrays), with margin.
@@ -51,342 +36,6 @@ BYTES_PER_SAMPLE = {"golden": 32, "model": 32, "pysim": 48, "verilator": 48}
 #: longest run they are started for (s of wall time).
 CYCLES_PER_S = {"pysim": 3e3, "verilator": 5e6}
 MAX_WALL_S = 3600.0
-
-
-@dataclass(frozen=True)
-class TacanRunConfig:
-    """A whole run: the scenario, the front end, the link, the DSP and how it is scored.
-
-    Parameters
-    ----------
-    signal : TacanSignalConfig
-    backend : str
-        One of :data:`BACKENDS`.
-    dsp : str
-        ``"float"`` (golden arithmetic) or ``"fixed"`` (the fixed-point core, formats
-        ``fixed``).
-    kalman : KalmanConfig
-        The filter (memory, gate, ...), shared by both arithmetics.
-    fixed : KalmanFixedConfig, optional
-        Word lengths of the fixed-point core (default formats; its ``kalman`` is replaced
-        by ``kalman`` and its ``tick_hz`` by the signal's ``fs_hz``, the clock of the
-        FPGA timestamps).
-    settle_s : float, optional
-        Bearings before this time are not scored (default 2 x the filter memory).
-    frontend_changes : tuple of (name, value)
-        Overrides of :class:`dsp.tacan.frontend.FrontendConfig` (rates, structure).
-    hdl_changes : tuple of (name, value)
-        Overrides of :class:`hdl.tacan.model.TacanFrontendParams` (word lengths).
-    service : DspServiceConfig
-        How the DSP reads the FIFO (HDL backends).
-    control_writes : tuple of (cycle, register, value)
-        Register writes the DSP issues towards the FPGA (through a :class:`ControlPath`
-        with ``control_latency_cycles``); registers: ``"freq"`` (NCO word).
-    control_latency_cycles : int
-    compare : str, optional
-        ``"golden"``: also run the golden chain and report ``vs_golden_rms_deg``.
-    require_bearing : bool
-        Raise if no bearing is produced after settling (default). Short cycle-accurate
-        runs set it False and compare bits instead.
-    trace : str, optional
-        Waveform file of the cycle-accurate front end (``pysim``: VCD; ``verilator``: FST
-        if it ends in ``.fst``, else VCD); put it under ``build/``.
-    trace_window : (start, stop), optional
-        Cycles to dump (Verilator; the Amaranth VCD writer records the whole run).
-    recheck : str, optional
-        With the ``model`` backend: also run the first ``recheck_samples`` ADC samples
-        cycle-accurately (``"auto"``, ``"verilator"``, ``"pysim"``) and report whether the
-        FIFO words are the same bits (:func:`recheck_cycle_accurate`).
-    """
-
-    signal: TacanSignalConfig = field(default_factory=TacanSignalConfig)
-    backend: str = field(default="golden", metadata={
-        "help": "front end: float golden model (no FIFO), bit-exact HDL model, Amaranth "
-                "simulation (~3k cycles/s: records of a few 0.01 s) or Verilator",
-        "choices": BACKENDS, "case": "lower"})
-    dsp: str = field(default="float", metadata={"help": "arithmetic of the bearing DSP core",
-                                                "choices": DSP_MODES, "case": "lower"})
-    kalman: KalmanConfig = field(default_factory=KalmanConfig)
-    fixed: KalmanFixedConfig | None = None
-    settle_s: float | None = field(default=None, metadata={
-        "help": "bearings before this time (s) are not scored (default 2 x --memory-s)"})
-    noise_floor: str = field(default="clipped", metadata={
-        "help": "pulse detector's noise floor: clipped mean (default) or censored mean "
-                "(pulses do not lift it; threshold 3.44x; see dsp.tacan.frontend.NOISE_FLOORS)",
-        "choices": tuple(NOISE_FLOORS), "case": "lower"})
-    amplitude: str = field(default="peak", metadata={
-        "help": "what the FPGA reports as a pulse's amplitude: its peak, or the envelope at "
-                "its pair partner (12 us away in X mode, 30 us in Y; not the noise that made "
-                "the detection, so not censored by the threshold near the noise floor; the "
-                "DSP then measures every pulse outside the bursts below ~1 dB)",
-        "choices": ("peak", "partner"), "case": "lower"})
-    detector: str = field(default="both", metadata={
-        "help": "what the FPGA detects. both (default): a single-pulse search and a "
-                "pulse-pair search side by side (the envelope summed with itself one pair "
-                "spacing earlier: both pulses of a pair integrated; censored slow floor, its "
-                "own threshold), one tagged FIFO stream; the DSP decodes the references on "
-                "the single pulses and measures the bearing on the pairs, correcting their "
-                "bias near the threshold (dsp.tacan.peakbias): 1.1-1.6x the bound from 0 to "
-                "20 dB. pulse: the single-pulse search alone (the receiver before issue 18: "
-                "no bearing at 0-2 dB at some bearings; needed by --amplitude partner). pair: "
-                "the pair search alone, experimental (fewer records acquired at 0 dB, and an "
-                "X beacon heard by a Y receiver at 10 dB passes it)",
-        "choices": DETECTORS, "case": "lower"})
-    frontend_changes: tuple = ()
-    hdl_changes: tuple = ()
-    service: DspServiceConfig = field(default_factory=DspServiceConfig)
-    control_writes: tuple = ()
-    control_latency_cycles: int = 0
-    compare: str | None = field(default=None, metadata={
-        "help": "also run the golden chain and report vs_golden_rms_deg",
-        "choices": ("golden",), "case": "lower"})
-    require_bearing: bool = True
-    trace: str | None = field(default=None, metadata={
-        "help": "waveform of the cycle-accurate front end, format from the suffix: .vcd "
-                "(pysim, verilator) or .fst (verilator); put it under build/",
-        "metavar": "FILE"})
-    trace_window: tuple | None = None
-    recheck: str | None = field(default=None, metadata={
-        "help": "with --backend model: re-run the start of the record cycle-accurately "
-                "(auto = Verilator when installed) and compare the FIFO words",
-        "choices": ("auto", "pysim", "verilator"), "case": "lower"})
-    recheck_samples: int | None = field(default=None, metadata={
-        "help": "ADC samples re-checked with --recheck (default 1e6 with Verilator, 4e4 "
-                "with pysim)"})
-
-    def __post_init__(self):
-        if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {list(BACKENDS)}, not {self.backend!r}")
-        if self.dsp not in DSP_MODES:
-            raise ValueError(f"dsp must be one of {list(DSP_MODES)}, not {self.dsp!r}")
-        if self.noise_floor not in NOISE_FLOORS:
-            raise ValueError(f"noise_floor must be one of {list(NOISE_FLOORS)}, not "
-                             f"{self.noise_floor!r}")
-        if self.noise_floor != "clipped" and "peak" in dict(self.frontend_changes):
-            raise ValueError("noise_floor chooses the peak detector's parameters: give it or "
-                             "a 'peak' in frontend_changes, not both")
-        if self.amplitude not in ("peak", "partner"):
-            raise ValueError(f"amplitude must be 'peak' or 'partner', not {self.amplitude!r}")
-        if self.detector not in DETECTORS:
-            raise ValueError(f"detector must be one of {list(DETECTORS)}, not {self.detector!r}")
-        if self.detector == "pair" and (self.noise_floor != "clipped" or self.amplitude != "peak"
-                                        or "peak" in dict(self.frontend_changes)):
-            raise ValueError("the pair detector has its own noise floor and reports the pair's "
-                             "mean amplitude: give --detector pair without --noise-floor, "
-                             "--amplitude or a 'peak' in frontend_changes")
-        if self.detector == "both" and (self.amplitude != "peak"
-                                        or "pair_peak" in dict(self.frontend_changes)):
-            raise ValueError("with --detector both (the default) the bearing is measured on "
-                             "the pair search's amplitudes: --amplitude partner is an option "
-                             "of the single-pulse search alone (add --detector pulse), and "
-                             "give no 'pair_peak' in frontend_changes")
-        if self.compare not in (None, "golden"):
-            raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
-        if self.fixed is not None and not isinstance(self.fixed, KalmanFixedConfig):
-            raise ValueError(f"fixed must be a KalmanFixedConfig, not {self.fixed!r}")
-        if not isinstance(self.service, DspServiceConfig):
-            raise ValueError(f"service must be a DspServiceConfig, not {self.service!r}")
-        if self.settle_s is not None and not (math.isfinite(self.settle_s) and self.settle_s >= 0):
-            raise ValueError(f"settle_s must be >= 0, not {self.settle_s}")
-        if not (self.signal.mod_15 > 0 and self.signal.mod_135 > 0):
-            raise ValueError(
-                f"the bearing is the phase of the 15 Hz (coarse) and 135 Hz (fine) "
-                f"modulation: both depths must be > 0, not mod_15={self.signal.mod_15:g}, "
-                f"mod_135={self.signal.mod_135:g}")
-        if self.require_bearing and self.settle + 0.1 > self.signal.duration_s:
-            raise ValueError(
-                f"duration_s={self.signal.duration_s:g} leaves no time after the filter settles "
-                f"({self.settle:g} s); use a duration of at least {self.settle + 0.5:g} s "
-                f"or a shorter settle time")
-        ControlPath(self.control_latency_cycles)      # validates the latency
-        for w in self.control_writes:
-            if len(w) != 3 or w[1] not in ("freq",):
-                raise ValueError(f"control writes are (cycle, 'freq', value), not {w!r}")
-        if self.recheck is not None:
-            if self.recheck not in ("auto", "pysim", "verilator"):
-                raise ValueError(f"recheck must be auto, pysim or verilator, not "
-                                 f"{self.recheck!r}")
-            if self.backend != "model":
-                raise ValueError("recheck compares a model run with a cycle-accurate one: "
-                                 "use it with backend='model'")
-        if self.recheck_samples is not None and (
-                isinstance(self.recheck_samples, bool) or
-                not isinstance(self.recheck_samples, int) or self.recheck_samples < 1):
-            raise ValueError(f"recheck_samples must be an integer >= 1, not "
-                             f"{self.recheck_samples!r}")
-        if self.trace is not None and self.backend not in ("pysim", "verilator"):
-            raise ValueError(f"trace needs a cycle-accurate backend (pysim or verilator), "
-                             f"not {self.backend!r}")
-        if self.trace_window is not None:
-            tw = self.trace_window
-            if not (len(tw) == 2 and all(isinstance(v, (int, np.integer)) for v in tw)
-                    and 0 <= tw[0] < tw[1]):
-                raise ValueError(f"trace_window must be (start, stop) cycles with "
-                                 f"0 <= start < stop, not {tw!r}")
-
-    @property
-    def settle(self) -> float:
-        return 2.0 * self.kalman.memory_s if self.settle_s is None else float(self.settle_s)
-
-    @property
-    def frontend(self) -> FrontendConfig:
-        changes = dict(self.frontend_changes)
-        if self.noise_floor != "clipped":
-            changes["peak"] = NOISE_FLOORS[self.noise_floor]
-        cfg = FrontendConfig.for_signal(self.signal, **changes)
-        if self.amplitude == "partner":     # the pair spacing in envelope samples
-            d = pair_spacing_samples(self.signal.mode, cfg.env_rate_hz)
-            cfg = replace(cfg, peak=replace(cfg.peak, partner_offset=d))
-        if self.detector != "pulse":
-            base = PAIR_DETECTOR if self.detector == "pair" else BOTH_PAIR_SEARCH
-            pair = pair_detector(self.signal.mode, cfg.env_rate_hz,
-                                 replace(base, ts_step=cfg.peak.ts_step))
-            cfg = replace(cfg, **{"peak" if self.detector == "pair" else "pair_peak": pair})
-        return cfg
-
-    @property
-    def hdl_params(self):
-        from hdl.tacan.model import TacanFrontendParams
-        return TacanFrontendParams(config=self.frontend, adc_bits=self.signal.adc_bits,
-                                   **dict(self.hdl_changes))
-
-    @property
-    def receiver(self) -> ReceiverConfig:
-        if self.dsp == "fixed":
-            base = self.fixed or KalmanFixedConfig()
-            # the core counts the FPGA's timestamps: ticks of the ADC clock of this run
-            k = KalmanFixedConfig(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
-                                     "kalman": self.kalman, "tick_hz": float(self.signal.fs_hz)})
-        else:
-            k = self.kalman
-        dec = None
-        if self.amplitude == "partner":
-            dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
-        return ReceiverConfig(mode=self.signal.mode, kalman=k, decoder=dec,
-                              pair_reports=self.detector == "pair",
-                              peak_bias={"pulse": None, "pair": PAIR_PEAK_BIAS,
-                                         "both": BOTH_PEAK_BIAS}[self.detector])
-
-
-@dataclass
-class FrontendOutput:
-    """What the DSP receives from a front-end backend (one record).
-
-    ticks : int64 unwrapped ADC tick of each peak, golden convention (the tick that
-        completes the envelope sample); amplitude_fs : float amplitudes (FS);
-    amplitude_lsb : envelope LSBs (HDL backends) or None; words/cycles : FIFO words read by
-    the DSP and their read cycles (HDL backends); fifo_dropped : FPGA overflow counter at
-    the end; dropped_reported : sum of the gap markers the DSP read; source : with two
-    searches (``FrontendConfig.pair_peak``) the search of each peak (int8,
-    ``dsp.tacan.frontend.SOURCE_PULSE`` / ``SOURCE_PAIR``), else None.
-    """
-
-    ticks: np.ndarray
-    amplitude_fs: np.ndarray
-    amplitude_lsb: np.ndarray | None = None
-    words: np.ndarray | None = None
-    cycles: np.ndarray | None = None
-    fifo_dropped: int = 0
-    dropped_reported: int = 0
-    n_cycles: int = 0
-    scale_to_fs: float = 1.0
-    extra: dict = field(default_factory=dict)
-    source: np.ndarray | None = None   # with two searches: each peak's (dsp.tacan.frontend)
-
-
-# ---------------------------------------------------------------------------------------
-# Front-end backends
-# ---------------------------------------------------------------------------------------
-def golden_frontend(samples, run: TacanRunConfig) -> FrontendOutput:
-    """The float golden front end (:func:`dsp.tacan.frontend.run_golden_frontend`) on
-    ``samples``: the peaks' ticks, amplitudes and sources."""
-    pk = run_golden_frontend(samples, run.frontend, run.signal.adc_bits)
-    return FrontendOutput(ticks=np.asarray(pk.timestamps, np.int64),
-                          amplitude_fs=np.asarray(pk.amplitudes, np.float64), source=pk.source)
-
-
-def _n_cycles(samples, params) -> int:
-    """Cycles simulated: every ADC sample plus enough to flush the last peak out."""
-    return int(len(samples) + params.latency + 4 * params.decimation + 64)
-
-
-def _freq_segments(run: TacanRunConfig, params, n_cycles: int):
-    ctl = ControlPath(run.control_latency_cycles, initial={"freq": params.nco_freq_word})
-    for c, reg, v in run.control_writes:
-        ctl.write(int(c), reg, int(v))
-    return ctl
-
-
-def dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
-    """The DSP side of the link: tagged words -> peaks (unwrapped ticks, amplitudes; with
-    two searches their sources, each search's timestamps checked on their own)."""
-    out = receive_words(words, width=params.fifo.width, amp_width=params.peak.amp_width,
-                        ts_bits=params.peak.ts_bits, parity=params.fifo.parity,
-                        source_bits=params.source_bits)
-    ts, amp, rx = out[0], out[1], out[-1]
-    ticks = ts + np.int64(params.decimation - 1)     # golden convention (see peaks_to_fs)
-    return FrontendOutput(ticks=ticks, amplitude_fs=amp * params.scale_to_fs, amplitude_lsb=amp,
-                          words=np.asarray(words, np.int64), cycles=np.asarray(cycles, np.int64),
-                          fifo_dropped=int(ovf_count),
-                          dropped_reported=int(rx.stats["dropped_reported"]),
-                          n_cycles=int(n_cycles), scale_to_fs=params.scale_to_fs,
-                          extra={"rx": dict(rx.stats)},
-                          source=out[2] if params.source_bits else None)
-
-
-def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOutput:
-    """An HDL backend's output for one record, on the streaming pipeline: a front-end
-    session (:func:`cosim.backends.factory.open_frontend`) fed the record and ``_n_cycles - len``
-    idle cycles to flush the last peak, the DSP reading with ``run.service``, the
-    ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after)."""
-    from ..core.pipeline import Pipeline
-    from ..backends.factory import open_frontend
-    p = run.hdl_params
-    n_cycles = _n_cycles(samples, p)
-    ctl = _freq_segments(run, p, n_cycles)
-    # One ADC sample per cycle from reset: a write taking effect at cycle c changes the NCO
-    # word from ADC sample c on, on every backend.
-    writes = [(c, "freq", v) for c, _, v in ctl.writes()]
-    with open_frontend(backend, p, log_ranges=backend == "model",
-                       vcd=run.trace if backend == "pysim" else None) as fe:
-        pipe = Pipeline(fe, run.service)
-        pipe.schedule(writes)
-        pipe.feed(samples)
-        pipe.idle(n_cycles - len(samples))
-        res = pipe.result()
-        fo = dsp_receive(res.words, res.cycles, p, n_cycles, res.overflow_count)
-        if backend == "model":
-            fo.extra["ranges"] = fe.ranges()
-            fo.extra["fifo_max_level"] = int(fe.fifo_state.max_level)
-    return fo
-
-
-def _model(samples, run: TacanRunConfig) -> FrontendOutput:
-    return _session_frontend(samples, run, "model")
-
-
-def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
-    if kind == "pysim" or run.trace is None:
-        return _session_frontend(samples, run, kind)
-    # A Verilator waveform needs the one-shot run (a session's time base is per step).
-    from hdl.tacan.frontend import TacanFrontEnd
-    from ..backends.verilator import VerilatorStreamSim
-    p = run.hdl_params
-    n_cycles = _n_cycles(samples, p)
-    ctl = _freq_segments(run, p, n_cycles)
-    ready = run.service.ready_mask(n_cycles)
-    writes = [(c, "freq", v) for c, _, v in ctl.writes()]
-    sim = VerilatorStreamSim(TacanFrontEnd(p), name="tacan_frontend")
-    res = sim.run(samples, out_ready=ready, n_cycles=n_cycles,
-                  inputs={"freq": p.nco_freq_word}, writes=writes,
-                  final={"overflow_count": "overflow_count"},
-                  trace=run.trace, trace_window=run.trace_window)
-    return dsp_receive(res.words, res.cycles, p, n_cycles, res.final["overflow_count"])
-
-
-FRONTENDS = {"golden": golden_frontend, "model": _model,
-             "pysim": lambda s, r: _hdl_sim(s, r, "pysim"),
-             "verilator": lambda s, r: _hdl_sim(s, r, "verilator")}
 
 
 # ---------------------------------------------------------------------------------------
@@ -428,14 +77,6 @@ def _digest(*arrays) -> str:
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()[:16]
-
-
-def frontend_key(run: TacanRunConfig) -> tuple:
-    """What a front end's output depends on: runs with equal keys on the same samples get
-    the same :class:`FrontendOutput` (the DSP side may differ)."""
-    return (run.backend, run.signal, run.noise_floor, run.amplitude, run.frontend_changes,
-            run.hdl_changes, run.service,
-            run.control_writes, run.control_latency_cycles)
 
 
 def check_run_size(run: TacanRunConfig) -> None:
@@ -556,9 +197,8 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         bar.stage("golden chain")
         t4 = time.perf_counter()
         gfo = golden_frontend(s.samples, run)
-        gold = run_dsp(gfo, TacanRunConfig(**{**_fields(run), "backend": "golden",
-                                               "dsp": "float", "compare": None,
-                                               "recheck": None}), sig.fs_hz)
+        gold = run_dsp(gfo, replace(run, backend="golden", dsp="float", compare=None,
+                                    recheck=None), sig.fs_hz)
         rms, n = _match_rms(track, gold, run.settle)
         r["vs_golden_rms_deg"] = rms
         r["vs_golden_n"] = n
@@ -623,36 +263,6 @@ def _ranges(fo: FrontendOutput, track: BearingTrack, adc_clipped: int) -> dict:
                                   "headroom_bits": math.log2(v["hi"] / peak) if peak else None,
                                   "unit": "value", "overflows": v["saturations"]}
     return out
-
-
-def recheck_cycle_accurate(run: TacanRunConfig, samples, backend: str = "auto",
-                           n: int | None = None) -> dict:
-    """Re-run the first ``n`` ADC samples of a model run on a cycle-accurate backend and
-    compare the FIFO words and their cycles (and the overflow count) bit for bit.
-
-    ``backend``: ``"verilator"``, ``"pysim"`` or ``"auto"`` (Verilator when installed);
-    ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with pysim.
-    """
-    from ..backends.verilator import verilator_available
-    if backend == "auto":
-        backend = "verilator" if verilator_available() else "pysim"
-    if backend not in ("pysim", "verilator"):
-        raise ValueError(f"recheck backend must be auto, pysim or verilator, not {backend!r}")
-    n = int(n or (1_000_000 if backend == "verilator" else 40_000))
-    x = np.asarray(samples)[:n]
-    t0 = time.perf_counter()
-    ref_run = TacanRunConfig(**{**_fields(run), "backend": "model", "trace": None,
-                                "compare": None, "recheck": None})
-    a = _model(x, ref_run)
-    b = FRONTENDS[backend](x, TacanRunConfig(**{**_fields(ref_run), "backend": backend}))
-    same = (np.array_equal(a.words, b.words) and np.array_equal(a.cycles, b.cycles)
-            and a.fifo_dropped == b.fifo_dropped)
-    return {"backend": backend, "samples": int(x.size), "words": int(a.words.size),
-            "same_bits": bool(same), "seconds": time.perf_counter() - t0}
-
-
-def _fields(run: TacanRunConfig) -> dict:
-    return {f: getattr(run, f) for f in run.__dataclass_fields__}
 
 
 def frontend_output(run: TacanRunConfig) -> tuple[FrontendOutput, BearingTrack]:

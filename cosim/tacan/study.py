@@ -71,12 +71,12 @@ def trial_signal(cfg, snr_db: float, trial: int, adc_bits: int = 12):
 
 
 def run_config(cfg, combo: tuple, sig):
-    """The :class:`cosim.tacan.run.TacanRunConfig` of a point (raises ValueError if invalid)."""
+    """The :class:`cosim.tacan.config.TacanRunConfig` of a point (raises ValueError if invalid)."""
     from dsp.fixed import FixedFormat
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
     from ..core.validate import check_choice, check_int
-    from .run import TacanRunConfig
-    from .run import DETECTORS
+    from .config import TacanRunConfig
+    from dsp.tacan.frontend import DETECTORS
     hdl, kal, fmts, opts = {}, {"memory_s": cfg.memory_s}, {}, {}
     base = KalmanFixedConfig()
     for name, v in combo:
@@ -110,7 +110,7 @@ def study_detector(cfg) -> str:
     """The detector of every point and of the golden chain (``detector`` swept with one
     value, else the default); ValueError for several values: each record's golden run is
     shared by all its points, so they must detect alike."""
-    from .run import TacanRunConfig
+    from .config import TacanRunConfig
     vals = dict(cfg.params).get("detector")
     if vals is None:
         return TacanRunConfig().detector
@@ -145,7 +145,7 @@ def _score(r: dict) -> dict:
 def recheck_point(cfg, run, signal) -> dict:
     """Re-run the first samples of a point cycle-accurately (``cfg.recheck_plan``) and
     compare the FIFO words and their cycles with the bit-exact model."""
-    from .run import FRONTENDS
+    from .frontends import FRONTENDS
     backend, n = cfg.recheck_plan
     x = signal.samples[:n]
     t0 = time.perf_counter()

@@ -1,13 +1,14 @@
-"""ADC quantisation loss study: theory (Van Vleck, Thompson-Moran-Swenson, Max) and the
-Monte Carlo that must reproduce it (1.96 dB at 1 bit, 0.55 dB at 2 bits, within 0.1 dB)."""
+"""ADC quantisation loss study: the ADC model, the loadings, and the Monte Carlo that must
+reproduce the theory of :mod:`dsp.quantizer` (1.96 dB at 1 bit, 0.55 dB at 2 bits, within
+0.1 dB), and its report."""
 import json
 import math
 
 import numpy as np
 import pytest
-from scipy.integrate import quad
 
 from cosim.studies import adc_loss as al
+from dsp.quantizer import optimal_step
 
 LOSS_1BIT = 10 * math.log10(math.pi / 2)   # 1.961 dB
 LOSS_2BIT = 0.55
@@ -24,69 +25,7 @@ def _row(rows, bits):
     return next(r for r in rows if r["bits"] == bits)
 
 
-# -- theory ------------------------------------------------------------------------------
-@pytest.mark.parametrize("step", [1e-3, 0.5, 1.0, 1.6, 7.0])
-def test_one_bit_is_the_sign_for_any_step(step):
-    assert al.quantizer_efficiency(1, step) == pytest.approx(2 / math.pi, rel=1e-12)
-    assert al.theoretical_loss_db(1, step) == pytest.approx(1.9612, abs=1e-4)
-    t, lv = al.quantizer_cells(1, step)
-    np.testing.assert_allclose(t, [0.0])
-    np.testing.assert_allclose(lv, [-step / 2, step / 2])
-
-
-def test_two_bit_optimum_and_tms_four_level():
-    step = al.optimal_step(2)
-    assert step == pytest.approx(0.9957, abs=2e-4)           # thresholds at +-0.996 sigma
-    eta = al.quantizer_efficiency(2, step)
-    assert eta == pytest.approx(0.8812, abs=1e-4)             # uniform levels (ratio 3)
-    assert eta == pytest.approx(0.8825, abs=2e-3)
-    assert al.theoretical_loss_db(2, step) == pytest.approx(LOSS_2BIT, abs=0.01)
-    # Thompson, Moran & Swenson ch. 8: optimum four-level (ratio 3.34, thresholds 0.98 sigma)
-    tms = al.efficiency([-0.98, 0, 0.98], [-3.34, -1, 1, 3.34])
-    assert tms == pytest.approx(0.8825, abs=1e-4)
-    assert al.efficiency([0.0], [-1.0, 1.0]) == pytest.approx(2 / math.pi, rel=1e-12)
-
-
-@pytest.mark.parametrize("bits, max_step", [(3, 0.5860), (4, 0.3352), (5, 0.1881), (6, 0.1041)])
-def test_optimal_step_is_max_uniform_optimum(bits, max_step):
-    step = al.optimal_step(bits)
-    assert step == pytest.approx(max_step, abs=2e-4)
-    # it is a maximum of eta
-    eta = al.quantizer_efficiency(bits, step)
-    assert eta >= al.quantizer_efficiency(bits, step * 1.02)
-    assert eta >= al.quantizer_efficiency(bits, step / 1.02)
-
-
-@pytest.mark.parametrize("quantizer", al.QUANTIZERS)
-@pytest.mark.parametrize("bits, step", [(1, 0.7), (2, 0.9), (3, 0.6), (4, 0.2), (4, 1.3)])
-def test_efficiency_matches_numerical_integration(quantizer, bits, step):
-    t, lv = al.quantizer_cells(bits, step, quantizer)
-    edges = np.concatenate(([-np.inf], t, [np.inf]))
-    pdf = lambda x: math.exp(-0.5 * x * x) / math.sqrt(2 * math.pi)  # noqa: E731
-    e1 = exq = e2 = 0.0
-    for lo, hi, level in zip(edges[:-1], edges[1:], lv):
-        p = quad(pdf, lo, hi, epsabs=1e-14, epsrel=1e-12)[0]
-        xm = quad(lambda x: x * pdf(x), lo, hi, epsabs=1e-14, epsrel=1e-12)[0]
-        e1, exq, e2 = e1 + level * p, exq + level * xm, e2 + level * level * p
-    eta_quad = exq * exq / (e2 - e1 * e1)
-    assert al.quantizer_efficiency(bits, step, quantizer=quantizer) == pytest.approx(eta_quad, rel=1e-9)
-
-
-@pytest.mark.parametrize("quantizer", al.QUANTIZERS)
-@pytest.mark.parametrize("bits", [6, 8, 10, 12])
-def test_high_resolution_expansion_matches_exact(quantizer, bits):
-    step = al.optimal_step(bits, quantizer=quantizer)
-    ex = al.quantizer_efficiency(bits, step, quantizer=quantizer, method="exact")
-    hr = al.quantizer_efficiency(bits, step, quantizer=quantizer, method="high_resolution")
-    assert 1 - hr == pytest.approx(1 - ex, rel=1e-4)
-
-
-def test_theory_decreases_with_bits_up_to_24():
-    losses = [al.theoretical_loss_db(b, al.optimal_step(b)) for b in range(1, 25)]
-    assert all(a > b > 0 for a, b in zip(losses, losses[1:]))
-    assert losses[7] < 1e-3                                  # 8 bits: 0.0004 dB
-
-
+# -- ADC model ---------------------------------------------------------------------------
 def test_quantize_models():
     rng = np.random.default_rng(3)
     x = rng.normal(0, 2.0, 10_000)
@@ -107,7 +46,7 @@ def test_quantize_models():
 
 
 def test_step_for_loading():
-    assert al.step_for_loading(4, "optimal") == al.optimal_step(4)
+    assert al.step_for_loading(4, "optimal") == optimal_step(4)
     assert al.step_for_loading(4, "agc") == pytest.approx(al.AGC_FULL_SCALE_SIGMA / 8)
     assert al.step_for_loading(3, 4.0) == pytest.approx(1.0)
 
@@ -187,21 +126,6 @@ def test_bad_arguments(kwargs, match):
     bits = kw.pop("bits")
     with pytest.raises(ValueError, match=match):
         al.adc_loss_sweep(bits, **kw)
-
-
-def test_bad_theory_arguments():
-    with pytest.raises(ValueError, match="bits"):
-        al.optimal_step(0)
-    with pytest.raises(ValueError, match="bits"):
-        al.quantizer_efficiency(25, 0.1)
-    with pytest.raises(ValueError, match="step"):
-        al.quantizer_efficiency(3, 0.0)
-    with pytest.raises(ValueError, match="no optimal step"):
-        al.optimal_step(1, quantizer="mid_tread")
-    with pytest.raises(ValueError, match="increasing"):
-        al.efficiency([1.0, 0.0], [0, 1, 2])
-    with pytest.raises(ValueError, match="len"):
-        al.efficiency([0.0], [1.0])
 
 
 def test_write_report(tmp_path):

@@ -64,7 +64,7 @@ def test_ticks_need_their_clock():
 
 
 def test_fixed_core_runs_on_the_signal_clock():
-    from cosim.tacan.run import TacanRunConfig
+    from cosim.tacan.config import TacanRunConfig
     from cosim.tacan.signal import TacanSignalConfig
     run = TacanRunConfig(signal=TacanSignalConfig(fs_hz=24e6), dsp="fixed")
     assert run.receiver.kalman.tick_hz == 24e6

@@ -14,7 +14,7 @@ from cosim.core.pipeline import Pipeline
 from cosim.backends.factory import open_frontend
 from cosim.core.session import ready_window
 from cosim.tacan.session import TacanModelSession
-from cosim.tacan.run import TacanRunConfig
+from cosim.tacan.config import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
 from cosim.backends.verilator import verilator_available
 from dsp.tacan.kalman import KalmanConfig

@@ -14,7 +14,8 @@ import json
 import pytest
 
 from cosim.cli import main
-from cosim.gnss.run import SCENARIOS, GnssRunConfig, run_gnss
+from cosim.gnss.config import SCENARIOS, GnssRunConfig
+from cosim.gnss.run import run_gnss
 from cosim.gnss.signal import GnssSignalConfig
 from cosim.gnss.dynamics import seed002
 from cosim.backends.verilator import verilator_available

@@ -8,7 +8,8 @@ HDL accumulators are integers ~500 times larger, and the seed's ``P0 = 1e-3`` on
 import numpy as np
 import pytest
 
-from cosim.gnss.run import GnssRunConfig, run_gnss
+from cosim.gnss.config import GnssRunConfig
+from cosim.gnss.run import run_gnss
 from cosim.gnss.signal import GnssSignalConfig
 from dsp.gnss.loops_fixed import FLOAT
 from dsp.gnss.trackers import TrackerContext, make_tracker

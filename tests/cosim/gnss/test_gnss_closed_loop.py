@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from cosim.gnss.run import SKIP_RECORDS, GnssRunConfig, closed_loop
+from cosim.gnss.config import GnssRunConfig
+from cosim.gnss.tracking import SKIP_RECORDS, closed_loop
 from cosim.backends.verilator import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.model import GnssChannelParams

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from cosim.gnss.loopsim import jerk_cycles_s3
-from cosim.gnss.run import DynamicsChoice, GnssRunConfig, run_gnss
+from cosim.gnss.config import DynamicsChoice, GnssRunConfig
+from cosim.gnss.run import run_gnss
 from cosim.gnss.signal import GnssSignalConfig
 from dsp.gnss.loops import jerk_stress_deg
 

@@ -8,9 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from cosim.core import receivers
+from cosim import receivers
 from cosim.cli import main
-from cosim.gnss.run import SKIP_RECORDS, GnssRunConfig, closed_loop
+from cosim.gnss.config import GnssRunConfig
+from cosim.gnss.tracking import SKIP_RECORDS, closed_loop
 from cosim.ins.run import InsRunConfig, run_ins
 from cosim.backends.verilator import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
@@ -194,12 +195,12 @@ def test_aided_kf_closed_loop_model_equals_verilator():
 
 def test_boundary_replay_in_blocks_equals_one_pass():
     # the dump-boundary replay runs in blocks (a 150 s record would not fit in one array)
-    from cosim.gnss.run import dump_boundaries, handover_writes
+    from cosim.gnss.tracking import handover_writes, record_boundaries
     from hdl.gnss.model import REG_NAMES
     w = [(c, REG_NAMES[r], v) for c, r, v in handover_writes(SMALL, 1500.0, 600.0)]
     w += [(5000 + 2046 * j, REG_NAMES["code_freq"], SMALL.code_word(1.023e6 + 40.0 * j))
           for j in range(8)]
-    one = dump_boundaries(SMALL, w, 30, 31 * 2046, block=1 << 30)
+    one = record_boundaries(SMALL, w, 30, 31 * 2046, block=1 << 30)
     assert one.size == 30
     for block in (999, 2046, 7000):
-        np.testing.assert_array_equal(dump_boundaries(SMALL, w, 30, 31 * 2046, block=block), one)
+        np.testing.assert_array_equal(record_boundaries(SMALL, w, 30, 31 * 2046, block=block), one)

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from cosim.core.link import DSP_PRESETS, DspServiceConfig
-from cosim.tacan.run import TacanRunConfig, frontend_output, run_tacan
+from cosim.tacan.config import TacanRunConfig
+from cosim.tacan.run import frontend_output, run_tacan
 from cosim.tacan.signal import TacanSignalConfig
 from cosim.backends.verilator import verilator_available
 from dsp.tacan.bearing import wrap_deg
@@ -194,7 +195,7 @@ def test_both_searches_reach_the_dsp_with_their_source(backend):
     per source the model's, with their sources."""
     from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
     from hdl.tacan.model import TacanFrontendModel
-    from cosim.tacan.run import FRONTENDS
+    from cosim.tacan.frontends import FRONTENDS
     from cosim.tacan.signal import generate
     sig = TacanSignalConfig(duration_s=0.02, snr_db=10.0, seed=4)
     run = TacanRunConfig(signal=sig, backend=backend, detector="both", settle_s=0.0,

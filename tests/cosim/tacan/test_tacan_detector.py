@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cosim.tacan.detector import detector_bounds, operating_point
-from cosim.tacan.run import TacanRunConfig
+from cosim.tacan.config import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
 from dsp.tacan.receiver import bearing_stats
 
@@ -114,7 +114,8 @@ def test_both_searches_golden_chain_gives_a_bearing_at_0_db_90_deg():
     alone acquires no reference in 3 s; with both searches the references come from the
     single pulses and the bearing from the pairs, without a sector slip, within 2x the
     bound (0.219 deg; RMSE 0.41 deg; the pulse detector alone: 1.0 deg)."""
-    from cosim.tacan.run import golden_frontend, run_dsp
+    from cosim.tacan.frontends import golden_frontend
+    from cosim.tacan.run import run_dsp
     sig = TacanSignalConfig(bearing_deg=90.0, snr_db=0.0, duration_s=3.0, seed=102)
     s = generate(sig)
     out = {}

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from cosim.tacan.run import TacanRunConfig, run_tacan
+from cosim.tacan.config import TacanRunConfig
+from cosim.tacan.run import run_tacan
 from cosim.tacan.signal import TacanSignalConfig, generate
 from dsp.tacan.frontend import FrontendConfig, run_golden_frontend
 

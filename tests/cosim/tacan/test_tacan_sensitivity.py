@@ -4,7 +4,8 @@ default detector, unchanged) -> float DSP, with references acquired across burst
 import numpy as np
 import pytest
 
-from cosim.tacan.run import TacanRunConfig, run_tacan
+from cosim.tacan.config import TacanRunConfig
+from cosim.tacan.run import run_tacan
 from cosim.tacan.signal import TacanSignalConfig
 
 
@@ -113,8 +114,8 @@ def test_confidence_bench_quick(tmp_path):
     """`bench tacan-confidence` in its quick form (2 records at 3 dB per bearing): every point
     has its interval around the ratio, the verdict follows the criterion, and the report
     names the seeds and the verdict."""
-    from cosim.tacan.bench import (CRITERION_MEAN_DEG, CRITERION_RMSE_OVER_CRB,
-                                   tacan_confidence)
+    from cosim.tacan.bench_confidence import (CRITERION_MEAN_DEG, CRITERION_RMSE_OVER_CRB,
+                                              tacan_confidence)
     s = tacan_confidence(tmp_path, quick=True, jobs=1)
     assert [(r["snr_db"], r["bearing_deg"]) for r in s["rows"]] == [(3.0, 90.0), (3.0, 270.0)]
     for r in s["rows"]:

@@ -111,7 +111,8 @@ def test_zero_db_y_mode_shows_no_misleading_bearing():
     """Y mode, 0 dB, 270 deg, seed 100: an auxiliary burst decoded as a main (7 of 13
     pulses) at 2.66 s moved two bearings 81 deg, both shown valid, before the main-slot
     vote."""
-    from cosim.tacan.run import TacanRunConfig, run_tacan
+    from cosim.tacan.config import TacanRunConfig
+    from cosim.tacan.run import run_tacan
     r = run_tacan(TacanRunConfig(signal=TacanSignalConfig(mode="Y", bearing_deg=270.0,
                                                           snr_db=0.0, seed=100)))
     assert r["misleading_bearings"] == 0 and r["n_valid_bearings"] > 100

@@ -1,0 +1,256 @@
+"""What one GNSS run is: :class:`GnssRunConfig` (the tracker, the backend, the DSP's FIFO
+service, acquisition and scoring), :class:`DynamicsChoice` (the line-of-sight dynamics by
+name), the named :data:`SCENARIOS` of the command line, every field checked when it is built,
+and :func:`check_run_size` (a run the machine cannot hold or simulate in time is refused
+before any work).
+
+The run itself is :func:`cosim.gnss.run.run_gnss`; acquisition, hand-over and the closed
+tracking loop are :mod:`cosim.gnss.tracking`.
+"""
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass, field
+
+from dsp.gnss.trackers import tracker_names
+
+from ..core.validate import check_float, check_int, check_memory
+from .signal import GnssSignalConfig
+
+__all__ = ["GnssRunConfig", "DynamicsChoice", "BACKENDS", "DSP_MODES", "SCENARIOS", "DYNAMICS",
+           "WORD_BITS", "check_run_size"]
+
+BACKENDS = ("golden", "model", "pysim", "verilator")
+DSP_MODES = ("float", "fixed")
+DYNAMICS = ("static", "seed002", "seed002-jerk", "seed002-process")
+#: Simulation speed of the cycle-accurate backends (cycles/s, one channel, this machine's
+#: order of magnitude) and the longest run started on them (s of wall time).
+CYCLES_PER_S = {"pysim": 2e3, "verilator": 2e6}
+MAX_WALL_S = 3600.0
+#: NCO word width the trackers write (dsp.gnss.loops_fixed.WORD_BITS).
+WORD_BITS = 32
+
+
+#: Named scenarios of ``python -m cosim gnss --scenario NAME``: the options each sets (an
+#: option given on the command line wins) and, under ``"tracker"``, what the seed fixes
+#: that the trackers take as their defaults (written into the run's JSON).
+SCENARIOS = {
+    "seed002": {
+        "help": "seed 002 (RECEIVERS.md section 1): the x0 dynamics (1000 m/s, 1 g), "
+                "32 dB-Hz, T = 1 ms",
+        "options": {"cn0_dbhz": 32.0, "dynamics": "seed002"},
+        # an acquisition for 32 dB-Hz (the default 1 ms x 5 and 1 ms x 20 miss it):
+        # 2 ms coherent (125 Hz bins) x 20 non-coherent, 40 ms Doppler refinement
+        # and the tracker started on the seed's x0 Doppler rate (w1 / 2 pi)
+        "run": {"acq_coherent_ms": 2, "acq_noncoherent": 20, "acq_bin_hz": 125.0,
+                "refine_ms": 40, "handover_doppler_rate_hz_s": 323.356 / (2 * math.pi)},
+        "tracker": {"x0": [0.0, 32995.519, 323.356, 0.0], "T_s": 1e-3,
+                    "P0": "diag(1e-3) (w0 widened to the hand-over Doppler's sigma)",
+                    "epsilon": 1.027, "kappa": 0.0, "beta": 2.0, "q0": 5.0,
+                    "R": "1/(2 T C/N0) (--r-mode cn0) or 1e-9 (--r-mode seed)"},
+    },
+}
+
+
+@dataclass(frozen=True)
+class DynamicsChoice:
+    """The line-of-sight dynamics of a run, by name (:mod:`cosim.gnss.dynamics`).
+
+    Parameters
+    ----------
+    dynamics : str
+        ``static`` (the signal's own profile, constant range by default), ``seed002`` (the
+        seed-002 initial dynamics, 1000 m/s and 1 g, deterministic), ``seed002-jerk`` (that
+        plus a constant jerk segment), ``seed002-process`` (the seed-002 Singer jerk process,
+        q = 5).
+    jerk_g_per_s, jerk_start_s, jerk_duration_s : float
+        The jerk segment of ``seed002-jerk``.
+    """
+
+    dynamics: str = field(default="static", metadata={
+        "help": "line-of-sight dynamics: static, seed002 (1000 m/s, 1 g), seed002-jerk "
+                "(plus a jerk segment), seed002-process (Singer jerk process, q 5); default static",
+        "choices": DYNAMICS, "case": "lower"})
+    jerk_g_per_s: float = field(default=5.0, metadata={
+        "help": "jerk of the seed002-jerk segment (g/s)"})
+    jerk_start_s: float = field(default=2.0, metadata={
+        "help": "start of the seed002-jerk segment (s)"})
+    jerk_duration_s: float = field(default=2.0, metadata={
+        "help": "length of the seed002-jerk segment (s)"})
+
+    def __post_init__(self):
+        if self.dynamics not in DYNAMICS:
+            raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, not "
+                             f"{self.dynamics!r}")
+        check_float("jerk_g_per_s", self.jerk_g_per_s, unit="g/s")
+        check_float("jerk_start_s", self.jerk_start_s, 0.0, unit="s")
+        check_float("jerk_duration_s", self.jerk_duration_s, 0.0, lo_open=True, unit="s")
+
+    def apply(self, sig: GnssSignalConfig) -> GnssSignalConfig:
+        from .dynamics import seed002
+        if self.dynamics == "static":
+            return sig
+        if self.dynamics == "seed002":
+            return sig.replace(dynamics=seed002(q=0))
+        if self.dynamics == "seed002-process":
+            return sig.replace(dynamics=seed002(q=5.0))
+        return sig.replace(dynamics=seed002(q=0, jerk_g_per_s=self.jerk_g_per_s,
+                                            jerk_start_s=self.jerk_start_s,
+                                            jerk_duration_s=self.jerk_duration_s))
+
+
+@dataclass(frozen=True)
+class GnssRunConfig:
+    """How one GNSS run acquires, tracks and is scored (the scenario is a
+    :class:`~cosim.gnss.signal.GnssSignalConfig`).
+
+    Parameters
+    ----------
+    tracker : str
+        A tracker registered in :mod:`dsp.gnss.trackers`.
+    bn_hz, dll_bn_hz : float
+        Carrier and code loop noise bandwidths (Hz), for trackers that take them.
+    backend : str
+        One of :data:`BACKENDS`.
+    dsp : str
+        ``float`` or ``fixed`` arithmetic of the tracker.
+    control_latency_cycles : int
+        Cycles from the DSP issuing a register write to the register holding it.
+    compute_cycles : int
+        Cycles from the end of the DSP's read window to its writes.
+    service_period_us : float
+        The DSP's FIFO service period (us).
+    service_latency_cycles, service_batch_words : int
+        The rest of the service (:class:`cosim.core.link.DspServiceConfig`, 4 cycles per word).
+    settle_s : float
+        Records before this time are not scored.
+    acq_coherent_ms, acq_noncoherent, acq_bin_hz, acq_pfa, refine_ms :
+        Acquisition: coherent ms, non-coherent sums, Doppler bin (Hz, <= 500 for the
+        refinement), false-alarm probability, refinement length (ms).
+    compare : str or None
+        ``golden``: also run the golden chain (float) and report the differences.
+    hdl_changes : tuple of (name, value)
+        Overrides of :class:`hdl.gnss.model.GnssChannelParams`.
+    block_samples : int
+        Samples generated and fed per block.
+    """
+
+    tracker: str = field(default="pll3", metadata={
+        "help": "tracker (dsp.gnss.trackers): " + ", ".join(tracker_names()),
+        "choices": tracker_names(), "case": "lower"})
+    bn_hz: float = field(default=15.0, metadata={"help": "carrier loop noise bandwidth (Hz)"})
+    dll_bn_hz: float = field(default=1.0, metadata={"help": "code loop noise bandwidth (Hz)"})
+    backend: str = field(default="model", metadata={
+        "help": "channel: golden (float correlators, no HDL), model (bit-exact), pysim "
+                "(Amaranth, ~2k cycles/s: a few ms), verilator",
+        "choices": BACKENDS, "case": "lower"})
+    dsp: str = field(default="fixed", metadata={"help": "arithmetic of the tracker",
+                                                "choices": DSP_MODES, "case": "lower"})
+    control_latency_cycles: int = field(default=40, metadata={
+        "help": "cycles from the DSP issuing a register write to the register holding it"})
+    compute_cycles: int = field(default=200, metadata={
+        "help": "DSP processing cycles from its read window to its writes"})
+    service_period_us: float = field(default=500.0, metadata={
+        "help": "DSP FIFO service period (us; under a code period less the DSP's delays, so "
+                "a record's words reach the channel before its next dump)"})
+    service_latency_cycles: int = field(default=50, metadata={
+        "help": "interrupt latency before the DSP reads (cycles)"})
+    service_batch_words: int = field(default=16, metadata={
+        "help": "FIFO words the DSP reads per service at most"})
+    settle_s: float = field(default=0.5, metadata={
+        "help": "records before this time (s) are not scored (the 3rd-order loop's pull-in "
+                "of the unknown Doppler rate rings for ~0.5-0.8 s at Bn 15 Hz)"})
+    acq_coherent_ms: int = field(default=1, metadata={"help": "acquisition coherent ms"})
+    acq_noncoherent: int = field(default=5, metadata={"help": "acquisition non-coherent sums"})
+    acq_bin_hz: float = field(default=250.0, metadata={
+        "help": "acquisition Doppler bin (Hz, <= 500)"})
+    acq_pfa: float = field(default=1e-3, metadata={"help": "acquisition false-alarm "
+                                                           "probability per search"})
+    refine_ms: int = field(default=20, metadata={"help": "Doppler refinement length (ms)"})
+    handover_doppler_sigma_hz: float = field(default=3.0, metadata={
+        "help": "1-sigma error of the refined hand-over Doppler told to the tracker (Hz)"})
+    r_mode: str = field(default="cn0", metadata={
+        "help": "measurement noise R of the seed-002 trackers (aukf, ukf): cn0 = 1/(2 T C/N0) "
+                "of the nominal C/N0, seed = the seed's 1e-9",
+        "choices": ("cn0", "seed"), "case": "lower"})
+    handover_doppler_rate_hz_s: float = field(default=0.0, metadata={
+        "help": "Doppler rate the tracker starts on (Hz/s; acquisition does not measure it; "
+                "--scenario seed002: the seed's x0, 51.464 Hz/s)"})
+    compare: str | None = field(default=None, metadata={
+        "help": "also run the golden chain (float) and report the differences",
+        "choices": ("golden",), "case": "lower"})
+    hdl_changes: tuple = ()
+    block_samples: int = 1 << 17
+
+    def __post_init__(self):
+        if self.tracker not in tracker_names():
+            raise ValueError(f"tracker must be one of {', '.join(tracker_names())}, not "
+                             f"{self.tracker!r}")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not "
+                             f"{self.backend!r}")
+        if self.dsp not in DSP_MODES:
+            raise ValueError(f"dsp must be float or fixed, not {self.dsp!r}")
+        if self.r_mode not in ("cn0", "seed"):
+            raise ValueError(f"r_mode must be cn0 or seed, not {self.r_mode!r}")
+        if self.r_mode != "cn0":
+            from dsp.gnss.trackers import _TRACKERS
+            if "r_mode" not in inspect.signature(_TRACKERS[self.tracker][0]).parameters:
+                raise ValueError(f"r_mode {self.r_mode} applies to the seed-002 trackers "
+                                 f"(aukf, ukf), not {self.tracker}")
+        if self.compare not in (None, "golden"):
+            raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
+        check_float("bn_hz", self.bn_hz, 0.0, 100.0, lo_open=True, unit="Hz")
+        check_float("dll_bn_hz", self.dll_bn_hz, 0.0, 20.0, lo_open=True, unit="Hz")
+        check_int("control_latency_cycles", self.control_latency_cycles, 0)
+        check_int("compute_cycles", self.compute_cycles, 0)
+        check_float("service_period_us", self.service_period_us, 0.0, 900.0, lo_open=True,
+                    unit="us")
+        check_int("service_latency_cycles", self.service_latency_cycles, 0)
+        check_int("service_batch_words", self.service_batch_words, 1)
+        check_float("settle_s", self.settle_s, 0.0, unit="s")
+        check_int("acq_coherent_ms", self.acq_coherent_ms, 1, 10)
+        check_int("acq_noncoherent", self.acq_noncoherent, 1, 100)
+        check_float("acq_bin_hz", self.acq_bin_hz, 0.0, 500.0, lo_open=True, unit="Hz")
+        check_float("acq_pfa", self.acq_pfa, 0.0, 1.0, lo_open=True, hi_open=True)
+        check_int("refine_ms", self.refine_ms, 2, 200)
+        check_float("handover_doppler_sigma_hz", self.handover_doppler_sigma_hz, 0.0, 250.0,
+                    lo_open=True, unit="Hz")
+        check_float("handover_doppler_rate_hz_s", self.handover_doppler_rate_hz_s, -1e4, 1e4,
+                    unit="Hz/s")
+        check_int("block_samples", self.block_samples, 1024)
+        for kv in self.hdl_changes:
+            if not (isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)):
+                raise ValueError(f"hdl_changes are (name, value) pairs, not {kv!r}")
+
+    def service(self, fs_hz: float):
+        """The DSP's FIFO service at the channel clock ``fs_hz``."""
+        from ..core.link import DspServiceConfig
+        return DspServiceConfig(period_cycles=max(1, round(self.service_period_us * 1e-6 * fs_hz)),
+                                latency_cycles=self.service_latency_cycles,
+                                batch_words=self.service_batch_words, cycles_per_word=4)
+
+    def hdl_params(self, sig: GnssSignalConfig):
+        """The channel for the scenario: its rate, digital IF, ADC and PRN."""
+        from hdl.gnss.model import GnssChannelParams
+        p = GnssChannelParams(fs_hz=sig.fs_hz, if_hz=sig.digital_if_hz, adc_bits=sig.adc_bits,
+                              prn=sig.prn, **dict(self.hdl_changes))
+        if p.carr_phase_bits != WORD_BITS or p.code_phase_bits != WORD_BITS:
+            raise ValueError(f"the trackers write {WORD_BITS}-bit NCO words: carr_phase_bits "
+                             f"and code_phase_bits must be {WORD_BITS}, not "
+                             f"{p.carr_phase_bits} and {p.code_phase_bits}")
+        return p
+
+
+def check_run_size(sig: GnssSignalConfig, run: GnssRunConfig) -> None:
+    """Refuse, before work, a record the machine cannot hold or a cycle-accurate run that
+    would take hours (the message names the option)."""
+    n = sig.n_samples
+    check_memory(n * 8.0 if run.backend == "golden" else 64.0 * n / 1024,
+                 f"{n:.3g} ADC samples", "--duration-s")
+    if run.backend in CYCLES_PER_S and n / CYCLES_PER_S[run.backend] > MAX_WALL_S:
+        raise ValueError(f"{run.backend} simulates about {CYCLES_PER_S[run.backend]:.0e} "
+                         f"cycles/s: {n:,} cycles would take "
+                         f"~{n / CYCLES_PER_S[run.backend] / 3600:.1f} h (limit "
+                         f"{MAX_WALL_S / 3600:g} h): reduce --duration-s")
