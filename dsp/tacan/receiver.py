@@ -15,7 +15,9 @@ from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       deg_to_bangle, reference_advances, track_sector, wrap_deg)
 from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
-from .decode import REF_MAIN, DecoderConfig, decode, outside_bursts, rotation_track
+from .decode import DecoderConfig, decode, outside_bursts
+from .rotation import rotation_track
+from .scoring import REF_MAIN
 from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from .peakbias import PeakBias
 from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s
@@ -106,7 +108,7 @@ class ReceiverConfig:
     flag_sector_deg: float = 12.0
     flag_noise_ratio: float = 0.5
     #: Rotation-rate tracking: the beacon's rotation rate is estimated from the references
-    #: known so far (:func:`dsp.tacan.decode.rotation_track`: the 135 Hz grid's period over
+    #: known so far (:func:`dsp.tacan.rotation.rotation_track`: the 135 Hz grid's period over
     #: the latest 2 s, once they span ``rotation_span_s``: early, so that little of the fit
     #: is made at a wrong rate), and the Kalman model and the
     #: bearing's phase advances turn at it (15 Hz exactly on a nominal beacon: the
@@ -146,7 +148,7 @@ class ReceiverConfig:
     #: records): 2.44 % of the bearings misleading without it, none with it. None: off.
     flag_state_jump: float | None = 12.0
     #: Each peak is a pulse *pair* (the FPGA's pulse-pair detection,
-    #: :attr:`dsp.peak.PeakParams.pair_offset`; ``python -m cosim tacan --detector pair``):
+    #: :attr:`dsp.tacan.peak_params.PeakParams.pair_offset`; ``python -m cosim tacan --detector pair``):
     #: timestamped at its second pulse, with the pair's mean envelope. The DSP takes it as the
     #: pair's two pulses, the mode's pair spacing apart, each at that amplitude
     #: (:func:`expand_pairs`), so the decoder and the filter see pulses as from a pulse

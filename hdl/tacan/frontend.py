@@ -19,7 +19,7 @@ from ..ddc import Ddc
 from ..envelope import Envelope
 from ..fifo import DspFifo
 from ..fir import Fir
-from ..peak import PeakSearch
+from .peak import PeakSearch
 from .model import TacanFrontendParams
 
 __all__ = ["TacanFrontEnd", "TacanFrontendParams"]

@@ -55,7 +55,7 @@ pattern.
 
 Both searches (``config.pair_peak``)
 ------------------------------------
-A second :class:`~hdl.peak.PeakSearch` (the pulse-pair detection,
+A second :class:`~hdl.tacan.peak.PeakSearch` (the pulse-pair detection,
 :attr:`TacanFrontendParams.pair_peak`, built as :attr:`~TacanFrontendParams.peak` is: envelope
 width, ``ts_bits``, the decimation as timestamp step, the same threshold floor) runs on the
 same envelope stream. Both write into the one FIFO, whose payload grows by a **source bit**
@@ -96,7 +96,8 @@ from ..model.fir import FirKernel, FirParams, FirState, fir_model
 from ..model.fir import fir_kernel as _fir_kernel  # noqa: F401 (tests use it with _round_consts)
 from ..model.mixer import MixerParams
 from ..model.nco import NcoParams, NcoState, nco_freq_word
-from ..model.peak import PeakParams, PeakState, peak_search
+from dsp.tacan.peak_params import PeakParams, PeakState
+from .peak_model import peak_search
 from ..model.rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
 
 __all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",

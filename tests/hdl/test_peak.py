@@ -9,9 +9,10 @@ import pytest
 from amaranth.hdl import Fragment, Shape, unsigned
 
 from cosim.pysim import run_stream, unpack_fields
-from hdl.model.peak import (PeakParams, PeakState, peak_search, peak_search_float,
-                            peak_search_numpy)
-from hdl.peak import PeakSearch
+from dsp.tacan.peak import peak_search_float, peak_search_numpy
+from dsp.tacan.peak_params import PeakParams, PeakState
+from hdl.tacan.peak_model import peak_search
+from hdl.tacan.peak import PeakSearch
 
 from _util import (WithClear, accepted_cycles, assert_lints_clean, assert_same_stream,
                    needs_verilator, verilator_sim)

@@ -4,7 +4,8 @@ import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
 from dsp.tacan.bearing import combine_coarse_fine, seed_eq17, wrap_deg
-from dsp.tacan.decode import REF_AUX, REF_MAIN, DecoderConfig, decode
+from dsp.tacan.decode import DecoderConfig, decode
+from dsp.tacan.scoring import REF_AUX, REF_MAIN
 from dsp.tacan.kalman import KalmanConfig
 from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
 
@@ -67,7 +68,7 @@ def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
     """The compiled hypothesis scorer (one walking pointer per template pulse) gives the
     numpy nearest-neighbour matching's scores exactly, also at ties and at the tolerance."""
     from cosim.tacan.signal import burst_offsets
-    from dsp.tacan import decode as dec
+    from dsp.tacan import scoring as sco
     rng = np.random.default_rng(4)
     cfg = TacanSignalConfig(mode=mode, duration_s=0.5, seed=12)
     t, _, _, _ = pulse_schedule(cfg)
@@ -81,8 +82,8 @@ def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
                                (tt[100:150] + tt[101:151]) / 2 - offs[1],
                                [tt[0] - 1.0, tt[-1] + 1.0]])
         starts = np.unique(np.concatenate([starts, edge]))
-        got = dec._scores(tt, starts, offs, tol)
-        want = dec._scores_numpy(tt, starts, offs, tol)
+        got = sco.burst_scores(tt, starts, offs, tol)
+        want = sco.burst_scores_numpy(tt, starts, offs, tol)
         np.testing.assert_array_equal(got, want)
         assert want.max() == offs.size and (want == 0).any()
     # Dyadic times: distances of exactly tol (matched), tol + 1 LSB (not) and exact midpoints.
@@ -91,9 +92,9 @@ def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
     offs = np.array([0.0, 7, 16, 40]) * q
     starts = np.unique(np.concatenate([tt - 2 * q, tt + 2 * q, tt - 3 * q, tt + 0.5 * q,
                                        tt - 40 * q]))
-    got = dec._scores(tt, starts, offs, 2 * q)
-    np.testing.assert_array_equal(got, dec._scores_numpy(tt, starts, offs, 2 * q))
-    at_tol = dec._scores(tt[:1], np.array([tt[0] - 2 * q, tt[0] - 3 * q]), offs[:1], 2 * q)
+    got = sco.burst_scores(tt, starts, offs, 2 * q)
+    np.testing.assert_array_equal(got, sco.burst_scores_numpy(tt, starts, offs, 2 * q))
+    at_tol = sco.burst_scores(tt[:1], np.array([tt[0] - 2 * q, tt[0] - 3 * q]), offs[:1], 2 * q)
     assert at_tol.tolist() == [1, 0]
 
 

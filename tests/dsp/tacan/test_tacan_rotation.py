@@ -1,7 +1,7 @@
 """Rotation-rate tracking (issue 18): a beacon whose antenna turns off 15 Hz.
 
-The rate is the 135 Hz reference grid's period (:func:`dsp.tacan.decode.estimate_rotation`),
-tracked causally (:func:`dsp.tacan.decode.rotation_track`) and used by the Kalman model and
+The rate is the 135 Hz reference grid's period (:func:`dsp.tacan.rotation.estimate_rotation`),
+tracked causally (:func:`dsp.tacan.rotation.rotation_track`) and used by the Kalman model and
 the bearing's phase advances; rounded to 1e-5 so that a nominal beacon runs the nominal
 bits."""
 import math
@@ -11,7 +11,7 @@ import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.decode import (RATE_QUANTUM, estimate_rotation, quantize_rotation,
+from dsp.tacan.rotation import (RATE_QUANTUM, estimate_rotation, quantize_rotation,
                               rotation_track)
 from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks

@@ -18,7 +18,8 @@ from dsp.fixed import shift_right
 from dsp.tacan.frontend import (PAIR_DETECTOR, SOURCE_PAIR, SOURCE_PULSE, FrontendConfig,
                                 pair_detector, run_golden_frontend)
 from dsp.tacan.standard import pair_spacing_s
-from hdl.model.peak import PeakParams, peak_search
+from dsp.tacan.peak_params import PeakParams
+from hdl.tacan.peak_model import peak_search
 from hdl.tacan.model import (FrontendPeaks, TacanFrontendModel, TacanFrontendParams,
                                       _fir_kernel, _round_consts, amp_error_terms)
 from hdl.tacan.frontend import TacanFrontEnd
