@@ -227,7 +227,7 @@ def _ol_mulw(a, b, s, k, half):
 
 # -- division --------------------------------------------------------------------------------
 @njit_cached
-def _fdiv(n, d):
+def fdiv(n, d):
     """``n // d`` (floor) for int64 ``n`` and ``0 < d < 2**53``, exactly, via one float
     division and a remainder correction (a hardware integer divide is ~4x slower here)."""
     q = np.int64(math.floor(float(n) / float(d)))
@@ -284,7 +284,7 @@ def _ol_div_norm(num, Sn, nb, f, half, lo, hi, ev, i):
                 n = (num + (np.int64(1) << (nb - 1))) >> nb
             else:
                 n = num << (-nb)
-            q1 = _fdiv(n, Sn)
+            q1 = fdiv(n, Sn)
             rem = n - q1 * Sn
             if q1 >= (np.int64(1) << (61 - f)) or q1 < -(np.int64(1) << (61 - f)):
                 q = hi + 1 if q1 > 0 else lo - 1
@@ -292,7 +292,7 @@ def _ol_div_norm(num, Sn, nb, f, half, lo, hi, ev, i):
                 nn = rem << f
                 if half:
                     nn += Sn >> 1
-                q = (q1 << f) + _fdiv(nn, Sn)
+                q = (q1 << f) + fdiv(nn, Sn)
             _note(ev, i, q)
             if q < lo:
                 ev[i] += 1
@@ -319,7 +319,7 @@ def _ol_div_square(v, Sn, nb, t, half, hi, ev, i):
             tt = t - nb
             v2 = v * v
             if tt >= 0:
-                q1 = _fdiv(v2, Sn)
+                q1 = fdiv(v2, Sn)
                 rem = v2 - q1 * Sn
                 if tt > 61 or (q1 >> max(61 - tt, 0)) != 0:
                     e = hi + 1
@@ -327,10 +327,10 @@ def _ol_div_square(v, Sn, nb, t, half, hi, ev, i):
                     num = rem << tt
                     if half:
                         num += Sn >> 1
-                    e = (q1 << tt) + _fdiv(num, Sn)
+                    e = (q1 << tt) + fdiv(num, Sn)
             else:
                 den = Sn << (-tt)
-                e = _fdiv(v2 + ((den >> 1) if half else 0), den)
+                e = fdiv(v2 + ((den >> 1) if half else 0), den)
             _note(ev, i, e)
             if e > hi:
                 ev[i] += 1
@@ -353,7 +353,7 @@ def _ol_ewma(r, acc, m, half, lo, hi, ev, i):
             d = acc - r
             if half:
                 d += m // 2
-            v = r + _fdiv(d, m)
+            v = r + fdiv(d, m)
             _note(ev, i, v)
             if v < lo:
                 ev[i] += 1

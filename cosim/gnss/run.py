@@ -230,8 +230,8 @@ class GnssRunConfig:
         if self.r_mode not in ("cn0", "seed"):
             raise ValueError(f"r_mode must be cn0 or seed, not {self.r_mode!r}")
         if self.r_mode != "cn0":
-            from dsp.gnss.trackers import _TRACKERS
-            if "r_mode" not in inspect.signature(_TRACKERS[self.tracker][0]).parameters:
+            from dsp.gnss.trackers import TRACKERS
+            if "r_mode" not in inspect.signature(TRACKERS[self.tracker][0]).parameters:
                 raise ValueError(f"r_mode {self.r_mode} applies to the seed-002 trackers "
                                  f"(aukf, ukf), not {self.tracker}")
         if self.compare not in (None, "golden"):
@@ -327,14 +327,14 @@ def handover_writes(p, doppler_hz: float, code_phase_chips: float, inverted: boo
 def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_hz: float,
                   spacing_chips: float, arith_name: str, extra: tuple | None = None):
     from dsp.gnss.loops_fixed import FLOAT, FixedArith
-    from dsp.gnss.trackers import TrackerContext, _TRACKERS, make_tracker
+    from dsp.gnss.trackers import TrackerContext, TRACKERS, make_tracker
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
                          inverted=inverted, doppler0_hz=doppler_hz,
                          doppler_rate0_hz_s=run.handover_doppler_rate_hz_s, cn0_dbhz=cn0_dbhz,
                          spacing_chips=spacing_chips, latency_epochs=1,
                          doppler0_sigma_hz=run.handover_doppler_sigma_hz)
     arith = FixedArith() if arith_name == "fixed" else FLOAT
-    params = inspect.signature(_TRACKERS[run.tracker][0]).parameters
+    params = inspect.signature(TRACKERS[run.tracker][0]).parameters
     opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz", "r_mode") if k in params}
     if extra is not None:       # (TrackerContext changes, tracker options) of the caller
         ctx = replace(ctx, **extra[0])

@@ -396,7 +396,7 @@ def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> d
     """RMSE / CRB and mean error of the detector variants near the noise floor (golden
     chain, 3 s records, the same seeds for every variant)."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import crb_deg
+    from dsp.tacan.bounds import crb_deg
     from .detector import detector_bounds
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()
@@ -539,7 +539,7 @@ def tacan_sensitivity(out: Path, quick: bool = False, jobs: int | None = None) -
     tacan-accuracy bench's); and integrity over 60 s: the other mode in both directions and
     noise alone, no bearing shown valid."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import crb_deg
+    from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()
     det = "both"
@@ -619,7 +619,7 @@ def tacan_confidence(out: Path, quick: bool = False, jobs: int | None = None) ->
     error with its standard error, and whether each point meets the criterion (RMSE / CRB
     <= 1.5 and |mean| <= 0.1 deg; the interval says how firmly)."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import crb_deg
+    from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()
     snrs = (3.0,) if quick else (3.0, 4.0)

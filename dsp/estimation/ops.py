@@ -40,7 +40,7 @@ from numba import njit, types
 from numba.extending import overload
 
 from ..jit import njit_cached
-from ..qops import _fdiv, align  # noqa: F401  (align re-exported: exact left shift)
+from ..qops import fdiv, align  # noqa: F401  (align re-exported: exact left shift)
 
 _OPTS = {"cache": True}
 
@@ -166,7 +166,7 @@ def _ol_div_q(n, d, s, half, lo, hi, ev, i, izero, base):
                 ev[izero] += 1
                 return hi if n >= 0 else lo
             w = n << s
-            q = _fdiv(w, d)
+            q = fdiv(w, d)
             if half:
                 rem = w - q * d
                 if 2 * rem >= d:

@@ -27,7 +27,7 @@ from scipy import signal as sps
 from dsp.design import cic_taps, design_pulse_fir
 from dsp.tacan.peak import peak_search_float
 from dsp.tacan.peak_params import PeakParams, PeakState
-from dsp.tacan.standard import PULSE_WIDTH_S, SOURCE_PAIR, SOURCE_PULSE, pair_spacing_s  # noqa: F401
+from dsp.tacan.standard import PULSE_WIDTH_S, SOURCE_PAIR, SOURCE_PULSE, pair_spacing_s
 
 PULSE_SIGMA_S = PULSE_WIDTH_S / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 

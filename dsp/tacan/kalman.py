@@ -98,10 +98,9 @@ import numpy as np
 
 from ..fixed import FixedFormat
 from ..qops import PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, new_event_array
-from .kalman_kernel import EVENT_NAMES  # noqa: F401 (re-exported: the event counters' names)
-from .kalman_kernel import _EV, _run_parallel, _run_serial, _step_consts
+from .kalman_kernel import EVENT_INDEX, run_parallel, run_serial, step_consts
 from .kalman_monitor import StateMonitor
-from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
+from .standard import F15, F135
 
 #: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
 GATE_FRAC = 8
@@ -527,7 +526,7 @@ class EnvelopeKalman(StateMonitor):
         if t.size == 0:
             return
         if nsat is not None:
-            self._ev[:, _EV["sat_y"]] += nsat.sum(axis=1)
+            self._ev[:, EVENT_INDEX["sat_y"]] += nsat.sum(axis=1)
             # range log of the values taken as measurements (not the implausible ones)
             self._note_python(0, self._y_raw, used=y != np.iinfo(np.int64).min)
         if r_mult is None:
@@ -538,15 +537,15 @@ class EnvelopeKalman(StateMonitor):
                 raise ValueError("r_mult must hold one finite value > 0 per step")
         if self.fixed is not None:
             lo, hi = 2.0 ** -12, 2.0 ** 12
-            self._ev[:, _EV["sat_rmult"]] += int(np.count_nonzero((rmf < lo) | (rmf > hi)))
+            self._ev[:, EVENT_INDEX["sat_rmult"]] += int(np.count_nonzero((rmf < lo) | (rmf > hi)))
             rm = np.round(np.ldexp(np.clip(rmf, lo, hi), self.fixed.P.frac)).astype(np.int64)
             self._note_python(6, np.round(np.ldexp(rmf, self.fixed.P.frac))[None, :])
         else:
             rm = rmf
         self._advance(t)
         sc = np.empty((t.size, 7), self.x.dtype)
-        _step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
-        kern = _run_parallel if self.parallel else _run_serial
+        step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
+        kern = run_parallel if self.parallel else run_serial
         y = np.ascontiguousarray(y)
         if self._upsets is None:
             kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv,
@@ -609,14 +608,14 @@ class EnvelopeKalman(StateMonitor):
             out[name] = {"min": None if mn == big else math.ldexp(mn, -fmt.frac),
                          "max": None if mx == -big - 1 else math.ldexp(mx, -fmt.frac),
                          "lo": lo, "hi": hi,
-                         "saturations": int(self._ev[:, _EV[sat_name]].sum())}
+                         "saturations": int(self._ev[:, EVENT_INDEX[sat_name]].sum())}
         return out
 
     @property
     def events(self) -> dict:
         """Per-trial event counters (name -> (B,) int64); float mode counts only ``gated``,
         ``reinit`` and ``p_neg``."""
-        return {n: self._ev[:, i].copy() for n, i in _EV.items()}
+        return {n: self._ev[:, i].copy() for n, i in EVENT_INDEX.items()}
 
     def _to_float(self, v, fmt_name):
         if self.fixed is None:

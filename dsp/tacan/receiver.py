@@ -14,11 +14,11 @@ import numpy as np
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       deg_to_bangle, reference_advances, track_sector, wrap_deg)
-from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
 from .decode import DecoderConfig, decode, outside_bursts
 from .rotation import rotation_track
 from .scoring import REF_MAIN
-from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from .kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from .standard import F15, F135
 from .peakbias import PeakBias
 from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s
 

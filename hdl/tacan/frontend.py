@@ -11,7 +11,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
+from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE
 
 from ..cic import Cic
 from ..common import check_params

@@ -86,19 +86,18 @@ import numpy as np
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
 from dsp.jit import njit_cached
-from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE, FrontendConfig, Peaks
+from dsp.tacan.frontend import FrontendConfig, Peaks
+from dsp.tacan.standard import SOURCE_PAIR
 
 from ..model.cic import CicParams, CicState, cic_model
 from ..model.ddc import DdcCicKernel, DdcModel, DdcParams
 from ..model.envelope import EnvelopeParams, envelope_model
 from ..model.fifo import FifoParams, fifo_model
 from ..model.fir import FirKernel, FirParams, FirState, fir_model
-from ..model.fir import fir_kernel as _fir_kernel  # noqa: F401 (tests use it with _round_consts)
 from ..model.mixer import MixerParams
 from ..model.nco import NcoParams, NcoState, nco_freq_word
 from dsp.tacan.peak_params import PeakParams, PeakState
 from .peak_model import peak_search
-from ..model.rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
 
 __all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",
            "FifoRun", "fifo_write_cycles"]
@@ -494,7 +493,7 @@ class FrontendPeaks:
     hardware field); index / end_index : envelope sample of the peak / whose arrival emits
     the pulse (the closing sample, ``PeakParams.emit_delay`` later with the readout or the
     pair detection); source : with two searches (``config.pair_peak``) the search of each
-    peak, int8 :data:`~dsp.tacan.frontend.SOURCE_PULSE` / ``SOURCE_PAIR`` (None: one search).
+    peak, int8 :data:`~dsp.tacan.standard.SOURCE_PULSE` / ``SOURCE_PAIR`` (None: one search).
     """
 
     amplitudes: np.ndarray

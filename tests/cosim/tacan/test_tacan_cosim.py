@@ -192,7 +192,7 @@ def test_both_searches_reach_the_dsp_with_their_source(backend):
     """``--detector both`` on an HDL backend, the DSP stalling on an 8-word FIFO:
     ``_dsp_receive`` takes the source bit (``source_bits=1``) and the peaks it hands on are
     per source the model's, with their sources."""
-    from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
+    from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE
     from hdl.tacan.model import TacanFrontendModel
     from cosim.tacan.run import FRONTENDS
     from cosim.tacan.signal import generate

@@ -3,7 +3,8 @@ independent formulations: batch least squares and a plain numpy matrix Kalman fi
 import numpy as np
 import pytest
 
-from dsp.tacan.kalman import F15, F135, EnvelopeKalman, KalmanConfig
+from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig
+from dsp.tacan.standard import F15, F135
 
 H = np.array([1.0, 0, 1, 0, 1])
 

@@ -189,7 +189,7 @@ def test_two_searches_decode_on_the_pulses_and_measure_on_the_pairs():
     the pair reports' pulses: the bearings are those of the pair reports alone (same pulses,
     same amplitudes), the references those of the pulses; without the single pulses no
     reference is decoded at all -- the pair reports are not decoded."""
-    from dsp.tacan.frontend import SOURCE_PAIR
+    from dsp.tacan.standard import SOURCE_PAIR
     ticks, amps, second, mean, tk, a, src = _two_searches(
         TacanSignalConfig(duration_s=1.5, snr_db=20, seed=6))
     ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks, tick_hz=20e6)

@@ -15,13 +15,13 @@ from cosim.equivalence import check_equivalence, stall_pattern, tacan_record
 from cosim.pysim import run_stream
 from cosim.tacan.signal import TacanSignalConfig, generate
 from dsp.fixed import shift_right
-from dsp.tacan.frontend import (PAIR_DETECTOR, SOURCE_PAIR, SOURCE_PULSE, FrontendConfig,
-                                pair_detector, run_golden_frontend)
-from dsp.tacan.standard import pair_spacing_s
+from dsp.tacan.frontend import PAIR_DETECTOR, FrontendConfig, pair_detector, run_golden_frontend
+from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE, pair_spacing_s
 from dsp.tacan.peak_params import PeakParams
 from hdl.tacan.peak_model import peak_search
-from hdl.tacan.model import (FrontendPeaks, TacanFrontendModel, TacanFrontendParams,
-                                      _fir_kernel, _round_consts, amp_error_terms)
+from hdl.model.fir import fir_kernel as _fir_kernel
+from hdl.model.rounding import round_consts as _round_consts
+from hdl.tacan.model import FrontendPeaks, TacanFrontendModel, TacanFrontendParams, amp_error_terms
 from hdl.tacan.frontend import TacanFrontEnd
 
 P = TacanFrontendParams()
