@@ -385,11 +385,11 @@ class _PipelineDsp:
         self.p, self.track = p, track
         self.fifo = p.fifo
         self.rx = RecordRxState()
-        self.fields = p.record_fields
+        self.fields = p.record.fields
 
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.gnss.model import ACC_FIELDS, unpack_record
+        from hdl.gnss.model import ACC_FIELDS
         p, fp = self.p, self.fifo
         if not call.words.size:
             return ()
@@ -400,7 +400,7 @@ class _PipelineDsp:
             v = 0
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
-            d = unpack_record(v, p)
+            d = p.record.unpack(v)
             # (the boundary sample is not in the record: _boundaries recomputes it)
             r = self.track.record(None, d["carr_phase"] / 2.0 ** p.carr_phase_bits,
                                   d["code_phase"] / 2.0 ** p.code_phase_bits,

@@ -199,7 +199,6 @@ class _HdlDsp:
 
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.monopulse.model import unpack_record
         p, fp = self.p, self.p.fifo
         if not call.words.size:
             return ()
@@ -213,7 +212,7 @@ class _HdlDsp:
             v = 0
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
-            f = unpack_record(v, p)
+            f = p.record.unpack(v)
             j = self.n_records
             self.n_records += 1
             if self.faults is None:

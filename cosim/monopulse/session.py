@@ -98,7 +98,7 @@ class MonopulseModelSession(FrontendSession):
         return out
 
     def _step(self, queue, ready, n, writes):
-        from hdl.monopulse.model import record_to_words, unpack_input
+        from hdl.monopulse.model import unpack_input
         p = self.params
         start, stop = self.cycle, self.cycle + n
         words = queue[:n]
@@ -107,7 +107,7 @@ class MonopulseModelSession(FrontendSession):
         r = self.model.step(x, chips, reg, cycles=start + np.arange(x.shape[0]),
                             horizon=stop)
         self.n_records += len(r.values)
-        w = np.array([record_to_words(v, p) for v in r.values],
+        w = np.array([p.record.to_words(v, p.fifo_width) for v in r.values],
                      np.int64).reshape(-1, p.record_words)
         wc = np.r_[self._carry_c, r.cycles]
         w = np.concatenate([self._carry_w, w])

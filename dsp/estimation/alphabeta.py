@@ -58,9 +58,8 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from .events import EventRegistry
-from ..qops import rs
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
-from .ops import align, div_q, flip, sqrt_q, store
+from ..qops import align, div_q, flip, rs, sqrt_q, store
 
 
 def tracking_index(T_s: float, sigma_w: float, sigma_v: float) -> float:

@@ -4,7 +4,7 @@
 (constant or time-varying F, B, H, Q, R; ``n <= 8`` states, ``m <= n`` measurements, optional
 control input ``B u``) in the arithmetic of its configuration: ``"float64"``, ``"float32"``
 or a :class:`KalmanFormats` table (fixed point). The kernel :func:`_kf_kernel` is written
-once with the operators of :mod:`dsp.estimation.ops`; numba compiles it per state dtype.
+once with the operators of :mod:`dsp.qops`; numba compiles it per state dtype.
 It runs Monte Carlo trials batched (``x`` is ``(B, n)``, ``P`` ``(B, n, n)``).
 
 Steps of one update, each one rounding in fixed point (signal names of the table)::
@@ -57,7 +57,7 @@ from .formats import (FormatTable, arithmetic_name, fits, fmt, need_bits, need_s
                       sum_bits, to_fixed)
 from .models import LinearGaussianModel, check_psd
 from .linalg import chol_q, matmul_q, solve_lower_q, solve_upper_t_q
-from .ops import align, flip, store
+from ..qops import align, flip, store
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,7 @@ from .events import EventRegistry
 from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, sum_bits, to_fixed
 from .linalg import chol_q, solve_lower_q, solve_upper_t_q
 from .models import MAX_STATES, check_psd
-from .ops import align, cos_q, rnd, sin_q, store
+from ..qops import align, cos_q, rs, sin_q, store
 
 @dataclass(frozen=True)
 class UkfFormats(FormatTable):
@@ -233,7 +233,7 @@ def _f_linear(x, w, prm, q, out):
         acc = align(w[i], q[0] + q[2] - q[1])
         for j in range(n):
             acc += prm[i, j] * x[j]
-        out[i] = rnd(acc, q[0] + q[2] - q[3], q[4])
+        out[i] = rs(acc, q[0] + q[2] - q[3], q[4])
 
 
 @njit_cached
@@ -243,16 +243,16 @@ def _h_linear(x, v, prm, q, out):
         acc = align(v[r], q[0] + q[2] - q[1])
         for j in range(x.shape[0]):
             acc += prm[r, j] * x[j]
-        out[r] = rnd(acc, q[0] + q[2] - q[3], q[4])
+        out[r] = rs(acc, q[0] + q[2] - q[3], q[4])
 
 
 @njit_cached
 def _h_iq(x, v, prm, q, out):
     """``A [cos x0, sin x0] + v`` (``A = prm[0, 0]``): the I/Q of a carrier phase."""
     acc = prm[0, 0] * cos_q(x[0], q[0], q[3], q[4]) + align(v[0], q[2] + q[3] - q[1])
-    out[0] = rnd(acc, q[2], q[4])
+    out[0] = rs(acc, q[2], q[4])
     acc = prm[0, 0] * sin_q(x[0], q[0], q[3], q[4]) + align(v[1], q[2] + q[3] - q[1])
-    out[1] = rnd(acc, q[2], q[4])
+    out[1] = rs(acc, q[2], q[4])
 
 
 class NonlinearModel:
@@ -264,12 +264,12 @@ class NonlinearModel:
         ``f(x, w, prm_f, q, out)`` writes the next state (``n``) into ``out``; ``h(x, v,
         prm_h, q, out)`` the measurement (``m``). With additive noise ``w`` and ``v`` are zero
         and the noise is added by the filter; augmented, they are the noise sigma points.
-        Write them once with the operators of :mod:`dsp.estimation.ops` (``align``, ``rnd``,
+        Write them once with the operators of :mod:`dsp.qops` (``align``, ``rs``,
         ``sin_q``, ``cos_q``) and the dtype of ``x`` (no float64 literals): they then run in
         float64, float32 and fixed point. ``q`` is an int64 array ``[frac x, frac w (or v),
         frac prm, frac out, half]`` (all 0 for floats): in fixed point ``x``, ``w`` and ``v``
         are in the ``X`` format, ``out`` in ``X`` (``f``) or ``Y`` (``h``), ``prm`` in
-        ``prm``; the model rounds (``rnd``), the filter saturates and counts.
+        ``prm``; the model rounds (``rs``), the filter saturates and counts.
     Q, R : arrays
         Noise covariances (``n x n`` PSD, ``m x m`` positive definite).
     prm_f, prm_h : 2-D float arrays

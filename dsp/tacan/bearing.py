@@ -94,8 +94,8 @@ def seed_eq17(coarse_deg, fine135_deg):
 #: below the filter's noise (~1e-3 deg), and two angles times a 30-bit fraction still fit
 #: the int64 intermediates of :func:`combine_coarse_fine_fixed`.
 ANGLE_BITS = 32
-#: Bits per turn of the Kalman core's phase accumulator (the same as ``dsp.qops.PHASE_BITS``;
-#: repeated here so that this module does not import numba -- a test checks they agree).
+#: Bits per turn of the Kalman core's phase accumulator (:mod:`dsp.tacan.phase_ops` and the
+#: Kalman kernel read it here).
 PHASE_BITS = 40
 #: TACAN modulation frequencies (Hz) of the coarse and fine components (dsp.tacan.standard).
 F15_HZ, F135_HZ = F15, F135

@@ -97,7 +97,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..fixed import FixedFormat
-from ..qops import PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, new_event_array
+from ..qops import RANGE_BASE, S_BITS, new_event_array
+from .bearing import PHASE_BITS
+from .phase_ops import SIN_LUT, TRIG_FRAC
 from .kalman_kernel import EVENT_INDEX, run_parallel, run_serial, step_consts
 from .kalman_monitor import StateMonitor
 from .standard import F15, F135

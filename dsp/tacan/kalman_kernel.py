@@ -15,8 +15,9 @@ import numba
 import numpy as np
 
 from ..jit import njit_cached
-from ..qops import (align, div_norm, div_square, ewma, floor_one, lut_index, mac2, mulw,
-                    rate_dt, rs, sat, scale_sat, sincos_dt, snorm)
+from ..qops import (align, div_norm, div_square, ewma, floor_one, lut_index, mac2, mulw, rs, sat,
+                    scale_sat, snorm)
+from .phase_ops import rate_dt, sincos_dt
 
 __all__ = ["BLOCK", "EVENT_NAMES", "run_parallel", "run_serial", "step_consts", "_trial"]
 

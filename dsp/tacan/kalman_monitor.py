@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-from ..qops import PHASE_BITS, SIN_LUT
+from .bearing import PHASE_BITS
+from .phase_ops import SIN_LUT
 from .kalman_kernel import EVENT_INDEX, run_serial, step_consts
 
 __all__ = ["StateMonitor"]

@@ -33,9 +33,9 @@ __all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray
 
 
 def record_layout(params: GnssChannelParams) -> data.StructLayout:
-    """The record as a struct, fields LSB first (:attr:`GnssChannelParams.record_fields`)."""
+    """The record as a struct, fields LSB first (:attr:`GnssChannelParams.record`)."""
     return data.StructLayout({n: (signed(w) if s else unsigned(w))
-                              for n, w, s in params.record_fields})
+                              for n, w, s in params.record.fields})
 
 
 def array_params(params: GnssChannelParams, channels: int) -> GnssChannelParams:

@@ -60,6 +60,7 @@ from dsp.jit import njit_cached
 
 from dsp.fixed import check_width
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, ca_code_table, check_prn
+from dsp.record_layout import RecordLayout
 from hdl.model.fifo import FifoParams, FifoState, fifo_model_events
 from hdl.model.mixer import MixerParams
 from hdl.model.nco import NcoParams, nco_freq_word, nco_full_tables
@@ -264,18 +265,19 @@ class GnssChannelParams:
         return max(self.carr_phase_bits, self.code_phase_bits, self.slew_bits, 6)
 
     @property
-    def record_fields(self) -> list[tuple[str, int, bool]]:
-        """(name, width, signed), LSB first."""
+    def record(self) -> RecordLayout:
+        """The record's fields, LSB first: the six accumulators, ``epoch``, ``carr_phase``,
+        ``code_phase`` and, in an array, ``channel``."""
         f = [(n, self.acc_width, True) for n in ACC_FIELDS]
         f += [("epoch", self.epoch_bits, False), ("carr_phase", self.carr_phase_bits, False),
               ("code_phase", self.code_phase_bits, False)]
         if self.channel_bits:
             f.append(("channel", self.channel_bits, False))
-        return f
+        return RecordLayout(tuple(f))
 
     @property
     def record_bits(self) -> int:
-        return sum(w for _, w, _ in self.record_fields)
+        return self.record.bits
 
     @property
     def fifo(self) -> FifoParams:
@@ -310,34 +312,6 @@ class GnssChannelParams:
             raise ValueError(f"GNSS register {reg} takes unsigned {widths[reg]}-bit values, "
                              f"not {value!r}")
         return v
-
-
-# -- record packing ----------------------------------------------------------------------
-
-def pack_record(values: dict, params: GnssChannelParams) -> int:
-    """Fields -> the record as one int (LSB first, signed fields two's complement)."""
-    v, pos = 0, 0
-    for name, w, _ in params.record_fields:
-        v |= (int(values[name]) & ((1 << w) - 1)) << pos
-        pos += w
-    return v
-
-
-def unpack_record(value: int, params: GnssChannelParams) -> dict:
-    out, pos = {}, 0
-    for name, w, s in params.record_fields:
-        x = (int(value) >> pos) & ((1 << w) - 1)
-        if s and x >> (w - 1):
-            x -= 1 << w
-        out[name] = x
-        pos += w
-    return out
-
-
-def record_to_words(value: int, params: GnssChannelParams) -> list[int]:
-    fp = params.fifo
-    m = (1 << fp.width) - 1
-    return [(int(value) >> (j * fp.width)) & m for j in range(fp.record_words)]
 
 
 def bus_writes(writes, *, data_width: int = 32) -> list[tuple[int, str, int]]:
@@ -485,7 +459,7 @@ class ChannelRecords:
             d.update(epoch=int(row[6]), carr_phase=int(row[7]), code_phase=int(row[8]))
             if params.channel_bits:
                 d["channel"] = 0 if channel is None else int(channel)
-            out.append(pack_record(d, params))
+            out.append(params.record.pack(d))
         return out
 
 
@@ -703,7 +677,7 @@ class GnssArrayModel:
         vals = [v for v, k in zip(vals, keep) if k]
         p = self.params
         fp = p.fifo
-        recs = np.array([record_to_words(v, p) for v in vals],
+        recs = np.array([p.record.to_words(v, fp.width, fp.record_words) for v in vals],
                         np.int64).reshape(-1, fp.record_words)
         ready = np.ones(n_cycles, bool) if out_ready is None else \
             np.asarray(out_ready, bool)[:n_cycles]

@@ -76,7 +76,7 @@ record of block ``b`` carries the ``u0, v0`` active during block ``b``. Reset: e
 coefficient :attr:`MonopulseFrontendParams.unit_coef` (gain 1 - 2**-(b-1), phase 0),
 ``u0 = v0 = 0``.
 
-Record (LSB first; :attr:`MonopulseFrontendParams.record_fields`)
+Record (LSB first; :attr:`MonopulseFrontendParams.record`)
 ---------------------------------------------------------------
 ``block`` (``block_bits``, wraps), ``u``, ``v`` (``dc_bits`` signed), ``ang_a``, ``ang_e``
 (``angle_bits`` signed: ``a`` of each axis, turns), ``shift`` (the normalisation ``r``),
@@ -95,6 +95,7 @@ import numpy as np
 
 from dsp.cordic import CordicConfig
 from dsp.fixed import ROUNDINGS, check_width, shift_right
+from dsp.record_layout import RecordLayout
 from hdl.model.cic import CicParams, cic_model
 from hdl.model.ddc import DdcModel, DdcParams
 from hdl.model.fifo import FifoParams, FifoState, fifo_model_events
@@ -103,8 +104,8 @@ from hdl.model.mixer import MixerModel, MixerParams
 from hdl.model.nco import NcoModel, NcoParams, nco_freq_word
 
 __all__ = ["MonopulseFrontendParams", "MonopulseFrontendModel", "MonopulseRecords",
-           "REG_COEF", "REG_U0", "REG_V0", "REG_NAMES", "BEAMS", "pack_input", "pack_record",
-           "unpack_record", "record_to_words", "coef_word", "dc_word", "hadamard_channels"]
+           "REG_COEF", "REG_U0", "REG_V0", "REG_NAMES", "BEAMS", "pack_input", "coef_word",
+           "dc_word", "hadamard_channels"]
 
 #: Register addresses.
 REG_COEF, REG_U0, REG_V0 = 0, 4, 5
@@ -395,20 +396,20 @@ class MonopulseFrontendParams:
         return max(2 * self.corr_coef_bits, self.dc_bits)
 
     @property
-    def record_fields(self) -> list[tuple[str, int, bool]]:
-        """(name, width, signed), LSB first."""
+    def record(self) -> RecordLayout:
+        """The record's fields, LSB first (module docstring)."""
         f = [("block", self.block_bits, False), ("u", self.dc_bits, True),
              ("v", self.dc_bits, True), ("ang_a", self.angle_bits, True),
              ("ang_e", self.angle_bits, True), ("shift", self.shift_bits, False)]
-        return f + [(n, self.acc_width, True) for n in _ACC_FIELDS]
+        return RecordLayout(tuple(f + [(n, self.acc_width, True) for n in _ACC_FIELDS]))
 
     @property
     def record_bits(self) -> int:
-        return sum(w for _, w, _ in self.record_fields)
+        return self.record.bits
 
     @property
     def record_words(self) -> int:
-        return -(-self.record_bits // self.fifo_width)
+        return self.record.words(self.fifo_width)
 
     @property
     def fifo(self) -> FifoParams:
@@ -513,30 +514,6 @@ def unpack_input(words, params: MonopulseFrontendParams) -> tuple[np.ndarray, np
     x = np.stack([(w >> np.int64(i * b)) & np.int64((1 << b) - 1) for i in range(4)], axis=1)
     x = np.where(x >= 1 << (b - 1), x - (1 << b), x)
     return x, (w >> np.int64(4 * b)) & 1
-
-
-def pack_record(values: dict, params: MonopulseFrontendParams) -> int:
-    v, pos = 0, 0
-    for name, w, _ in params.record_fields:
-        v |= (int(values[name]) & ((1 << w) - 1)) << pos
-        pos += w
-    return v
-
-
-def unpack_record(value: int, params: MonopulseFrontendParams) -> dict:
-    out, pos = {}, 0
-    for name, w, s in params.record_fields:
-        x = (int(value) >> pos) & ((1 << w) - 1)
-        if s and x >> (w - 1):
-            x -= 1 << w
-        out[name] = x
-        pos += w
-    return out
-
-
-def record_to_words(value: int, params: MonopulseFrontendParams) -> list[int]:
-    m = (1 << params.fifo_width) - 1
-    return [(int(value) >> (j * params.fifo_width)) & m for j in range(params.record_words)]
 
 
 def hadamard_channels(rec: dict) -> np.ndarray:
@@ -774,7 +751,7 @@ class MonopulseFrontendModel:
         f["block"] = np.array(blocks, np.int64) & ((1 << p.block_bits) - 1)
         for j, name in enumerate(_ACC_FIELDS):
             f[name] = acc[:, j]
-        vals = [pack_record({k_: f[k_][r] for k_ in f}, p) for r in range(len(blocks))]
+        vals = [p.record.pack({k_: f[k_][r] for k_ in f}) for r in range(len(blocks))]
         return MonopulseRecords(np.array(out_cyc, np.int64), vals, f, over)
 
     def run(self, x, chips, writes=(), *, n_cycles: int, out_ready=None, cycles=None):
@@ -783,8 +760,9 @@ class MonopulseFrontendModel:
         not offered)."""
         r = self.step(x, chips, writes, cycles=cycles, horizon=n_cycles)
         keep = r.cycles < n_cycles
-        words = np.array([record_to_words(v, self.params) for v, k in zip(r.values, keep) if k],
-                         np.int64).reshape(-1, self.params.record_words)
+        p = self.params
+        words = np.array([p.record.to_words(v, p.fifo_width) for v, k in zip(r.values, keep) if k],
+                         np.int64).reshape(-1, p.record_words)
         ready = np.ones(n_cycles, bool) if out_ready is None else np.asarray(out_ready, bool)
         if ready.size < n_cycles:
             ready = np.r_[ready[:n_cycles], np.ones(n_cycles - ready.size, bool)]

@@ -8,6 +8,8 @@ from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp import qops
 from dsp.tacan import kalman as kfx
+from dsp.tacan import phase_ops
+from dsp.tacan.bearing import PHASE_BITS
 from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
 from dsp.tacan.kalman_kernel import EVENT_NAMES
 from dsp.tacan.standard import F15, F135
@@ -19,7 +21,7 @@ def EnvelopeKalmanFixed(cfg=None, batch=1):
 
 @numba.njit
 def _sincos_phase(lut, phase, cs_frac, half):
-    return qops.sincos_dt(lut, phase, np.int64(1), cs_frac, half)
+    return phase_ops.sincos_dt(lut, phase, np.int64(1), cs_frac, half)
 
 
 # ---------------------------------------------------------------------------------------
@@ -64,12 +66,12 @@ class _Ref:
 
     @staticmethod
     def trig(phase, csf, half):
-        lut = [int(v) for v in qops.SIN_LUT]
-        sh = qops.PHASE_BITS - qops.LUT_BITS
+        lut = [int(v) for v in phase_ops.SIN_LUT]
+        sh = PHASE_BITS - phase_ops.LUT_BITS
         idx, d = phase >> sh, phase & ((1 << sh) - 1)
-        s0, c0 = lut[idx], lut[(idx + (1 << (qops.LUT_BITS - 2))) % (1 << qops.LUT_BITS)]
-        TF = qops.TRIG_FRAC
-        dl = _rs((d >> 8) * qops._TWO_PI_30, qops.PHASE_BITS - 8, 1)
+        s0, c0 = lut[idx], lut[(idx + (1 << (phase_ops.LUT_BITS - 2))) % (1 << phase_ops.LUT_BITS)]
+        TF = phase_ops.TRIG_FRAC
+        dl = _rs((d >> 8) * phase_ops._TWO_PI_30, PHASE_BITS - 8, 1)
         d2 = _rs(dl * dl, TF, 1)
         d3 = _rs(d2 * dl, TF, 1)
         cd, sd = (1 << TF) - (d2 >> 1), dl - d3 // 6
@@ -80,7 +82,7 @@ class _Ref:
         cfg = self.cfg
         fx, fP, fK, fcs, fi, fr, fy = cfg.x, cfg.P, cfg.K, cfg.cs, cfg.innov, cfg.r, cfg.y
         hx, hP, hK, hcs, hi, hr = (f.rounding == "half_up" for f in (fx, fP, fK, fcs, fi, fr))
-        mask = (1 << qops.PHASE_BITS) - 1
+        mask = (1 << PHASE_BITS) - 1
         sa, ca = self.trig((dt * self.fw15) & mask, fcs.frac, hcs)
         sb, cb = self.trig((dt * self.fw135) & mask, fcs.frac, hcs)
         qr = _rs(self.q_rot * min(dt, (1 << 61) // self.q_rot), kfx.Q_EXTRA, hP)
@@ -220,10 +222,10 @@ def test_kernel_equals_unbounded_integer_reference(peak_bias):
 
 
 def test_sin_cos_from_phase_accumulator():
-    ph = np.random.default_rng(3).integers(0, 1 << qops.PHASE_BITS, 2000)
-    got = np.array([_sincos_phase(qops.SIN_LUT, np.int64(p), np.int64(22), np.int64(1))
+    ph = np.random.default_rng(3).integers(0, 1 << PHASE_BITS, 2000)
+    got = np.array([_sincos_phase(phase_ops.SIN_LUT, np.int64(p), np.int64(22), np.int64(1))
                     for p in ph]) / 2.0 ** 22
-    ang = 2 * np.pi * ph / 2.0 ** qops.PHASE_BITS
+    ang = 2 * np.pi * ph / 2.0 ** PHASE_BITS
     np.testing.assert_allclose(got[:, 0], np.sin(ang), rtol=0, atol=0.51 * 2 ** -22 + 1e-12)
     np.testing.assert_allclose(got[:, 1], np.cos(ang), rtol=0, atol=0.51 * 2 ** -22 + 1e-12)
 
