@@ -58,7 +58,7 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from .events import EventRegistry
-from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, sum_bits, to_fixed
+from .formats import Arithmetic, FormatTable, fits, fmt, need_bits, need_shift, sum_bits, to_fixed
 from .linalg import chol_q, solve_lower_q, solve_upper_t_q
 from .models import MAX_STATES, check_psd
 from ..qops import align, cos_q, rs, sin_q, store
@@ -634,9 +634,7 @@ class UnscentedKalmanFilter:
                  p_floor: float = 1e-12, z_limit: float | None = None, redraw: bool = True):
         if not isinstance(model, NonlinearModel):
             raise ValueError(f"model must be a NonlinearModel, not {model!r}")
-        kind = arithmetic_name(arithmetic)
-        if kind == "fixed" and not isinstance(arithmetic, UkfFormats):
-            raise ValueError(f"the fixed-point unscented filter takes a UkfFormats table, not {arithmetic!r}")
+        ar = Arithmetic.of(arithmetic, UkfFormats, "unscented filter")
         if noise not in ("additive", "augmented"):
             raise ValueError(f"noise must be 'additive' or 'augmented', not {noise!r}")
         if not (isinstance(alpha, (int, float)) and 0 < alpha <= 10):
@@ -654,14 +652,14 @@ class UnscentedKalmanFilter:
         wm, wc, c = sigma_weights(L, float(alpha), float(beta), float(kappa))
         if not c > 0:
             raise ValueError(f"alpha and kappa give L + lambda = {c:g}; it must be > 0")
-        self.model, self.trials, self.kind, self.z_limit = model, int(trials), kind, z_limit
+        self.model, self.trials, self.z_limit = model, int(trials), z_limit
+        self.ar, self.kind, self.formats = ar, ar.kind, ar.formats
         self.aug = noise == "augmented"
         self.redraw = bool(redraw)
-        self.formats = arithmetic if kind == "fixed" else None
-        if kind == "fixed":
-            arithmetic.check(n, m, L)
-            arithmetic.check_weights(L, float(alpha), float(beta), float(kappa))
-        dt = {"float64": np.float64, "float32": np.float32, "fixed": np.int64}[kind]
+        if ar.fixed:
+            ar.formats.check(n, m, L)
+            ar.formats.check_weights(L, float(alpha), float(beta), float(kappa))
+        dt = ar.dtype
         x0 = np.asarray(x0, np.float64)
         P0 = np.asarray(P0, np.float64)
         if x0.shape not in ((n,), (self.trials, n)):
@@ -672,8 +670,8 @@ class UnscentedKalmanFilter:
         x0 = np.broadcast_to(x0, (self.trials, n))
         P0 = np.broadcast_to(P0, (self.trials, n, n))
         Lq, Lr = (np.sqrt(c) * psd_sqrt(a) for a in (model.Q, model.R))
-        if kind == "fixed":
-            fm = arithmetic
+        if ar.fixed:
+            fm = ar.formats
             for what, v, f in (("x0", x0, fm.x), ("P0", P0, fm.P), ("Q", model.Q, fm.Pp), ("R", model.R, fm.Pyy),
                                ("sqrt(c) chol(Q)", Lq, fm.U), ("sqrt(c) chol(R)", Lr, fm.U),
                                ("prm_f", model.prm_f, fm.prm), ("prm_h", model.prm_h, fm.prm)):
@@ -687,16 +685,14 @@ class UnscentedKalmanFilter:
             r = fm.fracs()
             self._q = (np.array([r["X"], r["X"], r["prm"], r["X"], int(fm.X.rounding == "half_up")], np.int64),
                        np.array([r["X"], r["X"], r["prm"], r["Y"], int(fm.Y.rounding == "half_up")], np.int64))
-            self._fmt = fm.arrays()[:4]
         else:
             self.x = np.array(x0, dtype=dt, order="C")
             self.P = np.array(P0, dtype=dt, order="C")
             self._w = (wm.astype(dt), wc.astype(dt), np.array([c], dt), np.array([p_floor, p_floor], dt))
             self._mats = tuple(np.ascontiguousarray(a, dtype=dt) for a in
                                (model.Q, model.R, Lq, Lr, model.prm_f, model.prm_h))
-            zz = np.zeros(len(SIGNALS), np.int64)
             self._q = (np.zeros(5, np.int64), np.zeros(5, np.int64))
-            self._fmt = (zz, zz, zz, zz)
+        self._fmt = ar.arrays[:4]
         self.events = EVENTS
         self.ev = EVENTS.new((self.trials,))
 
@@ -715,15 +711,11 @@ class UnscentedKalmanFilter:
         if z.ndim != 3 or z.shape[0] != self.trials or z.shape[2] != m:
             raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
         ok = np.all(np.isfinite(z), axis=2)
-        lim = self.z_limit
-        if self.kind == "fixed":
-            f = self.formats.z
-            flim = min(f.max_value, -f.min_value)
-            lim = flim if lim is None else min(lim, flim)
+        lim = self.ar.limit(self.z_limit, "z")
         if lim is not None:
             ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
         zc = np.where(ok[..., None], z, 0.0)
-        zc = np.ascontiguousarray(to_fixed(zc, self.formats.z) if self.kind == "fixed" else zc.astype(self.x.dtype))
+        zc = self.ar.words(zc, "z")
         T = z.shape[1]
         xs = np.empty((self.trials, T, n), self.x.dtype)
         Ps = np.empty((self.trials, T if keep_P else 0, n, n), self.x.dtype)
@@ -732,15 +724,9 @@ class UnscentedKalmanFilter:
         fr, lo, hi, hf = self._fmt
         _kernel_for(self.model.f, self.model.h)(self.x, self.P, zc, ok, Q, R, Lq, Lr, pf, ph, self._q[0],
                     self._q[1], wm, wc, c, pfl, fr, lo, hi, hf, self.aug, self.redraw, self.ev, xs, Ps, keep_P)
-        if self.kind == "fixed":
-            xs_f = xs * 2.0 ** -self.formats.x.frac
-            Ps_f = Ps * 2.0 ** -self.formats.P.frac if keep_P else None
-        else:
-            xs_f, Ps_f = xs.astype(np.float64), (Ps.astype(np.float64) if keep_P else None)
-        return UKFRun(xs_f, Ps_f, self.counts())
+        return UKFRun(self.ar.physical(xs, "x"), self.ar.physical(Ps, "P") if keep_P else None,
+                      self.counts())
 
     def state(self):
         """Current ``(x, P)`` in physical units (float64)."""
-        if self.kind == "fixed":
-            return self.x * 2.0 ** -self.formats.x.frac, self.P * 2.0 ** -self.formats.P.frac
-        return self.x.astype(np.float64), self.P.astype(np.float64)
+        return self.ar.physical(self.x, "x"), self.ar.physical(self.P, "P")
