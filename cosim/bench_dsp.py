@@ -242,7 +242,7 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     from concurrent.futures import ProcessPoolExecutor
     from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig
-    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.params import TacanFrontendParams
     from .link import DspServiceConfig
     from .pipeline import Pipeline
     from .session import open_frontend

@@ -381,7 +381,7 @@ def _model_session(params, **kw):
 
 
 def _frontend():
-    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.params import TacanFrontendParams
     return Frontend(params=TacanFrontendParams, component=_component, model=_model_session,
                     verilog_name="tacan_frontend",
                     inputs=lambda p: {"freq": p.nco_freq_word})

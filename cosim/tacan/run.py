@@ -33,8 +33,9 @@ from dsp.tacan.frontend import (BOTH_PAIR_SEARCH, DETECTORS, NOISE_FLOORS, PAIR_
 from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PAIR_PEAK_BIAS
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
-                                ReceiverState, crb_deg, process_peaks)
+                                ReceiverState, process_peaks)
 from dsp.tacan.bearing import wrap_deg
+from dsp.tacan.bounds import crb_deg
 from dsp.tacan.decode import DecoderConfig
 from dsp.tacan.fifo_rx import receive_words
 from ..link import ControlPath, DspServiceConfig
@@ -75,7 +76,7 @@ class TacanRunConfig:
     frontend_changes : tuple of (name, value)
         Overrides of :class:`dsp.tacan.frontend.FrontendConfig` (rates, structure).
     hdl_changes : tuple of (name, value)
-        Overrides of :class:`hdl.tacan.model.TacanFrontendParams` (word lengths).
+        Overrides of :class:`hdl.tacan.params.TacanFrontendParams` (word lengths).
     service : DspServiceConfig
         How the DSP reads the FIFO (HDL backends).
     control_writes : tuple of (cycle, register, value)
@@ -245,7 +246,7 @@ class TacanRunConfig:
 
     @property
     def hdl_params(self):
-        from hdl.tacan.model import TacanFrontendParams
+        from hdl.tacan.params import TacanFrontendParams
         return TacanFrontendParams(config=self.frontend, adc_bits=self.signal.adc_bits,
                                    **dict(self.hdl_changes))
 

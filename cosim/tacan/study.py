@@ -6,7 +6,7 @@ Parameters (``--param NAME=VALUES``)
 -----------------------------------
 ``adc_bits``              ADC word length (the signal is digitised once per record for every
                           value, :func:`cosim.tacan.signal.generate_adc_variants`).
-``<field>``               any field of :class:`hdl.tacan.model.TacanFrontendParams`
+``<field>``               any field of :class:`hdl.tacan.params.TacanFrontendParams`
                           (``nco_amp_bits``, ``mixer_out_bits``, ``cic_out_bits``,
                           ``fir_coef_bits``, ``fir_out_bits``, ``env_iterations``,
                           ``mixer_rounding``, ...).
@@ -40,7 +40,7 @@ FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
 def check_param(name: str) -> None:
     """Refuse a swept parameter name TACAN does not know (ValueError)."""
     from dsp.tacan.kalman import KalmanConfig
-    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.params import TacanFrontendParams
     hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
     if name in ("adc_bits", "detector") or name in hdl_fields:
         return

@@ -214,7 +214,8 @@ def _old_chain(simulated_s, block_s, batch_s):
     from dsp.tacan.frontend import FrontendConfig
     from dsp.tacan.kalman import KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
-    from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendModel
+    from hdl.tacan.params import TacanFrontendParams
     n_blocks = int(round(simulated_s / block_s))
     bearing, snr = 90.0, 10.0
     sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)

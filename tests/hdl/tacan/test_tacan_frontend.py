@@ -21,7 +21,8 @@ from dsp.tacan.peak_params import PeakParams
 from hdl.tacan.peak_model import peak_search
 from hdl.model.fir import fir_kernel as _fir_kernel
 from hdl.model.rounding import round_consts as _round_consts
-from hdl.tacan.model import FrontendPeaks, TacanFrontendModel, TacanFrontendParams, amp_error_terms
+from hdl.tacan.model import FrontendPeaks, TacanFrontendModel
+from hdl.tacan.params import TacanFrontendParams, amp_error_terms
 from hdl.tacan.frontend import TacanFrontEnd
 
 P = TacanFrontendParams()
