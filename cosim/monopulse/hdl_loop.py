@@ -55,7 +55,7 @@ CYCLES_PER_WORD = 4
 def hdl_params(run, sig):
     """The front end for the scenario: its rates, ADC, block length, spacings, plus
     ``run.hdl_changes``."""
-    from hdl.monopulse.model import MonopulseFrontendParams
+    from hdl.monopulse.params import MonopulseFrontendParams
     arr = sig.array
     return MonopulseFrontendParams(fs_hz=sig.fs_hz, if_hz=sig.if_hz,
                                    snapshot_decimation=sig.decimation, cic_rate=sig.decimation,
@@ -140,7 +140,7 @@ class _HdlDsp:
 
     def writes_for(self, st):
         """Register writes steering a block at ``st`` = (u0, v0)."""
-        from hdl.monopulse.model import coef_word, dc_word
+        from hdl.monopulse.params import coef_word, dc_word
         arr = self.sig.array
         k = arr.steering_correction(st[0], st[1]) * self.cal_n
         out = [(f"coef{i + 1}", coef_word(k[i], self.p)) for i in range(4)]
@@ -155,7 +155,7 @@ class _HdlDsp:
         return [x & ((1 << p.dc_bits) - 1) for x in (u0, v0)]
 
     def _want(self, k):
-        from hdl.monopulse.model import dc_word
+        from hdl.monopulse.params import dc_word
         return [dc_word(x, self.p) for x in self.loop.steer[k, 0]]
 
     def _block(self, k, f):
@@ -264,7 +264,7 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
     """Run ``loop`` (one trial) on the HDL front end of ``run.backend``; fills the loop's
     arrays and returns the FIFO/pipeline figures (``fifo_dropped``, digests, writes; with
     ``faults``: the bad and missing records and the record receiver's counters)."""
-    from hdl.monopulse.model import REG_NAMES, pack_input
+    from hdl.monopulse.params import REG_NAMES, pack_input
     from ..pipeline import Pipeline
     from ..session import RegisterSession, open_frontend
     from .signal import generate

@@ -1,6 +1,6 @@
 """The bit-exact model of the monopulse front end as a persistent session
 (:class:`cosim.session.FrontendSession`): the ``model`` backend for
-:class:`hdl.monopulse.model.MonopulseFrontendParams`, with the same ports and the same bits
+:class:`hdl.monopulse.params.MonopulseFrontendParams`, with the same ports and the same bits
 as the ``pysim`` / ``verilator`` sessions of :class:`hdl.monopulse.frontend.MonopulseFrontEnd`.
 """
 from __future__ import annotations
@@ -32,7 +32,7 @@ class MonopulseModelSession(FrontendSession):
     """:class:`~hdl.monopulse.model.MonopulseFrontendModel` (state carried) and the FIFO
     model (:func:`~hdl.model.fifo.fifo_model_events`, state carried) as a session.
 
-    Input words are :func:`~hdl.monopulse.model.pack_input` words, one offered per cycle
+    Input words are :func:`~hdl.monopulse.params.pack_input` words, one offered per cycle
     while queued. Writes are port writes on :data:`BUS_PORTS` (as the HDL sessions take
     them; :func:`write_register` makes one bus write); a register write happens in every
     cycle ``reg_we`` is high, with the ``reg_addr`` / ``reg_data`` of that cycle. Each step
@@ -98,7 +98,7 @@ class MonopulseModelSession(FrontendSession):
         return out
 
     def _step(self, queue, ready, n, writes):
-        from hdl.monopulse.model import unpack_input
+        from hdl.monopulse.params import unpack_input
         p = self.params
         start, stop = self.cycle, self.cycle + n
         words = queue[:n]

@@ -6,8 +6,8 @@ import pytest
 from cosim.monopulse.session import MonopulseModelSession, write_register
 from cosim.session import open_stream_session
 from hdl.monopulse.frontend import MonopulseFrontEnd
-from hdl.monopulse.model import (REG_COEF, REG_U0, MonopulseFrontendParams, coef_word,
-                                 dc_word, pack_input)
+from hdl.monopulse.params import (REG_COEF, REG_U0, MonopulseFrontendParams, coef_word, dc_word,
+                                  pack_input)
 
 P = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
                             cordic_iterations=12, angle_bits=16, fifo_depth=16)

@@ -14,9 +14,9 @@ from dsp.monopulse.angles import direction_cosines
 from dsp.monopulse.golden import golden_chain
 from hdl.gnss.model import bus_writes
 from hdl.monopulse.frontend import MonopulseFrontEnd
-from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendModel,
-                                 MonopulseFrontendParams, angle_error_bound, coef_word,
-                                 dc_word, hadamard_channels, pack_input)
+from hdl.monopulse.model import MonopulseFrontendModel, angle_error_bound, hadamard_channels
+from hdl.monopulse.params import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
+                                  dc_word, pack_input)
 
 #: Reduced sizes for the Amaranth simulation: 4 samples per snapshot, 12 snapshots a block.
 SMALL = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
