@@ -155,7 +155,7 @@ def _equivalence(**kw) -> dict:
 
 
 def _frontend():
-    from hdl.gnss.model import GnssChannelParams
+    from hdl.gnss.params import GnssChannelParams
     return Frontend(params=GnssChannelParams, component=_component, model=_model_session,
                     verilog_name="gnss_channel")
 

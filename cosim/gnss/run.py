@@ -166,7 +166,7 @@ class GnssRunConfig:
     compare : str or None
         ``golden``: also run the golden chain (float) and report the differences.
     hdl_changes : tuple of (name, value)
-        Overrides of :class:`hdl.gnss.model.GnssChannelParams`.
+        Overrides of :class:`hdl.gnss.params.GnssChannelParams`.
     block_samples : int
         Samples generated and fed per block.
     """
@@ -268,7 +268,7 @@ class GnssRunConfig:
 
     def hdl_params(self, sig: GnssSignalConfig):
         """The channel for the scenario: its rate, digital IF, ADC and PRN."""
-        from hdl.gnss.model import GnssChannelParams
+        from hdl.gnss.params import GnssChannelParams
         p = GnssChannelParams(fs_hz=sig.fs_hz, if_hz=sig.digital_if_hz, adc_bits=sig.adc_bits,
                               prn=sig.prn, **dict(self.hdl_changes))
         if p.carr_phase_bits != WORD_BITS or p.code_phase_bits != WORD_BITS:
@@ -389,7 +389,7 @@ class _PipelineDsp:
 
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.gnss.model import ACC_FIELDS
+        from hdl.gnss.params import ACC_FIELDS
         p, fp = self.p, self.fifo
         if not call.words.size:
             return ()

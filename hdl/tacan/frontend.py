@@ -23,7 +23,7 @@ from ..fir import Fir
 from .peak import PeakSearch
 from .params import TacanFrontendParams
 
-__all__ = ["TacanFrontEnd", "TacanFrontendParams"]
+__all__ = ["TacanFrontEnd"]
 
 
 class TacanFrontEnd(wiring.Component):

@@ -10,7 +10,7 @@ import pytest
 from cosim.gnss.run import SKIP_RECORDS, GnssRunConfig, closed_loop
 from cosim.verilator import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
-from hdl.gnss.model import GnssChannelParams
+from hdl.gnss.params import GnssChannelParams
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

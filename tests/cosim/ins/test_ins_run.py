@@ -14,7 +14,7 @@ from cosim.gnss.run import SKIP_RECORDS, GnssRunConfig, closed_loop
 from cosim.ins.run import InsRunConfig, run_ins
 from cosim.verilator import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
-from hdl.gnss.model import GnssChannelParams
+from hdl.gnss.params import GnssChannelParams
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")
@@ -195,7 +195,7 @@ def test_aided_kf_closed_loop_model_equals_verilator():
 def test_boundary_replay_in_blocks_equals_one_pass():
     # the dump-boundary replay runs in blocks (a 150 s record would not fit in one array)
     from cosim.gnss.run import _boundaries, handover_writes
-    from hdl.gnss.model import REG_NAMES
+    from hdl.gnss.params import REG_NAMES
     w = [(c, REG_NAMES[r], v) for c, r, v in handover_writes(SMALL, 1500.0, 600.0)]
     w += [(5000 + 2046 * j, REG_NAMES["code_freq"], SMALL.code_word(1.023e6 + 40.0 * j))
           for j in range(8)]

@@ -6,8 +6,10 @@ from _util import assert_lints_clean, needs_verilator, verilator_sim  # tests/hd
 from cosim.pysim import run_stream
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
-from hdl.gnss.model import (REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssArrayModel,
-                            GnssChannelModel, GnssChannelParams, bus_writes, dump_epochs_for)
+from hdl.gnss.model import GnssArrayModel, GnssChannelModel
+from hdl.model.bus import bus_writes
+from hdl.gnss.params import (REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssChannelParams,
+                             dump_epochs_for)
 
 #: Reduced rate for the Amaranth simulation: 2 samples per chip, 2046 samples per epoch.
 SMALL = GnssChannelParams(fs_hz=2.046e6, if_hz=0.3e6, el_spacing_samples=2, slew_bits=6,

@@ -12,7 +12,7 @@ from cosim.monopulse.trajectory import ConstantRate
 from cosim.pysim import run_stream
 from dsp.monopulse.angles import direction_cosines
 from dsp.monopulse.golden import golden_chain
-from hdl.gnss.model import bus_writes
+from hdl.model.bus import bus_writes
 from hdl.monopulse.frontend import MonopulseFrontEnd
 from hdl.monopulse.model import MonopulseFrontendModel, angle_error_bound, hadamard_channels
 from hdl.monopulse.params import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
