@@ -54,7 +54,7 @@ def fxpmath_naive_rate(dts_ticks, ys, cfg=None, n_steps: int = 150) -> float:
     of a float model with a fixed-point library looks like). Same formats as the core; no
     gate or r estimate (it only makes it slower)."""
     from fxpmath import Fxp
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     from dsp.tacan.standard import F15, F135
     cfg = cfg or KalmanFixedConfig()
 
@@ -90,7 +90,8 @@ def fxpmath_naive_rate(dts_ticks, ys, cfg=None, n_steps: int = 150) -> float:
 
 
 def dsp_speed(out: Path, quick: bool = False) -> dict:
-    from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+    from dsp.tacan.kalman import EnvelopeKalman
+    from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
     import numba
     t_start = time.perf_counter()
     fcfg, kcfg = KalmanFixedConfig(), KalmanConfig()
@@ -240,7 +241,7 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     and of batches; the tests run a few seconds). ``out=None`` writes no files.
     """
     from concurrent.futures import ProcessPoolExecutor
-    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig
     from hdl.tacan.params import TacanFrontendParams
     from .link import DspServiceConfig

@@ -144,7 +144,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     until 2026-12-05) and with both searches (``--detector both``, the default): SNR -3..20
     dB at 90 / 270 deg, every bearing at 0 dB; with single pulses also every bearing at 10
     dB, the pulse-level fast path and the robustness table (``tacan-robustness`` has both)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
     from .detector import detector_bounds
@@ -396,7 +396,7 @@ DETECTOR_VARIANTS = (("default (peak, clipped floor)", {"detector": "pulse"}),
 def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     """RMSE / CRB and mean error of the detector variants near the noise floor (golden
     chain, 3 s records, the same seeds for every variant)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from .detector import detector_bounds
     from .signal import TacanSignalConfig
@@ -539,7 +539,7 @@ def tacan_sensitivity(out: Path, quick: bool = False, jobs: int | None = None) -
     100-107, the tacan-detector bench's records); every bearing at 0 dB (2 s records, the
     tacan-accuracy bench's); and integrity over 60 s: the other mode in both directions and
     noise alone, no bearing shown valid."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()
@@ -619,7 +619,7 @@ def tacan_confidence(out: Path, quick: bool = False, jobs: int | None = None) ->
     receiver. Reported: RMSE / CRB with a 95 % bootstrap interval over the records, the mean
     error with its standard error, and whether each point meets the criterion (RMSE / CRB
     <= 1.5 and |mean| <= 0.1 deg; the interval says how firmly)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()

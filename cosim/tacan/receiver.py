@@ -1,6 +1,6 @@
 """TACAN's entry in the receiver registry (:mod:`cosim.receivers`): its command-line options
 (derived from :class:`~cosim.tacan.signal.TacanSignalConfig`,
-:class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman.KalmanConfig` and
+:class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman_config.KalmanConfig` and
 :class:`~cosim.link.DspServiceConfig`), the ``tacan`` command, its sweep and fault studies,
 its HDL top and its equivalence check."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import math
 import sys
 
 from dsp.tacan.frontend import DETECTORS
-from dsp.tacan.kalman import KalmanConfig
+from dsp.tacan.kalman_config import KalmanConfig
 
 from ..link import DspServiceConfig
 from ..receivers import (Arg, Figure, Frontend, Option, Receiver, Study, config_kwargs,

@@ -30,7 +30,7 @@ import numpy as np
 from dsp.tacan.frontend import (BOTH_PAIR_SEARCH, DETECTORS, NOISE_FLOORS, PAIR_DETECTOR,
                                 FrontendConfig,
                                 pair_detector, pair_spacing_samples, run_golden_frontend)
-from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PAIR_PEAK_BIAS
 from dsp.tacan.receiver import (BearingTrack, ReceiverConfig, amplitude_codes, bearing_stats,
                                 ReceiverState, process_peaks)

@@ -14,7 +14,7 @@ Parameters (``--param NAME=VALUES``)
                           ``K``, ``cs``, ``innov``, ``r``), integer bits kept: fraction bits
                           change.
 ``dsp.<fmt>.rounding``    rounding of that format (``floor`` / ``half_up``).
-``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
+``kalman.<field>``        a :class:`dsp.tacan.kalman_config.KalmanConfig` field.
 ``detector``              what the FPGA detects (``both``, the default; ``pulse``; ``pair``):
                           one value per study, since the golden chain detects the same way
                           (the single-pulse receiver's study: ``detector=pulse``).
@@ -39,7 +39,7 @@ FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
 
 def check_param(name: str) -> None:
     """Refuse a swept parameter name TACAN does not know (ValueError)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from hdl.tacan.params import TacanFrontendParams
     hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
     if name in ("adc_bits", "detector") or name in hdl_fields:
@@ -73,7 +73,7 @@ def trial_signal(cfg, snr_db: float, trial: int, adc_bits: int = 12):
 def run_config(cfg, combo: tuple, sig):
     """The :class:`cosim.tacan.run.TacanRunConfig` of a point (raises ValueError if invalid)."""
     from dsp.fixed import FixedFormat
-    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
     from ..validate import check_choice, check_int
     from .run import TacanRunConfig
     from .run import DETECTORS
@@ -187,7 +187,7 @@ class TacanSweepRecord:
         self.base = {"bearing_deg": sig.bearing_deg}
 
     def golden(self) -> dict:
-        from dsp.tacan.kalman import KalmanConfig
+        from dsp.tacan.kalman_config import KalmanConfig
         from . import run as tr
         gs = self.signals[GOLDEN_ADC_BITS]
         grun = tr.TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",

@@ -3,7 +3,7 @@
 :func:`_trial` runs one trial's filter over all its steps in terms of the operators of
 :mod:`dsp.qops`; numba compiles it for ``float64`` state (the golden filter: every operator
 is the real operation) and for ``int64`` state (the fixed-point DSP core: every operator
-quantises to the formats of :class:`dsp.tacan.kalman.KalmanFixedConfig`, whose integer
+quantises to the formats of :class:`dsp.tacan.kalman_config.KalmanFixedConfig`, whose integer
 constants ``ci`` it reads at the indices below). :func:`step_consts` computes the per-step
 values every trial shares; :func:`run_serial` / :func:`run_parallel` run a batch of trials
 block by block. :class:`dsp.tacan.kalman.EnvelopeKalman` prepares the inputs and keeps the

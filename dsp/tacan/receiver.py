@@ -17,7 +17,8 @@ from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, com
 from .decode import DecoderConfig, decode, outside_bursts
 from .rotation import rotation_track
 from .scoring import REF_MAIN
-from .kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from .kalman import EnvelopeKalman
+from .kalman_config import KalmanConfig, KalmanFixedConfig
 from .standard import F15, F135
 from .peakbias import PeakBias
 from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s

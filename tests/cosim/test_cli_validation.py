@@ -53,7 +53,7 @@ def test_every_sample_rate_gives_the_true_bearing(capsys, fs_hz, backend):
 
 
 def test_ticks_need_their_clock():
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig, process_peaks
     t = np.arange(10) * 1e-3
     with pytest.raises(ValueError, match="ticks need their clock: pass tick_hz"):

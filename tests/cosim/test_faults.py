@@ -6,7 +6,8 @@ import pytest
 
 from cosim.cli import main
 from cosim.studies.faults import FaultConfig, _flip_signed, flip_bits, parse_ber, run_faults
-from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanFixedConfig
 
 QUICK = dict(trials=1, duration_s=1.2, memory_s=0.25)
 

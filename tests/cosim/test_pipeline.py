@@ -16,7 +16,7 @@ from cosim.tacan.session import TacanModelSession
 from cosim.tacan.run import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
 from cosim.verilator import verilator_available
-from dsp.tacan.kalman import KalmanConfig
+from dsp.tacan.kalman_config import KalmanConfig
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")
@@ -212,7 +212,7 @@ def _old_chain(simulated_s, block_s, batch_s):
     from dsp.tacan.bearing import wrap_deg
     from dsp.tacan.fifo_rx import receive_words
     from dsp.tacan.frontend import FrontendConfig
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
     from hdl.tacan.model import TacanFrontendModel
     from hdl.tacan.params import TacanFrontendParams

@@ -15,7 +15,7 @@ from cosim.tacan.run import TacanRunConfig, frontend_output, run_tacan
 from cosim.tacan.signal import TacanSignalConfig
 from cosim.verilator import verilator_available
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.kalman import KalmanConfig
+from dsp.tacan.kalman_config import KalmanConfig
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

@@ -6,7 +6,7 @@ from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_sche
 from dsp.tacan.bearing import combine_coarse_fine, seed_eq17, wrap_deg
 from dsp.tacan.decode import DecoderConfig, decode
 from dsp.tacan.scoring import REF_AUX, REF_MAIN
-from dsp.tacan.kalman import KalmanConfig
+from dsp.tacan.kalman_config import KalmanConfig
 from dsp.tacan.bounds import crb_deg
 from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
 
@@ -318,7 +318,7 @@ def test_binary_angle_conversions():
 
 
 def test_phase_words_match_the_kalman_core():
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
 
     cfg = KalmanFixedConfig()
     fw15, fw135 = (int(v) for v in cfg.value_consts()[:2])
@@ -412,7 +412,8 @@ def test_bearing_from_fixed_kalman_state_on_tacan_pulses():
     state and the tick differences to the latest main and latest reference: the integer
     bearing is the true one (20 dB) and within 2.1 LSB of the float readout."""
     from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
-    from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
+    from dsp.tacan.kalman import EnvelopeKalman
+    from dsp.tacan.kalman_config import KalmanFixedConfig
 
     cfg = TacanSignalConfig(duration_s=1.0, snr_db=20, seed=4)
     bears = np.array([0.0, 39.99, 123.4, 200.0, 359.9])

@@ -3,7 +3,8 @@ independent formulations: batch least squares and a plain numpy matrix Kalman fi
 import numpy as np
 import pytest
 
-from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig
 from dsp.tacan.standard import F15, F135
 
 H = np.array([1.0, 0, 1, 0, 1])
@@ -155,7 +156,7 @@ def test_state_jump_sees_a_state_word_changed_between_updates(arith):
     process noise. The answer: the checkpoint's state predicted to now (the core's own
     prediction); twice in a row, a re-initialisation, after which nothing is judged until
     the next checkpoint."""
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     t, y, _ = _stream(5, n=3000)
     cfg = KalmanConfig()
     kf = EnvelopeKalman(KalmanFixedConfig(kalman=cfg) if arith == "fixed" else cfg)
@@ -206,7 +207,7 @@ def test_covariance_fault_sees_a_covariance_word_changed_between_updates(arith):
     word raised by far more than the process noise since the checkpoint, or an off-diagonal
     word beyond the Cauchy-Schwarz bound, is a corrupted word (and a state-jump statistic
     that divides by the covariance does not see it)."""
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     t, y, _ = _stream(6, n=2000)
     cfg = KalmanConfig()
     dts = np.diff(t, prepend=t[0])

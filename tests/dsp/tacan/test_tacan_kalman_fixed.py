@@ -7,10 +7,11 @@ import pytest
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp import qops
-from dsp.tacan import kalman as kfx
+from dsp.tacan import kalman_config as kfx
 from dsp.tacan import phase_ops
 from dsp.tacan.bearing import PHASE_BITS
-from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.kalman_kernel import EVENT_NAMES
 from dsp.tacan.standard import F15, F135
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
-from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.peakbias import PAIR_PEAK_BIAS, PeakBias
 from dsp.tacan.receiver import ReceiverConfig
 

@@ -5,7 +5,7 @@ import pytest
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
 
 

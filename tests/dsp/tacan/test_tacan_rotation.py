@@ -13,7 +13,8 @@ from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.rotation import (RATE_QUANTUM, estimate_rotation, quantize_rotation,
                               rotation_track)
-from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
 from dsp.tacan.standard import F15
 
