@@ -204,8 +204,7 @@ class _TacanBatchDsp:
         ticks = np.concatenate(self.acc_t)
         y = amplitude_codes(np.concatenate(self.acc_a), p.scale_to_fs, rc.kalman.y)
         self.acc_t, self.acc_a = [], []
-        tr = process_peaks(ticks / self.fs, y, rc, ticks=ticks, tick_hz=self.fs,
-                           state=self.dsp_state)
+        tr = process_peaks(ticks / self.fs, y, rc, ticks=ticks, state=self.dsp_state)
         self.dsp_state = tr.state
         self.t_dsp += time.perf_counter() - t3
         keep = tr.times_s >= self.settle
@@ -257,7 +256,7 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)
     params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
     svc = DspServiceConfig()
-    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(), tick_hz=sig0.fs_hz))
+    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(tick_hz=sig0.fs_hz)))
     fs, n_blk = sig0.fs_hz, sig0.n_samples
     batch_cycles = int(round(batch_s * fs))
     spc = int(round(loop_s * fs)) // svc.period_cycles

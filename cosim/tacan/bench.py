@@ -526,7 +526,7 @@ def _other_mode(kw: dict) -> dict:
     run = TacanRunConfig(signal=replace(sig, mode=rx), detector=kw["detector"],
                          require_bearing=False)
     fo = _golden(generate(sig).samples, run)
-    tr = run_dsp(fo, run, sig.fs_hz)
+    tr = run_dsp(fo, run)
     return {**kw, "peaks": int(fo.ticks.size), "main_refs": int(tr.n_main_refs),
             "aux_refs": int(tr.n_aux_refs), "bearings": int(tr.times_s.size),
             "valid_bearings": int(np.count_nonzero(tr.valid)) if tr.valid is not None else 0}

@@ -66,11 +66,12 @@ class TacanRunConfig:
         ``"float"`` (golden arithmetic) or ``"fixed"`` (the fixed-point core, formats
         ``fixed``).
     kalman : KalmanConfig
-        The filter (memory, gate, ...), shared by both arithmetics.
+        The filter (memory, gate, ...), shared by both arithmetics; the receiver runs it
+        with its ``tick_hz`` replaced by the signal's ``fs_hz``, the clock of the FPGA
+        timestamps.
     fixed : KalmanFixedConfig, optional
         Word lengths of the fixed-point core (default formats; its ``kalman`` is replaced
-        by ``kalman`` and its ``tick_hz`` by the signal's ``fs_hz``, the clock of the
-        FPGA timestamps).
+        by that filter).
     settle_s : float, optional
         Bearings before this time are not scored (default 2 x the filter memory).
     frontend_changes : tuple of (name, value)
@@ -252,13 +253,9 @@ class TacanRunConfig:
 
     @property
     def receiver(self) -> ReceiverConfig:
-        if self.dsp == "fixed":
-            base = self.fixed or KalmanFixedConfig()
-            # the core counts the FPGA's timestamps: ticks of the ADC clock of this run
-            k = KalmanFixedConfig(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
-                                     "kalman": self.kalman, "tick_hz": float(self.signal.fs_hz)})
-        else:
-            k = self.kalman
+        # the filter counts the FPGA's timestamps: ticks of the ADC clock of this run
+        kal = replace(self.kalman, tick_hz=float(self.signal.fs_hz))
+        k = replace(self.fixed or KalmanFixedConfig(), kalman=kal) if self.dsp == "fixed" else kal
         dec = None
         if self.amplitude == "partner":
             dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)
@@ -388,18 +385,18 @@ FRONTENDS = {"golden": _golden, "model": _model,
 
 
 # ---------------------------------------------------------------------------------------
-def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float,
+def run_dsp(fo: FrontendOutput, run: TacanRunConfig,
             state: ReceiverState | None = None) -> BearingTrack:
     """The bearing DSP on a front end's output (float or fixed by ``run.dsp``), from
-    ``state`` when given (e.g. a core with scheduled upsets, :mod:`cosim.tacan.faults`)."""
+    ``state`` when given (e.g. a core with scheduled upsets, :mod:`cosim.tacan.faults`); the
+    timestamps' clock is the receiver configuration's (the signal's ``fs_hz``)."""
     rc = run.receiver
-    times = fo.ticks / fs_hz
+    times = fo.ticks / rc.kalman.tick_hz
     if rc.dsp == "fixed" and fo.amplitude_lsb is not None:
         amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
     else:
         amps = fo.amplitude_fs
-    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz, source=fo.source,
-                         state=state)
+    return process_peaks(times, amps, rc, ticks=fo.ticks, source=fo.source, state=state)
 
 
 def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):
@@ -488,7 +485,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
             frontend_cache[key] = fo
     t2 = time.perf_counter()
     bar.stage(f"DSP ({run.dsp})")
-    track = run_dsp(fo, run, sig.fs_hz)
+    track = run_dsp(fo, run)
     t3 = time.perf_counter()
     st = bearing_stats(track, s.truth.bearing_deg, run.settle)
     rel_sigma = sig.matched_filter_rel_sigma()
@@ -556,7 +553,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         gfo = _golden(s.samples, run)
         gold = run_dsp(gfo, TacanRunConfig(**{**_fields(run), "backend": "golden",
                                                "dsp": "float", "compare": None,
-                                               "recheck": None}), sig.fs_hz)
+                                               "recheck": None}))
         rms, n = _match_rms(track, gold, run.settle)
         r["vs_golden_rms_deg"] = rms
         r["vs_golden_n"] = n
@@ -657,4 +654,4 @@ def frontend_output(run: TacanRunConfig) -> tuple[FrontendOutput, BearingTrack]:
     """The front end's output and the DSP's track for ``run`` (for tests and studies)."""
     s = generate(run.signal)
     fo = FRONTENDS[run.backend](s.samples, run)
-    return fo, run_dsp(fo, run, run.signal.fs_hz)
+    return fo, run_dsp(fo, run)

@@ -84,7 +84,7 @@ Fixed-point stability
   with ``input_limit``), so garbage never enters the state, not even right after a
   re-initialisation.
 
-Timestamps: ``run`` takes ``dts`` as integer ticks (``tick_hz``, default 20 MHz, the ADC
+Timestamps: ``run`` takes ``dts`` as integer ticks (``KalmanConfig.tick_hz``, default 20 MHz, the ADC
 clock) or float seconds. The fixed core converts seconds by rounding the *cumulative* time to
 ticks (the residual carried between calls) so no rounding drift builds up; the float filter
 converts ticks to seconds.
@@ -124,8 +124,6 @@ class EnvelopeKalman(StateMonitor):
         Independent trials sharing one pulse timeline.
     parallel : bool, optional
         Spread the trials over the cores (numba threads). Default: when ``batch >= 16``.
-    tick_hz : float, optional
-        Tick rate for integer ``dts`` in float mode (fixed mode: ``cfg.tick_hz``).
 
     Attributes
     ----------
@@ -139,27 +137,25 @@ class EnvelopeKalman(StateMonitor):
     """
 
     def __init__(self, cfg: KalmanConfig | KalmanFixedConfig | None = None, batch: int = 1, *,
-                 parallel: bool | None = None, tick_hz: float = 20e6):
+                 parallel: bool | None = None):
         cfg = KalmanConfig() if cfg is None else cfg
         if isinstance(cfg, KalmanFixedConfig):
             self.fixed: KalmanFixedConfig | None = cfg
             self.kalman = cfg.kalman
-            self.tick_hz = float(cfg.tick_hz)
             self._ci = cfg.int_consts()
             self._cv = cfg.value_consts()
             dtype = np.int64
         elif isinstance(cfg, KalmanConfig):
             self.fixed = None
             self.kalman = cfg
-            if not (isinstance(tick_hz, (int, float)) and math.isfinite(tick_hz) and tick_hz > 0):
-                raise ValueError(f"tick_hz must be a finite number > 0, not {tick_hz!r}")
-            self.tick_hz = float(tick_hz)
             self._ci = KalmanFixedConfig(kalman=cfg).int_consts()   # unused by float ops
             self._cv = float_consts(cfg)
             dtype = np.float64
         else:
             raise ValueError(f"cfg must be a KalmanConfig or KalmanFixedConfig, not {cfg!r}")
         self.cfg = cfg
+        #: The clock of integer ``dts`` (:attr:`KalmanConfig.tick_hz`).
+        self.tick_hz = float(self.kalman.tick_hz)
         self._rotation_hz = F15
         if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
             raise ValueError(f"batch must be an integer >= 1, not {batch!r}")

@@ -46,6 +46,11 @@ class KalmanConfig:
         fixed core's input range, i.e. its ``y`` format (a value it cannot hold is
         implausible rather than saturated); no limit in float (the golden filter takes
         amplitudes on any scale).
+    tick_hz : float
+        The clock of integer timestamps (Hz, >= 135 kHz): the ADC sample rate the front end
+        stamps its peaks with. The fixed-point core's frequency words and the float filter's
+        tick-to-second conversion read it, and so does the receiver
+        (:func:`dsp.tacan.receiver.process_peaks`): the one place the clock is given.
     """
 
     memory_s: float = 0.5
@@ -56,8 +61,13 @@ class KalmanConfig:
     max_rejects: int = 64
     r_smooth: int = 512
     input_limit: float | None = None
+    tick_hz: float = 20e6
 
     def __post_init__(self):
+        t = self.tick_hz
+        if isinstance(t, bool) or not (isinstance(t, (int, float)) and math.isfinite(t)
+                                       and t >= 1000 * F135):
+            raise ValueError(f"tick_hz must be a finite number >= {1000 * F135:g}, not {t!r}")
         if self.input_limit is not None and not (
                 isinstance(self.input_limit, (int, float)) and math.isfinite(self.input_limit)
                 and self.input_limit > 0):
@@ -113,7 +123,6 @@ class KalmanFixedConfig:
     cs: FixedFormat = field(default_factory=lambda: _default(24, 22))
     innov: FixedFormat = field(default_factory=lambda: _default(24, 20))
     r: FixedFormat = field(default_factory=lambda: _default(40, 30))
-    tick_hz: float = 20e6
 
     def __post_init__(self):
         if not isinstance(self.kalman, KalmanConfig):
@@ -131,9 +140,6 @@ class KalmanFixedConfig:
                 raise ValueError(f"{name} overflow must be 'saturate', not {f.overflow!r}")
             if f.frac < 0:
                 raise ValueError(f"{name} frac must be >= 0, not {f.frac}")
-        t = self.tick_hz
-        if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 1000 * F135):
-            raise ValueError(f"tick_hz must be a finite number >= {1000 * F135:g}, not {t!r}")
         y, x, P, K, cs, iv, r = self.y, self.x, self.P, self.K, self.cs, self.innov, self.r
         if not (cs.int_bits >= 1 and cs.frac <= TRIG_FRAC):
             raise ValueError(f"cs must hold +-1 with at most {TRIG_FRAC} fraction bits, not {cs}")
@@ -160,6 +166,11 @@ class KalmanFixedConfig:
                              f"(needs p0 <= {P.max_value / 2:g})")
         if r.max_value < 1.0:
             raise ValueError(f"r format {r} must hold the initial r = 1")
+
+    @property
+    def tick_hz(self) -> float:
+        """The clock of the timestamps the core counts (:attr:`KalmanConfig.tick_hz`)."""
+        return self.kalman.tick_hz
 
     def int_consts(self) -> np.ndarray:
         """Integer parameters of the kernel: counters and, per format, frac/min/max/half-up."""

@@ -214,8 +214,7 @@ class ReceiverState:
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
-                  ticks=None, tick_hz: float | None = None,
-                  state: ReceiverState | None = None, source=None) -> BearingTrack:
+                  ticks=None, state: ReceiverState | None = None, source=None) -> BearingTrack:
     """Run the bearing DSP on pulse peaks.
 
     Parameters
@@ -227,11 +226,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         integer codes in the core's ``y`` format (see :func:`amplitude_codes`).
     ticks : array of int (N,), optional
         The same times as integer clock ticks (the FPGA timestamps, unwrapped): the filter
-        then steps by exact tick differences instead of rounded seconds.
-    tick_hz : float
-        The clock of ``ticks`` (the ADC sample rate); required with ``ticks`` -- there is
-        no default rate, since a wrong one silently rotates every bearing. The fixed-point
-        core's ``KalmanFixedConfig.tick_hz`` must be the same clock.
+        then steps by exact tick differences instead of rounded seconds. Their clock is the
+        filter configuration's (``cfg.kalman.tick_hz``, :attr:`KalmanConfig.tick_hz`).
     state : ReceiverState, optional
         Continue from an earlier block (streaming); the updated state is returned in
         ``track.state``. A reference burst split across two blocks is not decoded.
@@ -250,17 +246,6 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ticks = np.asarray(ticks)
         if ticks.dtype.kind not in "iu" or ticks.shape != t.shape:
             raise ValueError("ticks must be integers, one per peak time")
-        if tick_hz is None:
-            raise ValueError("ticks need their clock: pass tick_hz (the ADC sample rate)")
-        if not (isinstance(tick_hz, (int, float)) and math.isfinite(tick_hz) and tick_hz > 0):
-            raise ValueError(f"tick_hz must be a finite number > 0, not {tick_hz!r}")
-        tick_hz = float(tick_hz)
-        if cfg.dsp == "fixed" and cfg.kalman.tick_hz != tick_hz:
-            raise ValueError(f"the fixed-point core counts ticks of {cfg.kalman.tick_hz:g} Hz "
-                             f"(KalmanFixedConfig.tick_hz) but the timestamps tick at "
-                             f"{tick_hz:g} Hz")
-    elif tick_hz is not None:
-        raise ValueError("tick_hz is the clock of ticks: pass ticks with it")
     amps = np.atleast_2d(np.asarray(amplitudes))
     if amps.dtype.kind in "iu":
         if cfg.dsp != "fixed":
@@ -290,8 +275,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ticks = ticks[pm] if ticks is not None else None
     thr = cfg.peak_bias.threshold(amps) if cfg.peak_bias is not None else None
     if cfg.pair_reports or source is not None:
-        t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks, tick_hz=tick_hz,
-                                      tol_s=dcfg.tol_s)
+        t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks,
+                                      tick_hz=cfg.kalman.tick_hz, tol_s=dcfg.tol_s)
     if source is None:
         dec = decode(t, cfg.mode, dcfg)
         sel = np.flatnonzero(dec.measurement_mask)
@@ -305,11 +290,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     r_mult = burst_r_mult(tm, dec, cfg.mode) if cfg.density_weighting else None
     B = amps.shape[0]
     if state is None:
-        state = ReceiverState(kf=EnvelopeKalman(cfg.kalman, batch=B, tick_hz=tick_hz or 20e6))
+        state = ReceiverState(kf=EnvelopeKalman(cfg.kalman, batch=B))
     elif state.kf.batch != B or state.kf.cfg != cfg.kalman:
-        raise ValueError("state belongs to a receiver with another batch size or filter")
-    elif tick_hz is not None and state.kf.tick_hz != tick_hz:
-        raise ValueError(f"state counts ticks of {state.kf.tick_hz:g} Hz, not {tick_hz:g} Hz")
+        raise ValueError("state belongs to a receiver with another batch size, filter or clock")
     kf = state.kf
     if thr is not None:      # amplitude codes: their threshold in signal units
         thr = math.ldexp(thr, -cfg.kalman.y.frac) if amps.dtype.kind == "i" else thr

@@ -222,7 +222,7 @@ def _old_chain(simulated_s, block_s, batch_s):
     params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
     fe = TacanFrontendModel(params)
     svc = DspServiceConfig()
-    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(), tick_hz=20e6))
+    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(tick_hz=20e6)))
     fs, n_blk = sig0.fs_hz, sig0.n_samples
     settle = 2 * rc.kalman.kalman.memory_s
     fe_state = link_state = rx_state = dsp_state = None
@@ -250,7 +250,7 @@ def _old_chain(simulated_s, block_s, batch_s):
             ticks = np.concatenate(acc_t)
             y = amplitude_codes(np.concatenate(acc_a), params.scale_to_fs, rc.kalman.y)
             acc_t, acc_a = [], []
-            tr = process_peaks(ticks / fs, y, rc, ticks=ticks, tick_hz=fs, state=dsp_state)
+            tr = process_peaks(ticks / fs, y, rc, ticks=ticks, state=dsp_state)
             dsp_state = tr.state
             err = wrap_deg(tr.bearing_deg[0, tr.times_s >= settle] - bearing)
             rows.append({"bearings": int(err.size),

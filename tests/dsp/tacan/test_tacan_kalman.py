@@ -82,7 +82,7 @@ def test_equals_matrix_form_with_process_noise_and_chunking():
 def test_ticks_and_seconds_agree_in_float():
     ticks = np.random.default_rng(3).integers(100, 6000, 300)
     y = np.random.default_rng(4).uniform(0.5, 1.5, (1, 300))
-    a, b = EnvelopeKalman(), EnvelopeKalman(tick_hz=20e6)
+    a, b = EnvelopeKalman(), EnvelopeKalman(KalmanConfig(tick_hz=20e6))
     a.run(ticks / 20e6, y)
     b.run(ticks, y)
     np.testing.assert_array_equal(a.x, b.x)

@@ -384,10 +384,15 @@ def test_bad_input_messages():
     (dict(innov=FixedFormat(26, 20, True, "half_up", "saturate"),
           K=FixedFormat(30, 26, True, "half_up", "saturate")),
      r"innov must be at most 24 bits wide"),
-    (dict(tick_hz=float("nan")), r"tick_hz must be a finite number >= 135000, not nan"),
     (dict(kalman="fast"), r"kalman must be a KalmanConfig, not 'fast'"),
     (dict(innov=(24, 20)), r"innov must be a FixedFormat, not \(24, 20\)"),
 ])
 def test_bad_config_messages(changes, message):
     with pytest.raises(ValueError, match=message):
         KalmanFixedConfig(**changes)
+
+
+def test_the_core_reads_its_clock_from_the_filter_config():
+    assert KalmanFixedConfig(KalmanConfig(tick_hz=24e6)).tick_hz == 24e6
+    with pytest.raises(ValueError, match=r"tick_hz must be a finite number >= 135000, not nan"):
+        KalmanConfig(tick_hz=float("nan"))

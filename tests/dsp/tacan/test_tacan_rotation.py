@@ -105,7 +105,7 @@ def _run(rate_hz, dsp, track=True, seed=1, snr=10.0):
     ticks = np.round(t * 20e6).astype(np.int64)
     kc = KalmanConfig() if dsp == "float" else KalmanFixedConfig()
     tr = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=kc, track_rotation=track),
-                       ticks=ticks, tick_hz=20e6)
+                       ticks=ticks)
     return tr, bearing_stats(tr, BEARINGS, 1.0)
 
 
