@@ -195,9 +195,9 @@ def hdl_blocks() -> dict:
     from hdl.fifo import DspFifo
     from hdl.fir import Fir
     from hdl.mixer import Mixer
-    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.params import TacanFrontendParams
     from hdl.nco import Nco
-    from hdl.peak import PeakSearch
+    from hdl.tacan.peak import PeakSearch
     p = TacanFrontendParams()
     blocks = {
         "nco": lambda: Nco(p.ddc.nco),

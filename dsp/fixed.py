@@ -15,7 +15,7 @@ Rounding modes (what happens to the LSBs dropped by a right shift):
 Overflow modes: ``"wrap"`` (two's complement, what a plain adder does) and ``"saturate"``.
 
 Arithmetic lives with the cores that use it: the one-source numba operators of
-:mod:`dsp.qops` (TACAN core) and :mod:`dsp.estimation.ops` (estimation library), which count
+:mod:`dsp.qops` (TACAN core) and :mod:`dsp.qops` (estimation library), which count
 saturations and log ranges per signal (:class:`dsp.estimation.events.EventRegistry`). The
 array kernels this module once had (``add`` ... ``div``, ``Counters``, ``SignalStats``) had
 no production caller and were removed.

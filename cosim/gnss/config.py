@@ -131,7 +131,7 @@ class GnssRunConfig:
     compare : str or None
         ``golden``: also run the golden chain (float) and report the differences.
     hdl_changes : tuple of (name, value)
-        Overrides of :class:`hdl.gnss.model.GnssChannelParams`.
+        Overrides of :class:`hdl.gnss.params.GnssChannelParams`.
     block_samples : int
         Samples generated and fed per block.
     """
@@ -195,8 +195,8 @@ class GnssRunConfig:
         if self.r_mode not in ("cn0", "seed"):
             raise ValueError(f"r_mode must be cn0 or seed, not {self.r_mode!r}")
         if self.r_mode != "cn0":
-            from dsp.gnss.trackers import _TRACKERS
-            if "r_mode" not in inspect.signature(_TRACKERS[self.tracker][0]).parameters:
+            from dsp.gnss.trackers import TRACKERS
+            if "r_mode" not in inspect.signature(TRACKERS[self.tracker][0]).parameters:
                 raise ValueError(f"r_mode {self.r_mode} applies to the seed-002 trackers "
                                  f"(aukf, ukf), not {self.tracker}")
         if self.compare not in (None, "golden"):

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from dsp.gnss.ca_code import L1_HZ
-from dsp.gnss.jerk import _phi_b, jerk_phi, jerk_q  # noqa: F401  (the model lives with the DSP)
+from dsp.gnss.jerk import phi_b, jerk_phi, jerk_q  # noqa: F401  (the model lives with the DSP)
 
 #: Speed of light (m/s), IS-GPS-200.
 C_MPS = 299792458.0

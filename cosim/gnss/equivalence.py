@@ -23,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
-from hdl.gnss.model import GnssChannelParams
+from hdl.gnss.params import GnssChannelParams
 
 from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
 

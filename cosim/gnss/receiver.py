@@ -182,7 +182,7 @@ BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_
 
 
 def _frontend():
-    from hdl.gnss.model import GnssChannelParams
+    from hdl.gnss.params import GnssChannelParams
     return Frontend(params=GnssChannelParams, component=_component, model=_model_session,
                     verilog_name="gnss_channel")
 

@@ -1,7 +1,7 @@
 """The bit-exact GNSS channel as a persistent session, and the register view of any session.
 
 :class:`GnssModelSession` is the ``model`` backend of :func:`cosim.backends.factory.open_frontend`
-for :class:`hdl.gnss.model.GnssChannelParams`: the bit-exact channel
+for :class:`hdl.gnss.params.GnssChannelParams`: the bit-exact channel
 (:class:`~hdl.gnss.model.GnssChannelModel`, its state carried) and its record FIFO
 (:func:`~hdl.model.fifo.fifo_model_events`, its state carried). It has the ports of
 :class:`hdl.gnss.channel.GnssChannel`, so the same port writes drive the model, the
@@ -16,7 +16,7 @@ Amaranth simulation and Verilator:
 
 The DSP thinks in registers, not bus cycles: :class:`GnssRegisterSession` wraps a session
 of any backend and takes writes to ``carr_freq``, ``code_freq``, ``prn`` and ``slew``
-(:data:`hdl.gnss.model.REG_NAMES`). A register write taking effect at cycle ``e`` is the
+(:data:`hdl.gnss.params.REG_NAMES`). A register write taking effect at cycle ``e`` is the
 bus pulse ``reg_we = 1`` with its address and data at bus cycle ``b = max(e, previous
 b + 1)`` and ``reg_we = 0`` at ``b + 1`` (the bus takes one write per cycle, so two
 registers written for the same cycle go out on consecutive cycles, in the order written).
@@ -125,7 +125,7 @@ class GnssRegisterSession(RegisterSession):
     """
 
     def __init__(self, inner: FrontendSession, params):
-        from hdl.gnss.model import REG_NAMES
+        from hdl.gnss.params import REG_NAMES
         super().__init__(inner, params, REG_NAMES, "GNSS")
 
 

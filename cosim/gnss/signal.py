@@ -56,6 +56,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from dsp.jit import njit_cached
+from dsp.sampling import fold_frequency
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
 
@@ -119,15 +120,6 @@ def _num(name, v, allow_none=False):
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite, not {v!r}")
     return float(v)
-
-
-def fold_frequency(f_hz: float, fs_hz: float) -> tuple[float, bool]:
-    """The frequency ``f_hz`` appears at after sampling at ``fs_hz``, and whether the
-    spectrum is inverted there (even Nyquist zones)."""
-    f = math.fmod(f_hz, fs_hz)
-    if f > fs_hz / 2:
-        return fs_hz - f, True
-    return f, False
 
 
 @dataclass(frozen=True)
@@ -243,11 +235,11 @@ class GnssSignalConfig:
     # -- derived ---------------------------------------------------------------------------
     @property
     def digital_if_hz(self) -> float:
-        return fold_frequency(self.if_hz, self.fs_hz)[0]
+        return fold_frequency(self.if_hz, self.fs_hz).digital_if_hz
 
     @property
     def spectrum_inverted(self) -> bool:
-        return fold_frequency(self.if_hz, self.fs_hz)[1]
+        return fold_frequency(self.if_hz, self.fs_hz).inverted
 
     @property
     def n_samples(self) -> int:

@@ -1,5 +1,5 @@
 """GNSS's side of the generic sweep engine (:mod:`cosim.studies.sweep`): the word lengths of
-the fixed-point seed-002 AUKF core (:class:`dsp.gnss.aukf.AukfFormats`) swept on the
+the fixed-point seed-002 AUKF core (:class:`dsp.gnss.aukf_master.AukfFormats`) swept on the
 correlation-domain fast path, each point paired with the float64 (golden) AUKF on the same
 truth and the same correlator noise.
 
@@ -52,9 +52,10 @@ def check_param(name: str) -> None:
 
 
 def formats_of(combo: tuple):
-    """The :class:`~dsp.gnss.aukf.AukfFormats` of a point: each swept width with its
+    """The :class:`~dsp.gnss.aukf_master.AukfFormats` of a point: each swept width with its
     format's integer bits kept (ValueError if refused)."""
-    from dsp.gnss.aukf import AukfFormats, QFormat
+    from dsp.gnss.aukf import AukfFormats
+    from dsp.gnss.aukf_master import QFormat
     from ..core.validate import check_int
     base = AukfFormats()
     kw = {}

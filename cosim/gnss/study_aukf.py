@@ -179,7 +179,7 @@ def bench(out, quick: bool = False) -> dict:
     import json
     import time
     from pathlib import Path
-    from dsp.gnss.aukf import AukfFormats
+    from dsp.gnss.aukf_master import AukfFormats
     from dsp.gnss.loops_fixed import FLOAT, FixedArith
     from ..core.provenance import machine_info
     out = Path(out)

@@ -99,14 +99,14 @@ def handover_writes(p, doppler_hz: float, code_phase_chips: float, inverted: boo
 def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_hz: float,
                   spacing_chips: float, arith_name: str, extra: tuple | None = None):
     from dsp.gnss.loops_fixed import FLOAT, FixedArith
-    from dsp.gnss.trackers import TrackerContext, _TRACKERS, make_tracker
+    from dsp.gnss.trackers import TrackerContext, TRACKERS, make_tracker
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
                          inverted=inverted, doppler0_hz=doppler_hz,
                          doppler_rate0_hz_s=run.handover_doppler_rate_hz_s, cn0_dbhz=cn0_dbhz,
                          spacing_chips=spacing_chips, latency_epochs=1,
                          doppler0_sigma_hz=run.handover_doppler_sigma_hz)
     arith = FixedArith() if arith_name == "fixed" else FLOAT
-    params = inspect.signature(_TRACKERS[run.tracker][0]).parameters
+    params = inspect.signature(TRACKERS[run.tracker][0]).parameters
     opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz", "r_mode") if k in params}
     if extra is not None:       # (TrackerContext changes, tracker options) of the caller
         ctx = replace(ctx, **extra[0])
@@ -157,11 +157,11 @@ class _PipelineDsp:
         self.p, self.track = p, track
         self.fifo = p.fifo
         self.rx = RecordRxState()
-        self.fields = p.record_fields
+        self.fields = p.record.fields
 
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.gnss.model import ACC_FIELDS, unpack_record
+        from hdl.gnss.params import ACC_FIELDS
         p, fp = self.p, self.fifo
         if not call.words.size:
             return ()
@@ -172,7 +172,7 @@ class _PipelineDsp:
             v = 0
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
-            d = unpack_record(v, p)
+            d = p.record.unpack(v)
             # (the boundary sample is not in the record: record_boundaries recomputes it)
             r = self.track.record(None, d["carr_phase"] / 2.0 ** p.carr_phase_bits,
                                   d["code_phase"] / 2.0 ** p.code_phase_bits,

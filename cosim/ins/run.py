@@ -133,7 +133,7 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     hand-over writes), on the golden chain the end of its first record (its local code
     starts at the acquired code phase)."""
     from cosim.gnss.tracking import SKIP_RECORDS, handover_writes, record_boundaries
-    from hdl.gnss.model import REG_NAMES
+    from hdl.gnss.params import REG_NAMES
     if backend == "golden":
         kf = CHIP_RATE_HZ * (1 + hand["doppler_hz"] / 1575.42e6)
         return (CODE_LENGTH - hand["code_phase_chips"]) / kf

@@ -16,8 +16,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
-                                 dc_word, pack_input)
+from hdl.monopulse.params import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
+                                  dc_word, pack_input)
 
 from ..core.session import write_register
 from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern

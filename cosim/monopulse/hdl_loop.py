@@ -140,7 +140,7 @@ class _HdlDsp:
 
     def writes_for(self, st):
         """Register writes steering a block at ``st`` = (u0, v0)."""
-        from hdl.monopulse.model import coef_word, dc_word
+        from hdl.monopulse.params import coef_word, dc_word
         arr = self.sig.array
         k = arr.steering_correction(st[0], st[1]) * self.cal_n
         out = [(f"coef{i + 1}", coef_word(k[i], self.p)) for i in range(4)]
@@ -155,7 +155,7 @@ class _HdlDsp:
         return [x & ((1 << p.dc_bits) - 1) for x in (u0, v0)]
 
     def _want(self, k):
-        from hdl.monopulse.model import dc_word
+        from hdl.monopulse.params import dc_word
         return [dc_word(x, self.p) for x in self.loop.steer[k, 0]]
 
     def _block(self, k, f):
@@ -199,7 +199,6 @@ class _HdlDsp:
 
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.monopulse.model import unpack_record
         p, fp = self.p, self.p.fifo
         if not call.words.size:
             return ()
@@ -213,7 +212,7 @@ class _HdlDsp:
             v = 0
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
-            f = unpack_record(v, p)
+            f = p.record.unpack(v)
             j = self.n_records
             self.n_records += 1
             if self.faults is None:
@@ -265,7 +264,8 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
     """Run ``loop`` (one trial) on the HDL front end of ``run.backend``; fills the loop's
     arrays and returns the FIFO/pipeline figures (``fifo_dropped``, digests, writes; with
     ``faults``: the bad and missing records and the record receiver's counters)."""
-    from hdl.monopulse.model import REG_NAMES, pack_input
+    from hdl.monopulse.params import REG_NAMES
+    from hdl.monopulse.params import pack_input
     from ..core.pipeline import Pipeline
     from ..core.session import RegisterSession
     from ..backends.factory import open_frontend

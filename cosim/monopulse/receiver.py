@@ -187,7 +187,7 @@ def _bench(out, quick: bool = False, jobs: int | None = None) -> dict:
 
 
 def _frontend():
-    from hdl.monopulse.model import MonopulseFrontendParams
+    from hdl.monopulse.params import MonopulseFrontendParams
     return Frontend(params=MonopulseFrontendParams, component=_component, model=_model_session,
                     verilog_name="monopulse_frontend")
 

@@ -123,7 +123,7 @@ class MonopulseRunConfig:
         "HDL backends: DSP processing cycles from its read window to its writes"))
     control_latency_cycles: int = field(default=40, metadata=_h(
         "HDL backends: cycles from the DSP issuing a register write to the register holding it"))
-    #: Overrides of :class:`hdl.monopulse.model.MonopulseFrontendParams`, (name, value) pairs
+    #: Overrides of :class:`hdl.monopulse.params.MonopulseFrontendParams`, (name, value) pairs
     #: (HDL backends; studies).
     hdl_changes: tuple = ()
     #: Total widths of the fixed-point tracker's formats, (format, width) pairs (``dsp``

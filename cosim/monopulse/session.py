@@ -1,6 +1,6 @@
 """The bit-exact model of the monopulse front end as a persistent session
 (:class:`cosim.core.session.BusModelSession`): the ``model`` backend for
-:class:`hdl.monopulse.model.MonopulseFrontendParams`, with the same ports and the same bits
+:class:`hdl.monopulse.params.MonopulseFrontendParams`, with the same ports and the same bits
 as the ``pysim`` / ``verilator`` sessions of :class:`hdl.monopulse.frontend.MonopulseFrontEnd`.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ class MonopulseModelSession(BusModelSession):
     """:class:`~hdl.monopulse.model.MonopulseFrontendModel` (state carried) and the FIFO
     model (:func:`~hdl.model.fifo.fifo_model_events`, state carried) as a session.
 
-    Input words are :func:`~hdl.monopulse.model.pack_input` words, one offered per cycle
+    Input words are :func:`~hdl.monopulse.params.pack_input` words, one offered per cycle
     while queued. Writes are port writes on :data:`cosim.core.session.BUS_PORTS` (as the
     HDL sessions take them; :func:`cosim.core.session.write_register` makes one bus write); a
     register write happens in every cycle ``reg_we`` is high, with the ``reg_addr`` /
@@ -64,7 +64,7 @@ class MonopulseModelSession(BusModelSession):
         return out
 
     def _step(self, queue, ready, n, writes):
-        from hdl.monopulse.model import record_to_words, unpack_input
+        from hdl.monopulse.params import unpack_input
         p = self.params
         start, stop = self.cycle, self.cycle + n
         words = queue[:n]
@@ -73,7 +73,7 @@ class MonopulseModelSession(BusModelSession):
         r = self.model.step(x, chips, reg, cycles=start + np.arange(x.shape[0]),
                             horizon=stop)
         self.n_records += len(r.values)
-        w = np.array([record_to_words(v, p) for v in r.values],
+        w = np.array([p.record.to_words(v, p.fifo_width) for v in r.values],
                      np.int64).reshape(-1, p.record_words)
         wc = np.r_[self._carry_c, r.cycles]
         w = np.concatenate([self._carry_w, w])

@@ -6,7 +6,7 @@ float IF chain and float tracker on the same record).
 Parameters (``--param NAME=VALUES``)
 -----------------------------------
 ``adc_bits``      ADC word length (signal generator and front end).
-``<field>``       a :class:`hdl.monopulse.model.MonopulseFrontendParams` field the scenario
+``<field>``       a :class:`hdl.monopulse.params.MonopulseFrontendParams` field the scenario
                   does not fix: ``cordic_iterations``, ``cordic_in_bits`` (the normalised
                   accumulator width entering the ratio), ``corr_out_bits`` (the corrected
                   snapshot the accumulator sums), ``angle_bits``, ``dc_frac_bits``,
@@ -40,7 +40,7 @@ FIXED_BY_SCENARIO = ("fs_hz", "if_hz", "snapshot_decimation", "cic_rate", "snaps
 
 
 def _hdl_fields():
-    from hdl.monopulse.model import MonopulseFrontendParams
+    from hdl.monopulse.params import MonopulseFrontendParams
     return sorted(f.name for f in fields(MonopulseFrontendParams)
                   if f.init and f.name not in FIXED_BY_SCENARIO)
 

@@ -27,7 +27,8 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     dB at 90 / 270 deg, every bearing at 0 dB; with single pulses also every bearing at 10
     dB, the pulse-level fast path and the robustness table (``tacan-robustness`` has both)."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
+    from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
+    from dsp.tacan.bounds import crb_deg
     from .detector import detector_bounds
     from .signal import TacanSignalConfig, pulse_observations
 

@@ -28,7 +28,7 @@ def tacan_confidence(out: Path, quick: bool = False, jobs: int | None = None) ->
     error with its standard error, and whether each point meets the criterion (RMSE / CRB
     <= 1.5 and |mean| <= 0.1 deg; the interval says how firmly)."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import crb_deg
+    from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()
     snrs = (3.0,) if quick else (3.0, 4.0)

@@ -29,7 +29,7 @@ def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> d
     """RMSE / CRB and mean error of the detector variants near the noise floor (golden
     chain, 3 s records, the same seeds for every variant)."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import crb_deg
+    from dsp.tacan.bounds import crb_deg
     from .detector import detector_bounds
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()

@@ -52,7 +52,8 @@ def fxpmath_naive_rate(dts_ticks, ys, cfg=None, n_steps: int = 150) -> float:
     of a float model with a fixed-point library looks like). Same formats as the core; no
     gate or r estimate (it only makes it slower)."""
     from fxpmath import Fxp
-    from dsp.tacan.kalman import F15, F135, KalmanFixedConfig
+    from dsp.tacan.kalman import F15, KalmanFixedConfig
+    from dsp.tacan.standard import F135
     cfg = cfg or KalmanFixedConfig()
 
     def fmt(f):

@@ -30,7 +30,7 @@ def _other_mode(kw: dict) -> dict:
     run = TacanRunConfig(signal=replace(sig, mode=rx), detector=kw["detector"],
                          require_bearing=False)
     fo = golden_frontend(generate(sig).samples, run)
-    tr = run_dsp(fo, run, sig.fs_hz)
+    tr = run_dsp(fo, run)
     return {**kw, "peaks": int(fo.ticks.size), "main_refs": int(tr.n_main_refs),
             "aux_refs": int(tr.n_aux_refs), "bearings": int(tr.times_s.size),
             "valid_bearings": int(np.count_nonzero(tr.valid)) if tr.valid is not None else 0}
@@ -44,7 +44,7 @@ def tacan_sensitivity(out: Path, quick: bool = False, jobs: int | None = None) -
     tacan-accuracy bench's); and integrity over 60 s: the other mode in both directions and
     noise alone, no bearing shown valid."""
     from dsp.tacan.kalman import KalmanConfig
-    from dsp.tacan.receiver import crb_deg
+    from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()
     det = "both"

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench import machine_info
+from ..core.provenance import machine_info
 
 
 def _best(fn, reps: int) -> float:
@@ -34,11 +34,12 @@ def _best(fn, reps: int) -> float:
 def sim_speed(out: Path, quick: bool = False) -> dict:
     from hdl.tacan.model import TacanFrontendModel
     from hdl.tacan.frontend import TacanFrontEnd
-    from .link import DspServiceConfig
-    from .pysim import run_stream
-    from .tacan.config import TacanRunConfig
-    from .tacan.signal import TacanSignalConfig, generate
-    from .verilator import VerilatorStreamSim, verilator_available, verilator_version
+    from ..core.link import DspServiceConfig
+    from ..backends.pysim import run_stream
+    from .config import TacanRunConfig
+    from .signal import TacanSignalConfig, generate
+    from ..backends.verilator import VerilatorStreamSim
+    from ..backends.verilator_harness import verilator_available, verilator_version
 
     t_start = time.perf_counter()
     n_pysim = 4_000 if quick else 40_000
@@ -80,7 +81,7 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
               "build_or_load_s": t_build, "built": bool(sim.built),
               "version": verilator_version()}
     # -- agreement on the common part (pysim's cycles) ---------------------------------------
-    from .tacan.frontends import FRONTENDS
+    from .frontends import FRONTENDS
     short = FRONTENDS["model"](x[:n_pysim], run)
     words_model = short.words
     same_pysim = bool(np.array_equal(ps.words, words_model[:len(ps.words)])

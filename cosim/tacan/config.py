@@ -39,17 +39,18 @@ class TacanRunConfig:
         ``"float"`` (golden arithmetic) or ``"fixed"`` (the fixed-point core, formats
         ``fixed``).
     kalman : KalmanConfig
-        The filter (memory, gate, ...), shared by both arithmetics.
+        The filter (memory, gate, ...), shared by both arithmetics; the receiver runs it
+        with its ``tick_hz`` replaced by the signal's ``fs_hz``, the clock of the FPGA
+        timestamps.
     fixed : KalmanFixedConfig, optional
         Word lengths of the fixed-point core (default formats; its ``kalman`` is replaced
-        by ``kalman`` and its ``tick_hz`` by the signal's ``fs_hz``, the clock of the
-        FPGA timestamps).
+        by that filter).
     settle_s : float, optional
         Bearings before this time are not scored (default 2 x the filter memory).
     frontend_changes : tuple of (name, value)
         Overrides of :class:`dsp.tacan.frontend.FrontendConfig` (rates, structure).
     hdl_changes : tuple of (name, value)
-        Overrides of :class:`hdl.tacan.model.TacanFrontendParams` (word lengths).
+        Overrides of :class:`hdl.tacan.params.TacanFrontendParams` (word lengths).
     service : DspServiceConfig
         How the DSP reads the FIFO (HDL backends).
     control_writes : tuple of (cycle, register, value)
@@ -225,13 +226,9 @@ class TacanRunConfig:
 
     @property
     def receiver(self) -> ReceiverConfig:
-        if self.dsp == "fixed":
-            base = self.fixed or KalmanFixedConfig()
-            # the core counts the FPGA's timestamps: ticks of the ADC clock of this run
-            k = KalmanFixedConfig(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
-                                     "kalman": self.kalman, "tick_hz": float(self.signal.fs_hz)})
-        else:
-            k = self.kalman
+        # the filter counts the FPGA's timestamps: ticks of the ADC clock of this run
+        kal = replace(self.kalman, tick_hz=float(self.signal.fs_hz))
+        k = replace(self.fixed or KalmanFixedConfig(), kalman=kal) if self.dsp == "fixed" else kal
         dec = None
         if self.amplitude == "partner":
             dec = DecoderConfig(mode=self.signal.mode, single_pulses_below=0.4)

@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from dsp.tacan.bounds import crb_deg, detected_fraction, detection_bound_deg
-from dsp.tacan.decode import _match
+from dsp.tacan.scoring import match_nearest
 from dsp.tacan.frontend import GoldenFrontend, record_chunks
 
 from .config import TacanRunConfig
@@ -50,7 +50,7 @@ def _detections(run: TacanRunConfig):
     n, a, T = np.concatenate(idx), np.concatenate(amp), np.concatenate(thr)
     t = (n * cfg.decimation - cfg.group_delay_samples) / run.signal.fs_hz
     tp = s.truth.pulse_times_s
-    match = _match(tp, t, MATCH_S) if tp.size else (np.zeros(t.size, int), np.zeros(t.size, bool))
+    match = match_nearest(tp, t, MATCH_S) if tp.size else (np.zeros(t.size, int), np.zeros(t.size, bool))
     return s, a, T, t, match
 
 

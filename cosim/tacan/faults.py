@@ -120,7 +120,7 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
             x, wi, _ = flip_signed(s.samples, run.signal.adc_bits, ber, rng, fc.bits)
             rec["flips"] = int(wi.size)
             fo = FRONTENDS["model"](x, run)
-            track = run_dsp(fo, run, run.signal.fs_hz)
+            track = run_dsp(fo, run)
         elif fc.target == "fifo":
             fkey = ("fo", trial)
             if fkey not in cache:
@@ -130,7 +130,7 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
             rec["flips"] = int(wi.size)
             fo = dsp_receive(w, fo0.cycles, p, fo0.n_cycles, fo0.fifo_dropped)
             rec["rx"] = fo.extra.get("rx")
-            track = run_dsp(fo, run, run.signal.fs_hz)
+            track = run_dsp(fo, run)
         elif fc.target == "register":
             track, rec["flips"] = _register_run(fc, run, s, p, ber, rng)
         else:
@@ -165,7 +165,7 @@ def _register_run(fc, run, s, p, ber, rng):
     r = replace(run, control_writes=tuple(writes), control_latency_cycles=0,
                 backend=fc.backend)
     fo = FRONTENDS[fc.backend](s.samples, r)
-    return run_dsp(fo, r, run.signal.fs_hz), flips
+    return run_dsp(fo, r), flips
 
 
 def _dsp_state_run(fc, run, s, ber, rng, cache, trial):
@@ -198,7 +198,7 @@ def _dsp_state_run(fc, run, s, ber, rng, cache, trial):
     sel = flat % word_of_bit.size
     kf = EnvelopeKalman(fx, batch=1)
     kf.schedule_upsets(steps, word_of_bit[sel], bit_in_word[sel])
-    track = run_dsp(fo, run, run.signal.fs_hz, state=ReceiverState(kf=kf))
+    track = run_dsp(fo, run, state=ReceiverState(kf=kf))
     return track, int(kf.upsets_applied)
 
 

@@ -1,6 +1,6 @@
 """TACAN's entry in the receiver registry (:mod:`cosim.core.receivers`): its command-line options
 (derived from :class:`~cosim.tacan.signal.TacanSignalConfig`,
-:class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman.KalmanConfig` and
+:class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman_config.KalmanConfig` and
 :class:`~cosim.core.link.DspServiceConfig`), the ``tacan`` command, its sweep and fault studies,
 its HDL top and its equivalence check."""
 from __future__ import annotations

@@ -21,8 +21,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from dsp.tacan.receiver import (BearingTrack, amplitude_codes, bearing_stats,
-                                ReceiverState, crb_deg, process_peaks)
+from dsp.tacan.receiver import (BearingTrack, amplitude_codes, bearing_stats, ReceiverState, process_peaks)
+from dsp.tacan.bounds import crb_deg
 from dsp.tacan.bearing import wrap_deg
 from .config import TacanRunConfig
 from .frontends import (FRONTENDS, FrontendOutput, frontend_key, golden_frontend,
@@ -131,7 +131,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
             frontend_cache[key] = fo
     t2 = time.perf_counter()
     bar.stage(f"DSP ({run.dsp})")
-    track = run_dsp(fo, run, sig.fs_hz)
+    track = run_dsp(fo, run)
     t3 = time.perf_counter()
     st = bearing_stats(track, s.truth.bearing_deg, run.settle)
     rel_sigma = sig.matched_filter_rel_sigma()
@@ -198,7 +198,7 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         t4 = time.perf_counter()
         gfo = golden_frontend(s.samples, run)
         gold = run_dsp(gfo, replace(run, backend="golden", dsp="float", compare=None,
-                                    recheck=None), sig.fs_hz)
+                                    recheck=None))
         rms, n = _match_rms(track, gold, run.settle)
         r["vs_golden_rms_deg"] = rms
         r["vs_golden_n"] = n
@@ -269,4 +269,4 @@ def frontend_output(run: TacanRunConfig) -> tuple[FrontendOutput, BearingTrack]:
     """The front end's output and the DSP's track for ``run`` (for tests and studies)."""
     s = generate(run.signal)
     fo = FRONTENDS[run.backend](s.samples, run)
-    return fo, run_dsp(fo, run, run.signal.fs_hz)
+    return fo, run_dsp(fo, run)

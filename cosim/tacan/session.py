@@ -1,6 +1,6 @@
 """The bit-exact model of the TACAN front end as a persistent session
 (:class:`cosim.core.session.FrontendSession`), the ``model`` backend of
-:func:`cosim.backends.factory.open_frontend` for :class:`hdl.tacan.model.TacanFrontendParams`."""
+:func:`cosim.backends.factory.open_frontend` for :class:`hdl.tacan.params.TacanFrontendParams`."""
 from __future__ import annotations
 
 import numpy as np
@@ -18,7 +18,7 @@ class TacanModelSession(FrontendSession):
     """The bit-exact model of :class:`hdl.tacan.frontend.TacanFrontEnd` as a session.
 
     :class:`~hdl.tacan.model.TacanFrontendModel` (its state carried) gives the peaks
-    and the cycle each leaves its search, :func:`~hdl.tacan.model.fifo_write_cycles` the
+    and the cycle each leaves its search, :func:`~hdl.tacan.fifo_merge.fifo_write_cycles` the
     cycle each is written to the FIFO (with two searches, ``config.pair_peak``, a pair word
     may wait a cycle behind a pulse word); the FIFO model
     (:func:`~hdl.model.fifo.fifo_model_events`, its state carried) gives what the DSP reads.

@@ -49,6 +49,7 @@ import numpy as np
 from scipy import signal as sps
 
 from dsp.jit import njit_cached
+from dsp.sampling import fold_frequency
 # The standard (frequencies, pulse width, burst codes) is the DSP's: imported, not restated.
 from dsp.tacan.standard import F15, F135, PULSE_WIDTH_S, burst_offsets, pair_spacing_s  # noqa: F401
 
@@ -57,14 +58,6 @@ FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 KIND_RANDOM, KIND_MAIN, KIND_AUX, KIND_IDENT, KIND_ECHO = 0, 1, 2, 3, 4
 KIND_NAMES = {KIND_RANDOM: "random", KIND_MAIN: "main", KIND_AUX: "aux",
               KIND_IDENT: "identity", KIND_ECHO: "echo"}
-
-
-def fold_frequency(f_hz: float, fs_hz: float) -> tuple[float, bool]:
-    """Where ``f_hz`` lands after sampling at ``fs_hz``: (frequency in [0, fs/2], inverted)."""
-    r = math.fmod(f_hz, fs_hz)
-    if r <= fs_hz / 2:
-        return r, False
-    return fs_hz - r, True
 
 
 @dataclass(frozen=True)
@@ -220,11 +213,11 @@ class TacanSignalConfig:
     # -- derived ---------------------------------------------------------------------------
     @property
     def digital_if_hz(self) -> float:
-        return fold_frequency(self.if_hz, self.fs_hz)[0]
+        return fold_frequency(self.if_hz, self.fs_hz).digital_if_hz
 
     @property
     def spectrum_inverted(self) -> bool:
-        return fold_frequency(self.if_hz, self.fs_hz)[1]
+        return fold_frequency(self.if_hz, self.fs_hz).inverted
 
     @property
     def pulse_sigma_s(self) -> float:

@@ -6,7 +6,7 @@ Parameters (``--param NAME=VALUES``)
 -----------------------------------
 ``adc_bits``              ADC word length (the signal is digitised once per record for every
                           value, :func:`cosim.tacan.signal.generate_adc_variants`).
-``<field>``               any field of :class:`hdl.tacan.model.TacanFrontendParams`
+``<field>``               any field of :class:`hdl.tacan.params.TacanFrontendParams`
                           (``nco_amp_bits``, ``mixer_out_bits``, ``cic_out_bits``,
                           ``fir_coef_bits``, ``fir_out_bits``, ``env_iterations``,
                           ``mixer_rounding``, ...).
@@ -14,7 +14,7 @@ Parameters (``--param NAME=VALUES``)
                           ``K``, ``cs``, ``innov``, ``r``), integer bits kept: fraction bits
                           change.
 ``dsp.<fmt>.rounding``    rounding of that format (``floor`` / ``half_up``).
-``kalman.<field>``        a :class:`dsp.tacan.kalman.KalmanConfig` field.
+``kalman.<field>``        a :class:`dsp.tacan.kalman_config.KalmanConfig` field.
 ``detector``              what the FPGA detects (``both``, the default; ``pulse``; ``pair``):
                           one value per study, since the golden chain detects the same way
                           (the single-pulse receiver's study: ``detector=pulse``).

@@ -4,7 +4,9 @@ from .alphabeta import (AlphaBetaFilter, AlphaBetaFormats, AlphaBetaRun, kalata,
                         steady_state_gains, tracking_index)
 from .events import EventRegistry
 from .kalman import KalmanFilter, KalmanFormats, KalmanRun
-from .ukf import NonlinearModel, UKFRun, UkfFormats, UnscentedKalmanFilter, sigma_weights, weight_problem
+from .ukf import UKFRun, UnscentedKalmanFilter
+from .ukf_formats import UkfFormats, sigma_weights, weight_problem
+from .nonlinear import NonlinearModel
 from .models import LinearGaussianModel, white_acceleration, white_jerk
 
 __all__ = ["AlphaBetaFilter", "AlphaBetaFormats", "AlphaBetaRun", "kalata", "steady_state_gains",

@@ -58,9 +58,8 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from .events import EventRegistry
-from ..qops import rs
-from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, to_fixed
-from .ops import align, div_q, flip, sqrt_q, store
+from .formats import Arithmetic, FormatTable, fits, fmt, need_bits, need_shift, to_fixed
+from ..qops import align, div_q, flip, rs, sqrt_q, store
 
 
 def tracking_index(T_s: float, sigma_w: float, sigma_v: float) -> float:
@@ -335,7 +334,9 @@ class AlphaBetaFilter:
             raise ValueError(f"z_limit must be a finite number > 0 or None, not {z_limit!r}")
         self.T_s, self.trials, self.adaptive, self.z_limit = float(T_s), int(trials), bool(adaptive), z_limit
         self.n = 2 if gamma is None else 3
-        self.kind = arithmetic_name(arithmetic)
+        self.ar = ar = Arithmetic.of(arithmetic, AlphaBetaFormats, "alpha-beta filter")
+        self.kind, self.formats = ar.kind, ar.formats
+        self.fr, self.lo, self.hi, self.hf, self.wd = ar.arrays
         n = self.n
         x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=np.float64)
         if x0.shape not in ((n,), (self.trials, n)):
@@ -348,10 +349,9 @@ class AlphaBetaFilter:
                            scale, alpha_relax])
         window = window if adaptive else 1
         self.events = EVENTS
-        if self.kind == "fixed":
-            fm = arithmetic
+        if ar.fixed:
+            fm = ar.formats
             fm.check(window)
-            self.formats = fm
             fits("x0 (per-sample units)", x0, fm.x)
             fits("coefficients", coef, fm.c)
             fits("noise_floor sigma_v^2", consts[:1], fm.s)
@@ -360,22 +360,17 @@ class AlphaBetaFilter:
             if adaptive and to_fixed(consts[5], fm.l) < 1:
                 raise ValueError(f"format too narrow for sigma_v / manoeuvre_gain = {consts[5]:g}: "
                                  f"below one LSB of {fm.l}")
-            self.fr, self.lo, self.hi, self.hf, self.wd = fm.arrays()
             self.x = to_fixed(x0, fm.x)
             self.c = np.broadcast_to(to_fixed(coef, fm.c), (self.trials, 3)).copy()
             self.consts = np.array([to_fixed(consts[0], fm.s), to_fixed(alpha_min, fm.c),
                                     to_fixed(alpha_max, fm.c), 1 << fm.c.frac, window,
                                     to_fixed(consts[5], fm.l), 4 << fm.l.frac, int(scale),
                                     to_fixed(alpha_relax, fm.c)], np.int64)
-            dt = np.int64
         else:
-            dt = np.float64 if self.kind == "float64" else np.float32
-            self.formats = None
-            zz = np.zeros(len(SIGNALS), np.int64)
-            self.fr, self.lo, self.hi, self.hf, self.wd = zz, zz, zz, zz, zz
-            self.x = x0.astype(dt)
-            self.c = np.array(np.broadcast_to(coef, (self.trials, 3)), dtype=dt, order="C")
-            self.consts = consts.astype(dt)
+            self.x = x0.astype(ar.dtype)
+            self.c = np.array(np.broadcast_to(coef, (self.trials, 3)), dtype=ar.dtype, order="C")
+            self.consts = consts.astype(ar.dtype)
+        dt = ar.dtype
         self._x_scale = np.array([1.0, T_s, T_s * T_s / 2][:n])
         self._c0 = self.c.copy()
         self.ring = np.zeros((self.trials, window), dt)
@@ -424,15 +419,11 @@ class AlphaBetaFilter:
         if z.ndim != 2 or z.shape[0] != self.trials:
             raise ValueError(f"z must have shape (T,) or ({self.trials}, T), not {shape}")
         ok = np.isfinite(z)
-        lim = self.z_limit
-        if self.kind == "fixed":
-            f = self.formats.z
-            flim = min(f.max_value, -f.min_value)
-            lim = flim if lim is None else min(lim, flim)
+        lim = self.ar.limit(self.z_limit, "z")
         if lim is not None:
             ok &= np.abs(np.where(ok, z, 0.0)) <= lim
         zc = np.where(ok, z, 0.0)
-        zc = to_fixed(zc, self.formats.z) if self.kind == "fixed" else zc.astype(self.x.dtype)
+        zc = self.ar.words(zc, "z")
         T = z.shape[1]
         if upsets is None:
             ups = np.zeros((0, 4), np.int64)

@@ -7,7 +7,7 @@ registry lays them out in one ``int64`` array per trial::
 
 so ``ev[i]`` counts the clamps of signal ``i``, the other events follow, and the range log
 of signal ``i`` sits at ``ev[base + 2 i]``, ``ev[base + 2 i + 1]`` (``base`` = number of
-counters). The operators of :mod:`dsp.estimation.ops` take ``(ev, i, base)``. Unlike
+counters). The operators of :mod:`dsp.qops` take ``(ev, i, base)``. Unlike
 ``dsp.qops`` (``RANGE_SLOTS = 8``, kept for the TACAN core) the size follows the filter.
 """
 from __future__ import annotations

@@ -9,6 +9,7 @@ range logs of :class:`dsp.estimation.events.EventRegistry`.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -112,3 +113,60 @@ def arithmetic_name(arith) -> str:
     if isinstance(arith, FormatTable):
         return "fixed"
     raise ValueError(f"arithmetic must be 'float64', 'float32' or a format table, not {arith!r}")
+
+
+@dataclass(frozen=True)
+class Arithmetic:
+    """The arithmetic a filter runs in, resolved once from its ``arithmetic`` argument: the
+    kind (``"float64"``, ``"float32"`` or ``"fixed"``), the state dtype, the format table
+    (fixed point only) and the kernels' per-signal ``(frac, lo, hi, half, width)`` arrays
+    (zeros for floats), with the conversions between physical values and the filter's
+    words that every filter makes."""
+
+    kind: str
+    dtype: type
+    formats: FormatTable | None
+    arrays: tuple
+
+    @classmethod
+    def of(cls, arithmetic, table: type, what: str) -> "Arithmetic":
+        """Resolve ``arithmetic`` (``"float64"``, ``"float32"`` or an instance of the format
+        table class ``table``) for the filter named ``what``."""
+        kind = arithmetic_name(arithmetic)
+        if kind == "fixed":
+            if not isinstance(arithmetic, table):
+                raise ValueError(f"the fixed-point {what} takes a {table.__name__} table, "
+                                 f"not {arithmetic!r}")
+            return cls(kind, np.int64, arithmetic, arithmetic.arrays())
+        zz = np.zeros(len(table.signals()), np.int64)
+        return cls(kind, np.float64 if kind == "float64" else np.float32, None, (zz,) * 5)
+
+    @property
+    def fixed(self) -> bool:
+        return self.kind == "fixed"
+
+    def words(self, values, signal: str, what: str | None = None) -> np.ndarray:
+        """Physical ``values`` as the filter's words of ``signal``: fixed point, rounded into
+        its format (first checked to fit when ``what`` names them); floats, cast to the
+        dtype."""
+        if self.fixed:
+            f = getattr(self.formats, signal)
+            if what is not None:
+                fits(what, values, f)
+            return to_fixed(values, f)
+        return np.ascontiguousarray(np.asarray(values), dtype=self.dtype)
+
+    def physical(self, words, signal: str) -> np.ndarray:
+        """The filter's words of ``signal`` in physical units (float64)."""
+        if self.fixed:
+            return words * 2.0 ** -getattr(self.formats, signal).frac
+        return words.astype(np.float64)
+
+    def limit(self, limit: float | None, signal: str = "z") -> float | None:
+        """The plausibility limit on ``|signal|``: ``limit`` (None: none), in fixed point
+        also the format's symmetric range."""
+        if not self.fixed:
+            return limit
+        f = getattr(self.formats, signal)
+        flim = min(f.max_value, -f.min_value)
+        return flim if limit is None else min(limit, flim)

@@ -4,7 +4,7 @@
 (constant or time-varying F, B, H, Q, R; ``n <= 8`` states, ``m <= n`` measurements, optional
 control input ``B u``) in the arithmetic of its configuration: ``"float64"``, ``"float32"``
 or a :class:`KalmanFormats` table (fixed point). The kernel :func:`_kf_kernel` is written
-once with the operators of :mod:`dsp.estimation.ops`; numba compiles it per state dtype.
+once with the operators of :mod:`dsp.qops`; numba compiles it per state dtype.
 It runs Monte Carlo trials batched (``x`` is ``(B, n)``, ``P`` ``(B, n, n)``).
 
 Steps of one update, each one rounding in fixed point (signal names of the table)::
@@ -53,11 +53,10 @@ import numpy as np
 from ..fixed import FixedFormat
 from ..jit import njit_cached
 from .events import EventRegistry
-from .formats import (FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift,
-                      sum_bits, to_fixed)
+from .formats import Arithmetic, FormatTable, fits, fmt, need_bits, need_shift, sum_bits
 from .models import LinearGaussianModel, check_psd
 from .linalg import chol_q, matmul_q, solve_lower_q, solve_upper_t_q
-from .ops import align, flip, store
+from ..qops import align, flip, store
 
 
 @dataclass(frozen=True)
@@ -368,7 +367,9 @@ class KalmanFilter:
         if z_limit is not None and not (np.isfinite(z_limit) and z_limit > 0):
             raise ValueError(f"z_limit must be a finite number > 0 or None, not {z_limit!r}")
         self.model, self.trials, self.z_limit = model, int(trials), z_limit
-        self.kind = arithmetic_name(arithmetic)
+        self.ar = ar = Arithmetic.of(arithmetic, KalmanFormats, "Kalman filter")
+        self.kind, self.formats = ar.kind, ar.formats
+        self.fr, self.lo, self.hi, self.hf, self.wd = ar.arrays
         n, m, p = model.n, model.m, model.p
         x0 = _as_trials("x0", x0, self.trials, (n,))
         P0 = _as_trials("P0", P0, self.trials, (n, n))
@@ -377,39 +378,28 @@ class KalmanFilter:
         check_psd("P0", P0)
         self.events = EVENTS
         self.k = 0
-        if self.kind == "fixed":
-            fm = arithmetic
-            fm.check(n, m, p)
-            self.formats = fm
-            fits("x0", x0, fm.x)
-            fits("P0", P0, fm.P)
-            for name, a in (("F", model.F), ("H", model.H), ("Q", model.Q), ("R", model.R), ("B", model.B)):
-                fits(name, a, getattr(fm, name))
-            self.fr, self.lo, self.hi, self.hf, self.wd = fm.arrays()
-            self._mats = tuple(to_fixed(a, getattr(fm, name)) for name, a in
-                               (("F", model.F), ("B", model.B), ("H", model.H), ("Q", model.Q), ("R", model.R)))
-            self.x = to_fixed(x0, fm.x)
-            self.P = to_fixed(P0, fm.P)
+        if ar.fixed:
+            ar.formats.check(n, m, p)
+        self.x = ar.words(x0, "x", "x0")
+        self.P = ar.words(P0, "P", "P0")
+        mats = {"F": model.F, "B": model.B, "H": model.H, "Q": model.Q, "R": model.R}
+        if ar.fixed:
+            for name in ("F", "H", "Q", "R", "B"):
+                fits(name, mats[name], getattr(ar.formats, name))
+        self._mats = tuple(ar.words(a, name) for name, a in mats.items())
+        if ar.fixed:
             self.P = np.triu(self.P) + np.triu(self.P, 1).transpose(0, 2, 1)
-            self._one = np.array([1 << (fm.K.frac + fm.H.frac)], np.int64)
+            self._one = np.array([1 << (ar.formats.K.frac + ar.formats.H.frac)], np.int64)
         else:
-            dt = np.float64 if self.kind == "float64" else np.float32
-            self.formats = None
-            z = np.zeros(len(SIGNALS), np.int64)
-            self.fr, self.lo, self.hi, self.hf, self.wd = z, z, z, z, z
-            self._mats = tuple(np.ascontiguousarray(a, dtype=dt) for a in
-                               (model.F, model.B, model.H, model.Q, model.R))
-            self.x = x0.astype(dt)
-            self.P = P0.astype(dt)
-            self._one = np.ones(1, dt)
+            self._one = np.ones(1, ar.dtype)
         self.ev = EVENTS.new((self.trials,))
 
     # -- state in real units
     def x_float(self) -> np.ndarray:
-        return self.x * 2.0 ** -self.formats.x.frac if self.kind == "fixed" else self.x.astype(np.float64)
+        return self.ar.physical(self.x, "x")
 
     def P_float(self) -> np.ndarray:
-        return self.P * 2.0 ** -self.formats.P.frac if self.kind == "fixed" else self.P.astype(np.float64)
+        return self.ar.physical(self.P, "P")
 
     def counts(self) -> dict:
         return EVENTS.counts(self.ev)
@@ -426,11 +416,7 @@ class KalmanFilter:
             raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
         T = z.shape[1]
         ok = np.all(np.isfinite(z), axis=2)
-        lim = self.z_limit
-        if self.kind == "fixed":
-            f = self.formats.z
-            flim = min(f.max_value, -f.min_value)
-            lim = flim if lim is None else min(lim, flim)
+        lim = self.ar.limit(self.z_limit, "z")
         if lim is not None:
             ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
         zc = np.where(ok[..., None], z, 0.0)
@@ -454,12 +440,7 @@ class KalmanFilter:
                 big = np.any((uc > fu.max_value) | (uc < fu.min_value), axis=2)
                 uok &= ~big
                 uc = np.where(uok[..., None], uc, 0.0)
-        if self.kind == "fixed":
-            zc, uc = to_fixed(zc, self.formats.z), to_fixed(uc, self.formats.u)
-        else:
-            dt = self.x.dtype
-            zc, uc = zc.astype(dt), uc.astype(dt)
-        return np.ascontiguousarray(zc), ok, np.ascontiguousarray(uc), uok, T
+        return self.ar.words(zc, "z"), ok, self.ar.words(uc, "u"), uok, T
 
     def run(self, z, u=None, *, upsets=None, keep_P: bool = False) -> KalmanRun:
         """Filter ``T`` steps (predict then update with ``z[k]``).
@@ -500,10 +481,5 @@ class KalmanFilter:
         _kf_kernel(self.x, self.P, zc, zok, uc, uok, F, B, H, Q, R, self.k, self.fr, self.lo,
                    self.hi, self.hf, self.wd, self._one, self.ev, ups, xs, Ps, keep_P)
         self.k += T
-        if self.kind == "fixed":
-            xs_f = xs * 2.0 ** -self.formats.x.frac
-            Ps_f = Ps * 2.0 ** -self.formats.P.frac if keep_P else None
-        else:
-            xs_f = xs.astype(np.float64)
-            Ps_f = Ps.astype(np.float64) if keep_P else None
-        return KalmanRun(xs_f, Ps_f, self.counts())
+        return KalmanRun(self.ar.physical(xs, "x"),
+                         self.ar.physical(Ps, "P") if keep_P else None, self.counts())

@@ -1,6 +1,6 @@
 """Small-matrix operators in the one-source form: matrix product, Cholesky factor and the
 two triangular solves a Kalman gain needs, for float64, float32 and fixed point by the dtype
-of the arrays (the element operators of :mod:`dsp.estimation.ops`).
+of the arrays (the element operators of :mod:`dsp.qops`).
 
 Fixed point: every output element is *one* rounding of an exact int64 accumulator (the
 caller checks the word lengths, :func:`dsp.estimation.formats.need_bits`):
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from ..jit import njit_cached
 
-from .ops import align, div_q, sqrt_q, store
+from ..qops import align, div_q, sqrt_q, store
 
 
 @njit_cached

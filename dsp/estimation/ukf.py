@@ -1,7 +1,7 @@
 """Unscented Kalman filter (scaled unscented transform), one source for float64, float32 and
 fixed point, batched over trials.
 
-The model says ``f`` and ``h`` (:class:`NonlinearModel`: numba functions
+The model says ``f`` and ``h`` (:class:`dsp.estimation.nonlinear.NonlinearModel`: numba functions
 ``f(x, w, prm, q, out)`` and ``h(x, v, prm, q, out)`` with their parameter arrays, plus Q
 and R);
 the filter says how they are combined; the arithmetic is a configuration. The sigma points
@@ -27,7 +27,7 @@ at least ``p_floor``, and factoring again (a diagonal with positive entries alwa
 An innovation covariance that does not factor skips the update (``s_not_pd``). NaN,
 infinite or implausible (``z_limit``) measurements only predict (``implausible``).
 
-Fixed point (a :class:`UkfFormats` table, the same kernel compiled for int64): every step
+Fixed point (a :class:`dsp.estimation.ukf_formats.UkfFormats` table, the same kernel compiled for int64): every step
 above is one rounding into the format of its signal (``c P -> Pc``, its Cholesky by
 :func:`~dsp.estimation.linalg.chol_q` ``-> U``, ``x +- U -> X``, ``f -> X``, ``sum Wm X ->
 xm``, ``X - xm -> D``, ``Wc D -> D``, ``sum (Wc D) D (+ Q) -> Pp``, ``h -> Y``, ``sum Wm Y ->
@@ -35,7 +35,7 @@ Y``, ... ``Pyy``, ``Pxy``, ``chol -> Ls``, ``Ls^-1 Pxy^T -> V``, ``Ls^-T V -> K`
 -> e``, ``xm + K e -> x``, ``Pp - V^T V -> P``), checked bit for bit against Python integers
 (``tests/dsp/estimation``). The covariance update is ``P = Pp - V^T V`` with ``V = Ls^-1
 Pxy^T`` (equal to ``Pp - K S K^T``; one exact accumulation) in every arithmetic. The UT
-weights must suit the ``W`` format (:func:`weight_problem`): with small alpha (1e-3) the
+weights must suit the ``W`` format (:func:`dsp.estimation.ukf_formats.weight_problem`): with small alpha (1e-3) the
 centre weight is ~-1e6 against positive weights of ~+1e5 and the rounding errors cancel
 badly, so such parameters are refused, naming the alpha that would do; the seed-002
 parameters (alpha = 1.027, beta = 2, kappa = 0, L = 10: Wm0 = 0.0519, Wc0 = 1.997, Wi =
@@ -55,165 +55,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fixed import FixedFormat
 from ..jit import njit_cached
 from .events import EventRegistry
-from .formats import FormatTable, arithmetic_name, fits, fmt, need_bits, need_shift, sum_bits, to_fixed
+from .formats import Arithmetic, fits, to_fixed
 from .linalg import chol_q, solve_lower_q, solve_upper_t_q
-from .models import MAX_STATES, check_psd
-from .ops import align, cos_q, rnd, sin_q, store
-
-@dataclass(frozen=True)
-class UkfFormats(FormatTable):
-    """Fixed-point formats of the unscented filter, one per signal.
-
-    The defaults suit states of order 1 (``x`` +-32) with covariances below 8 and
-    measurements of order 1 (an I/Q pair); scale the model or change the table otherwise.
-
-    ======  ==============================================================
-    signal  what
-    ======  ==============================================================
-    z       measurement
-    x       state; also the sigma points ``X`` are in ``X``
-    P       covariance
-    Pc      ``(L + lambda) P`` (and ``(L + lambda) Pp``), factored for the sigma points
-    U       its Cholesky factor and the constant noise factors ``sqrt(c) Lq, sqrt(c) Lr``
-    X       sigma points (state and noise parts) and the points propagated by ``f``
-    W       weights ``Wm``, ``Wc`` and ``c = L + lambda``
-    xm      predicted mean
-    Pp      predicted covariance (incl. ``Q``, additive noise)
-    Y       measurement sigma points ``h(X)`` and the predicted measurement
-    D       deviations ``X - xm``, ``Y - zp`` and the weighted deviations ``Wc D``
-    Pyy     innovation covariance (incl. ``R``, additive noise)
-    Pxy     cross covariance
-    Ls      Cholesky factor of ``Pyy``
-    V       ``Ls^-1 Pxy^T`` (also gives ``P = Pp - V^T V``)
-    K       gain
-    e       innovation ``z - zp``
-    prm     model parameters ``prm_f``, ``prm_h``
-    ======  ==============================================================
-    """
-
-    z: FixedFormat = fmt(24, 20)
-    x: FixedFormat = fmt(32, 26)
-    P: FixedFormat = fmt(32, 28)
-    Pc: FixedFormat = fmt(32, 26)
-    U: FixedFormat = fmt(30, 24)
-    X: FixedFormat = fmt(32, 26)
-    W: FixedFormat = fmt(24, 18)
-    xm: FixedFormat = fmt(32, 26)
-    Pp: FixedFormat = fmt(32, 28)
-    Y: FixedFormat = fmt(28, 24)
-    D: FixedFormat = fmt(28, 24)
-    Pyy: FixedFormat = fmt(32, 28)
-    Pxy: FixedFormat = fmt(32, 28)
-    Ls: FixedFormat = fmt(30, 24)
-    V: FixedFormat = fmt(30, 24)
-    K: FixedFormat = fmt(24, 20)
-    e: FixedFormat = fmt(24, 20)
-    prm: FixedFormat = fmt(24, 20)
-
-    def __post_init__(self):
-        self.validate()
-
-    def check(self, n: int, m: int, L: int) -> None:
-        """Every exact intermediate fits int64 and every alignment is a left shift."""
-        w = {s: getattr(self, s).width for s in self.signals()}
-        r = self.fracs()
-        ns = 2 * L + 1
-        need_shift("c P", r["W"] + r["P"] - r["Pc"], "Pc")
-        need_shift("c Pp", r["W"] + r["Pp"] - r["Pc"], "Pc")
-        need_bits("c P", w["W"] + max(w["P"], w["Pp"]) - 1)
-        a = 2 * r["U"]
-        need_bits("Cholesky of c P", max(sum_bits(w["U"], w["U"], n),
-                                         w["Pc"] + need_shift("Cholesky of c P", a - r["Pc"], "Pc")) + 1)
-        for what, f1, f2 in (("x + U", "x", "U"), ("xm + U", "xm", "U")):
-            a = max(r[f1], r[f2])
-            need_bits(what, max(w[f1] + a - r[f1], w[f2] + a - r[f2]) + 1)
-            need_shift(what, a - r["X"], "X")
-        need_bits("sum Wm X", sum_bits(w["W"], w["X"], ns))
-        need_shift("sum Wm X", r["W"] + r["X"] - r["xm"], "xm")
-        need_bits("sum Wm Y", sum_bits(w["W"], w["Y"], ns))
-        a = max(r["X"], r["xm"])
-        need_bits("X - xm", max(w["X"] + a - r["X"], w["xm"] + a - r["xm"]) + 1)
-        need_shift("X - xm", a - r["D"], "D")
-        need_shift("Y - zp", r["Y"] - r["D"], "D")
-        need_bits("Wc D", w["W"] + w["D"] - 1)
-        need_bits("sum (Wc D) D", sum_bits(w["D"], w["D"], ns) + 1)
-        for sig, noise in (("Pp", "Q"), ("Pyy", "R"), ("Pxy", None)):
-            need_shift("sum (Wc D) D", 2 * r["D"] - r[sig], sig)
-            need_bits("sum (Wc D) D + noise", w[sig] + 2 * r["D"] - r[sig] + 1)
-        a = 2 * r["Ls"]
-        need_bits("Cholesky of Pyy", max(sum_bits(w["Ls"], w["Ls"], m),
-                                         w["Pyy"] + need_shift("Cholesky of Pyy", a - r["Pyy"], "Pyy")) + 1)
-        a = r["Ls"] + r["V"]
-        need_bits("Ls^-1 Pxy^T", max(sum_bits(w["Ls"], w["V"], m),
-                                     w["Pxy"] + need_shift("Ls^-1 Pxy^T", a - r["Pxy"], "Pxy")) + 1)
-        a = r["Ls"] + r["K"]
-        need_bits("Ls^-T V", max(sum_bits(w["Ls"], w["K"], m),
-                                 w["V"] + need_shift("Ls^-T V", a - r["V"], "V")) + 1)
-        a = max(r["z"], r["Y"])
-        need_bits("z - zp", max(w["z"] + a - r["z"], w["Y"] + a - r["Y"]) + 1)
-        need_shift("z - zp", a - r["e"], "e")
-        a = r["K"] + r["e"]
-        need_bits("xm + K e", max(sum_bits(w["K"], w["e"], m), w["xm"] + need_shift("xm + K e", a - r["xm"], "xm")) + 1)
-        need_shift("xm + K e", a - r["x"], "x")
-        a = 2 * r["V"]
-        need_bits("Pp - V^T V", max(sum_bits(w["V"], w["V"], m), w["Pp"] + need_shift("Pp - V^T V", a - r["Pp"], "Pp")) + 1)
-        need_shift("Pp - V^T V", a - r["P"], "P")
-        a = max(r["P"], r["Pp"])
-        need_bits("P = Pp (no update)", w["Pp"] + a - r["Pp"])
-
-    def check_weights(self, L: int, alpha: float, beta: float, kappa: float) -> None:
-        """Refuse UT parameters whose weights this table cannot hold (see
-        :func:`weight_problem`), naming the smallest alpha that would do."""
-        bad = weight_problem(self.W, L, alpha, beta, kappa)
-        if bad is None:
-            return
-        need = None
-        for a in np.geomspace(max(alpha, 1e-4), 10.0, 2000):
-            if weight_problem(self.W, L, float(a), beta, kappa) is None:
-                need = float(a)
-                break
-        hint = (f"alpha >= {need:.4g} would do (L = {L}, beta = {beta:g}, kappa = {kappa:g})"
-                if need is not None else "no alpha in (0, 10] would do; widen the W format")
-        raise ValueError(f"UT weights not representable in fixed point: {bad}; {hint}")
-
-
-#: Largest ``sum |W|`` of a fixed-point UT: the rounding errors of the sigma points are
-#: amplified by it in the mean and covariance (small alpha: a large negative centre weight
-#: cancelling large positive ones).
-WEIGHT_GAIN_MAX = 8.0
-#: Largest relative quantisation error of a weight in the W format (2**-12).
-WEIGHT_REL_ERR = 2.0 ** -12
-
-
-def weight_problem(fw: FixedFormat, L: int, alpha: float, beta: float, kappa: float):
-    """``None`` if the weights of ``(L, alpha, beta, kappa)`` suit the format ``fw``, else the
-    rule broken, with the bad value: (1) every ``|Wm|``, ``|Wc|`` and ``c = L + lambda`` within
-    the format's range; (2) ``sum |Wm|`` and ``sum |Wc|`` at most :data:`WEIGHT_GAIN_MAX`;
-    (3) each weight quantised to a relative error of at most :data:`WEIGHT_REL_ERR` and
-    ``|sum Wm_q - 1|`` at most that as well."""
-    wm, wc, c = sigma_weights(L, alpha, beta, kappa)
-    for name, v in (("Wm0", wm[0]), ("Wc0", wc[0]), ("Wi", wm[1]), ("c = L + lambda", c)):
-        if not fw.min_value <= v <= fw.max_value:
-            return (f"|{name}| = {abs(v):.6g} beyond the range of the W format {fw} "
-                    f"([{fw.min_value:g}, {fw.max_value:g}])")
-    for name, ws in (("Wm", wm), ("Wc", wc)):
-        g = float(np.sum(np.abs(ws)))
-        if g > WEIGHT_GAIN_MAX:
-            return f"sum |{name}| = {g:.6g} > {WEIGHT_GAIN_MAX:g} (rounding errors amplified by it)"
-    lsb = 2.0 ** -fw.frac
-    for name, v in (("Wm0", wm[0]), ("Wc0", wc[0]), ("Wi", wm[1])):
-        q = np.floor(v / lsb + 0.5) * lsb
-        if v != 0 and abs(q - v) > WEIGHT_REL_ERR * abs(v):
-            return (f"{name} = {v:.6g} quantised to {q:.6g} in {fw}: relative error "
-                    f"{abs(q - v) / abs(v):.3g} > 2^-12")
-    s = float(np.sum(np.floor(wm / lsb + 0.5))) * lsb
-    if abs(s - 1.0) > WEIGHT_REL_ERR:
-        return f"sum of the quantised Wm = {s:.9g}, off 1 by {abs(s - 1):.3g} > 2^-12"
-    return None
-
+from .models import check_psd
+from ..qops import align, store
+from .nonlinear import NonlinearModel
+from .ukf_formats import UkfFormats, sigma_weights
 
 SIGNALS = UkfFormats.signals()
 EVENTS = EventRegistry(SIGNALS, ("implausible", "chol_fail", "s_not_pd", "div_zero"))
@@ -223,111 +72,6 @@ _EV_CHOL = EVENTS.index("chol_fail")
 _EV_SNPD = EVENTS.index("s_not_pd")
 _EV_DIV = EVENTS.index("div_zero")
 _BASE = EVENTS.base
-
-
-@njit_cached
-def _f_linear(x, w, prm, q, out):
-    """``F x + w`` (fixed point: ``q = [frac x, frac w, frac prm, frac out, half]``)."""
-    n = x.shape[0]
-    for i in range(n):
-        acc = align(w[i], q[0] + q[2] - q[1])
-        for j in range(n):
-            acc += prm[i, j] * x[j]
-        out[i] = rnd(acc, q[0] + q[2] - q[3], q[4])
-
-
-@njit_cached
-def _h_linear(x, v, prm, q, out):
-    """``H x + v``."""
-    for r in range(out.shape[0]):
-        acc = align(v[r], q[0] + q[2] - q[1])
-        for j in range(x.shape[0]):
-            acc += prm[r, j] * x[j]
-        out[r] = rnd(acc, q[0] + q[2] - q[3], q[4])
-
-
-@njit_cached
-def _h_iq(x, v, prm, q, out):
-    """``A [cos x0, sin x0] + v`` (``A = prm[0, 0]``): the I/Q of a carrier phase."""
-    acc = prm[0, 0] * cos_q(x[0], q[0], q[3], q[4]) + align(v[0], q[2] + q[3] - q[1])
-    out[0] = rnd(acc, q[2], q[4])
-    acc = prm[0, 0] * sin_q(x[0], q[0], q[3], q[4]) + align(v[1], q[2] + q[3] - q[1])
-    out[1] = rnd(acc, q[2], q[4])
-
-
-class NonlinearModel:
-    """``x[k+1] = f(x[k], w)``, ``z[k] = h(x[k], v)`` with ``w ~ N(0, Q)``, ``v ~ N(0, R)``.
-
-    Parameters
-    ----------
-    f, h : numba ``@njit`` functions
-        ``f(x, w, prm_f, q, out)`` writes the next state (``n``) into ``out``; ``h(x, v,
-        prm_h, q, out)`` the measurement (``m``). With additive noise ``w`` and ``v`` are zero
-        and the noise is added by the filter; augmented, they are the noise sigma points.
-        Write them once with the operators of :mod:`dsp.estimation.ops` (``align``, ``rnd``,
-        ``sin_q``, ``cos_q``) and the dtype of ``x`` (no float64 literals): they then run in
-        float64, float32 and fixed point. ``q`` is an int64 array ``[frac x, frac w (or v),
-        frac prm, frac out, half]`` (all 0 for floats): in fixed point ``x``, ``w`` and ``v``
-        are in the ``X`` format, ``out`` in ``X`` (``f``) or ``Y`` (``h``), ``prm`` in
-        ``prm``; the model rounds (``rnd``), the filter saturates and counts.
-    Q, R : arrays
-        Noise covariances (``n x n`` PSD, ``m x m`` positive definite).
-    prm_f, prm_h : 2-D float arrays
-        Parameters passed to ``f`` and ``h`` (cast to the filter's dtype).
-    """
-
-    def __init__(self, f, h, Q, R, prm_f=None, prm_h=None):
-        Q = np.atleast_2d(np.asarray(Q, dtype=np.float64))
-        R = np.atleast_2d(np.asarray(R, dtype=np.float64))
-        if Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
-            raise ValueError(f"Q must be square (n x n), not {Q.shape}")
-        if not 1 <= Q.shape[0] <= MAX_STATES:
-            raise ValueError(f"the state dimension must be 1..{MAX_STATES}, not {Q.shape[0]}")
-        if R.ndim != 2 or R.shape[0] != R.shape[1]:
-            raise ValueError(f"R must be square (m x m), not {R.shape}")
-        check_psd("Q", Q[None])
-        check_psd("R", R[None], strict=True)
-        self.f, self.h, self.Q, self.R = f, h, Q, R
-        self.prm_f = np.atleast_2d(np.zeros((1, 1)) if prm_f is None else np.asarray(prm_f, np.float64))
-        self.prm_h = np.atleast_2d(np.zeros((1, 1)) if prm_h is None else np.asarray(prm_h, np.float64))
-
-    @property
-    def n(self) -> int:
-        return self.Q.shape[0]
-
-    @property
-    def m(self) -> int:
-        return self.R.shape[0]
-
-    @classmethod
-    def linear(cls, F, H, Q, R) -> "NonlinearModel":
-        """The linear-Gaussian model ``f = F x + w``, ``h = H x + v`` (for tests: the UKF on
-        it equals the Kalman filter)."""
-        F, H = np.asarray(F, np.float64), np.atleast_2d(np.asarray(H, np.float64))
-        if F.ndim != 2 or F.shape[0] != F.shape[1]:
-            raise ValueError(f"F must be square (n x n), not {F.shape}")
-        return cls(_f_linear, _h_linear, Q, R, F, H)
-
-    @classmethod
-    def phase_iq(cls, F, Q, R, amplitude: float = 1.0) -> "NonlinearModel":
-        """A carrier-phase model (seed 002 shape): linear dynamics ``x[k+1] = F x + w`` of a
-        state whose first element is the phase (rad), measured as the I/Q pair ``A [cos
-        x0, sin x0] + v``. Runs in every arithmetic."""
-        F = np.asarray(F, np.float64)
-        if F.ndim != 2 or F.shape[0] != F.shape[1]:
-            raise ValueError(f"F must be square (n x n), not {F.shape}")
-        return cls(_f_linear, _h_iq, Q, R, F, [[amplitude]])
-
-
-def sigma_weights(L: int, alpha: float, beta: float, kappa: float):
-    """``(Wm, Wc, c)`` of the scaled unscented transform, ``c = L + lambda``."""
-    lam = alpha * alpha * (L + kappa) - L
-    c = L + lam
-    wm = np.full(2 * L + 1, 0.5 / c)
-    wc = wm.copy()
-    wm[0] = lam / c
-    wc[0] = lam / c + (1.0 - alpha * alpha + beta)
-    return wm, wc, c
 
 
 def psd_sqrt(A) -> np.ndarray:
@@ -634,9 +378,7 @@ class UnscentedKalmanFilter:
                  p_floor: float = 1e-12, z_limit: float | None = None, redraw: bool = True):
         if not isinstance(model, NonlinearModel):
             raise ValueError(f"model must be a NonlinearModel, not {model!r}")
-        kind = arithmetic_name(arithmetic)
-        if kind == "fixed" and not isinstance(arithmetic, UkfFormats):
-            raise ValueError(f"the fixed-point unscented filter takes a UkfFormats table, not {arithmetic!r}")
+        ar = Arithmetic.of(arithmetic, UkfFormats, "unscented filter")
         if noise not in ("additive", "augmented"):
             raise ValueError(f"noise must be 'additive' or 'augmented', not {noise!r}")
         if not (isinstance(alpha, (int, float)) and 0 < alpha <= 10):
@@ -654,14 +396,14 @@ class UnscentedKalmanFilter:
         wm, wc, c = sigma_weights(L, float(alpha), float(beta), float(kappa))
         if not c > 0:
             raise ValueError(f"alpha and kappa give L + lambda = {c:g}; it must be > 0")
-        self.model, self.trials, self.kind, self.z_limit = model, int(trials), kind, z_limit
+        self.model, self.trials, self.z_limit = model, int(trials), z_limit
+        self.ar, self.kind, self.formats = ar, ar.kind, ar.formats
         self.aug = noise == "augmented"
         self.redraw = bool(redraw)
-        self.formats = arithmetic if kind == "fixed" else None
-        if kind == "fixed":
-            arithmetic.check(n, m, L)
-            arithmetic.check_weights(L, float(alpha), float(beta), float(kappa))
-        dt = {"float64": np.float64, "float32": np.float32, "fixed": np.int64}[kind]
+        if ar.fixed:
+            ar.formats.check(n, m, L)
+            ar.formats.check_weights(L, float(alpha), float(beta), float(kappa))
+        dt = ar.dtype
         x0 = np.asarray(x0, np.float64)
         P0 = np.asarray(P0, np.float64)
         if x0.shape not in ((n,), (self.trials, n)):
@@ -672,8 +414,8 @@ class UnscentedKalmanFilter:
         x0 = np.broadcast_to(x0, (self.trials, n))
         P0 = np.broadcast_to(P0, (self.trials, n, n))
         Lq, Lr = (np.sqrt(c) * psd_sqrt(a) for a in (model.Q, model.R))
-        if kind == "fixed":
-            fm = arithmetic
+        if ar.fixed:
+            fm = ar.formats
             for what, v, f in (("x0", x0, fm.x), ("P0", P0, fm.P), ("Q", model.Q, fm.Pp), ("R", model.R, fm.Pyy),
                                ("sqrt(c) chol(Q)", Lq, fm.U), ("sqrt(c) chol(R)", Lr, fm.U),
                                ("prm_f", model.prm_f, fm.prm), ("prm_h", model.prm_h, fm.prm)):
@@ -687,16 +429,14 @@ class UnscentedKalmanFilter:
             r = fm.fracs()
             self._q = (np.array([r["X"], r["X"], r["prm"], r["X"], int(fm.X.rounding == "half_up")], np.int64),
                        np.array([r["X"], r["X"], r["prm"], r["Y"], int(fm.Y.rounding == "half_up")], np.int64))
-            self._fmt = fm.arrays()[:4]
         else:
             self.x = np.array(x0, dtype=dt, order="C")
             self.P = np.array(P0, dtype=dt, order="C")
             self._w = (wm.astype(dt), wc.astype(dt), np.array([c], dt), np.array([p_floor, p_floor], dt))
             self._mats = tuple(np.ascontiguousarray(a, dtype=dt) for a in
                                (model.Q, model.R, Lq, Lr, model.prm_f, model.prm_h))
-            zz = np.zeros(len(SIGNALS), np.int64)
             self._q = (np.zeros(5, np.int64), np.zeros(5, np.int64))
-            self._fmt = (zz, zz, zz, zz)
+        self._fmt = ar.arrays[:4]
         self.events = EVENTS
         self.ev = EVENTS.new((self.trials,))
 
@@ -715,15 +455,11 @@ class UnscentedKalmanFilter:
         if z.ndim != 3 or z.shape[0] != self.trials or z.shape[2] != m:
             raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
         ok = np.all(np.isfinite(z), axis=2)
-        lim = self.z_limit
-        if self.kind == "fixed":
-            f = self.formats.z
-            flim = min(f.max_value, -f.min_value)
-            lim = flim if lim is None else min(lim, flim)
+        lim = self.ar.limit(self.z_limit, "z")
         if lim is not None:
             ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
         zc = np.where(ok[..., None], z, 0.0)
-        zc = np.ascontiguousarray(to_fixed(zc, self.formats.z) if self.kind == "fixed" else zc.astype(self.x.dtype))
+        zc = self.ar.words(zc, "z")
         T = z.shape[1]
         xs = np.empty((self.trials, T, n), self.x.dtype)
         Ps = np.empty((self.trials, T if keep_P else 0, n, n), self.x.dtype)
@@ -732,15 +468,9 @@ class UnscentedKalmanFilter:
         fr, lo, hi, hf = self._fmt
         _kernel_for(self.model.f, self.model.h)(self.x, self.P, zc, ok, Q, R, Lq, Lr, pf, ph, self._q[0],
                     self._q[1], wm, wc, c, pfl, fr, lo, hi, hf, self.aug, self.redraw, self.ev, xs, Ps, keep_P)
-        if self.kind == "fixed":
-            xs_f = xs * 2.0 ** -self.formats.x.frac
-            Ps_f = Ps * 2.0 ** -self.formats.P.frac if keep_P else None
-        else:
-            xs_f, Ps_f = xs.astype(np.float64), (Ps.astype(np.float64) if keep_P else None)
-        return UKFRun(xs_f, Ps_f, self.counts())
+        return UKFRun(self.ar.physical(xs, "x"), self.ar.physical(Ps, "P") if keep_P else None,
+                      self.counts())
 
     def state(self):
         """Current ``(x, P)`` in physical units (float64)."""
-        if self.kind == "fixed":
-            return self.x * 2.0 ** -self.formats.x.frac, self.P * 2.0 ** -self.formats.P.frac
-        return self.x.astype(np.float64), self.P.astype(np.float64)
+        return self.ar.physical(self.x, "x"), self.ar.physical(self.P, "P")

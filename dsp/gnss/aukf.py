@@ -13,8 +13,8 @@ Cholesky ``S`` of ``P-``: ``c = sqrt((n + lambda) P-_11)``, ``a = W1 + 18 W2 + 2
 ``y_hat = A a u``, ``Pyy = A^2 ((W4 - l) u u^T + m I) + R``, ``Pxy = 2 A W2 sin(c)
 sqrt(n + lambda) S[:, 0] v^T`` (``u = [cos th, sin th]``, ``v = [-sin th, cos th]``). As
 ``Pxy`` has rank 1, ``P = P- - g^2 (v^T Pyy^-1 v) s0 s0^T`` (``s0 = sqrt(n+lambda) S[:,0]``,
-``g = 2 A W2 sin c``). :func:`master_update` is this form (a numba kernel);
-:func:`master_update_generic` runs the same update through the generic augmented UKF of
+``g = 2 A W2 sin c``). :func:`dsp.gnss.aukf_master.master_update` is this form (a numba kernel);
+:func:`dsp.gnss.aukf_master.master_update_generic` runs the same update through the generic augmented UKF of
 :mod:`dsp.estimation.ukf` (identity transition, zero process noise: its 21 sigma points are
 then exactly the seed's); test A1 holds them to 1e-12.
 
@@ -44,7 +44,7 @@ slave instead measures, once per block of ``M`` epochs, ``z = (w2_hat_end - s^M 
 over the block, in which the process noise dominates the thermal noise once ``M T`` exceeds
 the filter's time constant. Its expectation, for a master in steady state with the gain of
 ``q_hat``, is *linear* in the true ``q``: ``h(q) = a(q_hat) q + b(q_hat)``, from the
-mismatched-filter Lyapunov equation of the linearised loop (:func:`block_moments`,
+mismatched-filter Lyapunov equation of the linearised loop (:func:`dsp.gnss.aukf_slave.block_moments`,
 tabulated on a log grid of ``q_hat``); ``Rq = 2 h(q_hat)^2`` (``z`` is a squared Gaussian).
 The block slave's state is ``ln q`` (a scalar UKF in ``q`` let a quarter of the runs at
 ``q_true = 0.1 q0`` collapse onto the floor ``q >= 0``); its prior is derived: ``P_lnq0 = 1``
@@ -74,7 +74,7 @@ measured at 28 dB-Hz: 4.41 mean, 3.87 lowest of 99 locked trials x 10 s vs expec
 limit 2.42; the lost trial fell to 2.1 when 60 Hz off). Needs the nominal C/N0 (else only (1)).
 (3) A non-finite state.
 
-Fixed point (:class:`AukfFormats`): every stored signal of the master (predicted state and
+Fixed point (:class:`dsp.gnss.aukf_master.AukfFormats`): every stored signal of the master (predicted state and
 covariance, trig values, ``c``, ``Pyy``, its inverse, gain terms, state and covariance) is
 rounded half-up to its format's fraction bits and saturated (counted) -- an emulation of
 the DSP's word lengths evaluated in float64 (exact products of up to 53 bits), not an
@@ -83,20 +83,19 @@ integer bit-exact model. float32 rounds every stored signal to float32.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..estimation.ukf import NonlinearModel, UnscentedKalmanFilter, sigma_weights
+from ..estimation.ukf_formats import sigma_weights
 from ..estimation.models import check_psd
-from ..jit import njit_cached
 from .ca_code import CHIP_RATE_HZ
 from .discriminators import dll_nelp
 from .loops_fixed import DISC_CODE, WORD_BITS
+from .aukf_master import (N_AUG, TWO_PI, AukfFormats, master_kernel, master_update_generic,
+                          pyy_diag_kernel, ut_weights)
+from .aukf_slave import Q_TABLE, block_table, wipe_gain
 from .trackers import register_tracker
 
-TWO_PI = 2.0 * np.pi
-N_AUG = 10
 SEED_X0 = (0.0, 32995.519, 323.356, 0.0)
 SEED_P0 = 1e-3
 SEED_R = 1e-9
@@ -108,303 +107,6 @@ HANDOVER_P_THETA = (np.pi / 2) ** 2 / 3
 #: sums of the raw prompt) over wide-band power, over NBW_WINDOW epochs.
 NBW_EPOCHS = 10
 NBW_WINDOW = 1000
-
-
-@dataclass(frozen=True)
-class QFormat:
-    """Signed fixed-point format: ``bits`` total, ``frac`` fraction bits."""
-
-    bits: int
-    frac: int
-
-    def __post_init__(self):
-        if not (isinstance(self.bits, int) and 2 <= self.bits <= 62):
-            raise ValueError(f"format bits must be an integer in 2..62, not {self.bits!r}")
-        if not (isinstance(self.frac, int) and 0 <= self.frac < self.bits + 40):
-            raise ValueError(f"format frac must be an integer >= 0, not {self.frac!r}")
-
-    @property
-    def max_value(self) -> float:
-        return (2.0 ** (self.bits - 1) - 1) * 2.0 ** -self.frac
-
-
-@dataclass(frozen=True)
-class AukfFormats:
-    """Word lengths of the fixed-point master and slave (each a :class:`QFormat`).
-
-    theta, w0, w1, w2 : state elements (rad, rad/s, rad/s^2, rad/s^3)
-    P : covariance entries; y : normalised I/Q and the innovation; trig : sin/cos values;
-    gain : ``Pyy^-1`` entries and the gain terms; q : the slave's ``q_hat`` and its variance.
-    """
-
-    theta: QFormat = QFormat(24, 20)
-    w0: QFormat = QFormat(48, 30)
-    w1: QFormat = QFormat(40, 28)
-    w2: QFormat = QFormat(32, 22)
-    P: QFormat = QFormat(48, 36)
-    y: QFormat = QFormat(24, 18)
-    trig: QFormat = QFormat(20, 18)
-    gain: QFormat = QFormat(32, 22)
-    q: QFormat = QFormat(32, 16)
-
-    def __post_init__(self):
-        for f in fields(self):
-            if not isinstance(getattr(self, f.name), QFormat):
-                raise ValueError(f"AukfFormats.{f.name} must be a QFormat, not {getattr(self, f.name)!r}")
-
-    def table(self) -> np.ndarray:
-        """``(9, 2)`` float array ``[frac, max]`` in field order (kernel input)."""
-        return np.array([[getattr(self, f.name).frac, getattr(self, f.name).max_value]
-                         for f in fields(self)], np.float64)
-
-
-_ITH, _IW0, _IW1, _IW2, _IP, _IY, _ITRIG, _IGAIN, _IQ = range(9)
-
-
-@njit_cached
-def _qs(v, mode, fm, i, ev):
-    """Store ``v`` into signal ``i``: mode 0 float64, 1 float32, 2 fixed (round half up to
-    ``fm[i, 0]`` fraction bits, saturate at ``fm[i, 1]``, count in ``ev[2]``)."""
-    if mode == 0:
-        return v
-    if mode == 1:
-        return float(np.float32(v))
-    s = 2.0 ** fm[i, 0]
-    r = math.floor(v * s + 0.5) / s
-    if r > fm[i, 1]:
-        ev[2] += 1
-        return fm[i, 1]
-    if r < -fm[i, 1]:
-        ev[2] += 1
-        return -fm[i, 1]
-    return r
-
-
-@njit_cached
-def _pyy_terms(p11, th, A, W, mode, fm, ev):
-    """``(a, u, v, Pyy without R (3 entries), c)`` of the closed form for ``P-_11``."""
-    W1, W2, W3, cL = W[0], W[1], W[2], W[3]
-    c = _qs(math.sqrt(cL * p11), mode, fm, _ITH, ev)
-    cc = _qs(math.cos(c), mode, fm, _ITRIG, ev)
-    sc = _qs(math.sin(c), mode, fm, _ITRIG, ev)
-    a = _qs(W1 + 18.0 * W2 + 2.0 * cc * W2, mode, fm, _ITRIG, ev)
-    W6 = W3 + 18.0 * W2
-    W4 = W6 * (1.0 - a) * (1.0 - a)
-    m = 2.0 * W2 * sc * sc
-    nn = 2.0 * W2 * (cc - a) * (cc - a)
-    l_ = m - nn
-    u0 = _qs(math.cos(th), mode, fm, _ITRIG, ev)
-    u1 = _qs(math.sin(th), mode, fm, _ITRIG, ev)
-    A2 = A * A
-    g = W4 - l_
-    s00 = _qs(A2 * (g * u0 * u0 + m), mode, fm, _IP, ev)
-    s01 = _qs(A2 * g * u0 * u1, mode, fm, _IP, ev)
-    s11 = _qs(A2 * (g * u1 * u1 + m), mode, fm, _IP, ev)
-    return a, u0, u1, s00, s01, s11, sc
-
-
-@njit_cached
-def _master_kernel(x, P, y, ok, dphi, qhat, Phi, Qbar, R, A, W, pfloor, mode, fm, ev, nu_out,
-                   predict):
-    """One epoch for every trial: prediction (``predict``) then the closed-form update.
-    ``x (B, 4)``, ``P (B, 4, 4)`` updated in place; ``nu_out (B, 2)`` the innovation."""
-    B = x.shape[0]
-    xp = np.empty(4)
-    Pp = np.empty((4, 4))
-    tmp = np.empty((4, 4))
-    fx = np.array([_ITH, _IW0, _IW1, _IW2])
-    for b in range(B):
-        eb = ev[b]
-        if predict:
-            for i in range(4):
-                acc = 0.0
-                for j in range(4):
-                    acc += Phi[i, j] * x[b, j]
-                xp[i] = acc
-            xp[0] -= dphi[b]
-            for i in range(4):
-                xp[i] = _qs(xp[i], mode, fm, fx[i], eb)
-            for i in range(4):
-                for j in range(4):
-                    acc = 0.0
-                    for k in range(4):
-                        acc += Phi[i, k] * P[b, k, j]
-                    tmp[i, j] = acc
-            for i in range(4):
-                for j in range(i, 4):
-                    acc = qhat[b] * Qbar[i, j]
-                    for k in range(4):
-                        acc += tmp[i, k] * Phi[j, k]
-                    Pp[i, j] = _qs(acc, mode, fm, _IP, eb)
-                    Pp[j, i] = Pp[i, j]
-        else:
-            for i in range(4):
-                xp[i] = x[b, i]
-                for j in range(4):
-                    Pp[i, j] = P[b, i, j]
-        if not Pp[0, 0] > 0.0:                     # Cholesky of P- fails at its first pivot
-            eb[0] += 1
-            for i in range(4):
-                d = Pp[i, i]
-                if not d > pfloor:
-                    d = pfloor
-                for j in range(4):
-                    Pp[i, j] = 0.0
-                Pp[i, i] = d
-        nu_out[b, 0] = 0.0
-        nu_out[b, 1] = 0.0
-        if ok[b]:
-            a, u0, u1, s00, s01, s11, sc = _pyy_terms(Pp[0, 0], xp[0], A, W, mode, fm, eb)
-            s00 += R[0, 0]
-            s01 += R[0, 1]
-            s11 += R[1, 1]
-            det = s00 * s11 - s01 * s01
-            if s00 > 0.0 and det > 0.0:
-                i00 = _qs(s11 / det, mode, fm, _IGAIN, eb)
-                i01 = _qs(-s01 / det, mode, fm, _IGAIN, eb)
-                i11 = _qs(s00 / det, mode, fm, _IGAIN, eb)
-                e0 = _qs(y[b, 0] - A * a * u0, mode, fm, _IY, eb)
-                e1 = _qs(y[b, 1] - A * a * u1, mode, fm, _IY, eb)
-                nu_out[b, 0] = e0
-                nu_out[b, 1] = e1
-                v0, v1 = -u1, u0
-                # Pxy = g s0 v^T, s0 = sqrt(cL / P-11) P-[:, 0], g = 2 A W2 sin c
-                g = 2.0 * A * W[1] * sc * math.sqrt(W[3] / Pp[0, 0])
-                g = _qs(g, mode, fm, _IGAIN, eb)
-                wv0 = v0 * i00 + v1 * i01               # Pyy^-1 v
-                wv1 = v0 * i01 + v1 * i11
-                r = _qs(wv0 * e0 + wv1 * e1, mode, fm, _IGAIN, eb)   # v^T Pyy^-1 nu
-                vv = _qs(v0 * wv0 + v1 * wv1, mode, fm, _IGAIN, eb)  # v^T Pyy^-1 v
-                for i in range(4):
-                    x[b, i] = _qs(xp[i] + g * Pp[i, 0] * r, mode, fm, fx[i], eb)
-                h = g * g * vv
-                for i in range(4):
-                    for j in range(i, 4):
-                        P[b, i, j] = _qs(Pp[i, j] - h * Pp[i, 0] * Pp[j, 0], mode, fm, _IP, eb)
-                        P[b, j, i] = P[b, i, j]
-                continue
-            eb[1] += 1
-        for i in range(4):
-            x[b, i] = xp[i]
-            for j in range(4):
-                P[b, i, j] = Pp[i, j]
-
-
-@njit_cached
-def _pyy_diag_kernel(p11, th, A, W, R, out):
-    """``diag Pyy`` for ``P-_11`` values ``p11 (B, J)`` (the seed slave's ``h_q``)."""
-    ev = np.zeros(3, np.int64)
-    fm = np.zeros((9, 2))
-    for b in range(p11.shape[0]):
-        for j in range(p11.shape[1]):
-            a, u0, u1, s00, s01, s11, sc = _pyy_terms(max(p11[b, j], 0.0), th[b], A, W, 0, fm, ev)
-            out[b, j, 0] = s00 + R[0, 0]
-            out[b, j, 1] = s11 + R[1, 1]
-
-
-def ut_weights(epsilon: float = 1.027, beta: float = 2.0, kappa: float = 0.0, L: int = N_AUG):
-    """``[W1 = Wm0, W2 = Wi, W3 = Wc0, n + lambda]`` of the seed's scaled UT."""
-    wm, wc, c = sigma_weights(L, epsilon, beta, kappa)
-    return np.array([wm[0], wm[1], wc[0], c])
-
-
-def master_update(xp, Pp, y, R, amplitude: float = 1.0, epsilon: float = 1.027, beta: float = 2.0,
-                  kappa: float = 0.0):
-    """Closed-form measurement update (float64) of predicted ``xp (B, 4)``, ``Pp (B, 4, 4)``
-    with I/Q ``y (B, 2)``; returns ``(x, P, events)``."""
-    x = np.array(xp, np.float64, ndmin=2, copy=True)
-    P = np.array(Pp, np.float64, ndmin=3, copy=True)
-    B = x.shape[0]
-    ev = np.zeros((B, 3), np.int64)
-    _master_kernel(x, P, np.ascontiguousarray(np.reshape(y, (B, 2)), np.float64), np.ones(B, np.bool_),
-                   np.zeros(B), np.zeros(B), np.eye(4), np.zeros((4, 4)), np.asarray(R, np.float64),
-                   float(amplitude), ut_weights(epsilon, beta, kappa), 1e-12, 0, np.zeros((9, 2)), ev,
-                   np.zeros((B, 2)), False)
-    return x, P, ev
-
-
-def master_update_generic(xp, Pp, y, R, amplitude: float = 1.0, epsilon: float = 1.027,
-                          beta: float = 2.0, kappa: float = 0.0):
-    """The same update by the generic augmented UKF (``dsp.estimation.ukf``, n = 10: the
-    identity transition with zero process noise leaves the sigma points of ``P-``)."""
-    xp = np.array(xp, np.float64, ndmin=2)
-    Pp = np.array(Pp, np.float64, ndmin=3)
-    B = xp.shape[0]
-    model = NonlinearModel.phase_iq(np.eye(4), np.zeros((4, 4)), R, amplitude)
-    f = UnscentedKalmanFilter(model, xp, Pp, alpha=epsilon, beta=beta, kappa=kappa,
-                              noise="augmented", trials=B)
-    r = f.run(np.reshape(y, (B, 1, 2)), keep_P=True)
-    return r.x[:, 0], r.P[:, 0], r.events
-
-
-# ------------------------------------------------------------------------------------------
-# the block slave's measurement model
-# ------------------------------------------------------------------------------------------
-def _linear_gain(Phi, Q, Rph):
-    import scipy.linalg as sl
-    H = np.array([[1.0, 0, 0, 0]])
-    Pm = sl.solve_discrete_are(Phi.T, H.T, Q, np.array([[Rph]]))
-    return (Pm @ H.T / (Pm[0, 0] + Rph))[:, 0]
-
-
-def wipe_gain(r_true: float) -> float:
-    """Mean discriminator gain ``k_d = 1 - 2 p`` of the data-wiped prompt: the bit is removed
-    by the sign of the in-phase component (unit amplitude, noise variance ``r_true`` per
-    component), wrong with probability ``p = Phi(-1 / sqrt(r_true))``; a wrong sign flips the
-    quadrature signal (the phase information) but not the statistics of its noise, which is
-    independent of the in-phase noise: ``E[v^T y] = k_d sin(theta_err)``, variance still
-    ``r_true`` (0.925 at 32 dB-Hz, 0.985 at 36, 0.77 at 28)."""
-    if not r_true > 0:
-        return 1.0
-    return 1.0 - 2.0 * 0.5 * math.erfc(1.0 / math.sqrt(2.0 * r_true))
-
-
-def block_moments(q_hat, Phi, Qbar, r_phase: float, M: int, kd: float = 1.0):
-    """``(a, b)`` with ``E[z] = a q + b`` for ``z = (w2_hat_end - s^M w2_hat_start)^2`` over
-    ``M`` epochs, the linearised master in steady state with the gain of ``q_hat`` and the
-    truth's intensity ``q`` (phase-measurement variance ``r_phase`` rad^2). ``kd``: the
-    discriminator's mean gain (:func:`wipe_gain`), which the master's gain does not know:
-    the loop sees ``kd theta_err`` plus the full noise (without it the noise floor ``b`` was
-    20-40 % low at 32 dB-Hz and biased ``q_hat`` up at low ``q``, A4)."""
-    import scipy.linalg as sl
-    K = _linear_gain(Phi, q_hat * Qbar, r_phase)
-    H = np.array([1.0, 0, 0, 0])
-    IKH = np.eye(4) - kd * np.outer(K, H)
-    Ae = IKH @ Phi
-    s = Phi[3, 3]
-    A = np.zeros((5, 5))
-    A[:4, :4] = Ae
-    A[4, :4] = kd * K[3] * (H @ Phi)
-    A[4, 4] = s
-    Bw = np.vstack([IKH, kd * K[3] * H[None, :]])
-    Bv = np.concatenate([-K, [K[3]]])
-    out = []
-    for Qn, Rn in ((Qbar, 0.0), (np.zeros((4, 4)), r_phase)):
-        Se = sl.solve_discrete_lyapunov(Ae, IKH @ Qn @ IKH.T + Rn * np.outer(K, K))
-        C = np.zeros((5, 5))
-        C[:4, :4] = Se
-        N = Bw @ Qn @ Bw.T + Rn * np.outer(Bv, Bv)
-        for _ in range(M):
-            C = A @ C @ A.T + N
-        out.append(C[4, 4])
-    return out[0], out[1]
-
-
-_MOMENTS: dict = {}
-#: Range of q (rad^2/s^7) the block slave's table covers; q_hat is kept inside it.
-Q_TABLE = (1e-3, 1e4)
-
-
-def block_table(Phi, Qbar, r_phase, M, q_lo=None, q_hi=None, n=57, kd=1.0):
-    q_lo = Q_TABLE[0] if q_lo is None else q_lo
-    q_hi = Q_TABLE[1] if q_hi is None else q_hi
-    key = (Phi.tobytes(), Qbar.tobytes(), float(r_phase), int(M), q_lo, q_hi, n, float(kd))
-    t = _MOMENTS.get(key)
-    if t is None:
-        g = np.geomspace(q_lo, q_hi, n)
-        ab = np.array([block_moments(v, Phi, Qbar, r_phase, M, kd) for v in g])
-        t = _MOMENTS[key] = (np.log(g), ab[:, 0], ab[:, 1])
-    return t
 
 
 # ------------------------------------------------------------------------------------------
@@ -664,7 +366,7 @@ class AukfTracker:
                 xp, Pp = self.x, self.P
             self.x, self.P, _ = master_update_generic(xp, Pp, y, self.R, 1.0, *self.ut)
         else:
-            _master_kernel(self.x, self.P, np.ascontiguousarray(y), ok, dphi, self.qhat, self.Phi,
+            master_kernel(self.x, self.P, np.ascontiguousarray(y), ok, dphi, self.qhat, self.Phi,
                            self.Qbar, self.R, 1.0, self.W, self.pfloor, self.mode, self._fm, self.ev, nu,
                            self._started)
         self._started = True
@@ -674,7 +376,7 @@ class AukfTracker:
                 def h(Qs):
                     p11 = p11_base[:, None] + Qs * self.Qbar[0, 0]
                     out = np.empty(Qs.shape + (2,))
-                    _pyy_diag_kernel(np.ascontiguousarray(p11), np.ascontiguousarray(th_pred), 1.0,
+                    pyy_diag_kernel(np.ascontiguousarray(p11), np.ascontiguousarray(th_pred), 1.0,
                                      self.W, self.R, out)
                     return out
                 self._slave_update(nu * nu, h, np.eye(2) * self.Rq)

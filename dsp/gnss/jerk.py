@@ -10,7 +10,7 @@ import numpy as np
 __all__ = ["jerk_phi", "jerk_q"]
 
 
-def _phi_b(alpha: float, tau):
+def phi_b(alpha: float, tau):
     """Column ``Phi(tau) B`` of the jerk model, ``B = [0, 0, 0, 1]``: ``(p, q1, r, s)``.
 
     The closed forms cancel catastrophically for small ``alpha tau``; there the exact series
@@ -41,7 +41,7 @@ def _phi_b(alpha: float, tau):
 def jerk_phi(alpha_per_s: float, step_s: float) -> np.ndarray:
     """The exact 4x4 transition matrix of the jerk model over ``step_s`` (RECEIVERS.md 1)."""
     T = float(step_s)
-    p, q1, r, s = (float(v) for v in _phi_b(float(alpha_per_s), T))
+    p, q1, r, s = (float(v) for v in phi_b(float(alpha_per_s), T))
     return np.array([[1.0, T, T * T / 2, p], [0.0, 1.0, T, q1], [0.0, 0.0, 1.0, r],
                      [0.0, 0.0, 0.0, s]])
 
@@ -55,5 +55,5 @@ def jerk_q(alpha_per_s: float, q: float, step_s: float) -> np.ndarray:
     T = float(step_s)
     x, w = np.polynomial.legendre.leggauss(24)
     tau = T / 2 * (x + 1)
-    g = np.array(_phi_b(float(alpha_per_s), tau))          # (4, 24)
+    g = np.array(phi_b(float(alpha_per_s), tau))          # (4, 24)
     return float(q) * (g * (w * T / 2)) @ g.T

@@ -77,7 +77,7 @@ class TrackerContext:
     aiding: Callable[[int], Any] | None = field(default=None, compare=False)
 
 
-_TRACKERS: dict[str, tuple[Callable, str]] = {}
+TRACKERS: dict[str, tuple[Callable, str]] = {}
 #: names of the trackers that need ``TrackerContext.aiding`` (an external sensor)
 _NEEDS_AIDING: set[str] = set()
 
@@ -86,9 +86,9 @@ def register_tracker(name: str, factory: Callable, help: str = "", *,
                      needs_aiding: bool = False) -> Callable:
     """Register ``factory(ctx, arith, **options)`` under ``name`` (unique);
     ``needs_aiding``: the tracker cannot run without ``TrackerContext.aiding``."""
-    if name in _TRACKERS and _TRACKERS[name][0] is not factory:
+    if name in TRACKERS and TRACKERS[name][0] is not factory:
         raise ValueError(f"tracker {name!r} is registered twice")
-    _TRACKERS[name] = (factory, help)
+    TRACKERS[name] = (factory, help)
     if needs_aiding:
         _NEEDS_AIDING.add(name)
     return factory
@@ -111,20 +111,20 @@ BUILTIN: tuple[str, ...] = ("dsp.gnss.aukf", "dsp.ins.loops")
 
 def tracker_names() -> tuple[str, ...]:
     _load_builtin()
-    return tuple(sorted(_TRACKERS))
+    return tuple(sorted(TRACKERS))
 
 
 def tracker_help(name: str) -> str:
     _load_builtin()
-    return _TRACKERS[name][1]
+    return TRACKERS[name][1]
 
 
 def make_tracker(name: str, ctx: TrackerContext, arith, **options):
     """Build the tracker ``name`` for ``ctx`` in arithmetic ``arith``."""
     _load_builtin()
-    if name not in _TRACKERS:
-        raise ValueError(f"unknown tracker {name!r}; choose from {', '.join(sorted(_TRACKERS))}")
-    return _TRACKERS[name][0](ctx, arith, **options)
+    if name not in TRACKERS:
+        raise ValueError(f"unknown tracker {name!r}; choose from {', '.join(sorted(TRACKERS))}")
+    return TRACKERS[name][0](ctx, arith, **options)
 
 
 def _pll_factory(order: int):

@@ -54,12 +54,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .rotation import RATE_RANGE
+from .scoring import REF_AUX, REF_MAIN, burst_scores
 from .standard import F135, burst_offsets
-
-REF_MAIN, REF_AUX = 1, 2
-
-#: Rotation rates searched (relative deviation from 15 Hz); the generator's range.
-RATE_RANGE = 0.05
 
 
 @dataclass(frozen=True)
@@ -112,11 +109,10 @@ def _match_times(t, starts, offs, tol):
 
 def candidates(t, offs, cfg: AcquireConfig):
     """Peak-anchored template starts with >= cand_hits matches, best per template span."""
-    from .decode import _scores
     if t.size == 0:
         return np.empty(0), np.empty(0, np.int64)
     starts = np.unique(np.round((t[:, None] - offs[None, :4]).ravel(), 12))
-    sc = _scores(t, starts, offs, cfg.tol_s)
+    sc = burst_scores(t, starts, offs, cfg.tol_s)
     g = np.flatnonzero(sc >= cfg.cand_hits)
     if g.size == 0:
         return np.empty(0), np.empty(0, np.int64)

@@ -21,7 +21,7 @@ Fixed point (what the DSP does with integers only): angles are *binary angles* o
 sums and differences wrap like a 32-bit register. :func:`combine_coarse_fine_fixed` is the
 combination above with integer candidate choice, a restoring divider for the weight
 fraction and one rounding (<= 0.62 LSB from the exact result); :func:`bearing_from_state`
-goes from the integer Kalman state (:class:`dsp.tacan.kalman.KalmanFixedConfig`, s36.28)
+goes from the integer Kalman state (:class:`dsp.tacan.kalman_config.KalmanFixedConfig`, s36.28)
 and the 40-bit phase advances since the references (:func:`reference_advances`) to the
 bearing with the vectoring CORDIC of :mod:`dsp.cordic` (<= 2.1 LSB from the float path on
 the same state). :func:`deg_to_bangle`/:func:`bangle_to_deg` (and the radian forms) are the
@@ -94,8 +94,8 @@ def seed_eq17(coarse_deg, fine135_deg):
 #: below the filter's noise (~1e-3 deg), and two angles times a 30-bit fraction still fit
 #: the int64 intermediates of :func:`combine_coarse_fine_fixed`.
 ANGLE_BITS = 32
-#: Bits per turn of the Kalman core's phase accumulator (the same as ``dsp.qops.PHASE_BITS``;
-#: repeated here so that this module does not import numba -- a test checks they agree).
+#: Bits per turn of the Kalman core's phase accumulator (:mod:`dsp.tacan.phase_ops` and the
+#: Kalman kernel read it here).
 PHASE_BITS = 40
 #: TACAN modulation frequencies (Hz) of the coarse and fine components (dsp.tacan.standard).
 F15_HZ, F135_HZ = F15, F135
@@ -182,7 +182,7 @@ def freq_word(f_hz: float, tick_hz: float, phase_bits: int = PHASE_BITS) -> int:
     The phase advance over ``dt`` ticks is ``dt * word mod 2**phase_bits`` (see
     :func:`phase_advance`); the frequency error is below ``tick_hz / 2**(phase_bits+1)``
     (1e-5 Hz at 20 MHz and 40 bits). Identical to the Kalman core's words
-    (:meth:`dsp.tacan.kalman.KalmanFixedConfig.value_consts`).
+    (:meth:`dsp.tacan.kalman_config.KalmanFixedConfig.value_consts`).
     """
     b = _angle_bits(phase_bits)
     for name, v in (("f_hz", f_hz), ("tick_hz", tick_hz)):

@@ -39,11 +39,12 @@ template a lead. A record where the mains are all decoded (>= 5 dB) is left as i
 
 Rotation rate: the beacon's antenna may turn slightly off 15 Hz (the references then lie
 on a grid of period ``1 / (9 f)``). The grid's period is estimated from the decoded
-references (:func:`estimate_rotation`: median of the gaps, then a least-squares grid with
-indices counted gap by gap, so a beacon 5 % off still fits) and rounded to
-:data:`RATE_QUANTUM` (a nominal beacon gives exactly 15 Hz). The block's estimate sets the
-grid of :func:`_snap_to_grid` and of the rotation-slot detector; the receiver tracks the rate
-causally (:func:`rotation_track`) for its Kalman model and phase advances.
+references (:func:`dsp.tacan.rotation.estimate_rotation`: median of the gaps, then a
+least-squares grid with indices counted gap by gap, so a beacon 5 % off still fits) and
+rounded to :data:`dsp.tacan.rotation.RATE_QUANTUM` (a nominal beacon gives exactly 15 Hz).
+The block's estimate sets the grid of :func:`_snap_to_grid` and of the rotation-slot
+detector; the receiver tracks the rate causally (:func:`dsp.tacan.rotation.rotation_track`)
+for its Kalman model and phase advances.
 
 Near the noise floor (0 dB, references in the envelope trough) even the auxiliary bursts
 rarely pass ``min_fraction`` alone, so no grid forms. When fewer than ``acquire_below`` of
@@ -71,12 +72,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dsp.jit import njit_cached
 from .acquire import AcquireConfig, acquire_references
+from .rotation import estimate_rotation, fit_grid, period_median, quantize_rotation
+from .scoring import REF_AUX, REF_MAIN, burst_scores, match_nearest
 from .standard import F15, F135, burst_offsets, pair_spacing_s
-
-REF_MAIN, REF_AUX = 1, 2
-
 
 @dataclass(frozen=True)
 class DecoderConfig:
@@ -160,59 +159,11 @@ class Decoded:
     near_floor: bool = False   # near the noise floor: acquisition used or bursts incomplete
 
 
-def _match(t: np.ndarray, targets: np.ndarray, tol: float):
-    """Index of the nearest peak to each target, and whether it is within tol."""
-    j = np.searchsorted(t, targets)
-    j0 = np.clip(j - 1, 0, len(t) - 1)
-    j1 = np.clip(j, 0, len(t) - 1)
-    d0 = np.abs(t[j0] - targets)
-    d1 = np.abs(t[j1] - targets)
-    best = np.where(d1 < d0, j1, j0)
-    return best, np.minimum(d0, d1) <= tol
-
-
-@njit_cached(nogil=True)
-def _score_kernel(t, starts, offs, tol, score):
-    """``score[i]`` = how many ``starts[i] + offs[c]`` have a peak within ``tol``: for each
-    template pulse, :func:`_match` (nearest of the two neighbours found by a left
-    ``searchsorted``) with one pointer walking ``t`` -- ``starts`` ascending makes the
-    targets ascending -- so no ``peaks x align x template`` temporaries (~330 MB each for a
-    minute of pulses) and no log factor. Same arithmetic as :func:`_scores_numpy`."""
-    n = t.size
-    for i in range(starts.size):
-        score[i] = 0
-    for c in range(offs.size):
-        o = offs[c]
-        j = 0
-        for i in range(starts.size):
-            x = starts[i] + o
-            while j < n and t[j] < x:
-                j += 1
-            j0 = j - 1 if j > 0 else 0
-            j1 = j if j < n else n - 1
-            if min(abs(t[j0] - x), abs(t[j1] - x)) <= tol:
-                score[i] += 1
-
-
-def _scores(t: np.ndarray, starts: np.ndarray, offs: np.ndarray, tol: float) -> np.ndarray:
-    """Matched template pulses of each start hypothesis (``starts`` ascending)."""
-    score = np.empty(starts.size, np.int64)
-    _score_kernel(np.ascontiguousarray(t, np.float64), np.ascontiguousarray(starts, np.float64),
-                  np.ascontiguousarray(offs, np.float64), float(tol), score)
-    return score
-
-
-def _scores_numpy(t, starts, offs, tol):
-    """:func:`_scores` with numpy (the reference the tests hold the kernel to)."""
-    _, ok = _match(t, (starts[:, None] + offs[None, :]).ravel(), tol)
-    return ok.reshape(starts.size, offs.size).sum(axis=1)
-
-
 def _bursts(t: np.ndarray, offs: np.ndarray, cfg: DecoderConfig):
     n_al = min(int(cfg.align), len(offs))
     starts = (t[:, None] - offs[None, :n_al]).ravel()
     starts = np.unique(np.round(starts, 12))
-    score = _scores(t, starts, offs, cfg.tol_s)
+    score = burst_scores(t, starts, offs, cfg.tol_s)
     need = int(np.ceil(cfg.min_fraction * len(offs)))
     good = np.flatnonzero(score >= need)
     if good.size == 0:
@@ -226,7 +177,7 @@ def _bursts(t: np.ndarray, offs: np.ndarray, cfg: DecoderConfig):
     first[1:] = cluster[order][1:] != cluster[order][:-1]
     win = good[order[first]]
     targets = starts[win][:, None] + offs[None, :]
-    idx, ok = _match(t, targets.ravel(), cfg.tol_s)
+    idx, ok = match_nearest(t, targets.ravel(), cfg.tol_s)
     idx, ok = idx.reshape(targets.shape), ok.reshape(targets.shape)
     times = np.empty(win.size)
     used = np.zeros(len(t), bool)
@@ -262,9 +213,9 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     # A burst found by both templates (overlapping spans) keeps the better fractional score.
     if tm.size and ta.size:
         span = max(main_off[-1], aux_off[-1])
-        j, close = _match(tm, ta, span)
+        j, close = match_nearest(tm, ta, span)
         a_worse = close & (sa / len(aux_off) <= sm[j] / len(main_off))
-        i, close_m = _match(ta, tm, span)
+        i, close_m = match_nearest(ta, tm, span)
         m_worse = close_m & (sm / len(main_off) < sa[i] / len(aux_off))
         ta, sa = ta[~a_worse], sa[~a_worse]
         tm, sm = tm[~m_worse], sm[~m_worse]
@@ -278,7 +229,7 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
     # see RATE_QUANTUM): the grid the references are snapped to and fitted with.
     f_rot = estimate_rotation(ref_t, cfg.tol_s, int(cfg.min_grid_refs))
     if f_rot is None:
-        p_med = _period_median(ref_t) if ref_t.size >= cfg.min_grid_refs else None
+        p_med = period_median(ref_t) if ref_t.size >= cfg.min_grid_refs else None
         f_rot = quantize_rotation(1.0 / (9.0 * p_med)) if p_med is not None else F15
     ref_t, on_grid = _snap_to_grid(ref_t, kinds, cfg, 1.0 / (9.0 * f_rot))
     n_off = int(np.count_nonzero(~on_grid))
@@ -293,8 +244,8 @@ def decode(times_s, mode: str = "X", cfg: DecoderConfig | None = None) -> Decode
         um = um | used
 
     pair = pair_spacing_s(cfg.mode)
-    _, fwd = _match(t, t + pair, cfg.tol_s)
-    _, back = _match(t, t - pair, cfg.tol_s)
+    _, fwd = match_nearest(t, t + pair, cfg.tol_s)
+    _, back = match_nearest(t, t - pair, cfg.tol_s)
     n_rot = (t[-1] - t[0]) * (f_est or F15)
     if cfg.acquire and ref_t.size < cfg.acquire_below * 9 * n_rot:
         # Too few bursts decoded alone (near the noise floor): integrate across bursts
@@ -367,141 +318,23 @@ def _mode_check(t, tm, sm, cfg: DecoderConfig):
         return tm, sm, 0
     if cfg.mode == "X":
         off = burst_offsets("X", "main")
-        _, ok = _match(t, (tm[:, None] + off[None, :]).ravel(), cfg.tol_s)
+        _, ok = match_nearest(t, (tm[:, None] + off[None, :]).ravel(), cfg.tol_s)
         ok = ok.reshape(tm.size, off.size)
         keep = np.count_nonzero(ok[:, 0::2] & ok[:, 1::2], axis=1) >= cfg.min_pairs_x
     else:
         off = burst_offsets("Y", "main")
-        _, ok = _match(t, (tm[:, None] + off[None, :]).ravel(), cfg.tol_s)
-        _, ok12 = _match(t, (tm[:, None] + off[None, :] + pair_spacing_s("X")).ravel(), cfg.tol_s)
+        _, ok = match_nearest(t, (tm[:, None] + off[None, :]).ravel(), cfg.tol_s)
+        _, ok12 = match_nearest(t, (tm[:, None] + off[None, :] + pair_spacing_s("X")).ravel(), cfg.tol_s)
         ok, ok12 = ok.reshape(tm.size, off.size), ok12.reshape(tm.size, off.size)
         keep = np.count_nonzero(ok & ok12, axis=1) < 0.5 * np.count_nonzero(ok, axis=1)
     return tm[keep], sm[keep], int(np.count_nonzero(~keep))
-
-
-#: Resolution of the rotation-rate estimate, relative to 15 Hz (0.15 mHz). The estimate is
-#: rounded to it, so a nominal beacon -- whose estimate is within ~1e-6 of 15 Hz after a
-#: fifth of a second of references -- gives exactly 15 Hz (the DSP's words and bits are
-#: then those of the nominal rate), and the rounding leaves at most 5e-6 of rate error:
-#: a filter lag of ~0.007 deg (the lag is ~2 pi df memory_s in the 135 Hz phase, / 9).
-RATE_QUANTUM = 1e-5
-#: Rotation rates the estimator accepts (relative deviation from 15 Hz); the generator's range.
-RATE_RANGE = 0.05
-
-
-def quantize_rotation(f_hz: float) -> float:
-    """A rotation-rate estimate rounded to :data:`RATE_QUANTUM` steps of 15 Hz (exactly
-    ``F15`` on the nominal step) and clipped to ``F15 (1 +- RATE_RANGE)``."""
-    k = round((float(f_hz) / F15 - 1.0) / RATE_QUANTUM)
-    kmax = round(RATE_RANGE / RATE_QUANTUM)
-    k = max(-kmax, min(kmax, k))
-    return F15 * (1.0 + k * RATE_QUANTUM) if k else F15
-
-
-def _grid_index(ref_t: np.ndarray, period: float) -> np.ndarray:
-    """Grid index of each (time-sorted) reference, counted gap by gap from the first: a
-    gap of ``k`` periods is read right while ``k`` times the period's error stays below half
-    a period (a beacon 5 % off 15 Hz: gaps up to 9 periods), where indices from one origin
-    (``(t - t0) / p``) slip after ``1 / (2 x error)`` periods."""
-    if ref_t.size == 0:
-        return np.empty(0, np.int64)
-    return np.concatenate([[0], np.cumsum(np.rint(np.diff(ref_t) / period))]).astype(np.int64)
-
-
-def _period_median(ref_t: np.ndarray) -> float | None:
-    """Robust 135 Hz period from the gaps between consecutive references: the median of
-    ``gap / k`` over gaps of ``k`` = 1..8 nominal periods (None: fewer than 3 such gaps)."""
-    p0 = 1.0 / F135
-    d = np.diff(ref_t)
-    k = np.rint(d / p0)
-    ok = (k >= 1) & (k <= 8)
-    if np.count_nonzero(ok) < 3:
-        return None
-    p = float(np.median(d[ok] / k[ok]))
-    return p if abs(p / p0 - 1.0) <= RATE_RANGE else None
-
-
-def estimate_rotation(ref_t: np.ndarray, tol: float, min_refs: int,
-                      min_span_s: float = 0.0) -> float | None:
-    """Rotation rate (Hz, :func:`quantize_rotation`) from reference times: a robust median
-    period, then the least-squares grid (:func:`_fit_grid`) through them. None when there
-    are fewer than ``min_refs`` references, they span less than ``min_span_s``, or no
-    grid holds 80 % of them."""
-    t = np.sort(np.asarray(ref_t, dtype=np.float64))
-    if t.size < max(int(min_refs), 3) or t[-1] - t[0] < min_span_s:
-        return None
-    p = _period_median(t)
-    if p is None:
-        return None
-    fit = _fit_grid(t, p, tol, int(min_refs))
-    if fit is None:
-        return None
-    return quantize_rotation(1.0 / (9.0 * fit[1]))
-
-
-def rotation_track(ref_t, tol: float, min_refs: int, min_span_s: float,
-                   window_s: float = 2.0, prior_rate: float | None = None):
-    """Causal rotation-rate estimate after each reference of ``ref_t`` (given in the order
-    the references become known): :func:`estimate_rotation` of the references known so
-    far that lie within ``window_s`` of the newest (a tracker: it follows a slowly changing
-    rate, and the cost per reference stays bounded), holding the latest estimate (``F15``
-    before the first) when they do not suffice. ``prior_rate`` (an earlier block's
-    estimate, None: none yet) is held until the first estimate.
-
-    Returns
-    -------
-    (rates, confirmed) : float array, bool array
-        The rate after each reference and whether an estimate exists by then (the
-        reference timing is *confirmed*: a 135 Hz grid through ``min_refs`` references
-        spanning ``min_span_s``; the receiver flags its bearings until then).
-    """
-    ref_t = np.asarray(ref_t, dtype=np.float64)
-    out = np.empty(ref_t.size)
-    conf = np.zeros(ref_t.size, bool)
-    f = F15 if prior_rate is None else float(prior_rate)
-    have = prior_rate is not None
-    known = []
-    for i in range(ref_t.size):
-        known.append(ref_t[i])
-        if len(known) > 4 * int(window_s * F135):
-            known = known[-int(window_s * F135) * 2:]
-        w = np.asarray(known)
-        w = w[w >= w.max() - window_s]
-        e = estimate_rotation(w, tol, min_refs, min_span_s)
-        if e is not None:
-            f, have = e, True
-        out[i], conf[i] = f, have
-    return out, conf
-
-
-def _fit_grid(ref_t: np.ndarray, period: float, tol: float, min_refs: int):
-    """Least-squares 135 Hz grid ``t = a + p n`` through the (time-sorted) references:
-    indices counted gap by gap with ``period`` (:func:`_grid_index`), then refitted twice on
-    the references within ``tol`` of the grid (a burst mis-aligned by a code step does not
-    pull it). None when fewer than ``min_refs`` references, or fewer than 80 % of them,
-    lie on one grid."""
-    a, p = float(ref_t[0]), period
-    inl = np.ones(ref_t.size, bool)
-    n = _grid_index(ref_t, p)
-    for it in range(3):
-        if it:
-            n = np.rint((ref_t - a) / p)
-        A = np.stack([np.ones(np.count_nonzero(inl)), n[inl]], axis=1)
-        (a, p), *_ = np.linalg.lstsq(A, ref_t[inl], rcond=None)
-        n = np.rint((ref_t - a) / p)
-        inl = np.abs(ref_t - (a + p * n)) <= tol
-        if np.count_nonzero(inl) < max(min_refs, 2):
-            return None
-    if np.count_nonzero(inl) < 0.8 * ref_t.size:
-        return None
-    return float(a), float(p), np.rint((ref_t - a) / p).astype(np.int64)
 
 
 def _main_slot_vote(ref_t, kinds, cfg: DecoderConfig, f_rot: float):
     """Decoded mains outside the 135 Hz grid slot that two thirds of them share become
     auxiliaries (the main burst repeats once per rotation in one slot of nine). Returns the
     kinds and how many mains were moved."""
-    fit = _fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
+    fit = fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
     main = kinds == REF_MAIN
     if fit is None or not main.any():
         return kinds, 0
@@ -529,7 +362,7 @@ def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderCo
     if main_n >= np.floor(n_rot) - 1 and main_n >= cfg.min_rotations:
         kinds2, n_off_slot = _main_slot_vote(ref_t, kinds, cfg, f_rot)
         return ref_t, kinds2, scores, done, none, {"n_main_off_slot": n_off_slot}
-    fit = _fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
+    fit = fit_grid(ref_t, 1.0 / (9.0 * f_rot), cfg.tol_s, int(cfg.min_grid_refs))
     if fit is None:
         return ref_t, kinds, scores, done, none, {}
     a, p, n_ref = fit
@@ -540,8 +373,8 @@ def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderCo
         return ref_t, kinds, scores, done, none, {}
     n_all = np.arange(lo, hi + 1)
     starts = a + p * n_all
-    sm = _scores(t, starts, main_off, cfg.tol_s)
-    sa = _scores(t, starts, aux_off, cfg.tol_s)
+    sm = burst_scores(t, starts, main_off, cfg.tol_s)
+    sa = burst_scores(t, starts, aux_off, cfg.tol_s)
     fm, fa = sm / main_off.size, sa / aux_off.size
     slot = n_all % 9
     # Rotation by rotation: per slot, the share of the main template in the matched template
@@ -578,7 +411,7 @@ def _infer_main(t, ref_t, kinds, scores, done, main_off, aux_off, cfg: DecoderCo
     main_t = np.where(np.isin(n_main, n_ref[in_slot]),
                       np.interp(n_main, n_ref, ref_t), a + p * n_main)
     # (a decoded burst in the slot keeps its own refined time; the others take the grid's)
-    m_idx, m_ok = _match(t, (main_t[:, None] + main_off[None, :]).ravel(), cfg.tol_s)
+    m_idx, m_ok = match_nearest(t, (main_t[:, None] + main_off[None, :]).ravel(), cfg.tol_s)
     m_ok = m_ok.reshape(main_t.size, main_off.size)
     used = np.zeros(t.size, bool)
     used[m_idx.reshape(m_ok.shape)[m_ok]] = True

@@ -209,7 +209,7 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
 
     Two searches (``source_bits = 1``, the front end with ``FrontendConfig.pair_peak``):
     the payload's top bit (``amplitude | timestamp << amp_width | source << (amp_width +
-    ts_bits)``) says which search reported the word (:data:`dsp.tacan.frontend.SOURCE_PULSE`
+    ts_bits)``) says which search reported the word (:data:`dsp.tacan.standard.SOURCE_PULSE`
     / ``SOURCE_PAIR``). Each search's timestamps ascend but the merged stream's do not (a
     pair is timestamped at its second pulse and leaves its search later than a pulse), so
     the rules above run per source, on that source's words alone (its own predecessor and

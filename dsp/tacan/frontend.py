@@ -8,7 +8,7 @@ differ only where the hardware rounds:
 
 The CIC runs here as its equivalent FIR (a boxcar of R*M convolved N times, DC gain 1), the
 FIR with the float taps of :func:`dsp.design.design_pulse_fir`, the envelope is the exact
-magnitude and the peak search is :func:`dsp.peak.peak_search_float` (the integer
+magnitude and the peak search is :func:`dsp.tacan.peak.peak_search_float` (the integer
 model's twin). Amplitudes come out in units of ADC full scale (carrier peak amplitude);
 timestamps in ADC sample ticks, delayed by :attr:`FrontendConfig.group_delay_samples`.
 
@@ -25,8 +25,9 @@ import numpy as np
 from scipy import signal as sps
 
 from dsp.design import cic_taps, design_pulse_fir
-from dsp.peak import PeakParams, PeakState, peak_search_float
-from dsp.tacan.standard import PULSE_WIDTH_S, SOURCE_PAIR, SOURCE_PULSE, pair_spacing_s  # noqa: F401
+from dsp.tacan.peak import peak_search_float
+from dsp.tacan.peak_params import PeakParams, PeakState
+from dsp.tacan.standard import PULSE_WIDTH_S, SOURCE_PAIR, SOURCE_PULSE, pair_spacing_s
 
 PULSE_SIGMA_S = PULSE_WIDTH_S / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 
@@ -34,7 +35,7 @@ PULSE_SIGMA_S = PULSE_WIDTH_S / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 #: The pulse detector's noise-floor profiles (``python -m cosim tacan --noise-floor``):
 #:
 #: * ``clipped`` (default): the block mean of ``min(e, 2 nu)``, threshold 3.0x;
-#: * ``censored``: samples over ``2 nu`` count as ``nu`` (:attr:`dsp.peak.PeakParams.clip_to_floor`),
+#: * ``censored``: samples over ``2 nu`` count as ``nu`` (:attr:`dsp.tacan.peak_params.PeakParams.clip_to_floor`),
 #:   threshold 3.44x (55/16). Bursts of pulses no longer lift the threshold after them,
 #:   which biased the bearing near the noise floor; and since pulses no longer lift the
 #:   floor at all, the factor is raised so that a 10 dB record gives the clipped floor's
@@ -289,7 +290,7 @@ class GoldenFrontend:
         return np.abs(self.fir(self.cic(z)))
 
     def search(self, codes: np.ndarray, env: np.ndarray | None = None):
-        """The peak search's full result (:class:`dsp.peak.PeakResult`: with the threshold
+        """The peak search's full result (:class:`dsp.tacan.peak_params.PeakResult`: with the threshold
         of every envelope sample) on the next chunk of ADC codes (or on its ``env``)."""
         env = self.envelope(codes) if env is None else env
         res, self.peak_state = peak_search_float(env, self.cfg.peak, self.peak_state,

@@ -84,7 +84,7 @@ Fixed-point stability
   with ``input_limit``), so garbage never enters the state, not even right after a
   re-initialisation.
 
-Timestamps: ``run`` takes ``dts`` as integer ticks (``tick_hz``, default 20 MHz, the ADC
+Timestamps: ``run`` takes ``dts`` as integer ticks (``KalmanConfig.tick_hz``, default 20 MHz, the ADC
 clock) or float seconds. The fixed core converts seconds by rounding the *cumulative* time to
 ticks (the residual carried between calls) so no rounding drift builds up; the float filter
 converts ticks to seconds.
@@ -92,200 +92,23 @@ converts ticks to seconds.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..fixed import FixedFormat
-from ..qops import PHASE_BITS, RANGE_BASE, S_BITS, SIN_LUT, TRIG_FRAC, new_event_array
-from .kalman_kernel import EVENT_NAMES  # noqa: F401 (re-exported: the event counters' names)
-from .kalman_kernel import _EV, _run_parallel, _run_serial, _step_consts
+from ..qops import RANGE_BASE, new_event_array
+from .bearing import PHASE_BITS
+from .phase_ops import SIN_LUT
+from .kalman_kernel import EVENT_INDEX, run_parallel, run_serial, step_consts
 from .kalman_monitor import StateMonitor
-from .standard import F15, F135  # noqa: F401 (re-exported: dsp.tacan.receiver reads them here)
+from .kalman_config import KalmanConfig, KalmanFixedConfig, float_consts
+from .standard import F15
 
-#: Fraction bits of the gate^2 constant and extra fraction bits of the Q-per-tick rates.
-GATE_FRAC = 8
-Q_EXTRA = 16
 #: Largest dt in ticks (2^38 ticks: 3.8 h at 20 MHz).
 MAX_TICKS = 1 << 38
 
 #: Signals whose range the fixed-point core logs (event index -> format name): every store
 #: of that format goes through a saturating operator with that index (r also holds e2).
 RANGE_SIGNALS = {0: "y", 1: "x", 2: "P", 3: "K", 4: "innov", 5: "r", 6: "rmult"}
-
-
-@dataclass(frozen=True)
-class KalmanConfig:
-    """Parameters of the envelope Kalman filter.
-
-    Parameters
-    ----------
-    memory_s : float
-        Equivalent exponential-window length (s) that sets the process noise.
-    pulse_rate_hz : float
-        Nominal measurement rate (7200 pulses/s) used to turn ``memory_s`` into ``Q``.
-    p0 : float
-        Initial state variance in units of ``r`` (uninformative prior).
-    gate : float
-        Innovation gate in standard deviations.
-    warmup : int
-        Updates before the gate and the ``r`` estimator start.
-    max_rejects : int
-        Consecutive gated measurements that count as divergence (re-initialise).
-    r_smooth : int
-        Time constant (updates) of the innovation-based ``r`` estimate.
-    input_limit : float, optional
-        Largest plausible ``|amplitude|`` (signal units). A value beyond it is not a
-        measurement: the step only predicts, counted as ``implausible``, and neither the
-        gate, the divergence count nor the ``r`` estimate sees it -- so garbage cannot be
-        fitted, not even by a filter that has just re-initialised. ``None`` (default): the
-        fixed core's input range, i.e. its ``y`` format (a value it cannot hold is
-        implausible rather than saturated); no limit in float (the golden filter takes
-        amplitudes on any scale).
-    """
-
-    memory_s: float = 0.5
-    pulse_rate_hz: float = 7200.0
-    p0: float = 1.0e4
-    gate: float = 5.0
-    warmup: int = 400
-    max_rejects: int = 64
-    r_smooth: int = 512
-    input_limit: float | None = None
-
-    def __post_init__(self):
-        if self.input_limit is not None and not (
-                isinstance(self.input_limit, (int, float)) and math.isfinite(self.input_limit)
-                and self.input_limit > 0):
-            raise ValueError(f"input_limit must be a finite number > 0 or None, not "
-                             f"{self.input_limit!r}")
-        for name in ("memory_s", "pulse_rate_hz", "p0", "gate"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite number > 0, not {v!r}")
-        for name in ("warmup", "max_rejects", "r_smooth"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be an integer >= 1, not {v!r}")
-        if self.memory_s * self.pulse_rate_hz < 4:
-            raise ValueError(f"memory_s={self.memory_s} is shorter than a few pulses "
-                             f"at {self.pulse_rate_hz:g} pulses/s")
-
-    @property
-    def n_eff(self) -> float:
-        """Equivalent number of pulses in the filter's memory."""
-        return self.memory_s * self.pulse_rate_hz
-
-    @property
-    def gain_ss(self) -> float:
-        return 2.0 / (self.n_eff + 1.0)
-
-    def q_rates(self) -> tuple[float, float]:
-        """Process noise density (per second, units of r): (sin/cos states, DC state)."""
-        k = self.gain_ss
-        q_rot = k * k * 2.0 / (1.0 - k)
-        q_dc = k * k * 1.0 / (1.0 - k)
-        return q_rot * self.pulse_rate_hz, q_dc * self.pulse_rate_hz
-
-
-
-def _default(width, frac):
-    return FixedFormat(width, frac, True, "half_up", "saturate")
-
-
-@dataclass(frozen=True)
-class KalmanFixedConfig:
-    """The float :class:`KalmanConfig` plus the fixed-point word lengths (see module doc).
-
-    Every format must be signed, round ``"half_up"`` or ``"floor"`` and ``"saturate"``; the
-    combinations are checked so that no int64 intermediate can overflow.
-    """
-
-    kalman: KalmanConfig = field(default_factory=KalmanConfig)
-    y: FixedFormat = field(default_factory=lambda: _default(18, 16))
-    x: FixedFormat = field(default_factory=lambda: _default(36, 28))
-    P: FixedFormat = field(default_factory=lambda: _default(46, 30))
-    K: FixedFormat = field(default_factory=lambda: _default(38, 30))
-    cs: FixedFormat = field(default_factory=lambda: _default(24, 22))
-    innov: FixedFormat = field(default_factory=lambda: _default(24, 20))
-    r: FixedFormat = field(default_factory=lambda: _default(40, 30))
-    tick_hz: float = 20e6
-
-    def __post_init__(self):
-        if not isinstance(self.kalman, KalmanConfig):
-            raise ValueError(f"kalman must be a KalmanConfig, not {self.kalman!r}")
-        for name in ("y", "x", "P", "K", "cs", "innov", "r"):
-            f = getattr(self, name)
-            if not isinstance(f, FixedFormat):
-                raise ValueError(f"{name} must be a FixedFormat, not {f!r}")
-            if not f.signed:
-                raise ValueError(f"{name} format must be signed, not {f}")
-            if f.rounding not in ("half_up", "floor"):
-                raise ValueError(f"{name} rounding must be 'half_up' or 'floor', "
-                                 f"not {f.rounding!r}")
-            if f.overflow != "saturate":
-                raise ValueError(f"{name} overflow must be 'saturate', not {f.overflow!r}")
-            if f.frac < 0:
-                raise ValueError(f"{name} frac must be >= 0, not {f.frac}")
-        t = self.tick_hz
-        if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 1000 * F135):
-            raise ValueError(f"tick_hz must be a finite number >= {1000 * F135:g}, not {t!r}")
-        y, x, P, K, cs, iv, r = self.y, self.x, self.P, self.K, self.cs, self.innov, self.r
-        if not (cs.int_bits >= 1 and cs.frac <= TRIG_FRAC):
-            raise ValueError(f"cs must hold +-1 with at most {TRIG_FRAC} fraction bits, not {cs}")
-        if not (x.frac >= y.frac and x.frac >= iv.frac):
-            raise ValueError(f"x needs at least as many fraction bits as y and innov "
-                             f"(x {x}, y {y}, innov {iv})")
-        if x.width + cs.width > 61 or K.width + iv.width > 62:
-            raise ValueError(f"x*cs and K*innov products must fit 62 bits "
-                             f"(x {x}, cs {cs}, K {K}, innov {iv})")
-        if K.frac + iv.frac < x.frac:
-            raise ValueError(f"K.frac + innov.frac must be >= x.frac (K {K}, innov {iv}, x {x})")
-        if P.width - cs.frac + cs.width + 1 > 62 or cs.frac + cs.width + 1 > 62:
-            raise ValueError(f"the split P*cs product does not fit int64 (P {P}, cs {cs})")
-        if P.width + 2 + 2 * K.width > 124 or K.frac < 1 or K.frac > 40:
-            raise ValueError(f"the split P*K product does not fit int64 (P {P}, K {K})")
-        if P.frac < 12:
-            raise ValueError(f"P needs at least 12 fraction bits, not {P}")
-        if 2 * iv.width > 48:
-            raise ValueError(f"innov must be at most 24 bits wide (its square feeds e2), not {iv}")
-        if not (0 <= r.frac - 2 * iv.frac + P.frac + (S_BITS - P.frac + 12) <= 33) or r.width > 48:
-            raise ValueError(f"r format {r} does not fit e2 = innov^2/S with innov {iv}, P {P}")
-        if 2 * self.kalman.p0 > P.max_value:
-            raise ValueError(f"p0={self.kalman.p0:g} does not fit the P format {P} "
-                             f"(needs p0 <= {P.max_value / 2:g})")
-        if r.max_value < 1.0:
-            raise ValueError(f"r format {r} must hold the initial r = 1")
-
-    def int_consts(self) -> np.ndarray:
-        """Integer parameters of the kernel: counters and, per format, frac/min/max/half-up."""
-        k = self.kalman
-        c = [k.warmup, k.max_rejects, k.r_smooth, GATE_FRAC, Q_EXTRA]
-        for f in (self.y, self.x, self.P, self.K, self.cs, self.innov, self.r):   # 5..32
-            c += [f.frac, f.min_int, f.max_int, 1 if f.rounding == "half_up" else 0]
-        return np.array(c, dtype=np.int64)
-
-    def value_consts(self) -> np.ndarray:
-        """The quantised constants (built once from floats: the boundary)."""
-        k = self.kalman
-        q_rot, q_dc = k.q_rates()
-        qf = self.P.frac + Q_EXTRA
-        scale = 2.0 ** PHASE_BITS / self.tick_hz
-        return np.array([
-            int(round(F15 * scale)), int(round(F135 * scale)),       # frequency words
-            int(round(q_rot / self.tick_hz * 2.0 ** qf)),            # q_rot per tick
-            int(round(q_dc / self.tick_hz * 2.0 ** qf)),             # q_dc per tick
-            int(round(k.p0 * 2.0 ** self.P.frac)),                   # p0
-            min(int(round(k.gate ** 2 * (1 << GATE_FRAC))), 1 << 40),  # gate^2
-            1 << self.r.frac,                                        # r init = 1
-            np.iinfo(np.int64).min,                                  # "no measurement"
-        ], dtype=np.int64)
-
-
-def _float_consts(k: KalmanConfig) -> np.ndarray:
-    q_rot, q_dc = k.q_rates()
-    return np.array([2 * math.pi * F15, 2 * math.pi * F135, q_rot, q_dc, k.p0, k.gate ** 2, 1.0,
-                     math.nan])                                      # "no measurement"
 
 
 class EnvelopeKalman(StateMonitor):
@@ -301,8 +124,6 @@ class EnvelopeKalman(StateMonitor):
         Independent trials sharing one pulse timeline.
     parallel : bool, optional
         Spread the trials over the cores (numba threads). Default: when ``batch >= 16``.
-    tick_hz : float, optional
-        Tick rate for integer ``dts`` in float mode (fixed mode: ``cfg.tick_hz``).
 
     Attributes
     ----------
@@ -316,27 +137,25 @@ class EnvelopeKalman(StateMonitor):
     """
 
     def __init__(self, cfg: KalmanConfig | KalmanFixedConfig | None = None, batch: int = 1, *,
-                 parallel: bool | None = None, tick_hz: float = 20e6):
+                 parallel: bool | None = None):
         cfg = KalmanConfig() if cfg is None else cfg
         if isinstance(cfg, KalmanFixedConfig):
             self.fixed: KalmanFixedConfig | None = cfg
             self.kalman = cfg.kalman
-            self.tick_hz = float(cfg.tick_hz)
             self._ci = cfg.int_consts()
             self._cv = cfg.value_consts()
             dtype = np.int64
         elif isinstance(cfg, KalmanConfig):
             self.fixed = None
             self.kalman = cfg
-            if not (isinstance(tick_hz, (int, float)) and math.isfinite(tick_hz) and tick_hz > 0):
-                raise ValueError(f"tick_hz must be a finite number > 0, not {tick_hz!r}")
-            self.tick_hz = float(tick_hz)
             self._ci = KalmanFixedConfig(kalman=cfg).int_consts()   # unused by float ops
-            self._cv = _float_consts(cfg)
+            self._cv = float_consts(cfg)
             dtype = np.float64
         else:
             raise ValueError(f"cfg must be a KalmanConfig or KalmanFixedConfig, not {cfg!r}")
         self.cfg = cfg
+        #: The clock of integer ``dts`` (:attr:`KalmanConfig.tick_hz`).
+        self.tick_hz = float(self.kalman.tick_hz)
         self._rotation_hz = F15
         if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 1:
             raise ValueError(f"batch must be an integer >= 1, not {batch!r}")
@@ -527,7 +346,7 @@ class EnvelopeKalman(StateMonitor):
         if t.size == 0:
             return
         if nsat is not None:
-            self._ev[:, _EV["sat_y"]] += nsat.sum(axis=1)
+            self._ev[:, EVENT_INDEX["sat_y"]] += nsat.sum(axis=1)
             # range log of the values taken as measurements (not the implausible ones)
             self._note_python(0, self._y_raw, used=y != np.iinfo(np.int64).min)
         if r_mult is None:
@@ -538,15 +357,15 @@ class EnvelopeKalman(StateMonitor):
                 raise ValueError("r_mult must hold one finite value > 0 per step")
         if self.fixed is not None:
             lo, hi = 2.0 ** -12, 2.0 ** 12
-            self._ev[:, _EV["sat_rmult"]] += int(np.count_nonzero((rmf < lo) | (rmf > hi)))
+            self._ev[:, EVENT_INDEX["sat_rmult"]] += int(np.count_nonzero((rmf < lo) | (rmf > hi)))
             rm = np.round(np.ldexp(np.clip(rmf, lo, hi), self.fixed.P.frac)).astype(np.int64)
             self._note_python(6, np.round(np.ldexp(rmf, self.fixed.P.frac))[None, :])
         else:
             rm = rmf
         self._advance(t)
         sc = np.empty((t.size, 7), self.x.dtype)
-        _step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
-        kern = _run_parallel if self.parallel else _run_serial
+        step_consts(SIN_LUT, t, rm, self._ci, self._cv, sc)
+        kern = run_parallel if self.parallel else run_serial
         y = np.ascontiguousarray(y)
         if self._upsets is None:
             kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv,
@@ -609,14 +428,14 @@ class EnvelopeKalman(StateMonitor):
             out[name] = {"min": None if mn == big else math.ldexp(mn, -fmt.frac),
                          "max": None if mx == -big - 1 else math.ldexp(mx, -fmt.frac),
                          "lo": lo, "hi": hi,
-                         "saturations": int(self._ev[:, _EV[sat_name]].sum())}
+                         "saturations": int(self._ev[:, EVENT_INDEX[sat_name]].sum())}
         return out
 
     @property
     def events(self) -> dict:
         """Per-trial event counters (name -> (B,) int64); float mode counts only ``gated``,
         ``reinit`` and ``p_neg``."""
-        return {n: self._ev[:, i].copy() for n, i in _EV.items()}
+        return {n: self._ev[:, i].copy() for n, i in EVENT_INDEX.items()}
 
     def _to_float(self, v, fmt_name):
         if self.fixed is None:

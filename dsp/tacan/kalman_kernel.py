@@ -3,9 +3,9 @@
 :func:`_trial` runs one trial's filter over all its steps in terms of the operators of
 :mod:`dsp.qops`; numba compiles it for ``float64`` state (the golden filter: every operator
 is the real operation) and for ``int64`` state (the fixed-point DSP core: every operator
-quantises to the formats of :class:`dsp.tacan.kalman.KalmanFixedConfig`, whose integer
-constants ``ci`` it reads at the indices below). :func:`_step_consts` computes the per-step
-values every trial shares; :func:`_run_serial` / :func:`_run_parallel` run a batch of trials
+quantises to the formats of :class:`dsp.tacan.kalman_config.KalmanFixedConfig`, whose integer
+constants ``ci`` it reads at the indices below). :func:`step_consts` computes the per-step
+values every trial shares; :func:`run_serial` / :func:`run_parallel` run a batch of trials
 block by block. :class:`dsp.tacan.kalman.EnvelopeKalman` prepares the inputs and keeps the
 state; the design of the filter is described there.
 """
@@ -15,16 +15,17 @@ import numba
 import numpy as np
 
 from ..jit import njit_cached
-from ..qops import (align, div_norm, div_square, ewma, floor_one, lut_index, mac2, mulw,
-                    rate_dt, rs, sat, scale_sat, sincos_dt, snorm)
+from ..qops import (align, div_norm, div_square, ewma, floor_one, lut_index, mac2, mulw, rs, sat,
+                    scale_sat, snorm)
+from .phase_ops import rate_dt, sincos_dt
 
-__all__ = ["BLOCK", "EVENT_NAMES", "_run_parallel", "_run_serial", "_step_consts", "_trial"]
+__all__ = ["BLOCK", "EVENT_NAMES", "run_parallel", "run_serial", "step_consts", "_trial"]
 
 #: The event counters, in the order of the kernel's ``ev`` array (``ev[12]``: noise reports).
 EVENT_NAMES = ("sat_y", "sat_x", "sat_P", "sat_K", "sat_innov", "sat_r", "sat_rmult",
                "p_clamps", "p_neg", "reinit", "gated", "implausible", "noise_reports",
                "state_faults")
-_EV = {n: i for i, n in enumerate(EVENT_NAMES)}
+EVENT_INDEX = {n: i for i, n in enumerate(EVENT_NAMES)}
 
 _jit = njit_cached(nogil=True)
 # Index of each format's (frac, min, max, half) in the integer constants.
@@ -32,7 +33,7 @@ _Y, _X, _P, _K, _CS, _IV, _R = 5, 9, 13, 17, 21, 25, 29
 
 
 @_jit
-def _step_consts(lut, dts, rms, ci, cv, out):
+def step_consts(lut, dts, rms, ci, cv, out):
     """Per-step values shared by all trials: out[k] = (sa, ca, sb, cb, q_rot, q_dc, r_mult)."""
     csf, csh, ph = ci[_CS], ci[_CS + 3], ci[_P + 3]
     for k in range(dts.size):
@@ -217,7 +218,7 @@ BLOCK = 2048
 
 
 @_jit
-def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
+def run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in range(ys.shape[0]):
@@ -226,7 +227,7 @@ def _run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
 
 
 @njit_cached(nogil=True, parallel=True)
-def _run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
+def run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in numba.prange(ys.shape[0]):

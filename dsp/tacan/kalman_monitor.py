@@ -14,8 +14,9 @@ import math
 
 import numpy as np
 
-from ..qops import PHASE_BITS, SIN_LUT
-from .kalman_kernel import _EV, _run_serial, _step_consts
+from .bearing import PHASE_BITS
+from .phase_ops import SIN_LUT
+from .kalman_kernel import EVENT_INDEX, run_serial, step_consts
 
 __all__ = ["StateMonitor"]
 
@@ -36,7 +37,7 @@ class StateMonitor:
         """Remember the state for :meth:`state_jump`, :meth:`covariance_fault` and
         :meth:`recover` (the stored ``x`` and ``P``, the block traces of ``P``, the
         re-initialisation count) and restart the time and phase advance."""
-        self._ck = (self.x_float(), self._block_tr(), self._ev[:, _EV["reinit"]].copy(),
+        self._ck = (self.x_float(), self._block_tr(), self._ev[:, EVENT_INDEX["reinit"]].copy(),
                     self.x.copy(), self.P.copy())
         self._adv = [0, 0] if self.fixed is not None else [0.0, 0.0]
         self._elapsed_s = 0.0
@@ -45,7 +46,7 @@ class StateMonitor:
     def _judged(self) -> np.ndarray:
         """Trials whose change since the checkpoint can be judged: not re-initialised since
         (the warm-up is judged too: a state corrupted there would be carried past it)."""
-        return self._ev[:, _EV["reinit"]] == self._ck[2]
+        return self._ev[:, EVENT_INDEX["reinit"]] == self._ck[2]
 
     def covariance_fault(self) -> np.ndarray:
         """Per trial: the covariance changed since the :meth:`checkpoint` in a way the filter
@@ -124,10 +125,10 @@ class StateMonitor:
         self._failed = m.copy()
         if not m.any():
             return
-        self._ev[m, _EV["state_faults"]] += 1
+        self._ev[m, EVENT_INDEX["state_faults"]] += 1
         if again.any():
             self.reset(again)
-            self._ev[again, _EV["reinit"]] += 1
+            self._ev[again, EVENT_INDEX["reinit"]] += 1
         back = m & ~again
         if not back.any():
             return
@@ -135,12 +136,12 @@ class StateMonitor:
         t = np.array([self._elapsed_ticks if self.fixed is not None else self._elapsed_s],
                      dtype=np.int64 if self.fixed is not None else np.float64)
         sc = np.empty((1, 7), self.x.dtype)
-        _step_consts(SIN_LUT, t, np.ones(1, self.x.dtype) if self.fixed is None
+        step_consts(SIN_LUT, t, np.ones(1, self.x.dtype) if self.fixed is None
                      else np.array([1 << self.fixed.P.frac], np.int64), self._ci, self._cv, sc)
         nb = int(back.sum())
         no_y = np.full((nb, 1), self._cv[7], self.x.dtype)      # no measurement: predict
         cnt, ev = self._cnt[back].copy(), self._ev[back].copy()   # counters untouched
-        _run_serial(x, P, self._r[back].copy(), cnt, ev, sc, no_y, self._ci, self._cv,
+        run_serial(x, P, self._r[back].copy(), cnt, ev, sc, no_y, self._ci, self._cv,
                     self._bt, self._bs, self._nq)
         self.x[back], self.P[back] = x, P
 

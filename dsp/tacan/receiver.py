@@ -14,9 +14,12 @@ import numpy as np
 from ..fixed import FixedFormat
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       deg_to_bangle, reference_advances, track_sector, wrap_deg)
-from .bounds import crb_deg  # noqa: F401  (the bound the receiver's figures are set against)
-from .decode import REF_MAIN, DecoderConfig, decode, outside_bursts, rotation_track
-from .kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from .decode import DecoderConfig, decode, outside_bursts
+from .rotation import rotation_track
+from .scoring import REF_MAIN
+from .kalman import EnvelopeKalman
+from .kalman_config import KalmanConfig, KalmanFixedConfig
+from .standard import F15, F135
 from .peakbias import PeakBias
 from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s
 
@@ -106,7 +109,7 @@ class ReceiverConfig:
     flag_sector_deg: float = 12.0
     flag_noise_ratio: float = 0.5
     #: Rotation-rate tracking: the beacon's rotation rate is estimated from the references
-    #: known so far (:func:`dsp.tacan.decode.rotation_track`: the 135 Hz grid's period over
+    #: known so far (:func:`dsp.tacan.rotation.rotation_track`: the 135 Hz grid's period over
     #: the latest 2 s, once they span ``rotation_span_s``: early, so that little of the fit
     #: is made at a wrong rate), and the Kalman model and the
     #: bearing's phase advances turn at it (15 Hz exactly on a nominal beacon: the
@@ -146,7 +149,7 @@ class ReceiverConfig:
     #: records): 2.44 % of the bearings misleading without it, none with it. None: off.
     flag_state_jump: float | None = 12.0
     #: Each peak is a pulse *pair* (the FPGA's pulse-pair detection,
-    #: :attr:`dsp.peak.PeakParams.pair_offset`; ``python -m cosim tacan --detector pair``):
+    #: :attr:`dsp.tacan.peak_params.PeakParams.pair_offset`; ``python -m cosim tacan --detector pair``):
     #: timestamped at its second pulse, with the pair's mean envelope. The DSP takes it as the
     #: pair's two pulses, the mode's pair spacing apart, each at that amplitude
     #: (:func:`expand_pairs`), so the decoder and the filter see pulses as from a pulse
@@ -211,8 +214,7 @@ class ReceiverState:
 
 
 def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
-                  ticks=None, tick_hz: float | None = None,
-                  state: ReceiverState | None = None, source=None) -> BearingTrack:
+                  ticks=None, state: ReceiverState | None = None, source=None) -> BearingTrack:
     """Run the bearing DSP on pulse peaks.
 
     Parameters
@@ -224,11 +226,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         integer codes in the core's ``y`` format (see :func:`amplitude_codes`).
     ticks : array of int (N,), optional
         The same times as integer clock ticks (the FPGA timestamps, unwrapped): the filter
-        then steps by exact tick differences instead of rounded seconds.
-    tick_hz : float
-        The clock of ``ticks`` (the ADC sample rate); required with ``ticks`` -- there is
-        no default rate, since a wrong one silently rotates every bearing. The fixed-point
-        core's ``KalmanFixedConfig.tick_hz`` must be the same clock.
+        then steps by exact tick differences instead of rounded seconds. Their clock is the
+        filter configuration's (``cfg.kalman.tick_hz``, :attr:`KalmanConfig.tick_hz`).
     state : ReceiverState, optional
         Continue from an earlier block (streaming); the updated state is returned in
         ``track.state``. A reference burst split across two blocks is not decoded.
@@ -247,17 +246,6 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ticks = np.asarray(ticks)
         if ticks.dtype.kind not in "iu" or ticks.shape != t.shape:
             raise ValueError("ticks must be integers, one per peak time")
-        if tick_hz is None:
-            raise ValueError("ticks need their clock: pass tick_hz (the ADC sample rate)")
-        if not (isinstance(tick_hz, (int, float)) and math.isfinite(tick_hz) and tick_hz > 0):
-            raise ValueError(f"tick_hz must be a finite number > 0, not {tick_hz!r}")
-        tick_hz = float(tick_hz)
-        if cfg.dsp == "fixed" and cfg.kalman.tick_hz != tick_hz:
-            raise ValueError(f"the fixed-point core counts ticks of {cfg.kalman.tick_hz:g} Hz "
-                             f"(KalmanFixedConfig.tick_hz) but the timestamps tick at "
-                             f"{tick_hz:g} Hz")
-    elif tick_hz is not None:
-        raise ValueError("tick_hz is the clock of ticks: pass ticks with it")
     amps = np.atleast_2d(np.asarray(amplitudes))
     if amps.dtype.kind in "iu":
         if cfg.dsp != "fixed":
@@ -287,8 +275,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ticks = ticks[pm] if ticks is not None else None
     thr = cfg.peak_bias.threshold(amps) if cfg.peak_bias is not None else None
     if cfg.pair_reports or source is not None:
-        t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks, tick_hz=tick_hz,
-                                      tol_s=dcfg.tol_s)
+        t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks,
+                                      tick_hz=cfg.kalman.tick_hz, tol_s=dcfg.tol_s)
     if source is None:
         dec = decode(t, cfg.mode, dcfg)
         sel = np.flatnonzero(dec.measurement_mask)
@@ -302,11 +290,9 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     r_mult = burst_r_mult(tm, dec, cfg.mode) if cfg.density_weighting else None
     B = amps.shape[0]
     if state is None:
-        state = ReceiverState(kf=EnvelopeKalman(cfg.kalman, batch=B, tick_hz=tick_hz or 20e6))
+        state = ReceiverState(kf=EnvelopeKalman(cfg.kalman, batch=B))
     elif state.kf.batch != B or state.kf.cfg != cfg.kalman:
-        raise ValueError("state belongs to a receiver with another batch size or filter")
-    elif tick_hz is not None and state.kf.tick_hz != tick_hz:
-        raise ValueError(f"state counts ticks of {state.kf.tick_hz:g} Hz, not {tick_hz:g} Hz")
+        raise ValueError("state belongs to a receiver with another batch size, filter or clock")
     kf = state.kf
     if thr is not None:      # amplitude codes: their threshold in signal units
         thr = math.ldexp(thr, -cfg.kalman.y.frac) if amps.dtype.kind == "i" else thr

@@ -25,17 +25,16 @@ from hdl.fifo import DspFifo
 from hdl.mixer import Mixer
 from hdl.nco import Nco
 
-from .model import (ACC_FIELDS, REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW,
-                    GnssChannelParams)
+from .params import ACC_FIELDS, REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssChannelParams
 
 __all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
            "record_layout", "gnss_top"]
 
 
 def record_layout(params: GnssChannelParams) -> data.StructLayout:
-    """The record as a struct, fields LSB first (:attr:`GnssChannelParams.record_fields`)."""
+    """The record as a struct, fields LSB first (:attr:`GnssChannelParams.record`)."""
     return data.StructLayout({n: (signed(w) if s else unsigned(w))
-                              for n, w, s in params.record_fields})
+                              for n, w, s in params.record.fields})
 
 
 def array_params(params: GnssChannelParams, channels: int) -> GnssChannelParams:
@@ -108,7 +107,7 @@ class GnssCorrelator(wiring.Component):
         ADC samples, one per ``valid`` cycle (gaps allowed).
     reg_we, reg_addr (2 bits), reg_data (``reg_data_width`` bits) : In
         Register bus: a write when ``reg_we`` is high (addresses
-        :data:`~hdl.gnss.model.REG_CARR_FREQ` ...), into the shadow registers.
+        :data:`~hdl.gnss.params.REG_CARR_FREQ` ...), into the shadow registers.
     rec : Out(stream.Signature(record_layout(params), always_ready=True))
         One record per dump, :attr:`GnssChannelParams.latency` cycles after the input cycle
         of the dump's first sample; the payload holds until the next dump.

@@ -69,8 +69,8 @@ import numpy as np
 
 from dsp.fixed import check_int as _check_int, check_width, parity_bit
 
-from .fifo_kernel import (_CNT, _HEAD, _HOLD_V, _MAXLVL, _OUT_FULL, _OUT_REG, _OVF, _PENDING,
-                          _fifo_kernel)
+from .fifo_kernel import (SV_CNT, SV_HEAD, SV_HOLD_V, SV_MAXLVL, SV_OUT_FULL, SV_OUT_REG, SV_OVF,
+                          SV_PENDING, run_fifo_kernel)
 
 TAG_DATA = 0
 TAG_START = 1     # first word of a record (record_words > 1 only)
@@ -413,19 +413,19 @@ def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
     out_c = np.empty(cap, dtype=np.int64)
     dropped = np.zeros(n_words_total, dtype=bool)
     ovf0 = st.overflow
-    n_out = _fifo_kernel(write_cycles, in_words, start, start + n_cycles, rmode, rmask, start,
+    n_out = run_fifo_kernel(write_cycles, in_words, start, start + n_cycles, rmode, rmask, start,
                          sch.period, sch.offset, sch.count, sch.stride, D,
                          p.marker_max, TAG_MARKER << p.width, p.count_max, sv, ring,
                          out_w, out_c, dropped, hold, tagw)
-    head, cnt = int(sv[_HEAD]), int(sv[_CNT])
+    head, cnt = int(sv[SV_HEAD]), int(sv[SV_CNT])
     queue = np.roll(ring, -head)[:cnt].copy()
-    new = FifoState(cycle=start + n_cycles, queue=queue, out_full=bool(sv[_OUT_FULL]),
-                    out_reg=int(sv[_OUT_REG]), hold_valid=bool(sv[_HOLD_V]),
+    new = FifoState(cycle=start + n_cycles, queue=queue, out_full=bool(sv[SV_OUT_FULL]),
+                    out_reg=int(sv[SV_OUT_REG]), hold_valid=bool(sv[SV_HOLD_V]),
                     hold_data=int(hold[0]) if n == 1 else 0,
-                    hold_left=int(sv[_HOLD_V]) if n > 1 else 0,
+                    hold_left=int(sv[SV_HOLD_V]) if n > 1 else 0,
                     hold_record=tuple(int(v) for v in hold) if n > 1 else (),
-                    pending=int(sv[_PENDING]),
-                    overflow=int(sv[_OVF]), max_level=int(sv[_MAXLVL]))
+                    pending=int(sv[SV_PENDING]),
+                    overflow=int(sv[SV_OVF]), max_level=int(sv[SV_MAXLVL]))
     ovf_trace = None
     if trace:
         # The counter steps once per drop, the cycle after it, saturating: its trace follows

@@ -8,8 +8,8 @@ import numpy as np
 from dsp.jit import njit_cached
 
 # Layout of the int64 state vector the kernel reads and updates.
-# (_HOLD_V: hold words still to write; the hold words themselves are a separate array.)
-_OUT_FULL, _OUT_REG, _HOLD_V, _PENDING, _OVF, _HEAD, _CNT, _MAXLVL = range(8)
+# (SV_HOLD_V: hold words still to write; the hold words themselves are a separate array.)
+SV_OUT_FULL, SV_OUT_REG, SV_HOLD_V, SV_PENDING, SV_OVF, SV_HEAD, SV_CNT, SV_MAXLVL = range(8)
 
 
 @njit_cached(nogil=True)
@@ -35,22 +35,22 @@ def _next_ready(c, lim, rmode, rmask, rbase, period, offset, count, stride):
 
 
 @njit_cached(nogil=True)
-def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count, stride,
+def run_fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count, stride,
                  depth, wmask, marker_tag, count_max, st, ring, out_w, out_c, dropped,
                  hold, tagw):
     """Run cycles ``c .. c_end - 1``; the policy of :mod:`hdl.model.fifo`, exactly as
     :func:`hdl.model.fifo_reference.fifo_model_reference` steps it (``record_words == 1``).
     ``words`` is ``(n_in, n)``, ``hold`` the hold register's ``n`` words, ``tagw[j]`` the
     tag bits of a record's word ``j``. Returns the number of output words."""
-    out_full = st[_OUT_FULL]
-    out_reg = st[_OUT_REG]
-    left = st[_HOLD_V]          # hold words still to write
+    out_full = st[SV_OUT_FULL]
+    out_reg = st[SV_OUT_REG]
+    left = st[SV_HOLD_V]          # hold words still to write
     nrec = hold.size
-    pending = st[_PENDING]
-    ovf = st[_OVF]
-    head = st[_HEAD]
-    cnt = st[_CNT]
-    maxlvl = st[_MAXLVL]
+    pending = st[SV_PENDING]
+    ovf = st[SV_OVF]
+    head = st[SV_HEAD]
+    cnt = st[SV_CNT]
+    maxlvl = st[SV_MAXLVL]
     cap = depth - 1          # memory words (0 for depth 1: the output register only)
     ring_n = ring.size
     n_in = wc.size
@@ -171,12 +171,12 @@ def _fifo_kernel(wc, words, c, c_end, rmode, rmask, rbase, period, offset, count
         if cnt + out_full > maxlvl:
             maxlvl = cnt + out_full
         c += 1
-    st[_OUT_FULL] = out_full
-    st[_OUT_REG] = out_reg
-    st[_HOLD_V] = left
-    st[_PENDING] = pending
-    st[_OVF] = ovf
-    st[_HEAD] = head
-    st[_CNT] = cnt
-    st[_MAXLVL] = maxlvl
+    st[SV_OUT_FULL] = out_full
+    st[SV_OUT_REG] = out_reg
+    st[SV_HOLD_V] = left
+    st[SV_PENDING] = pending
+    st[SV_OVF] = ovf
+    st[SV_HEAD] = head
+    st[SV_CNT] = cnt
+    st[SV_MAXLVL] = maxlvl
     return n_out

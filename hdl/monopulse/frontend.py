@@ -19,9 +19,9 @@ from ..fifo import DspFifo
 from ..fir import Fir
 from ..mixer import Mixer
 from ..nco import Nco
-from .model import REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams
+from .params import REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams
 
-__all__ = ["MonopulseFrontEnd", "MonopulseFrontendParams", "monopulse_top"]
+__all__ = ["MonopulseFrontEnd", "monopulse_top"]
 
 
 class MonopulseFrontEnd(wiring.Component):
@@ -37,7 +37,7 @@ class MonopulseFrontEnd(wiring.Component):
         One sample of the four ADCs (channel ``j`` in bits ``[j b, (j + 1) b)``, signed) and
         the replica bit of its chip (bit ``4 b``; 0 = +1, 1 = -1); gaps in ``valid`` allowed.
     reg_we, reg_addr (3 bits), reg_data (``reg_data_width`` bits) : In
-        Register bus (:data:`~hdl.monopulse.model.REG_COEF` + i, ``REG_U0``, ``REG_V0``);
+        Register bus (:data:`~hdl.monopulse.params.REG_COEF` + i, ``REG_U0``, ``REG_V0``);
         a write when ``reg_we`` is high, into the shadow registers.
     o : Out(stream.Signature(DspFifo out layout))
         Tagged FIFO words, ``record_words`` per record (the first tagged 1), real ``ready``.

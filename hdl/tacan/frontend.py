@@ -3,7 +3,8 @@
 With ``config.pair_peak`` a second peak search (the pulse-pair detection) runs on the same
 envelope stream beside the single-pulse one, and both write into the one FIFO, each word
 tagged with its search in the payload's top bit (the merge: :meth:`TacanFrontEnd._merge`).
-Parameters, word lengths and the bit-exact model are in :mod:`hdl.tacan.model`.
+Parameters and word lengths are in :mod:`hdl.tacan.params`, the bit-exact model in
+:mod:`hdl.tacan.model`.
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
+from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE
 
 from ..cic import Cic
 from ..common import check_params
@@ -19,10 +20,10 @@ from ..ddc import Ddc
 from ..envelope import Envelope
 from ..fifo import DspFifo
 from ..fir import Fir
-from ..peak import PeakSearch
-from .model import TacanFrontendParams
+from .peak import PeakSearch
+from .params import TacanFrontendParams
 
-__all__ = ["TacanFrontEnd", "TacanFrontendParams"]
+__all__ = ["TacanFrontEnd"]
 
 
 class TacanFrontEnd(wiring.Component):
@@ -115,7 +116,7 @@ class TacanFrontEnd(wiring.Component):
 
     @staticmethod
     def _merge(m, fifo, pulse, pulse_valid, pair, pair_valid):
-        """The two searches into the one FIFO input (:func:`hdl.tacan.model.fifo_write_cycles`):
+        """The two searches into the one FIFO input (:func:`hdl.tacan.fifo_merge.fifo_write_cycles`):
         a pulse word is written at once; a pair word too, unless a pulse word comes in the same
         cycle, then it waits one cycle in ``hold``. The searches emit at least ``decimation
         >= 2`` cycles apart (checked by the params), so the cycle after a collision has

@@ -1,81 +1,17 @@
-"""TACAN FPGA front end (top level): parameters, word lengths and the bit-exact model.
+"""TACAN FPGA front end: the bit-exact model of :class:`hdl.tacan.frontend.TacanFrontEnd`.
 
-Chain (one ``sync`` clock, the ADC rate)::
+Chain (one ``sync`` clock, the ADC rate): ADC -> DDC (NCO + real mixer) -> CIC -> FIR ->
+envelope (CORDIC ``|z|``) -> pulse-peak search(es) -> FIFO -> DSP. The parameters and word
+lengths are :class:`hdl.tacan.params.TacanFrontendParams`; the design rationale is in
+``docs/tacan_frontend_design.md``.
 
-    ADC (12 b) -> DDC (NCO + real mixer) -> CIC (N=3, R=4, M=1) -> FIR (33 taps, matched,
-    CIC-compensating) -> envelope (CORDIC |z|) -> pulse-peak search -> FIFO -> DSP
-
-:class:`TacanFrontendParams` holds the rates/structure (a :class:`dsp.tacan.frontend.FrontendConfig`,
-shared with the golden float model) plus every word length, and builds each block's
-parameters in one place so that each block's output width is the next one's input width.
-
-Word lengths (defaults) and why
--------------------------------
-Units: "FS" is ADC full scale (code ``2**(adc_bits-1)``); the golden model's amplitudes are
-the carrier amplitude in FS (its mixer multiplies by ``2 exp(-jwn)``).
-
-* **ADC 12 b** (the scenario's converter).
-* **NCO**: 32-bit phase (frequency error ~2 mHz at 3 MHz), 10-bit table address (phase error
-  <= pi/1024 rad, zero-mean with the bin-centre table), 16-bit amplitude (table rounding
-  1.5e-5 relative): the 12 x 16 product fits one 18x18 multiplier. The LO phase error
-  changes a narrowband pulse's *magnitude* only to second order (a rotation to first order).
-* **Mixer 16 b, headroom 0, half_even**: output LSB ``2**-15`` FS (16x finer than the ADC
-  LSB, so its rounding adds < 0.4% to the ADC quantisation noise power). The product is
-  shifted by 11 bits and ``|x * lo| <= 2**11 * (2**15 - 1)``, so the output is at most
-  ``2**15 - 1`` LSB: it never saturates, not even at (-full scale) x (-peak). Convergent
-  rounding has no DC bias (a floor would put a ~1e-5 FS offset on I and Q).
-* **CIC 17 b out** (full width 22, 5 LSBs dropped, half_even, no pruning): LSB ``2**-16`` FS;
-  the impulse response is positive with gain 64/32, so ``|out| <= 2 * (2**15 - 1) < 2**16``;
-  17 bits make the FIR's pre-adder 18 bits, i.e. one 18x18 multiplier per tap.
-* **FIR**: 18-bit coefficients (the 18x18 multiplier; quantisation error of the pulse
-  response ~1e-5 relative), output LSB = input LSB (``2**-16`` FS), 18 b out: every tap is
-  positive with sum 1.212, so ``|out| <= 1.212 * 2**16 < 2**17`` (no overflow for any
-  input). The multipliers
-  are time-shared over ``input_spacing = cic_rate`` cycles (the CIC cannot deliver faster).
-* **Envelope 18 b in, 19 b out** (CORDIC, 12 iterations, half_up, no gain compensation):
-  ``1.647 * sqrt(2) * 2**17 < 2**19``; error <= :attr:`~hdl.model.envelope.EnvelopeParams.error_bound_lsb`
-  (1.4 LSB = 2.5e-5 FS). 12 iterations leave an angle residual of atan(2**-11), i.e. a
-  relative error <= 2**-23 (0.02 LSB at full scale); more iterations would only add
-  truncation error (each one < 1 guard LSB) and pipeline stages.
-* **Peak search** 19-bit amplitude, 32-bit timestamp (wraps after 214 s at 20 MHz; the model
-  also returns it unwrapped), threshold floor ``thr_min`` = the golden's ``thr_min_fs`` in
-  envelope LSBs.
-* **FIFO** 51-bit payload (amplitude | timestamp << 19; 52 with both searches, the source
-  bit on top) + 2-bit tag, 512 deep (one DP16KD block pair), 16-bit overflow counter.
-
-Model
------
 :class:`TacanFrontendModel` chains the block models (vectorised, chunkable with a
 :class:`TacanFrontendState`), or composes the blocks' compiled single-threaded kernels
 (:class:`hdl.model.ddc.DdcCicKernel`, :class:`hdl.model.fir.FirKernel`,
 :func:`hdl.model.envelope.envelope_model`; :meth:`TacanFrontendModel.envelope`, the default
-when the word lengths allow);
-:meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle model for a given DSP ``ready``
-pattern.
-
-Both searches (``config.pair_peak``)
-------------------------------------
-A second :class:`~hdl.peak.PeakSearch` (the pulse-pair detection,
-:attr:`TacanFrontendParams.pair_peak`, built as :attr:`~TacanFrontendParams.peak` is: envelope
-width, ``ts_bits``, the decimation as timestamp step, the same threshold floor) runs on the
-same envelope stream. Both write into the one FIFO, whose payload grows by a **source bit**
-at the top::
-
-    payload = amplitude | timestamp << amp_width | source << (amp_width + ts_bits)
-
-(source 0 = the single-pulse search, 1 = the pair search; a 52-bit payload by default).
-Merge rule (:func:`fifo_write_cycles`, the HDL's ``TacanFrontEnd._merge``): the pulse search
-has priority; a pair word emitted in the same cycle as a pulse word waits in a one-word hold
-register and is written the next cycle. Each search emits at most one word per envelope
-sample, i.e. at least ``decimation`` cycles apart, and ``decimation >= 2`` (checked), so that
-next cycle has no pulse word and no new pair word: one register suffices, nothing is lost.
-The pair search's latency is 8 (9 with the pair checks) against the pulse search's 6, and
-envelope samples are at least ``decimation`` cycles apart, so the two can only meet when the
-decimation is at most that difference: never with the default decimation 4, at decimation 2
-they do. Resources: a second search (its pair-sum memory of ``pair_offset`` words, the inner
-search's ``2 pair_offset``-word partner line, with the pair checks an envelope history of
-``pair_check_depth`` (512) words), the hold register and one FIFO bit more;
-``results/synth_tacan.json`` is the single search's (not re-synthesised).
+when the word lengths allow); :meth:`TacanFrontendModel.fifo_output` adds the FIFO cycle
+model for a given DSP ``ready`` pattern, with the two searches merged into the one FIFO
+input by :func:`hdl.tacan.fifo_merge.fifo_write_cycles`.
 """
 from __future__ import annotations
 
@@ -84,358 +20,22 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from dsp.fixed import OVERFLOWS, ROUNDINGS, check_width
-from dsp.jit import njit_cached
-from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE, FrontendConfig, Peaks
+from dsp.tacan.frontend import Peaks
+from dsp.tacan.peak_params import PeakState
+from dsp.tacan.standard import SOURCE_PAIR
 
-from ..model.cic import CicParams, CicState, cic_model
-from ..model.ddc import DdcCicKernel, DdcModel, DdcParams
-from ..model.envelope import EnvelopeParams, envelope_model
-from ..model.fifo import FifoParams, fifo_model
-from ..model.fir import FirKernel, FirParams, FirState, fir_model
-from ..model.fir import fir_kernel as _fir_kernel  # noqa: F401 (tests use it with _round_consts)
-from ..model.mixer import MixerParams
-from ..model.nco import NcoParams, NcoState, nco_freq_word
-from ..model.peak import PeakParams, PeakState, peak_search
-from ..model.rounding import round_consts as _round_consts  # noqa: F401 (tests use it with _fir_kernel)
+from ..model.cic import cic_model
+from ..model.ddc import DdcCicKernel, DdcModel
+from ..model.envelope import envelope_model
+from ..model.fifo import fifo_model
+from ..model.fir import FirKernel, fir_model
+from ..model.nco import NcoState
+from .fifo_merge import FifoRun, fifo_write_cycles
+from .params import TacanFrontendParams
+from .peak_model import peak_search
 
-__all__ = ["TacanFrontendParams", "TacanFrontendState", "TacanFrontendModel", "FrontendPeaks", "amp_error_terms",
-           "FifoRun", "fifo_write_cycles"]
+__all__ = ["TacanFrontendState", "TacanFrontendModel", "FrontendPeaks"]
 
-
-@dataclass(frozen=True)
-class TacanFrontendParams:
-    """Rates, structure and word lengths of the TACAN front end.
-
-    Parameters
-    ----------
-    config : FrontendConfig
-        Rates and structure shared with the golden model (fs, digital IF, CIC N/R/M, FIR
-        length/decimation, pulse width, peak-search parameters, ``thr_min_fs``).
-        ``config.peak`` gives the noise-floor/threshold/hold settings; its ``amp_width`` and
-        ``thr_min`` are replaced by the envelope width and ``thr_min_fs`` in LSBs.
-        ``config.pair_peak`` (optional) adds the pair search, built the same way
-        (:attr:`pair_peak`), and the source bit of the FIFO payload.
-    adc_bits : int
-        ADC word (signed, 2..18).
-    nco_phase_bits, nco_table_bits, nco_amp_bits, nco_dither_bits : int
-        NCO accumulator, full-circle table address, signed amplitude, phase dither widths.
-    mixer_out_bits, mixer_headroom_bits : int
-        Mixer output width and extra right shift (output LSB ``2**-(out - 1 - headroom)`` FS).
-    mixer_rounding : str
-        Rounding of the mixer products (see :mod:`dsp.fixed`).
-    cic_out_bits : int
-        CIC output width (LSBs dropped from the full Hogenauer width).
-    cic_rounding : str
-    cic_prune : bool
-        Hogenauer register pruning.
-    fir_coef_bits : int
-        FIR coefficient width.
-    fir_out_shift_rel : int
-        FIR output LSB relative to its input LSB, as a power of two: the FIR drops
-        ``coef_frac - fir_out_shift_rel`` LSBs (1: one fraction bit more than the input).
-    fir_out_bits : int
-        FIR output width.
-    fir_rounding : str
-    fir_input_spacing : int, optional
-        Multiplier sharing of the FIR (default ``config.cic_rate``: the CIC's guaranteed
-        minimum spacing between its outputs; 1 = fully parallel).
-    env_iterations : int
-        CORDIC iterations.
-    env_out_bits : int, optional
-        Envelope output width (default: natural, ``fir_out_bits + 1``).
-    env_rounding : str
-    ts_bits : int
-        Peak timestamp width (wraps).
-    fifo_depth, fifo_count_bits : int
-        FIFO depth (words) and overflow-counter width.
-    fifo_parity : bool
-        Even-parity bit on every FIFO word (checked by the DSP's FIFO receiver).
-    check_headroom : bool
-        Refuse word lengths where a legal input could overflow a stage (default True).
-    """
-
-    config: FrontendConfig = field(default_factory=FrontendConfig)
-    adc_bits: int = 12
-    nco_phase_bits: int = 32
-    nco_table_bits: int = 10
-    nco_amp_bits: int = 16
-    nco_dither_bits: int = 0
-    mixer_out_bits: int = 16
-    mixer_headroom_bits: int = 0
-    mixer_rounding: str = "half_even"
-    cic_out_bits: int = 17
-    cic_rounding: str = "half_even"
-    cic_prune: bool = False
-    fir_coef_bits: int = 18
-    fir_out_shift_rel: int = 0
-    fir_out_bits: int = 18
-    fir_rounding: str = "half_up"
-    fir_input_spacing: int | None = None
-    env_iterations: int = 12
-    env_out_bits: int | None = None
-    env_rounding: str = "half_up"
-    ts_bits: int = 32
-    fifo_depth: int = 512
-    fifo_count_bits: int = 16
-    fifo_parity: bool = False
-    check_headroom: bool = True
-    _blocks: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    def __post_init__(self):
-        if not isinstance(self.config, FrontendConfig):
-            raise ValueError(f"config must be a FrontendConfig, not {self.config!r}")
-        check_width("ADC adc_bits", self.adc_bits, minimum=2, maximum=18)
-        for name in ("mixer_rounding", "cic_rounding", "fir_rounding"):
-            if getattr(self, name) not in ROUNDINGS:
-                raise ValueError(f"{name} must be one of {ROUNDINGS}, not {getattr(self, name)!r}")
-        if not isinstance(self.cic_prune, bool):
-            raise ValueError(f"cic_prune must be a bool, not {self.cic_prune!r}")
-        if isinstance(self.fir_out_shift_rel, bool) or not isinstance(self.fir_out_shift_rel, int) \
-                or not 0 <= self.fir_out_shift_rel <= 8:
-            raise ValueError(f"fir_out_shift_rel must be an integer in [0, 8], not "
-                             f"{self.fir_out_shift_rel!r}")
-        cfg = self.config
-        if cfg.pair_peak is not None and cfg.decimation < 2:   # (FrontendConfig: cic_rate >= 2)
-            raise ValueError(f"with pair_peak the total decimation must be >= 2 (the merge of "
-                             f"the two searches holds a word for one cycle and needs each "
-                             f"search's words 2 cycles apart), not {cfg.decimation}")
-        if self.fir_input_spacing is None:
-            object.__setattr__(self, "fir_input_spacing", cfg.cic_rate)
-        if isinstance(self.fir_input_spacing, bool) or not isinstance(self.fir_input_spacing, int) \
-                or not 1 <= self.fir_input_spacing <= cfg.cic_rate:
-            raise ValueError(f"fir_input_spacing must be an integer in [1, cic_rate = "
-                             f"{cfg.cic_rate}] (the CIC's output spacing), not "
-                             f"{self.fir_input_spacing!r}")
-
-        # Build every block once, in chain order; each takes the previous one's out width.
-        b = self._blocks
-        nco = NcoParams(phase_bits=self.nco_phase_bits, table_bits=self.nco_table_bits,
-                        amp_bits=self.nco_amp_bits, dither_bits=self.nco_dither_bits)
-        mixer = MixerParams(in_width=self.adc_bits, lo_width=nco.amp_bits,
-                            out_width=self.mixer_out_bits, rounding=self.mixer_rounding,
-                            overflow="saturate", headroom_bits=self.mixer_headroom_bits)
-        b["ddc"] = DdcParams(nco=nco, mixer=mixer)
-        b["cic"] = CicParams(stages=cfg.cic_stages, rate=cfg.cic_rate, diff_delay=cfg.cic_delay,
-                             in_width=b["ddc"].out_width, channels=2, out_width=self.cic_out_bits,
-                             rounding=self.cic_rounding, overflow="saturate", prune=self.cic_prune)
-        probe = FirParams(taps=tuple(cfg.fir_taps), coef_bits=self.fir_coef_bits,
-                          decimation=cfg.fir_decim, in_width=b["cic"].out_width, channels=2)
-        out_shift = probe.coef_frac - self.fir_out_shift_rel
-        if out_shift < 0:
-            raise ValueError(f"fir_out_shift_rel must be <= the coefficient fraction bits "
-                             f"{probe.coef_frac}, not {self.fir_out_shift_rel}")
-        b["fir"] = FirParams(taps=probe.taps, coef_bits=self.fir_coef_bits,
-                             decimation=cfg.fir_decim, in_width=b["cic"].out_width, channels=2,
-                             out_shift=out_shift, out_width=self.fir_out_bits,
-                             rounding=self.fir_rounding, overflow="saturate",
-                             input_spacing=self.fir_input_spacing)
-        b["envelope"] = EnvelopeParams(in_width=b["fir"].out_width, out_width=self.env_out_bits,
-                                       iterations=self.env_iterations,
-                                       rounding=self.env_rounding)
-        env = b["envelope"]
-        object.__setattr__(self, "env_out_bits", env.out_width)
-        # thr_min_fs in envelope LSBs (scale of the chain up to the envelope).
-        thr_min = int(round(cfg.thr_min_fs / self._scale_from(b)))
-        # the algorithm's fields as configured; the widths, the timestamp step and the
-        # floor of the threshold are the chain's
-        searches = {"peak": cfg.peak}
-        if cfg.pair_peak is not None:
-            searches["pair_peak"] = cfg.pair_peak
-        for name, search in searches.items():
-            b[name] = replace(search, amp_width=env.out_width, ts_bits=self.ts_bits,
-                              ts_step=cfg.decimation,
-                              thr_min=min(thr_min, (1 << env.out_width) - 1))
-        b["fifo"] = FifoParams(width=env.out_width + self.ts_bits + self.source_bits,
-                               depth=self.fifo_depth, count_width=self.fifo_count_bits,
-                               parity=self.fifo_parity)
-        if self.check_headroom:
-            self._check_headroom()
-
-    # -- headroom ----------------------------------------------------------------------------
-    def headroom(self) -> dict[str, tuple[int, int]]:
-        """Per stage: (largest magnitude any legal ADC input can produce, largest the output
-        word holds), both in that stage's output LSBs (exact integers; the envelope's from
-        its CORDIC bound)."""
-        d, c, f, e = self.ddc, self.cic, self.fir, self.envelope
-        mx = d.mixer
-        full = 1 << (self.adc_bits - 1)
-        prod = full * d.nco.peak
-        drop = mx.drop_bits
-        mix_max = (prod + (1 << (drop - 1))) >> drop if drop > 0 else prod << -drop
-        # CIC: positive impulse response, gain/2**out_shift, plus a rounding carry.
-        cic_max = -(-mix_max * c.gain // (1 << c.out_shift))
-        taps = np.array(f.taps_int, dtype=object)
-        fir_max = -(-cic_max * int(np.abs(taps).sum()) // (1 << f.out_shift))
-        env_max = int(math.ceil(e.eff_gain * math.sqrt(2) * fir_max / 2.0 ** e.shift
-                                + e.error_bound_lsb))
-        return {
-            "mixer": (mix_max, (1 << (mx.out_width - 1)) - 1),
-            "cic": (cic_max, (1 << (c.out_width - 1)) - 1),
-            "fir": (fir_max, (1 << (f.out_width - 1)) - 1),
-            "envelope": (env_max, (1 << e.out_width) - 1),
-        }
-
-    def _check_headroom(self):
-        for stage, (need, have) in self.headroom().items():
-            if need > have:
-                raise ValueError(
-                    f"{stage} output can overflow: a full-scale ADC input reaches {need} LSB "
-                    f"but {stage} words hold {have}; widen it, or pass check_headroom=False "
-                    f"to study saturation")
-
-    # -- blocks --------------------------------------------------------------------------------
-    @property
-    def ddc(self) -> DdcParams:
-        return self._blocks["ddc"]
-
-    @property
-    def cic(self) -> CicParams:
-        return self._blocks["cic"]
-
-    @property
-    def fir(self) -> FirParams:
-        return self._blocks["fir"]
-
-    @property
-    def envelope(self) -> EnvelopeParams:
-        return self._blocks["envelope"]
-
-    @property
-    def peak(self) -> PeakParams:
-        return self._blocks["peak"]
-
-    @property
-    def pair_peak(self) -> PeakParams | None:
-        """The pulse-pair search beside :attr:`peak` (``config.pair_peak``), None without."""
-        return self._blocks.get("pair_peak")
-
-    @property
-    def source_bits(self) -> int:
-        """Bits of the source field at the top of the FIFO payload: 1 with
-        :attr:`pair_peak` (0 = :attr:`peak`, 1 = :attr:`pair_peak`), else 0."""
-        return 0 if self.config.pair_peak is None else 1
-
-    @property
-    def fifo(self) -> FifoParams:
-        return self._blocks["fifo"]
-
-    # -- derived ---------------------------------------------------------------------------------
-    @property
-    def nco_freq_word(self) -> int:
-        """NCO word of the digital IF (rounded to nearest; the error is ``nco_freq_error_hz``)."""
-        return nco_freq_word(self.config.if_hz, f_clk_hz=self.config.fs_hz,
-                             phase_bits=self.nco_phase_bits).word
-
-    @property
-    def nco_freq_error_hz(self) -> float:
-        return nco_freq_word(self.config.if_hz, f_clk_hz=self.config.fs_hz,
-                             phase_bits=self.nco_phase_bits).error_hz
-
-    @property
-    def decimation(self) -> int:
-        return self.config.decimation
-
-    @property
-    def chain_latency(self) -> int:
-        """Cycles from the ADC transfer that completes an envelope sample to the envelope's
-        output transfer of that sample (DDC, CIC, FIR, CORDIC)."""
-        return self.ddc.latency + self.cic.latency + self.fir.latency + self.envelope.latency
-
-    @property
-    def peak_latency(self) -> int:
-        """Cycles from the ADC transfer that completes a pulse's closing envelope sample
-        (``peak.emit_delay`` samples later with the readout or the pair detection) to the
-        peak search's output transfer (= the FIFO write)."""
-        return self.chain_latency + self.peak.latency
-
-    @property
-    def pair_peak_latency(self) -> int | None:
-        """:attr:`peak_latency` of the pair search (``pair_peak.emit_delay`` envelope samples
-        after the pair's closing sample), None without it. Its FIFO write comes one cycle
-        later when the pulse search writes in the same cycle (:func:`fifo_write_cycles`)."""
-        return None if self.pair_peak is None else self.chain_latency + self.pair_peak.latency
-
-    #: SyncFIFOBuffered: a word written into an empty queue is offered 2 cycles later.
-    FIFO_LATENCY = 2
-
-    @property
-    def latency(self) -> int:
-        """Cycles from the ADC transfer that completes a pulse's closing envelope sample to
-        ``o.valid`` of its FIFO word (empty FIFO, DSP ready)."""
-        return self.peak_latency + self.FIFO_LATENCY
-
-    @staticmethod
-    def _scale_from(b) -> float:
-        d, c, f, e = b["ddc"], b["cic"], b["fir"], b["envelope"]
-        mx = d.mixer
-        lo_rel = d.nco.peak / 2.0 ** (d.nco.amp_bits - 1)
-        # mixer integer per golden baseband unit: golden z = 2 x exp(-jwn) (x in FS).
-        mix = lo_rel * 2.0 ** (mx.out_width - 1 - mx.headroom_bits) / 2.0
-        return 1.0 / (mix * c.float_gain * f.float_gain * e.eff_gain / 2.0 ** e.shift)
-
-    @property
-    def scale_to_fs(self) -> float:
-        """ADC full-scale units per envelope (amplitude) LSB: golden amplitude ~=
-        ``scale_to_fs * amplitude`` (mixer scaling and NCO peak, CIC and FIR gains, CORDIC
-        gain; the FIR's quantised taps stand for the golden float taps)."""
-        return self._scale_from(self._blocks)
-
-    @property
-    def group_delay_samples(self) -> float:
-        """Delay (ADC ticks) of a pulse peak to its hardware timestamp: subtract it from a
-        timestamp to get the pulse time. The golden's delay less ``decimation - 1``: a
-        hardware envelope sample ``n`` has timestamp ``n D`` but completes on ADC tick
-        ``n D + D - 1`` (the D-th, 2D-th, ... input is kept)."""
-        return self.config.group_delay_samples - (self.decimation - 1)
-
-    @property
-    def amp_bound_fs(self) -> float:
-        """Bound on ``|model amplitude - golden amplitude|`` (FS) for the same envelope
-        sampling phase, from the rounding steps of the chain (worst case over inputs) and the
-        CORDIC bound; see :func:`amp_error_terms`."""
-        return sum(amp_error_terms(self).values())
-
-
-def amp_error_terms(p: TacanFrontendParams) -> dict[str, float]:
-    """Worst-case amplitude error (FS) contributed by each rounding step; the magnitude of a
-    complex error ``(ei, eq)`` with ``|ei|, |eq| <= b`` is at most ``sqrt(2) b``.
-
-    * mixer rounding: 1/2 LSB per sample (half_even), through CIC (DC gain 1, positive) and
-      FIR (sum|h|);
-    * CIC output rounding: 1/2 CIC LSB through the FIR;
-    * FIR output rounding (+ coefficient quantisation is not a rounding of the signal: the
-      golden comparison uses the design taps, so the difference of the tap sets times the
-      largest input is counted too);
-    * envelope: :attr:`EnvelopeParams.error_bound_lsb`.
-
-    * NCO: the table rounds the LO amplitude by <= 1/2 LSB of its peak (relative
-      ``1/(2 peak)``, first order, times the largest amplitude 1 FS); the table's phase
-      error ``|d| <= pi/2**table_bits`` only rotates a narrowband pulse to first order
-      (zero-mean pattern, filtered by the positive CIC/FIR), changing its magnitude by
-      ``<= d**2/2`` relative.
-    """
-    fs = p.scale_to_fs   # FS per envelope LSB
-    e = p.envelope
-    env_per_fir = e.eff_gain / 2.0 ** e.shift    # envelope LSB per FIR LSB
-    fir_lsb = fs * env_per_fir                   # FS per FIR LSB
-    cic_lsb = fir_lsb * p.fir.float_gain
-    mix_lsb = cic_lsb * p.cic.float_gain
-    h = np.asarray(p.fir.taps_quantised)
-    dh = float(np.abs(h - np.asarray(p.fir.taps)).sum())
-    s2 = math.sqrt(2.0)
-    half = {"floor": 1.0, "zero": 1.0, "half_up": 0.5, "half_even": 0.5}
-    return {
-        "mixer": s2 * half[p.ddc.mixer.rounding] * mix_lsb * np.abs(h).sum(),
-        "cic": s2 * half[p.cic.rounding] * (cic_lsb if p.cic.out_shift else 0.0) * np.abs(h).sum(),
-        "fir_coef": dh * 1.0,   # |x| <= 1 FS (golden units: carrier amplitude <= 1)
-        "fir": s2 * half[p.fir.rounding] * fir_lsb,
-        "envelope": e.error_bound_lsb * fs,
-        "nco": 1.0 / (2 * p.ddc.nco.peak) + (math.pi / 2 ** p.ddc.nco.table_bits) ** 2 / 2,
-    }
-
-
-# -- model ------------------------------------------------------------------------------------
 
 def _check_changes(freq_changes, phase_bits: int):
     """Validated ``freq`` writes as (index, word) int64 arrays (None: no writes)."""
@@ -493,7 +93,7 @@ class FrontendPeaks:
     hardware field); index / end_index : envelope sample of the peak / whose arrival emits
     the pulse (the closing sample, ``PeakParams.emit_delay`` later with the readout or the
     pair detection); source : with two searches (``config.pair_peak``) the search of each
-    peak, int8 :data:`~dsp.tacan.frontend.SOURCE_PULSE` / ``SOURCE_PAIR`` (None: one search).
+    peak, int8 :data:`~dsp.tacan.standard.SOURCE_PULSE` / ``SOURCE_PAIR`` (None: one search).
     """
 
     amplitudes: np.ndarray
@@ -518,46 +118,6 @@ class FrontendPeaks:
                for f in ("amplitudes", "timestamps", "index", "end_index")]
         src = None if parts[0].source is None else np.concatenate([q.source for q in parts])
         return FrontendPeaks(*cat, source=src)
-
-
-def fifo_write_cycles(emit_cycles, source=None, *, last_pulse: int = -1) -> np.ndarray:
-    """The merge of the two searches into the one FIFO input
-    (:class:`~hdl.tacan.frontend.TacanFrontEnd` with ``config.pair_peak``): the cycle each
-    peak is written to the FIFO, from the cycle it leaves its search (``emit_cycles``) and
-    its ``source``.
-
-    The pulse search has priority: a pulse word is written in the cycle it is emitted; a pair
-    word too, unless a pulse word is emitted in the same cycle, then it waits in a one-word
-    hold register and is written the next cycle. Each search emits at most one word per
-    envelope sample, i.e. at least ``decimation >= 2`` cycles apart, so that cycle has no
-    pulse word and the register is free again before the next pair word: one register
-    suffices and no word is lost or reordered within its search.
-
-    ``source`` None (one search): the emit cycles. ``last_pulse``: the emit cycle of the
-    last pulse word written before these (a caller that hands the FIFO the words of one
-    stretch of cycles at a time, keeping the later ones).
-    """
-    c = np.asarray(emit_cycles, dtype=np.int64)
-    if source is None:
-        return c.copy()
-    pair = np.asarray(source) == SOURCE_PAIR
-    pulses = np.r_[c[~pair], np.int64(last_pulse)]
-    w = c + (pair & np.isin(c, pulses))
-    if np.unique(w).size != w.size:
-        raise RuntimeError("two FIFO writes in one cycle: each search's words must be >= 2 "
-                           "cycles apart (decimation >= 2, one word per envelope sample)")
-    return w
-
-
-@dataclass
-class FifoRun:
-    """FIFO output predicted for a ready pattern: packed words and their cycles, the
-    ``overflow_count`` port per cycle, and which peaks were dropped."""
-
-    words: np.ndarray
-    cycles: np.ndarray
-    overflow_count: np.ndarray
-    dropped: np.ndarray
 
 
 class TacanFrontendModel:

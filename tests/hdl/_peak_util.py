@@ -9,8 +9,9 @@ from dataclasses import replace
 import numpy as np
 
 from cosim.backends.pysim import run_stream, unpack_fields
-from hdl.model.peak import PeakParams, peak_search
-from hdl.peak import PeakSearch
+from dsp.tacan.peak_params import PeakParams
+from hdl.tacan.peak_model import peak_search
+from hdl.tacan.peak import PeakSearch
 
 
 def realistic_envelope(rng, n, *, noise=200.0, width=10.0, min_gap=21, max_gap=150,

@@ -15,7 +15,7 @@ from hdl.envelope import Envelope
 from hdl.fir import Fir
 from hdl.mixer import Mixer
 from hdl.nco import Nco
-from hdl.peak import PeakSearch
+from hdl.tacan.peak import PeakSearch
 from hdl.tacan.frontend import TacanFrontEnd
 
 

@@ -8,7 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hdl.model.peak import PeakParams, PeakState, peak_search, peak_search_float, peak_search_numpy
+from dsp.tacan.peak_params import PeakParams, PeakState
+from hdl.tacan.peak_model import peak_search
+from dsp.tacan.peak import peak_search_float, peak_search_numpy
 
 from _peak_util import SMALL, as_tuples, realistic_envelope, reference_loop  # tests/hdl, on sys.path: conftest.py
 

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from amaranth.hdl import Fragment, Shape, unsigned
 
-from hdl.model.peak import PeakParams, PeakState, peak_search, peak_search_float, peak_search_numpy
-from hdl.peak import PeakSearch
+from dsp.tacan.peak_params import PeakParams, PeakState
+from hdl.tacan.peak_model import peak_search
+from dsp.tacan.peak import peak_search_float, peak_search_numpy
+from hdl.tacan.peak import PeakSearch
 
 from _util import WithClear
 from _peak_util import (PAIR_CHECKED, TACAN_X_PAIR, as_tuples, check_sim, pair_envelope, pair_sum,

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from amaranth.hdl import Fragment
 
-from hdl.model.peak import PeakParams, peak_search
-from hdl.peak import PeakSearch
+from dsp.tacan.peak_params import PeakParams
+from hdl.tacan.peak_model import peak_search
+from hdl.tacan.peak import PeakSearch
 
 from _util import WithClear
 from _peak_util import (PAIR_CHECKED, TACAN_X_PAIR, assert_checks_bite, check_sim,

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from cosim.backends.pysim import run_stream, unpack_fields
-from hdl.model.peak import PeakParams, peak_search, peak_search_float, peak_search_numpy
-from hdl.peak import PeakSearch
+from dsp.tacan.peak_params import PeakParams
+from hdl.tacan.peak_model import peak_search
+from dsp.tacan.peak import peak_search_float, peak_search_numpy
+from hdl.tacan.peak import PeakSearch
 
 from _util import WithClear
 from _peak_util import SMALL, as_tuples, check_sim, realistic_envelope, reference_loop, run_sim  # tests/hdl, on sys.path: conftest.py

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from cosim.backends.pysim import run_stream, unpack_fields
-from hdl.model.peak import PeakParams, peak_search
-from hdl.peak import PeakSearch
+from dsp.tacan.peak_params import PeakParams
+from hdl.tacan.peak_model import peak_search
+from hdl.tacan.peak import PeakSearch
 
 from _util import (accepted_cycles, assert_lints_clean, assert_same_stream, needs_verilator,
                    verilator_sim)

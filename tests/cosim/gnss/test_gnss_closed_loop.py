@@ -11,7 +11,7 @@ from cosim.gnss.config import GnssRunConfig
 from cosim.gnss.tracking import SKIP_RECORDS, closed_loop
 from cosim.backends.verilator import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
-from hdl.gnss.model import GnssChannelParams
+from hdl.gnss.params import GnssChannelParams
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

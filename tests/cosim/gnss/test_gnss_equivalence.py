@@ -12,7 +12,6 @@ import cosim.gnss.session as gnss_session
 from cosim.cli import main
 from cosim.gnss.equivalence import (EQUIV_PARAMS, EQUIV_PRN, check_gnss_equivalence,
                                     gnss_equivalence_stimulus)
-from hdl.gnss.model import unpack_record
 from hdl.model.fifo import unpack_word
 
 
@@ -23,7 +22,7 @@ def _records(words, p):
     out = []
     for row in payload.reshape(-1, rw):
         v = sum(int(a) << (p.fifo_width * i) for i, a in enumerate(row))
-        out.append(unpack_record(v, p))
+        out.append(p.record.unpack(v))
     return out
 
 

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from cosim import receivers
+from cosim.core.receivers import receivers
 from cosim.cli import main
 from cosim.gnss.config import GnssRunConfig
 from cosim.gnss.tracking import SKIP_RECORDS, closed_loop
@@ -196,7 +196,7 @@ def test_aided_kf_closed_loop_model_equals_verilator():
 def test_boundary_replay_in_blocks_equals_one_pass():
     # the dump-boundary replay runs in blocks (a 150 s record would not fit in one array)
     from cosim.gnss.tracking import handover_writes, record_boundaries
-    from hdl.gnss.model import REG_NAMES
+    from hdl.gnss.params import REG_NAMES
     w = [(c, REG_NAMES[r], v) for c, r, v in handover_writes(SMALL, 1500.0, 600.0)]
     w += [(5000 + 2046 * j, REG_NAMES["code_freq"], SMALL.code_word(1.023e6 + 40.0 * j))
           for j in range(8)]

@@ -57,7 +57,7 @@ def test_registry_declares_the_front_end_its_top_and_the_bench():
     from cosim.core.receivers import get
     from cosim.backends.factory import open_frontend
     from hdl.monopulse.frontend import MonopulseFrontEnd
-    from hdl.monopulse.model import MonopulseFrontendParams
+    from hdl.monopulse.params import MonopulseFrontendParams
     p = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
                                 cordic_iterations=12, angle_bits=16, fifo_depth=16)
     r = get("monopulse")

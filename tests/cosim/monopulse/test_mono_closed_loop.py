@@ -14,8 +14,8 @@ from cosim.monopulse.run import MonopulseRunConfig, run_monopulse
 from cosim.monopulse.signal import generate
 from cosim.backends.verilator import verilator_available
 from dsp.monopulse.golden import beams, golden_chain
-from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendModel,
-                                 coef_word, dc_word)
+from hdl.monopulse.model import MonopulseFrontendModel
+from hdl.monopulse.params import REG_COEF, REG_U0, REG_V0, coef_word, dc_word
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

@@ -7,8 +7,8 @@ from cosim.backends.factory import open_stream_session
 from cosim.core.session import write_register
 from cosim.monopulse.session import MonopulseModelSession
 from hdl.monopulse.frontend import MonopulseFrontEnd
-from hdl.monopulse.model import (REG_COEF, REG_U0, MonopulseFrontendParams, coef_word,
-                                 dc_word, pack_input)
+from hdl.monopulse.params import (REG_COEF, REG_U0, MonopulseFrontendParams, coef_word, dc_word,
+                                  pack_input)
 
 P = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
                             cordic_iterations=12, angle_bits=16, fifo_depth=16)

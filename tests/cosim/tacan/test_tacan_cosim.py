@@ -16,7 +16,7 @@ from cosim.tacan.run import frontend_output, run_tacan
 from cosim.tacan.signal import TacanSignalConfig
 from cosim.backends.verilator import verilator_available
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.kalman import KalmanConfig
+from dsp.tacan.kalman_config import KalmanConfig
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")
@@ -193,7 +193,7 @@ def test_both_searches_reach_the_dsp_with_their_source(backend):
     """``--detector both`` on an HDL backend, the DSP stalling on an 8-word FIFO:
     ``dsp_receive`` takes the source bit (``source_bits=1``) and the peaks it hands on are
     per source the model's, with their sources."""
-    from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
+    from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE
     from hdl.tacan.model import TacanFrontendModel
     from cosim.tacan.frontends import FRONTENDS
     from cosim.tacan.signal import generate

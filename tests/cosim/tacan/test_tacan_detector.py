@@ -121,7 +121,7 @@ def test_both_searches_golden_chain_gives_a_bearing_at_0_db_90_deg():
     out = {}
     for det in ("pair", "both"):
         run = TacanRunConfig(signal=sig, detector=det, require_bearing=False)
-        tr = run_dsp(golden_frontend(s.samples, run), run, sig.fs_hz)
+        tr = run_dsp(golden_frontend(s.samples, run), run)
         out[det] = (tr, bearing_stats(tr, 90.0, 1.0))
     assert out["pair"][1]["n_valid"][0] == 0
     tr, st = out["both"]

@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from cosim.tacan.signal import (KIND_AUX, KIND_IDENT, KIND_MAIN, KIND_RANDOM, Multipath,
-                                TacanSignalConfig, burst_offsets, envelope_gain, fold_frequency,
-                                generate, noise_enbw_hz, pulse_observations, pulse_schedule)
+                                TacanSignalConfig, burst_offsets, envelope_gain, generate,
+                                noise_enbw_hz, pulse_observations, pulse_schedule)
+from dsp.sampling import fold_frequency
 
 
 @pytest.mark.parametrize("mode", ["X", "Y"])

@@ -557,7 +557,7 @@ def ukf_step_int(A, x, P, z, model_f, model_h, Qq, Rq, Lq, Lr, wm, wc, c, pfloor
 
 
 def rnd_int(acc, s, half):
-    """The model operator ``rnd`` on Python integers."""
+    """The model operator ``rs`` on Python integers."""
     if s > 0:
         return (acc + (1 << (s - 1))) >> s if half else acc >> s
     return acc << (-s)

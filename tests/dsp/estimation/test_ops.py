@@ -10,7 +10,7 @@ import pytest
 from numba import njit
 
 from dsp.estimation.events import EventRegistry
-from dsp.estimation.ops import div_q, flip, isqrt, sqrt_q, store
+from dsp.qops import div_q, flip, isqrt, sqrt_q, store
 
 REG = EventRegistry(("a",), ("neg", "zero"))
 NEG, ZERO, BASE = REG.index("neg"), REG.index("zero"), REG.base

@@ -5,7 +5,8 @@ import pytest
 
 from cosim.gnss.dynamics import seed002
 from cosim.gnss.loopsim import cycle_slips, track_fast, truth_for
-from dsp.gnss.aukf import AukfFormats, AukfTracker, QFormat, master_update, master_update_generic
+from dsp.gnss.aukf import AukfTracker
+from dsp.gnss.aukf_master import AukfFormats, QFormat, master_update, master_update_generic
 from dsp.gnss.trackers import TrackerContext, make_tracker, tracker_names
 
 

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from dsp.gnss.aukf import Q_TABLE, AukfTracker, block_moments, wipe_gain
+from dsp.gnss.aukf import AukfTracker
+from dsp.gnss.aukf_slave import Q_TABLE, block_moments, wipe_gain
 from dsp.gnss.jerk import jerk_phi, jerk_q
 from dsp.gnss.trackers import TrackerContext
 

@@ -6,7 +6,8 @@ import pytest
 
 from cosim.tacan.signal import KIND_MAIN, TacanSignalConfig, pulse_schedule
 from dsp.tacan.acquire import AcquireConfig, acquire_references
-from dsp.tacan.decode import REF_MAIN, DecoderConfig, decode
+from dsp.tacan.decode import DecoderConfig, decode
+from dsp.tacan.scoring import REF_MAIN
 
 
 def _weak(mode, seed, keep, noise_per_s, duration_s=3.0, main_keep=None, **kw):

@@ -4,9 +4,11 @@ import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
 from dsp.tacan.bearing import combine_coarse_fine, seed_eq17, wrap_deg
-from dsp.tacan.decode import REF_AUX, REF_MAIN, DecoderConfig, decode
-from dsp.tacan.kalman import KalmanConfig
-from dsp.tacan.receiver import ReceiverConfig, bearing_stats, crb_deg, process_peaks
+from dsp.tacan.decode import DecoderConfig, decode
+from dsp.tacan.scoring import REF_AUX, REF_MAIN
+from dsp.tacan.kalman_config import KalmanConfig
+from dsp.tacan.bounds import crb_deg
+from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
 
 
 def test_combination_exact_for_every_bearing_with_coarse_error_below_20_degrees():
@@ -67,7 +69,7 @@ def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
     """The compiled hypothesis scorer (one walking pointer per template pulse) gives the
     numpy nearest-neighbour matching's scores exactly, also at ties and at the tolerance."""
     from cosim.tacan.signal import burst_offsets
-    from dsp.tacan import decode as dec
+    from dsp.tacan import scoring as sco
     rng = np.random.default_rng(4)
     cfg = TacanSignalConfig(mode=mode, duration_s=0.5, seed=12)
     t, _, _, _ = pulse_schedule(cfg)
@@ -81,8 +83,8 @@ def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
                                (tt[100:150] + tt[101:151]) / 2 - offs[1],
                                [tt[0] - 1.0, tt[-1] + 1.0]])
         starts = np.unique(np.concatenate([starts, edge]))
-        got = dec._scores(tt, starts, offs, tol)
-        want = dec._scores_numpy(tt, starts, offs, tol)
+        got = sco.burst_scores(tt, starts, offs, tol)
+        want = sco.burst_scores_numpy(tt, starts, offs, tol)
         np.testing.assert_array_equal(got, want)
         assert want.max() == offs.size and (want == 0).any()
     # Dyadic times: distances of exactly tol (matched), tol + 1 LSB (not) and exact midpoints.
@@ -91,9 +93,9 @@ def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
     offs = np.array([0.0, 7, 16, 40]) * q
     starts = np.unique(np.concatenate([tt - 2 * q, tt + 2 * q, tt - 3 * q, tt + 0.5 * q,
                                        tt - 40 * q]))
-    got = dec._scores(tt, starts, offs, 2 * q)
-    np.testing.assert_array_equal(got, dec._scores_numpy(tt, starts, offs, 2 * q))
-    at_tol = dec._scores(tt[:1], np.array([tt[0] - 2 * q, tt[0] - 3 * q]), offs[:1], 2 * q)
+    got = sco.burst_scores(tt, starts, offs, 2 * q)
+    np.testing.assert_array_equal(got, sco.burst_scores_numpy(tt, starts, offs, 2 * q))
+    at_tol = sco.burst_scores(tt[:1], np.array([tt[0] - 2 * q, tt[0] - 3 * q]), offs[:1], 2 * q)
     assert at_tol.tolist() == [1, 0]
 
 
@@ -316,10 +318,8 @@ def test_binary_angle_conversions():
 
 
 def test_phase_words_match_the_kalman_core():
-    from dsp.qops import PHASE_BITS as CORE_BITS
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
 
-    assert PHASE_BITS == CORE_BITS
     cfg = KalmanFixedConfig()
     fw15, fw135 = (int(v) for v in cfg.value_consts()[:2])
     assert freq_word(15.0, cfg.tick_hz) == fw15 and freq_word(135.0, cfg.tick_hz) == fw135
@@ -412,7 +412,8 @@ def test_bearing_from_fixed_kalman_state_on_tacan_pulses():
     state and the tick differences to the latest main and latest reference: the integer
     bearing is the true one (20 dB) and within 2.1 LSB of the float readout."""
     from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
-    from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
+    from dsp.tacan.kalman import EnvelopeKalman
+    from dsp.tacan.kalman_config import KalmanFixedConfig
 
     cfg = TacanSignalConfig(duration_s=1.0, snr_db=20, seed=4)
     bears = np.array([0.0, 39.99, 123.4, 200.0, 359.9])

@@ -3,7 +3,9 @@ independent formulations: batch least squares and a plain numpy matrix Kalman fi
 import numpy as np
 import pytest
 
-from dsp.tacan.kalman import F15, F135, EnvelopeKalman, KalmanConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig
+from dsp.tacan.standard import F15, F135
 
 H = np.array([1.0, 0, 1, 0, 1])
 
@@ -80,7 +82,7 @@ def test_equals_matrix_form_with_process_noise_and_chunking():
 def test_ticks_and_seconds_agree_in_float():
     ticks = np.random.default_rng(3).integers(100, 6000, 300)
     y = np.random.default_rng(4).uniform(0.5, 1.5, (1, 300))
-    a, b = EnvelopeKalman(), EnvelopeKalman(tick_hz=20e6)
+    a, b = EnvelopeKalman(), EnvelopeKalman(KalmanConfig(tick_hz=20e6))
     a.run(ticks / 20e6, y)
     b.run(ticks, y)
     np.testing.assert_array_equal(a.x, b.x)
@@ -154,7 +156,7 @@ def test_state_jump_sees_a_state_word_changed_between_updates(arith):
     process noise. The answer: the checkpoint's state predicted to now (the core's own
     prediction); twice in a row, a re-initialisation, after which nothing is judged until
     the next checkpoint."""
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     t, y, _ = _stream(5, n=3000)
     cfg = KalmanConfig()
     kf = EnvelopeKalman(KalmanFixedConfig(kalman=cfg) if arith == "fixed" else cfg)
@@ -205,7 +207,7 @@ def test_covariance_fault_sees_a_covariance_word_changed_between_updates(arith):
     word raised by far more than the process noise since the checkpoint, or an off-diagonal
     word beyond the Cauchy-Schwarz bound, is a corrupted word (and a state-jump statistic
     that divides by the covariance does not see it)."""
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     t, y, _ = _stream(6, n=2000)
     cfg = KalmanConfig()
     dts = np.diff(t, prepend=t[0])

@@ -7,8 +7,13 @@ import pytest
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp import qops
-from dsp.tacan import kalman as kfx
-from dsp.tacan.kalman import F15, F135, EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from dsp.tacan import kalman_config as kfx
+from dsp.tacan import phase_ops
+from dsp.tacan.bearing import PHASE_BITS
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman_kernel import EVENT_NAMES
+from dsp.tacan.standard import F15, F135
 
 
 def EnvelopeKalmanFixed(cfg=None, batch=1):
@@ -17,7 +22,7 @@ def EnvelopeKalmanFixed(cfg=None, batch=1):
 
 @numba.njit
 def _sincos_phase(lut, phase, cs_frac, half):
-    return qops.sincos_dt(lut, phase, np.int64(1), cs_frac, half)
+    return phase_ops.sincos_dt(lut, phase, np.int64(1), cs_frac, half)
 
 
 # ---------------------------------------------------------------------------------------
@@ -43,7 +48,7 @@ class _Ref:
         self.fw15, self.fw135, self.q_rot, self.q_dc, self.p0, self.g2 = c[:6]
         k = cfg.kalman
         self.warmup, self.max_rej, self.r_smooth = k.warmup, k.max_rejects, k.r_smooth
-        self.ev = {n: 0 for n in kfx.EVENT_NAMES}
+        self.ev = {n: 0 for n in EVENT_NAMES}
         self.r = 1 << cfg.r.frac
         self.bias = None
         self.reset()
@@ -62,12 +67,12 @@ class _Ref:
 
     @staticmethod
     def trig(phase, csf, half):
-        lut = [int(v) for v in qops.SIN_LUT]
-        sh = kfx.PHASE_BITS - qops.LUT_BITS
+        lut = [int(v) for v in phase_ops.SIN_LUT]
+        sh = PHASE_BITS - phase_ops.LUT_BITS
         idx, d = phase >> sh, phase & ((1 << sh) - 1)
-        s0, c0 = lut[idx], lut[(idx + (1 << (qops.LUT_BITS - 2))) % (1 << qops.LUT_BITS)]
-        TF = kfx.TRIG_FRAC
-        dl = _rs((d >> 8) * qops._TWO_PI_30, kfx.PHASE_BITS - 8, 1)
+        s0, c0 = lut[idx], lut[(idx + (1 << (phase_ops.LUT_BITS - 2))) % (1 << phase_ops.LUT_BITS)]
+        TF = phase_ops.TRIG_FRAC
+        dl = _rs((d >> 8) * phase_ops._TWO_PI_30, PHASE_BITS - 8, 1)
         d2 = _rs(dl * dl, TF, 1)
         d3 = _rs(d2 * dl, TF, 1)
         cd, sd = (1 << TF) - (d2 >> 1), dl - d3 // 6
@@ -78,7 +83,7 @@ class _Ref:
         cfg = self.cfg
         fx, fP, fK, fcs, fi, fr, fy = cfg.x, cfg.P, cfg.K, cfg.cs, cfg.innov, cfg.r, cfg.y
         hx, hP, hK, hcs, hi, hr = (f.rounding == "half_up" for f in (fx, fP, fK, fcs, fi, fr))
-        mask = (1 << kfx.PHASE_BITS) - 1
+        mask = (1 << PHASE_BITS) - 1
         sa, ca = self.trig((dt * self.fw15) & mask, fcs.frac, hcs)
         sb, cb = self.trig((dt * self.fw135) & mask, fcs.frac, hcs)
         qr = _rs(self.q_rot * min(dt, (1 << 61) // self.q_rot), kfx.Q_EXTRA, hP)
@@ -119,7 +124,7 @@ class _Ref:
                       "sat_innov")
         if S <= 0:
             raise AssertionError("S <= 0 in the reference run")
-        nb = S.bit_length() - kfx.S_BITS
+        nb = S.bit_length() - qops.S_BITS
         Sn = _rs(S, nb, 1)
         t = fr.frac - 2 * fi.frac + fP.frac - nb
         e2 = _div(iv * iv << t, Sn, hr) if t >= 0 else _div(iv * iv, Sn << -t, hr)
@@ -218,10 +223,10 @@ def test_kernel_equals_unbounded_integer_reference(peak_bias):
 
 
 def test_sin_cos_from_phase_accumulator():
-    ph = np.random.default_rng(3).integers(0, 1 << kfx.PHASE_BITS, 2000)
-    got = np.array([_sincos_phase(qops.SIN_LUT, np.int64(p), np.int64(22), np.int64(1))
+    ph = np.random.default_rng(3).integers(0, 1 << PHASE_BITS, 2000)
+    got = np.array([_sincos_phase(phase_ops.SIN_LUT, np.int64(p), np.int64(22), np.int64(1))
                     for p in ph]) / 2.0 ** 22
-    ang = 2 * np.pi * ph / 2.0 ** kfx.PHASE_BITS
+    ang = 2 * np.pi * ph / 2.0 ** PHASE_BITS
     np.testing.assert_allclose(got[:, 0], np.sin(ang), rtol=0, atol=0.51 * 2 ** -22 + 1e-12)
     np.testing.assert_allclose(got[:, 1], np.cos(ang), rtol=0, atol=0.51 * 2 ** -22 + 1e-12)
 
@@ -379,10 +384,15 @@ def test_bad_input_messages():
     (dict(innov=FixedFormat(26, 20, True, "half_up", "saturate"),
           K=FixedFormat(30, 26, True, "half_up", "saturate")),
      r"innov must be at most 24 bits wide"),
-    (dict(tick_hz=float("nan")), r"tick_hz must be a finite number >= 135000, not nan"),
     (dict(kalman="fast"), r"kalman must be a KalmanConfig, not 'fast'"),
     (dict(innov=(24, 20)), r"innov must be a FixedFormat, not \(24, 20\)"),
 ])
 def test_bad_config_messages(changes, message):
     with pytest.raises(ValueError, match=message):
         KalmanFixedConfig(**changes)
+
+
+def test_the_core_reads_its_clock_from_the_filter_config():
+    assert KalmanFixedConfig(KalmanConfig(tick_hz=24e6)).tick_hz == 24e6
+    with pytest.raises(ValueError, match=r"tick_hz must be a finite number >= 135000, not nan"):
+        KalmanConfig(tick_hz=float("nan"))

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
-from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.peakbias import PAIR_PEAK_BIAS, PeakBias
 from dsp.tacan.receiver import ReceiverConfig
 
@@ -81,7 +82,7 @@ def test_filter_with_the_table_recovers_the_modulation_the_bias_compresses(kalma
     dts, y = _biased_reports(T)
     depths = {}
     for use in (False, True):
-        kf = EnvelopeKalman(kalman, tick_hz=20e6)
+        kf = EnvelopeKalman(kalman)
         if use:
             kf.set_peak_bias(*PAIR_PEAK_BIAS.table(T))
         kf.run(dts, y)
@@ -109,7 +110,7 @@ def test_noise_rule_skips_low_reports_only_where_the_signal_stands_clear(kalman)
     pb = dataclasses.replace(PAIR_PEAK_BIAS, noise_report=1.15, noise_predicted=1.8)
     assert PAIR_PEAK_BIAS.noise_rule(T) is None           # the shipped profile has none
     for rule in (None, pb.noise_rule(T)):
-        kf = EnvelopeKalman(kalman, tick_hz=20e6)
+        kf = EnvelopeKalman(kalman)
         kf.set_peak_bias(*PAIR_PEAK_BIAS.table(T), noise=rule)
         kf.run(dts, noisy)
         out[rule is None] = (kf.phases()[4][0], int(kf.events["noise_reports"][0]),
@@ -118,7 +119,7 @@ def test_noise_rule_skips_low_reports_only_where_the_signal_stands_clear(kalman)
     assert abs(clean_dc - 1.0) < 0.002 and skipped >= 0.9 * hit.sum() and gated == 0
     dc, skipped, gated = out[True]                                  # without the rule:
     assert skipped == 0 and dc < 0.997 and gated > 100              # pulled down, gated
-    weak = EnvelopeKalman(kalman, tick_hz=20e6)                      # threshold ~ the signal
+    weak = EnvelopeKalman(kalman)                      # threshold ~ the signal
     weak.set_peak_bias(*pb.table(0.9), noise=pb.noise_rule(0.9))
     weak.run(dts, noisy)
     assert int(weak.events["noise_reports"][0]) == 0

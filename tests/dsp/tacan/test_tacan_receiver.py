@@ -5,7 +5,7 @@ import pytest
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.fixed import FixedFormat
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
 
 
@@ -15,12 +15,12 @@ def test_streaming_blocks_match_one_block(dsp):
     t, amps, _ = pulse_observations(cfg, [90.0, 250.0])
     ticks = np.round(t * 20e6).astype(np.int64)
     rc = ReceiverConfig(kalman=KalmanFixedConfig()) if dsp == "fixed" else ReceiverConfig()
-    whole = process_peaks(ticks / 20e6, amps, rc, ticks=ticks, tick_hz=20e6)
+    whole = process_peaks(ticks / 20e6, amps, rc, ticks=ticks)
     # split at a quiet point (gap >= 100 us, so no burst is cut) after 1.2 s
     gaps = np.flatnonzero((np.diff(t) > 100e-6) & (t[:-1] > 1.2))
     k = int(gaps[0]) + 1
-    a = process_peaks(ticks[:k] / 20e6, amps[:, :k], rc, ticks=ticks[:k], tick_hz=20e6)
-    b = process_peaks(ticks[k:] / 20e6, amps[:, k:], rc, ticks=ticks[k:], tick_hz=20e6, state=a.state)
+    a = process_peaks(ticks[:k] / 20e6, amps[:, :k], rc, ticks=ticks[:k])
+    b = process_peaks(ticks[k:] / 20e6, amps[:, k:], rc, ticks=ticks[k:], state=a.state)
     times = np.concatenate([a.times_s, b.times_s])
     np.testing.assert_array_equal(times, whole.times_s)
     bear = np.concatenate([a.bearing_deg, b.bearing_deg], axis=1)
@@ -68,8 +68,8 @@ def test_fixed_dsp_integer_bearing_matches_float_receiver():
     bears = [90.0, 270.0, 7.0, 199.0]
     t, amps, _ = pulse_observations(cfg, bears)
     ticks = np.round(t * 20e6).astype(np.int64)
-    ref = process_peaks(ticks / 20e6, amps, ticks=ticks, tick_hz=20e6)
-    fx = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=KalmanFixedConfig()), ticks=ticks, tick_hz=20e6)
+    ref = process_peaks(ticks / 20e6, amps, ticks=ticks)
+    fx = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=KalmanFixedConfig()), ticks=ticks)
     np.testing.assert_array_equal(fx.times_s, ref.times_s)
     keep = ref.times_s >= 0.5
     assert np.abs(wrap_deg(fx.bearing_deg[:, keep] - ref.bearing_deg[:, keep])).max() < 0.02
@@ -84,7 +84,7 @@ def _garbage_run(dsp, level):
     amps = amps.copy()
     amps[0, bad] = level                                   # a burst of garbage
     kc = KalmanConfig(input_limit=2.0) if dsp == "float" else KalmanFixedConfig()
-    tr = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=kc), ticks=ticks, tick_hz=20e6)
+    tr = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=kc), ticks=ticks)
     err = np.abs(wrap_deg(tr.bearing_deg[0] - 40.0))
     return tr, tr.valid[0], tr.times_s, err, int(bad.sum())
 
@@ -155,13 +155,13 @@ def test_pair_reports_give_the_bearing_of_the_pulses():
     cfg = TacanSignalConfig(duration_s=1.5, snr_db=20, seed=6)
     t, amps, _ = pulse_observations(cfg, [135.0])
     ticks = np.round(t * 20e6).astype(np.int64)
-    ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks, tick_hz=20e6)
+    ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks)
     # the pairs: pulses 240 ticks (12 us) apart; the second of each reports the mean
     second = np.flatnonzero(np.isin(ticks - 240, ticks))
     first = np.searchsorted(ticks, ticks[second] - 240)
     mean = (amps[:, first] + amps[:, second]) / 2
     pr = process_peaks(ticks[second] / 20e6, mean, ReceiverConfig(pair_reports=True),
-                       ticks=ticks[second], tick_hz=20e6)
+                       ticks=ticks[second])
     assert pr.n_main_refs == ref.n_main_refs and pr.n_aux_refs == ref.n_aux_refs
     keep = ref.times_s > 0.5
     d = wrap_deg(pr.bearing_deg[0][pr.times_s > 0.5] - ref.bearing_deg[0][keep])
@@ -189,19 +189,19 @@ def test_two_searches_decode_on_the_pulses_and_measure_on_the_pairs():
     the pair reports' pulses: the bearings are those of the pair reports alone (same pulses,
     same amplitudes), the references those of the pulses; without the single pulses no
     reference is decoded at all -- the pair reports are not decoded."""
-    from dsp.tacan.frontend import SOURCE_PAIR
+    from dsp.tacan.standard import SOURCE_PAIR
     ticks, amps, second, mean, tk, a, src = _two_searches(
         TacanSignalConfig(duration_s=1.5, snr_db=20, seed=6))
-    ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks, tick_hz=20e6)
+    ref = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks)
     pr = process_peaks(ticks[second] / 20e6, mean[None], ReceiverConfig(pair_reports=True),
-                       ticks=ticks[second], tick_hz=20e6)
-    both = process_peaks(tk / 20e6, a, ReceiverConfig(), ticks=tk, tick_hz=20e6, source=src)
+                       ticks=ticks[second])
+    both = process_peaks(tk / 20e6, a, ReceiverConfig(), ticks=tk, source=src)
     assert (both.n_main_refs, both.n_aux_refs) == (ref.n_main_refs, ref.n_aux_refs)
     assert both.n_peaks == tk.size and both.n_measurements == pr.n_measurements
     np.testing.assert_allclose(both.bearing_deg, pr.bearing_deg, atol=1e-9)
     only = src == SOURCE_PAIR
     alone = process_peaks(tk[only] / 20e6, a[only], ReceiverConfig(), ticks=tk[only],
-                          tick_hz=20e6, source=src[only])
+                          source=src[only])
     assert alone.n_main_refs == alone.n_aux_refs == 0 and alone.times_s.size == 0
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from cosim.tacan.signal import KIND_MAIN, TacanSignalConfig, pulse_schedule
-from dsp.tacan.decode import REF_MAIN, DecoderConfig, decode
+from dsp.tacan.decode import DecoderConfig, decode
+from dsp.tacan.scoring import REF_MAIN
 from dsp.tacan.receiver import ReceiverConfig, process_peaks
 
 

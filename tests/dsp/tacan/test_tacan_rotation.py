@@ -1,7 +1,7 @@
 """Rotation-rate tracking (issue 18): a beacon whose antenna turns off 15 Hz.
 
-The rate is the 135 Hz reference grid's period (:func:`dsp.tacan.decode.estimate_rotation`),
-tracked causally (:func:`dsp.tacan.decode.rotation_track`) and used by the Kalman model and
+The rate is the 135 Hz reference grid's period (:func:`dsp.tacan.rotation.estimate_rotation`),
+tracked causally (:func:`dsp.tacan.rotation.rotation_track`) and used by the Kalman model and
 the bearing's phase advances; rounded to 1e-5 so that a nominal beacon runs the nominal
 bits."""
 import math
@@ -11,9 +11,10 @@ import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations
 from dsp.tacan.bearing import wrap_deg
-from dsp.tacan.decode import (RATE_QUANTUM, estimate_rotation, quantize_rotation,
+from dsp.tacan.rotation import (RATE_QUANTUM, estimate_rotation, quantize_rotation,
                               rotation_track)
-from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
 from dsp.tacan.standard import F15
 
@@ -104,7 +105,7 @@ def _run(rate_hz, dsp, track=True, seed=1, snr=10.0):
     ticks = np.round(t * 20e6).astype(np.int64)
     kc = KalmanConfig() if dsp == "float" else KalmanFixedConfig()
     tr = process_peaks(ticks / 20e6, amps, ReceiverConfig(kalman=kc, track_rotation=track),
-                       ticks=ticks, tick_hz=20e6)
+                       ticks=ticks)
     return tr, bearing_stats(tr, BEARINGS, 1.0)
 
 

@@ -6,9 +6,10 @@ from _util import assert_lints_clean, needs_verilator, verilator_sim  # tests/hd
 from cosim.backends.pysim import run_stream
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
-from hdl.gnss.model import (REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssArrayModel,
-                            GnssChannelModel, GnssChannelParams, bus_writes, dump_epochs_for,
-                            unpack_record)
+from hdl.gnss.model import GnssArrayModel, GnssChannelModel
+from hdl.model.bus import bus_writes
+from hdl.gnss.params import (REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssChannelParams,
+                             dump_epochs_for)
 
 #: Reduced rate for the Amaranth simulation: 2 samples per chip, 2046 samples per epoch.
 SMALL = GnssChannelParams(fs_hz=2.046e6, if_hz=0.3e6, el_spacing_samples=2, slew_bits=6,
@@ -88,7 +89,7 @@ def test_correlation_peak_and_register_effects():
     # by d, putting the prompt on the signal (epoch 2 is the long one); the PRN-4 write
     # lands after boundary 3, so epoch 5 is the first with the wrong code.
     writes = [(100, REG_SLEW, 16368 - p.half_spacing), (16368 * 4 + 100, REG_PRN, 4)]
-    recs = [unpack_record(v, p) for v in m.step(x, writes).values(p)]
+    recs = [p.record.unpack(v) for v in m.step(x, writes).values(p)]
     mag = [{a: abs(r["i" + a]) + abs(r["q" + a]) for a in "epl"} for r in recs]
     assert [r["epoch"] for r in recs] == list(range(1, len(recs) + 1))
     assert mag[0]["e"] > mag[0]["p"] > mag[0]["l"]
@@ -223,7 +224,7 @@ def test_array_pysim_matches_model():
     assert len(want.records) >= 5 and not want.dropped.any()
     got = _sim_run(GnssChannelArray(p, 3), x, writes, ready, n_cycles, p)
     _assert_same(got, want)
-    chans = [unpack_record(v, array_params(p, 3))["channel"] for v in want.records]
+    chans = [array_params(p, 3).record.unpack(v)["channel"] for v in want.records]
     assert chans[:3] == [0, 1, 2]     # the first dumps coincide: granted in channel order
 
 
@@ -284,7 +285,7 @@ def test_closed_loop_model_writes_replayed_on_verilator():
         r = m.step(x[k:k + 500], writes[handed:])
         handed = len(writes)
         for v, c in zip(r.values(p), r.cycles):
-            d = unpack_record(v, p)
+            d = p.record.unpack(v)
             e = abs(d["ie"]) + abs(d["qe"]) - abs(d["il"]) - abs(d["ql"])
             word += int(np.sign(e)) * 1000
             writes.append((int(c) + 200, REG_CODE_FREQ, word))

@@ -12,11 +12,11 @@ from cosim.monopulse.trajectory import ConstantRate
 from cosim.backends.pysim import run_stream
 from dsp.monopulse.angles import direction_cosines
 from dsp.monopulse.golden import golden_chain
-from hdl.gnss.model import bus_writes
+from hdl.model.bus import bus_writes
 from hdl.monopulse.frontend import MonopulseFrontEnd
-from hdl.monopulse.model import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendModel,
-                                 MonopulseFrontendParams, angle_error_bound, coef_word,
-                                 dc_word, hadamard_channels, pack_input, unpack_record)
+from hdl.monopulse.model import MonopulseFrontendModel, angle_error_bound, hadamard_channels
+from hdl.monopulse.params import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams, coef_word,
+                                  dc_word, pack_input)
 
 #: Reduced sizes for the Amaranth simulation: 4 samples per snapshot, 12 snapshots a block.
 SMALL = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
@@ -328,7 +328,7 @@ def test_noise_free_angle_matches_the_float_equations(du, dv):
     assert bu < 6.25e-3 and bv < 6.25e-3, (bu, bv)       # 5 % of 1 / (2 D)
     assert abs(u_hw - u_f[1]) <= bu, (u_hw - u_f[1], bu)
     assert abs(v_hw - v_f[1]) <= bv, (v_hw - v_f[1], bv)
-    f = unpack_record(r.values[1], p)
+    f = p.record.unpack(r.values[1])
     assert (f["u"], f["v"]) == (r.fields["u"][1], r.fields["v"][1])
 
 

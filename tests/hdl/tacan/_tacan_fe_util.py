@@ -10,7 +10,7 @@ import pytest
 
 from cosim.tacan.signal import TacanSignalConfig
 from dsp.tacan.frontend import PAIR_DETECTOR, FrontendConfig, pair_detector
-from hdl.model.peak import PeakParams
+from dsp.tacan.peak_params import PeakParams
 from hdl.tacan.model import TacanFrontendParams
 
 P = TacanFrontendParams()

@@ -9,8 +9,11 @@ import pytest
 from cosim.tacan.equivalence import tacan_record
 from dsp.fixed import shift_right
 from dsp.tacan.frontend import FrontendConfig
-from hdl.model.peak import PeakParams
-from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams, _fir_kernel, _round_consts
+from dsp.tacan.peak_params import PeakParams
+from hdl.model.fir import fir_kernel
+from hdl.model.rounding import round_consts
+from hdl.tacan.model import TacanFrontendModel
+from hdl.tacan.params import TacanFrontendParams
 
 from _tacan_fe_util import P  # on sys.path: conftest.py
 
@@ -242,7 +245,7 @@ def test_fir_kernel_equals_direct_sum(L, down):
         for rounding in ("floor", "half_up", "half_even", "zero"):
             hh = hist.copy()
             out = np.empty(len(z) // down, np.int64)
-            _fir_kernel(z, hh, h.astype(np.float64), bool(np.array_equal(h, h[::-1])), down,
-                        _round_consts(7, rounding), out)
+            fir_kernel(z, hh, h.astype(np.float64), bool(np.array_equal(h, h[::-1])), down,
+                        round_consts(7, rounding), out)
             np.testing.assert_array_equal(out, shift_right(full, 7, rounding))
             np.testing.assert_array_equal(hh, buf[len(buf) - (L - 1):])

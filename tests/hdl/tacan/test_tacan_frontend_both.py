@@ -356,7 +356,7 @@ def test_verilator_merge_collision_at_decimation_4():
 @pytest.mark.verilator
 @verilator
 def test_exported_top_lints_clean_both_searches(tmp_path):
-    from cosim.verilog import export_verilog, lint
+    from cosim.tools.verilog import export_verilog, lint
     for name, p in (("tacan_frontend_both", BOTH),
                     ("tacan_frontend_both_d2", both_params(cic_rate=2, checks=False))):
         assert lint(export_verilog(TacanFrontEnd(p), name=name, out_dir=tmp_path)) == [], name

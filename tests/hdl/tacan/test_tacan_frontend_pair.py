@@ -12,7 +12,7 @@ from cosim.backends.pysim import run_stream
 from cosim.tacan.signal import TacanSignalConfig
 from dsp.tacan.frontend import FrontendConfig
 from dsp.tacan.standard import pair_spacing_s
-from hdl.model.peak import peak_search
+from hdl.tacan.peak_model import peak_search
 from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
 from hdl.tacan.frontend import TacanFrontEnd
 
@@ -127,7 +127,7 @@ def test_verilator_equals_model_pair_detection(samples, stall, checks):
 @pytest.mark.verilator
 @verilator
 def test_exported_top_lints_clean_pair_detection(tmp_path):
-    from cosim.verilog import export_verilog, lint
+    from cosim.tools.verilog import export_verilog, lint
     path = export_verilog(TacanFrontEnd(PAIR), name="tacan_frontend_pair", out_dir=tmp_path)
     assert lint(path) == []
     path = export_verilog(TacanFrontEnd(PAIR_CHECKED), name="tacan_frontend_pair_checked",

@@ -77,6 +77,6 @@ def test_verilator_equals_model(samples, stall):
 @pytest.mark.verilator
 @verilator
 def test_exported_top_lints_clean(tmp_path):
-    from cosim.verilog import export_verilog, lint
+    from cosim.tools.verilog import export_verilog, lint
     path = export_verilog(TacanFrontEnd(P), name="tacan_frontend", out_dir=tmp_path)
     assert lint(path) == []

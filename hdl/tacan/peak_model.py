@@ -1,10 +1,12 @@
-"""Pulse-peak search: the bit-exact compiled model of :class:`hdl.peak.PeakSearch`.
+"""Pulse-peak search: the bit-exact compiled model of :class:`hdl.tacan.peak.PeakSearch`.
 
-The algorithm, its parameters (:class:`PeakParams`) and the numpy implementation it is
-tested against (:func:`peak_search_numpy`; :func:`peak_search_float` is the golden's float64
-twin) are in :mod:`dsp.peak`, re-exported here. :func:`peak_search` is a compiled (numba)
-per-sample loop that follows the algorithm's steps as written; it runs in chunks with a
-:class:`PeakState` and gives the same bits as one long run. With ``floor_frac`` the kernel
+The algorithm and the numpy implementation it is tested against
+(:func:`dsp.tacan.peak.peak_search_numpy`; :func:`dsp.tacan.peak.peak_search_float` is the
+golden's float64 twin) are in :mod:`dsp.tacan.peak`, its parameters and state
+(:class:`~dsp.tacan.peak_params.PeakParams`, :class:`~dsp.tacan.peak_params.PeakState`) in
+:mod:`dsp.tacan.peak_params`. :func:`peak_search` is a compiled (numba) per-sample loop that
+follows the algorithm's steps as written; it runs in chunks with a ``PeakState`` and gives
+the same bits as one long run. With ``floor_frac`` the kernel
 carries the floor with its ``smooth_log2`` fraction bits (``F``, the HDL's wider floor
 register; :attr:`PeakState.nuf`) and derives ``nu = F >> smooth_log2`` from it at each block
 end.
@@ -16,16 +18,15 @@ import copy
 import numpy as np
 
 from dsp.jit import njit_cached
-from dsp.peak import (PeakParams, PeakResult, PeakState, peak_search_float, peak_search_numpy,
-                      search_pairs)
+from dsp.tacan.peak import search_pairs
+from dsp.tacan.peak_params import PeakParams, PeakResult, PeakState
 
-__all__ = ["PeakParams", "PeakState", "PeakResult", "peak_search", "peak_search_numpy",
-           "peak_search_float"]
+__all__ = ["peak_search"]
 
 
 def peak_search(env, params: PeakParams, state: PeakState | None = None
                 ) -> tuple[PeakResult, PeakState]:
-    """Bit-exact model of :class:`hdl.peak.PeakSearch` on a chunk of envelope samples.
+    """Bit-exact model of :class:`hdl.tacan.peak.PeakSearch` on a chunk of envelope samples.
 
     Parameters
     ----------

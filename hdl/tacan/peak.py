@@ -1,6 +1,6 @@
 """TACAN pulse-peak search: adaptive threshold from a block noise floor, peak of each pulse.
 
-The algorithm, its parameters and the bit-exact model are in :mod:`hdl.model.peak`.
+The algorithm, its parameters and the bit-exact model are in :mod:`hdl.tacan.peak_model`.
 
 Hardware structure (why it looks the way it does)
 -------------------------------------------------
@@ -74,7 +74,7 @@ Pulse-pair detection (``pair_offset = D > 0``): stages around an inner
 
 So the latency is the inner search's plus 3 (:attr:`PeakParams.latency`).
 
-Pair checks (``pair_balance``, ``pair_spread = w``; :mod:`dsp.peak`): the output filter
+Pair checks (``pair_balance``, ``pair_spread = w``; :mod:`dsp.tacan.peak`): the output filter
 becomes three stages, one cycle more (latency inner + 4):
 
 * an envelope history of ``depth = PeakParams.pair_check_depth`` words (the power of two >=
@@ -104,7 +104,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from hdl.common import check_params, const_mul
-from hdl.model.peak import PeakParams
+from dsp.tacan.peak_params import PeakParams
 
 __all__ = ["PeakSearch", "PeakParams"]
 

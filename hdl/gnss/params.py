@@ -1,0 +1,268 @@
+"""GPS L1 C/A tracking channel: its parameters and word lengths (:class:`GnssChannelParams`),
+register map (:data:`REG_NAMES`), record layout (:attr:`GnssChannelParams.record`) and the
+register words (:func:`code_freq_word`, :meth:`GnssChannelParams.carr_word`). What each
+register and field means is specified with the model, :mod:`hdl.gnss.model`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import NamedTuple
+
+import numpy as np
+
+from dsp.fixed import check_width
+from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, check_prn
+from dsp.record_layout import RecordLayout
+from hdl.model.fifo import FifoParams
+from hdl.model.mixer import MixerParams
+from hdl.model.nco import NcoParams, nco_freq_word
+
+#: Register addresses (per channel; an array adds ``4 * channel``).
+REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW = range(4)
+REG_NAMES = {"carr_freq": REG_CARR_FREQ, "code_freq": REG_CODE_FREQ, "prn": REG_PRN,
+             "slew": REG_SLEW}
+#: Signal bandwidth of C/A (main lobe, null to null), Hz: the lowest sample rate accepted.
+CA_BANDWIDTH_HZ = 2 * CHIP_RATE_HZ
+#: Record fields before ``channel``.
+ACC_FIELDS = ("ie", "qe", "ip", "qp", "il", "ql")
+
+
+def _number(name, v):
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(float(v)):
+        raise ValueError(f"GNSS channel {name} must be a finite number, not {v!r}")
+    return float(v)
+
+
+class CodeWord(NamedTuple):
+    word: int          #: code NCO frequency word
+    actual_hz: float   #: chipping rate it gives, chip/s
+    error_hz: float    #: actual - requested
+
+
+def code_freq_word(chip_rate_hz: float, *, fs_hz: float, code_phase_bits: int) -> CodeWord:
+    """Code NCO word for ``chip_rate_hz`` (nominal 1.023e6 plus code Doppler) at ``fs_hz``,
+    rounded to nearest; at most one chip per sample."""
+    check_width("GNSS code_phase_bits", code_phase_bits, minimum=8, maximum=32)
+    r = _number("chip_rate_hz", chip_rate_hz)
+    fs = _number("fs_hz", fs_hz)
+    if not 0 < r < fs:
+        raise ValueError(f"code chip rate must be in (0, fs_hz = {fs!r}) (at most one chip "
+                         f"per sample), not {chip_rate_hz!r}")
+    n = round(Fraction(r) / Fraction(fs) * (1 << code_phase_bits))
+    if n >= 1 << code_phase_bits:
+        raise ValueError(f"code chip rate {chip_rate_hz!r} rounds to one chip per sample")
+    actual = float(Fraction(n) * Fraction(fs) / (1 << code_phase_bits))
+    return CodeWord(int(n), actual, actual - r)
+
+
+def dump_epochs_for(dump_s: float) -> int:
+    """Code periods in a dump of ``dump_s`` seconds; ``ValueError`` unless it is a whole
+    number (>= 1) of 1 ms code periods."""
+    t = _number("dump length", dump_s)
+    k = round(t / 1e-3)
+    if k < 1 or abs(t - k * 1e-3) > 1e-12:
+        raise ValueError(f"dump length must be a whole number (>= 1) of 1 ms code periods, "
+                         f"not {dump_s!r} s")
+    return int(k)
+
+
+@dataclass(frozen=True)
+class GnssChannelParams:
+    """Parameters of one tracking channel (:class:`hdl.gnss.channel.GnssChannel`).
+
+    Parameters
+    ----------
+    fs_hz : float
+        ADC sample rate = clock rate, Hz (>= 2.046 MHz, the C/A main-lobe bandwidth).
+    if_hz : float
+        Nominal IF, Hz, in the first Nyquist zone ``[0, fs_hz / 2)``: the reset carrier word.
+    adc_bits : int
+        Signed ADC word (1..16); 1 bit means sign samples +-1.
+    carr_phase_bits, carr_table_bits, lo_bits : int
+        Carrier NCO accumulator (8..32), sine-table address (4..12) and LO amplitude bits
+        (2..16).
+    code_phase_bits : int
+        Code NCO accumulator (8..32).
+    el_spacing_samples : int
+        Early-minus-late spacing in samples, even, 2..128 (prompt is in the middle).
+    dump_epochs : int
+        Code periods per dump, 1..64 (must be whole: see :func:`dump_epochs_for`).
+    slew_bits : int
+        Width of the slew register (samples of code hold), 1..24.
+    epoch_bits : int
+        Width of the record's epoch counter, 1..32.
+    max_code_doppler_hz : float
+        Largest code-rate decrease below 1.023 Mcps the accumulator widths allow for, Hz.
+    prn : int
+        PRN at reset, 1..32.
+    fifo_width, fifo_depth : int
+        FIFO payload bits per word and depth in words.
+    record_words : int, optional
+        FIFO words per record; default the fewest that hold the record.
+    channel_bits : int
+        Width of a ``channel`` field appended to the record (0 for a single channel; set
+        by :class:`GnssChannelArray`).
+    """
+
+    fs_hz: float = 16.368e6
+    if_hz: float = 4.092e6
+    adc_bits: int = 2
+    carr_phase_bits: int = 32
+    carr_table_bits: int = 8
+    lo_bits: int = 4
+    code_phase_bits: int = 32
+    el_spacing_samples: int = 8
+    dump_epochs: int = 1
+    slew_bits: int = 16
+    epoch_bits: int = 16
+    max_code_doppler_hz: float = 100.0
+    prn: int = 1
+    fifo_width: int = 51
+    fifo_depth: int = 512
+    record_words: int | None = None
+    channel_bits: int = 0
+
+    def __post_init__(self):
+        fs = _number("fs_hz", self.fs_hz)
+        if fs < CA_BANDWIDTH_HZ:
+            raise ValueError(f"GNSS sample rate fs_hz must be >= the C/A signal bandwidth "
+                             f"{CA_BANDWIDTH_HZ:g} Hz, not {self.fs_hz!r}")
+        f_if = _number("if_hz", self.if_hz)
+        if not 0 <= f_if < fs / 2:
+            raise ValueError(f"GNSS IF must lie in the first Nyquist zone [0, fs_hz/2 = "
+                             f"{fs / 2:g}) Hz, not {self.if_hz!r}")
+        check_width("GNSS adc_bits", self.adc_bits, minimum=1, maximum=16)
+        check_width("GNSS carr_phase_bits", self.carr_phase_bits, minimum=8, maximum=32)
+        check_width("GNSS carr_table_bits", self.carr_table_bits, minimum=4,
+                    maximum=min(12, self.carr_phase_bits))
+        check_width("GNSS lo_bits", self.lo_bits, minimum=2, maximum=16)
+        check_width("GNSS code_phase_bits", self.code_phase_bits, minimum=8, maximum=32)
+        s = self.el_spacing_samples
+        if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or not 2 <= s <= 128 \
+                or s % 2:
+            raise ValueError(f"GNSS el_spacing_samples (early-minus-late, samples) must be an "
+                             f"even integer in [2, 128], not {s!r}")
+        k = self.dump_epochs
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
+            if isinstance(k, (float, np.floating)) and float(k).is_integer():
+                raise ValueError(f"GNSS dump_epochs must be an int, not {k!r}")
+            raise ValueError(f"GNSS dump length must be a whole number of code periods "
+                             f"(dump_epochs an integer in [1, 64]), not {k!r}")
+        check_width("GNSS dump_epochs", k, minimum=1, maximum=64)
+        check_width("GNSS slew_bits", self.slew_bits, minimum=1, maximum=24)
+        check_width("GNSS epoch_bits", self.epoch_bits, minimum=1, maximum=32)
+        cd = _number("max_code_doppler_hz", self.max_code_doppler_hz)
+        if not 0 <= cd < CHIP_RATE_HZ / 2:
+            raise ValueError(f"GNSS max_code_doppler_hz must be in [0, {CHIP_RATE_HZ / 2:g}), "
+                             f"not {self.max_code_doppler_hz!r}")
+        check_prn(self.prn)
+        if fs / CHIP_RATE_HZ * CODE_LENGTH < 4 * s:
+            raise ValueError(f"GNSS el_spacing_samples must be below a quarter code period, "
+                             f"not {s}")
+        check_width("GNSS channel_bits", self.channel_bits, minimum=0, maximum=8)
+        # A record wider than the FIFO's record is refused here, FIFO limits by FifoParams.
+        rw = self.record_words
+        if rw is not None:
+            check_width("GNSS record_words", rw, minimum=1, maximum=64)
+            if rw * self.fifo_width < self.record_bits:
+                raise ValueError(
+                    f"GNSS record of {self.record_bits} bits is wider than the FIFO record "
+                    f"(record_words * fifo_width = {rw} * {self.fifo_width} = "
+                    f"{rw * self.fifo_width} bits)")
+        self.fifo  # validates width and depth (FifoParams' own messages)
+
+    # -- derived ---------------------------------------------------------------------------
+    @property
+    def half_spacing(self) -> int:
+        """``d``: prompt is ``d`` samples behind early, late ``2 d``."""
+        return self.el_spacing_samples // 2
+
+    @property
+    def nco(self) -> NcoParams:
+        return NcoParams(phase_bits=self.carr_phase_bits, table_bits=self.carr_table_bits,
+                         amp_bits=self.lo_bits, dither_bits=0, phase_port=True)
+
+    @property
+    def mixer_in_width(self) -> int:
+        return max(2, self.adc_bits)
+
+    @property
+    def mixer(self) -> MixerParams:
+        """Full-precision real mixer (``drop_bits == 0``: nothing rounded, never overflows,
+        the NCO's peak being symmetric)."""
+        a, b = self.mixer_in_width, self.lo_bits
+        return MixerParams(in_width=a, complex_input=False, lo_width=b, out_width=a + b - 1,
+                           rounding="floor", overflow="wrap")
+
+    @property
+    def iq_width(self) -> int:
+        return self.mixer.out_width
+
+    @property
+    def max_dump_samples(self) -> int:
+        """Longest dump the accumulators are sized for: ``dump_epochs`` code periods at the
+        slowest chipping rate plus the longest slew."""
+        per = math.ceil(CODE_LENGTH * self.fs_hz / (CHIP_RATE_HZ - self.max_code_doppler_hz))
+        return self.dump_epochs * per + (1 << self.slew_bits) - 1
+
+    @property
+    def acc_width(self) -> int:
+        """Signed accumulator width: ``|I| < 2**(iq_width-1)`` per sample, so
+        ``iq_width + ceil(log2(max_dump_samples))`` holds any dump."""
+        return self.iq_width + (self.max_dump_samples - 1).bit_length()
+
+    @property
+    def reg_data_width(self) -> int:
+        return max(self.carr_phase_bits, self.code_phase_bits, self.slew_bits, 6)
+
+    @property
+    def record(self) -> RecordLayout:
+        """The record's fields, LSB first: the six accumulators, ``epoch``, ``carr_phase``,
+        ``code_phase`` and, in an array, ``channel``."""
+        f = [(n, self.acc_width, True) for n in ACC_FIELDS]
+        f += [("epoch", self.epoch_bits, False), ("carr_phase", self.carr_phase_bits, False),
+              ("code_phase", self.code_phase_bits, False)]
+        if self.channel_bits:
+            f.append(("channel", self.channel_bits, False))
+        return RecordLayout(tuple(f))
+
+    @property
+    def record_bits(self) -> int:
+        return self.record.bits
+
+    @property
+    def fifo(self) -> FifoParams:
+        rw = self.record_words or -(-self.record_bits // self.fifo_width)
+        return FifoParams(width=self.fifo_width, depth=self.fifo_depth, record_words=rw)
+
+    @property
+    def latency(self) -> int:
+        """Cycles from the input cycle of a dump's first sample to its record at the FIFO
+        input: carrier NCO, mixer, replica-product register, accumulator/record register."""
+        return self.nco.latency + self.mixer.latency + 2
+
+    # -- register values -------------------------------------------------------------------
+    def carr_word(self, f_hz: float) -> int:
+        return nco_freq_word(f_hz, f_clk_hz=self.fs_hz, phase_bits=self.carr_phase_bits).word
+
+    def code_word(self, chip_rate_hz: float = CHIP_RATE_HZ) -> int:
+        return code_freq_word(chip_rate_hz, fs_hz=self.fs_hz,
+                              code_phase_bits=self.code_phase_bits).word
+
+    def check_write(self, reg: int, value: int) -> int:
+        """A register write's value, refused if it does not fit (PRN: 1-32)."""
+        widths = {REG_CARR_FREQ: self.carr_phase_bits, REG_CODE_FREQ: self.code_phase_bits,
+                  REG_SLEW: self.slew_bits}
+        if reg == REG_PRN:
+            return check_prn(value)
+        if reg not in widths:
+            raise ValueError(f"GNSS register must be one of {sorted(REG_NAMES.values())}, "
+                             f"not {reg!r}")
+        v = int(value)
+        if not 0 <= v < 1 << widths[reg]:
+            raise ValueError(f"GNSS register {reg} takes unsigned {widths[reg]}-bit values, "
+                             f"not {value!r}")
+        return v
