@@ -266,7 +266,7 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     failed: list[str] = []
     for b in backends:
         if b == "verilator":
-            from .backends.verilator import verilator_available
+            from .backends.verilator_harness import verilator_available
             if not verilator_available():
                 check.skipped[b] = "Verilator, make or a C++ compiler not found on PATH"
                 continue

@@ -25,7 +25,7 @@ REAL_TIME_SPS = 16.368e6
 
 
 def gnss_speed(out: Path, quick: bool = False, duration_s: float | None = None) -> dict:
-    from ..backends.verilator import verilator_available
+    from ..backends.verilator_harness import verilator_available
     from .config import DynamicsChoice, GnssRunConfig
     from .tracking import acquire_handover, adc_words, closed_loop
     from .signal import GnssSignalConfig, GnssSignalGenerator

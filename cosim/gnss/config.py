@@ -233,7 +233,7 @@ class GnssRunConfig:
 
     def hdl_params(self, sig: GnssSignalConfig):
         """The channel for the scenario: its rate, digital IF, ADC and PRN."""
-        from hdl.gnss.model import GnssChannelParams
+        from hdl.gnss.params import GnssChannelParams
         p = GnssChannelParams(fs_hz=sig.fs_hz, if_hz=sig.digital_if_hz, adc_bits=sig.adc_bits,
                               prn=sig.prn, **dict(self.hdl_changes))
         if p.carr_phase_bits != WORD_BITS or p.code_phase_bits != WORD_BITS:

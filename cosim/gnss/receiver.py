@@ -1,6 +1,6 @@
 """GNSS's entry in the receiver registry (:mod:`cosim.core.receivers`): the ``gnss`` command
 (options derived from :class:`~cosim.gnss.signal.GnssSignalConfig`,
-:class:`~cosim.gnss.run.DynamicsChoice` and :class:`~cosim.gnss.run.GnssRunConfig`), the
+:class:`~cosim.gnss.config.DynamicsChoice` and :class:`~cosim.gnss.config.GnssRunConfig`), the
 channel's front end for :func:`cosim.backends.factory.open_frontend`, and its HDL top."""
 from __future__ import annotations
 

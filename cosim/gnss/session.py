@@ -50,7 +50,8 @@ class GnssModelSession(BusModelSession):
     what = "GNSS channel model"
 
     def __init__(self, params, *, log_ranges: bool = False):
-        from hdl.gnss.model import GnssChannelModel, GnssChannelParams
+        from hdl.gnss.model import GnssChannelModel
+        from hdl.gnss.params import GnssChannelParams
         if not isinstance(params, GnssChannelParams):
             raise ValueError(f"params must be a GnssChannelParams, not {type(params).__name__}")
         if params.channel_bits:

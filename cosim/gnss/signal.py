@@ -61,7 +61,8 @@ from dsp.sampling import fold_frequency
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
 
 from .dynamics import CsvProfile, JerkProcess, PolynomialProfile
-from .oscillator import OscillatorPhase, oscillator
+from .oscillator import OscillatorPhase
+from dsp.gnss.oscillator import oscillator
 
 #: C/A main-lobe (null-to-null) bandwidth, Hz.
 CA_MAIN_LOBE_HZ = 2 * CHIP_RATE_HZ

@@ -35,7 +35,7 @@ Q_TRUE = 5.0
 
 
 def _format_names() -> tuple:
-    from dsp.gnss.aukf import AukfFormats
+    from dsp.gnss.aukf_master import AukfFormats
     return tuple(f.name for f in fields(AukfFormats))
 
 
@@ -54,7 +54,7 @@ def check_param(name: str) -> None:
 def formats_of(combo: tuple):
     """The :class:`~dsp.gnss.aukf_master.AukfFormats` of a point: each swept width with its
     format's integer bits kept (ValueError if refused)."""
-    from dsp.gnss.aukf import AukfFormats
+    from dsp.gnss.aukf_master import AukfFormats
     from dsp.gnss.aukf_master import QFormat
     from ..core.validate import check_int
     base = AukfFormats()

@@ -2,7 +2,7 @@
 ins`` runs one of the three carrier loops (INS-aided Kalman, aided PLL, unaided Kalman)
 over the seed's trajectory on the GNSS channel (:func:`cosim.ins.run.run_ins`); its options
 are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP fields of
-:class:`~cosim.gnss.run.GnssRunConfig`. The front end is the GNSS channel's (``gnss``)."""
+:class:`~cosim.gnss.config.GnssRunConfig`. The front end is the GNSS channel's (``gnss``)."""
 from __future__ import annotations
 
 from ..gnss.config import GnssRunConfig

@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from cosim.gnss.dynamics import L1_WAVELENGTH_M
-from cosim.gnss.oscillator import OscillatorPhase, oscillator
+from cosim.gnss.oscillator import OscillatorPhase
+from dsp.gnss.oscillator import oscillator
 from dsp.gnss.ca_code import CHIP_RATE_HZ
 
 G_MPS2 = 9.80665

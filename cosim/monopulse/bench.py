@@ -64,7 +64,7 @@ def _hdl_cost(duration_s):
     """Closed loop on the HDL backends (model, Verilator when installed) and the golden IF
     chain over the same ``duration_s`` of the default scenario: wall seconds, measurements
     (blocks) and ADC samples per wall second, and whether the backends gave the same bits."""
-    from ..backends.verilator import verilator_available
+    from ..backends.verilator_harness import verilator_available
     rows, digests = [], {}
     for be in ("golden", "model") + (("verilator",) if verilator_available() else ()):
         cfg = MonopulseRunConfig(duration_s=duration_s, settle_s=0.005, backend=be, seed=3)

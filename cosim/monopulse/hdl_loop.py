@@ -55,7 +55,7 @@ CYCLES_PER_WORD = 4
 def hdl_params(run, sig):
     """The front end for the scenario: its rates, ADC, block length, spacings, plus
     ``run.hdl_changes``."""
-    from hdl.monopulse.model import MonopulseFrontendParams
+    from hdl.monopulse.params import MonopulseFrontendParams
     arr = sig.array
     return MonopulseFrontendParams(fs_hz=sig.fs_hz, if_hz=sig.if_hz,
                                    snapshot_decimation=sig.decimation, cic_rate=sig.decimation,

@@ -174,7 +174,7 @@ class SweepConfig:
         """(backend, samples) the re-checks use."""
         be = self.recheck_backend
         if be == "auto":
-            from cosim.backends.verilator import verilator_available
+            from cosim.backends.verilator_harness import verilator_available
             be = "verilator" if verilator_available() else "pysim"
         n = self.recheck_samples or (1_000_000 if be == "verilator" else 60_000)
         return be, n

@@ -26,7 +26,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None) -> d
     until 2026-12-05) and with both searches (``--detector both``, the default): SNR -3..20
     dB at 90 / 270 deg, every bearing at 0 dB; with single pulses also every bearing at 10
     dB, the pulse-level fast path and the robustness table (``tacan-robustness`` has both)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.receiver import ReceiverConfig, bearing_stats, process_peaks
     from dsp.tacan.bounds import crb_deg
     from .detector import detector_bounds

@@ -27,7 +27,7 @@ def tacan_confidence(out: Path, quick: bool = False, jobs: int | None = None) ->
     receiver. Reported: RMSE / CRB with a 95 % bootstrap interval over the records, the mean
     error with its standard error, and whether each point meets the criterion (RMSE / CRB
     <= 1.5 and |mean| <= 0.1 deg; the interval says how firmly)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()

@@ -28,7 +28,7 @@ DETECTOR_VARIANTS = (("default (peak, clipped floor)", {"detector": "pulse"}),
 def tacan_detector(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
     """RMSE / CRB and mean error of the detector variants near the noise floor (golden
     chain, 3 s records, the same seeds for every variant)."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from .detector import detector_bounds
     from .signal import TacanSignalConfig

@@ -52,7 +52,8 @@ def fxpmath_naive_rate(dts_ticks, ys, cfg=None, n_steps: int = 150) -> float:
     of a float model with a fixed-point library looks like). Same formats as the core; no
     gate or r estimate (it only makes it slower)."""
     from fxpmath import Fxp
-    from dsp.tacan.kalman import F15, KalmanFixedConfig
+    from dsp.tacan.standard import F15
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     from dsp.tacan.standard import F135
     cfg = cfg or KalmanFixedConfig()
 
@@ -88,7 +89,8 @@ def fxpmath_naive_rate(dts_ticks, ys, cfg=None, n_steps: int = 150) -> float:
 
 
 def dsp_speed(out: Path, quick: bool = False) -> dict:
-    from dsp.tacan.kalman import EnvelopeKalman, KalmanConfig, KalmanFixedConfig
+    from dsp.tacan.kalman import EnvelopeKalman
+    from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
     import numba
     t_start = time.perf_counter()
     fcfg, kcfg = KalmanFixedConfig(), KalmanConfig()
@@ -201,8 +203,7 @@ class _TacanBatchDsp:
         ticks = np.concatenate(self.acc_t)
         y = amplitude_codes(np.concatenate(self.acc_a), p.scale_to_fs, rc.kalman.y)
         self.acc_t, self.acc_a = [], []
-        tr = process_peaks(ticks / self.fs, y, rc, ticks=ticks, tick_hz=self.fs,
-                           state=self.dsp_state)
+        tr = process_peaks(ticks / self.fs, y, rc, ticks=ticks, state=self.dsp_state)
         self.dsp_state = tr.state
         self.t_dsp += time.perf_counter() - t3
         keep = tr.times_s >= self.settle
@@ -238,9 +239,9 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     and of batches; the tests run a few seconds). ``out=None`` writes no files.
     """
     from concurrent.futures import ProcessPoolExecutor
-    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig
-    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.params import TacanFrontendParams
     from ..core.link import DspServiceConfig
     from ..core.pipeline import Pipeline
     from ..backends.factory import open_frontend
@@ -254,7 +255,7 @@ def dsp_hour(out: Path | None, quick: bool = False, *, simulated_s: float | None
     sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)
     params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
     svc = DspServiceConfig()
-    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(), tick_hz=sig0.fs_hz))
+    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(tick_hz=sig0.fs_hz)))
     fs, n_blk = sig0.fs_hz, sig0.n_samples
     batch_cycles = int(round(batch_s * fs))
     spc = int(round(loop_s * fs)) // svc.period_cycles

@@ -43,7 +43,7 @@ def tacan_sensitivity(out: Path, quick: bool = False, jobs: int | None = None) -
     100-107, the tacan-detector bench's records); every bearing at 0 dB (2 s records, the
     tacan-accuracy bench's); and integrity over 60 s: the other mode in both directions and
     noise alone, no bearing shown valid."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from dsp.tacan.bounds import crb_deg
     from .signal import TacanSignalConfig
     t_start = time.perf_counter()

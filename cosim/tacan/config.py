@@ -14,7 +14,7 @@ import numpy as np
 
 from dsp.tacan.frontend import (BOTH_PAIR_SEARCH, DETECTORS, NOISE_FLOORS, PAIR_DETECTOR,
                                 FrontendConfig, pair_detector, pair_spacing_samples)
-from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
 from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PAIR_PEAK_BIAS
 from dsp.tacan.receiver import ReceiverConfig
 from dsp.tacan.decode import DecoderConfig
@@ -220,7 +220,7 @@ class TacanRunConfig:
 
     @property
     def hdl_params(self):
-        from hdl.tacan.model import TacanFrontendParams
+        from hdl.tacan.params import TacanFrontendParams
         return TacanFrontendParams(config=self.frontend, adc_bits=self.signal.adc_bits,
                                    **dict(self.hdl_changes))
 

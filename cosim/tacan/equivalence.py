@@ -121,7 +121,8 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                              inputs={"freq": freq})
             compare("pysim", res, time.perf_counter() - t)
     if "verilator" in backends:
-        from ..backends.verilator import VerilatorStreamSim, verilator_available
+        from ..backends.verilator import VerilatorStreamSim
+        from ..backends.verilator_harness import verilator_available
         if not verilator_available():
             from ..backends.verilog import verilator_missing_message
             skipped["verilator"] = verilator_missing_message()

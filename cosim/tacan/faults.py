@@ -53,7 +53,7 @@ def word_width(fc) -> int:
 
 
 def _run_cfg(fc, trial: int):
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from .config import TacanRunConfig
     from .signal import TacanSignalConfig
     rng = np.random.default_rng([fc.seed, trial, 31337])

@@ -164,7 +164,7 @@ def recheck_cycle_accurate(run: TacanRunConfig, samples, backend: str = "auto",
     ``backend``: ``"verilator"``, ``"pysim"`` or ``"auto"`` (Verilator when installed);
     ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with pysim.
     """
-    from ..backends.verilator import verilator_available
+    from ..backends.verilator_harness import verilator_available
     if backend == "auto":
         backend = "verilator" if verilator_available() else "pysim"
     if backend not in ("pysim", "verilator"):

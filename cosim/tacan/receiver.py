@@ -1,6 +1,6 @@
 """TACAN's entry in the receiver registry (:mod:`cosim.core.receivers`): its command-line options
 (derived from :class:`~cosim.tacan.signal.TacanSignalConfig`,
-:class:`~cosim.tacan.run.TacanRunConfig`, :class:`~dsp.tacan.kalman_config.KalmanConfig` and
+:class:`~cosim.tacan.config.TacanRunConfig`, :class:`~dsp.tacan.kalman_config.KalmanConfig` and
 :class:`~cosim.core.link.DspServiceConfig`), the ``tacan`` command, its sweep and fault studies,
 its HDL top and its equivalence check."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import math
 import sys
 
 from dsp.tacan.frontend import DETECTORS
-from dsp.tacan.kalman import KalmanConfig
+from dsp.tacan.kalman_config import KalmanConfig
 
 from ..core.link import DspServiceConfig
 from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
@@ -81,7 +81,7 @@ def _window(text: str, option: str) -> tuple[float, float]:
 
 
 def tacan_run_config(a) -> TacanRunConfig:
-    """The :class:`cosim.tacan.run.TacanRunConfig` of ``tacan`` arguments, every option checked
+    """The :class:`cosim.tacan.config.TacanRunConfig` of ``tacan`` arguments, every option checked
     against the others before any work starts (an option that cannot affect the run is
     refused, not ignored)."""
     from ..core.link import DSP_PRESETS
@@ -415,7 +415,7 @@ BENCHMARKS = {
 
 
 def _frontend():
-    from hdl.tacan.model import TacanFrontendParams
+    from hdl.tacan.params import TacanFrontendParams
     return Frontend(params=TacanFrontendParams, component=_component, model=_model_session,
                     verilog_name="tacan_frontend",
                     inputs=lambda p: {"freq": p.nco_freq_word})

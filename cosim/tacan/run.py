@@ -39,18 +39,18 @@ MAX_WALL_S = 3600.0
 
 
 # ---------------------------------------------------------------------------------------
-def run_dsp(fo: FrontendOutput, run: TacanRunConfig, fs_hz: float,
+def run_dsp(fo: FrontendOutput, run: TacanRunConfig,
             state: ReceiverState | None = None) -> BearingTrack:
     """The bearing DSP on a front end's output (float or fixed by ``run.dsp``), from
-    ``state`` when given (e.g. a core with scheduled upsets, :mod:`cosim.tacan.faults`)."""
+    ``state`` when given (e.g. a core with scheduled upsets, :mod:`cosim.tacan.faults`); the
+    timestamps' clock is the receiver configuration's (the signal's ``fs_hz``)."""
     rc = run.receiver
-    times = fo.ticks / fs_hz
+    times = fo.ticks / rc.kalman.tick_hz
     if rc.dsp == "fixed" and fo.amplitude_lsb is not None:
         amps = amplitude_codes(fo.amplitude_lsb, fo.scale_to_fs, rc.kalman.y)
     else:
         amps = fo.amplitude_fs
-    return process_peaks(times, amps, rc, ticks=fo.ticks, tick_hz=fs_hz, source=fo.source,
-                         state=state)
+    return process_peaks(times, amps, rc, ticks=fo.ticks, source=fo.source, state=state)
 
 
 def _match_rms(track: BearingTrack, ref: BearingTrack, settle: float, tol_s: float = 50e-6):

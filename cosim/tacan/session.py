@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from dsp.tacan.frontend import SOURCE_PULSE
+from dsp.tacan.standard import SOURCE_PULSE
 from hdl.model.fifo import FifoState
-from hdl.tacan.model import fifo_write_cycles
+from hdl.tacan.fifo_merge import fifo_write_cycles
 
 from ..core.session import FrontendSession, fifo_step
 

@@ -39,8 +39,8 @@ FORMATS = ("y", "x", "P", "K", "cs", "innov", "r")
 
 def check_param(name: str) -> None:
     """Refuse a swept parameter name TACAN does not know (ValueError)."""
-    from dsp.tacan.kalman import KalmanConfig
-    from hdl.tacan.model import TacanFrontendParams
+    from dsp.tacan.kalman_config import KalmanConfig
+    from hdl.tacan.params import TacanFrontendParams
     hdl_fields = {f.name for f in fields(TacanFrontendParams) if f.init and f.name != "config"}
     if name in ("adc_bits", "detector") or name in hdl_fields:
         return
@@ -73,7 +73,7 @@ def trial_signal(cfg, snr_db: float, trial: int, adc_bits: int = 12):
 def run_config(cfg, combo: tuple, sig):
     """The :class:`cosim.tacan.config.TacanRunConfig` of a point (raises ValueError if invalid)."""
     from dsp.fixed import FixedFormat
-    from dsp.tacan.kalman import KalmanConfig, KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanConfig, KalmanFixedConfig
     from ..core.validate import check_choice, check_int
     from .config import TacanRunConfig
     from dsp.tacan.frontend import DETECTORS
@@ -187,12 +187,13 @@ class TacanSweepRecord:
         self.base = {"bearing_deg": sig.bearing_deg}
 
     def golden(self) -> dict:
-        from dsp.tacan.kalman import KalmanConfig
+        from dsp.tacan.kalman_config import KalmanConfig
         from . import run as tr
+        from .config import TacanRunConfig
         gs = self.signals[GOLDEN_ADC_BITS]
-        grun = tr.TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
-                                 kalman=KalmanConfig(memory_s=self.cfg.memory_s),
-                                 detector=study_detector(self.cfg), require_bearing=False)
+        grun = TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
+                              kalman=KalmanConfig(memory_s=self.cfg.memory_s),
+                              detector=study_detector(self.cfg), require_bearing=False)
         g = tr.run_tacan(grun, gs)
         return {**_score(g), "locked": _shows_bearing(g)}
 

@@ -65,7 +65,7 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
             skipped["pysim"] = f"pysim runs only for samples <= {pysim_max_samples}"
             continue
         if name == "verilator":
-            from ..backends.verilator import verilator_available
+            from ..backends.verilator_harness import verilator_available
             if not verilator_available():
                 from ..backends.verilog import verilator_missing_message
                 skipped["verilator"] = verilator_missing_message()

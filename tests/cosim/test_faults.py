@@ -4,10 +4,11 @@ import json
 import numpy as np
 import pytest
 
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from cosim.cli import main
 from cosim.studies.faults import FaultConfig, flip_bits, flip_signed, parse_ber, run_faults
-from dsp.tacan.kalman import EnvelopeKalman, KalmanFixedConfig
+from dsp.tacan.kalman import EnvelopeKalman
+from dsp.tacan.kalman_config import KalmanFixedConfig
 
 QUICK = dict(trials=1, duration_s=1.2, memory_s=0.25)
 

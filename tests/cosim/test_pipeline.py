@@ -16,8 +16,8 @@ from cosim.core.session import ready_window
 from cosim.tacan.session import TacanModelSession
 from cosim.tacan.config import TacanRunConfig
 from cosim.tacan.signal import TacanSignalConfig, generate
-from cosim.backends.verilator import verilator_available
-from dsp.tacan.kalman import KalmanConfig
+from cosim.backends.verilator_harness import verilator_available
+from dsp.tacan.kalman_config import KalmanConfig
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")
@@ -213,16 +213,17 @@ def _old_chain(simulated_s, block_s, batch_s):
     from dsp.tacan.bearing import wrap_deg
     from dsp.tacan.fifo_rx import receive_words
     from dsp.tacan.frontend import FrontendConfig
-    from dsp.tacan.kalman import KalmanFixedConfig
+    from dsp.tacan.kalman_config import KalmanFixedConfig
     from dsp.tacan.receiver import ReceiverConfig, amplitude_codes, process_peaks
-    from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
+    from hdl.tacan.model import TacanFrontendModel
+    from hdl.tacan.params import TacanFrontendParams
     n_blocks = int(round(simulated_s / block_s))
     bearing, snr = 90.0, 10.0
     sig0 = TacanSignalConfig(duration_s=block_s, snr_db=snr, bearing_deg=bearing)
     params = TacanFrontendParams(config=FrontendConfig.for_signal(sig0), adc_bits=sig0.adc_bits)
     fe = TacanFrontendModel(params)
     svc = DspServiceConfig()
-    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(), tick_hz=20e6))
+    rc = ReceiverConfig(kalman=KalmanFixedConfig(kalman=KalmanConfig(tick_hz=20e6)))
     fs, n_blk = sig0.fs_hz, sig0.n_samples
     settle = 2 * rc.kalman.kalman.memory_s
     fe_state = link_state = rx_state = dsp_state = None
@@ -250,7 +251,7 @@ def _old_chain(simulated_s, block_s, batch_s):
             ticks = np.concatenate(acc_t)
             y = amplitude_codes(np.concatenate(acc_a), params.scale_to_fs, rc.kalman.y)
             acc_t, acc_a = [], []
-            tr = process_peaks(ticks / fs, y, rc, ticks=ticks, tick_hz=fs, state=dsp_state)
+            tr = process_peaks(ticks / fs, y, rc, ticks=ticks, state=dsp_state)
             dsp_state = tr.state
             err = wrap_deg(tr.bearing_deg[0, tr.times_s >= settle] - bearing)
             rows.append({"bearings": int(err.size),

@@ -137,7 +137,7 @@ def test_registry_refuses_a_second_receiver_of_one_name(tone):
 
 def test_tacan_options_are_its_dataclass_fields_with_their_defaults():
     """The TACAN subcommand keeps its options; every default is the dataclass's."""
-    from dsp.tacan.kalman import KalmanConfig
+    from dsp.tacan.kalman_config import KalmanConfig
     from cosim.tacan.config import TacanRunConfig
     from cosim.tacan.signal import TacanSignalConfig
     sub = _sub(build_parser(), "command").choices["tacan"]

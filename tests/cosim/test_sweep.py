@@ -10,7 +10,7 @@ from cosim.cli import main
 from cosim.studies.proposal import confirms, passes, propose, ratio_ci
 from cosim.studies.spec import SweepConfig, parse_param, parse_values
 from cosim.studies.sweep import study
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 
 SMALL = dict(params=(("adc_bits", (4, 10)),), snr_db=(15.0,), trials=2, duration_s=0.7,
              memory_s=0.15, recheck=0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cosim.testing import StreamMismatch, check_stream
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from hdl.model.fifo import ReadySchedule
 
 from cosim.core.provenance import REPO_ROOT

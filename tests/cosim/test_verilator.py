@@ -14,7 +14,8 @@ from amaranth.lib.wiring import In, Out
 
 import cosim.backends.verilator as vl
 from cosim.backends.pysim import run_stream
-from cosim.backends.verilator import VerilatorStreamSim, verilator_available
+from cosim.backends.verilator import VerilatorStreamSim
+from cosim.backends.verilator_harness import verilator_available
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator (and make, g++) not found on PATH")

@@ -17,7 +17,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 
 from cosim.backends.pysim import StreamResult
-from cosim.backends.verilator import VerilatorStreamSim, verilator_available
+from cosim.backends.verilator import VerilatorStreamSim
+from cosim.backends.verilator_harness import verilator_available
 from cosim.tools.verilog import export_verilog, lint
 from cosim.backends.verilog import verilator_missing_message
 

@@ -18,7 +18,7 @@ from cosim.gnss.config import SCENARIOS, GnssRunConfig
 from cosim.gnss.run import run_gnss
 from cosim.gnss.signal import GnssSignalConfig
 from cosim.gnss.dynamics import seed002
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

@@ -9,7 +9,7 @@ import pytest
 
 from cosim.gnss.config import GnssRunConfig
 from cosim.gnss.tracking import SKIP_RECORDS, closed_loop
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
 from hdl.gnss.params import GnssChannelParams
 

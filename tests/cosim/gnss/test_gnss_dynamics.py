@@ -6,8 +6,8 @@ import pytest
 from scipy.linalg import expm
 
 from cosim.gnss import dynamics as dy
-from cosim.gnss.dynamics import (L1_WAVELENGTH_M, CsvProfile, JerkProcess, PolynomialProfile,
-                                 jerk_phi, jerk_q)
+from cosim.gnss.dynamics import L1_WAVELENGTH_M, CsvProfile, JerkProcess, PolynomialProfile
+from dsp.gnss.jerk import jerk_phi, jerk_q
 
 
 def _q_alpha0(q, T):

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.gnss.oscillator import (OSCILLATORS, Oscillator, OscillatorPhase,
-                                   allan_variance_from_phase, clock_error_s, oscillator)
+from cosim.gnss.oscillator import (OSCILLATORS, OscillatorPhase, allan_variance_from_phase, clock_error_s)
+from dsp.gnss.oscillator import Oscillator, oscillator
 
 T = 1e-3
 N = 200_000

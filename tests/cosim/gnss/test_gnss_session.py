@@ -5,7 +5,8 @@ import pytest
 from cosim.gnss.session import GnssModelSession, GnssRegisterSession
 from cosim.core.link import DspServiceConfig
 from cosim.backends.factory import open_stream_session
-from hdl.gnss.model import GnssArrayModel, GnssChannelParams
+from hdl.gnss.model import GnssArrayModel
+from hdl.gnss.params import GnssChannelParams
 from hdl.gnss.params import REG_CODE_FREQ, REG_CARR_FREQ
 
 #: Reduced rate (as tests/hdl/gnss/test_channel.py): 2 samples per chip, 2046 per epoch.

@@ -8,14 +8,14 @@ import json
 import numpy as np
 import pytest
 
-from cosim.core.receivers import receivers
+from cosim.core import receivers
 from cosim.cli import main
 from cosim.gnss.config import GnssRunConfig
 from cosim.gnss.tracking import SKIP_RECORDS, closed_loop
 from cosim.ins.run import InsRunConfig, run_ins
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from dsp.gnss.ca_code import ca_code_levels
-from hdl.gnss.model import GnssChannelParams
+from hdl.gnss.params import GnssChannelParams
 
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")

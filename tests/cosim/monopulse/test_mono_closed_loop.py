@@ -12,7 +12,7 @@ import pytest
 from cosim.monopulse.hdl_loop import hdl_params, record_gain
 from cosim.monopulse.run import MonopulseRunConfig, run_monopulse
 from cosim.monopulse.signal import generate
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from dsp.monopulse.golden import beams, golden_chain
 from hdl.monopulse.model import MonopulseFrontendModel
 from hdl.monopulse.params import REG_COEF, REG_U0, REG_V0, coef_word, dc_word

@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from cosim.cli import main
 
 KEYS = {"bearing_true_deg", "bearing_est_deg", "rmse_deg", "mean_error_deg", "crb_deg",

@@ -14,7 +14,7 @@ from cosim.core.link import DSP_PRESETS, DspServiceConfig
 from cosim.tacan.config import TacanRunConfig
 from cosim.tacan.run import frontend_output, run_tacan
 from cosim.tacan.signal import TacanSignalConfig
-from cosim.backends.verilator import verilator_available
+from cosim.backends.verilator_harness import verilator_available
 from dsp.tacan.bearing import wrap_deg
 from dsp.tacan.kalman_config import KalmanConfig
 

@@ -4,9 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from cosim.tacan.signal import (KIND_AUX, KIND_IDENT, KIND_MAIN, KIND_RANDOM, Multipath,
-                                TacanSignalConfig, burst_offsets, envelope_gain, generate,
-                                noise_enbw_hz, pulse_observations, pulse_schedule)
+from cosim.tacan.signal import (KIND_AUX, KIND_IDENT, KIND_MAIN, KIND_RANDOM, Multipath, TacanSignalConfig, envelope_gain, generate, noise_enbw_hz, pulse_observations, pulse_schedule)
+from dsp.tacan.standard import burst_offsets
 from dsp.sampling import fold_frequency
 
 

@@ -65,7 +65,7 @@ def test_bad_input_messages():
     with pytest.raises(ValueError, match=r"h_2 must be a finite number >= 0.0"):
         kf_model_matrices(T, 0.0, -1.0, 1.0, 1e-3, True)
     with pytest.raises(ValueError, match="oscillator h0 must be a finite number >= 0"):
-        from cosim.gnss.oscillator import Oscillator
+        from dsp.gnss.oscillator import Oscillator
         make_tracker("aided-kf", _ctx(), FLOAT, oscillator=Oscillator(-1e-19, 0.0, 0.0))
     with pytest.raises(ValueError, match="aided Kalman loop needs ctx.aiding"):
         make_tracker("aided-kf", _ctx(aiding=None), FLOAT)

@@ -68,7 +68,7 @@ def test_decoder_robust_to_missing_and_extra_pulses(mode):
 def test_decoder_scoring_kernel_equals_the_numpy_matching(mode):
     """The compiled hypothesis scorer (one walking pointer per template pulse) gives the
     numpy nearest-neighbour matching's scores exactly, also at ties and at the tolerance."""
-    from cosim.tacan.signal import burst_offsets
+    from dsp.tacan.standard import burst_offsets
     from dsp.tacan import scoring as sco
     rng = np.random.default_rng(4)
     cfg = TacanSignalConfig(mode=mode, duration_s=0.5, seed=12)

@@ -11,7 +11,7 @@ import pytest
 from cosim.tacan.signal import TacanSignalConfig
 from dsp.tacan.frontend import PAIR_DETECTOR, FrontendConfig, pair_detector
 from dsp.tacan.peak_params import PeakParams
-from hdl.tacan.model import TacanFrontendParams
+from hdl.tacan.params import TacanFrontendParams
 
 P = TacanFrontendParams()
 HAVE_VERILATOR = shutil.which("verilator") is not None

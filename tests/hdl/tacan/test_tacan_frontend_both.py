@@ -12,9 +12,10 @@ from cosim.tacan.equivalence import check_equivalence, tacan_record
 from cosim.tools.equivalence import stall_pattern
 from cosim.backends.pysim import run_stream
 from cosim.tacan.signal import TacanSignalConfig
-from dsp.tacan.frontend import SOURCE_PAIR, SOURCE_PULSE
+from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE
 from dsp.tacan.standard import pair_spacing_s
-from hdl.tacan.model import FrontendPeaks, TacanFrontendModel, TacanFrontendParams
+from hdl.tacan.model import FrontendPeaks, TacanFrontendModel
+from hdl.tacan.params import TacanFrontendParams
 from hdl.tacan.frontend import TacanFrontEnd
 
 from _tacan_fe_util import BOTH, P, both_params, verilator  # on sys.path: conftest.py

@@ -7,8 +7,10 @@ import pytest
 
 from cosim.tacan.equivalence import tacan_record
 from cosim.tacan.signal import TacanSignalConfig, generate
-from dsp.tacan.frontend import PAIR_DETECTOR, SOURCE_PAIR, SOURCE_PULSE, run_golden_frontend
-from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
+from dsp.tacan.frontend import PAIR_DETECTOR, run_golden_frontend
+from dsp.tacan.standard import SOURCE_PAIR, SOURCE_PULSE
+from hdl.tacan.model import TacanFrontendModel
+from hdl.tacan.params import TacanFrontendParams
 from hdl.tacan.params import amp_error_terms
 
 from _tacan_fe_util import BOTH, P  # on sys.path: conftest.py

@@ -13,7 +13,8 @@ from cosim.tacan.signal import TacanSignalConfig
 from dsp.tacan.frontend import FrontendConfig
 from dsp.tacan.standard import pair_spacing_s
 from hdl.tacan.peak_model import peak_search
-from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
+from hdl.tacan.model import TacanFrontendModel
+from hdl.tacan.params import TacanFrontendParams
 from hdl.tacan.frontend import TacanFrontEnd
 
 from _tacan_fe_util import P, verilator  # on sys.path: conftest.py

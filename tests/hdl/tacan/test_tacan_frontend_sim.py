@@ -7,7 +7,8 @@ import pytest
 
 from cosim.tacan.equivalence import check_equivalence, tacan_record
 from cosim.backends.pysim import run_stream
-from hdl.tacan.model import TacanFrontendModel, TacanFrontendParams
+from hdl.tacan.model import TacanFrontendModel
+from hdl.tacan.params import TacanFrontendParams
 from hdl.tacan.frontend import TacanFrontEnd
 
 from _tacan_fe_util import P, verilator  # on sys.path: conftest.py
