@@ -48,7 +48,7 @@ test-all: setup  ## run every test on JOBS cores, slow ones included
 # The docs are built from a copy under build/, so that the API pages autosummary generates
 # stay out of docs/; warnings are errors and the tutorials are executed on every build.
 docs: setup  ## build the documentation site into build/docs (warnings are errors; tutorials executed)
-	rm -rf build/docs_src && mkdir -p build && cp -r docs build/docs_src
+	rm -rf build/docs_src && mkdir -p build && cp -r docs build/docs_src && cp CHANGELOG.md build/docs_src/changelog.md
 	KFNAV_ROOT=$(CURDIR) $(PY) -m sphinx -W --keep-going -q -b html -d build/docs_doctrees build/docs_src build/docs
 	@echo "documentation: build/docs/index.html"
 

@@ -6,8 +6,9 @@ import sys
 import types
 from pathlib import Path
 
-# The Makefile copies docs/ to build/docs_src before building, so that the API stubs
-# autosummary writes stay under build/; KFNAV_ROOT names the repository either way.
+# The Makefile copies docs/ to build/docs_src before building (with CHANGELOG.md as
+# changelog.md), so that the API stubs autosummary writes stay under build/; KFNAV_ROOT names
+# the repository either way.
 ROOT = Path(os.environ.get("KFNAV_ROOT", Path(__file__).resolve().parents[1])).resolve()
 os.environ["KFNAV_ROOT"] = str(ROOT)  # the tutorials' kernels run the CLI from here
 sys.path.insert(0, str(ROOT))
@@ -43,10 +44,6 @@ nb_execution_timeout = 300
 nb_execution_raise_on_error = True
 nb_execution_show_tb = True
 nb_merge_streams = True
-
-# A hidden glob toctree on the index takes in top-level pages added without a place yet;
-# it matches nothing while there are none.
-suppress_warnings = ["toc.empty_glob"]
 
 autosummary_generate = True
 autosummary_imported_members = False
