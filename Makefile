@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
 .DEFAULT_GOAL := help
-.PHONY: help setup tools run test test-all bench study study-wordlength faults verilog synth clean
+.PHONY: help setup tools run test test-all docs pages bench study study-wordlength faults verilog synth clean
 
 help:  ## show this help
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -17,7 +17,7 @@ setup: $(STAMP) tools  ## create .venv, install the package and the tools the te
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,synth,cluster]"
+	$(PY) -m pip install --quiet -e ".[test,synth,cluster,docs]"
 	touch $(STAMP)
 
 tools:  ## install Verilator when missing (apt-get, as root)
@@ -38,11 +38,22 @@ run: setup  ## default TACAN scenario: HDL front-end model -> FIFO link -> fixed
 # shared between workers under file locks). `make test JOBS=0` runs in one process.
 JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 2); [ $$n -gt 4 ] && n=4; echo $$n)
 
-test: setup  ## run the whole test suite on JOBS cores (slow tests excluded: see test-all)
+test: setup  ## run the whole test suite on JOBS cores (slow tests excluded: see test-all), then build the docs
 	$(PY) -m pytest -q -n $(JOBS) -m "not slow"
+	$(MAKE) --no-print-directory docs
 
 test-all: setup  ## run every test on JOBS cores, slow ones included
 	$(PY) -m pytest -q -n $(JOBS)
+
+# The docs are built from a copy under build/, so that the API pages autosummary generates
+# stay out of docs/; warnings are errors and the tutorials are executed on every build.
+docs: setup  ## build the documentation site into build/docs (warnings are errors; tutorials executed)
+	rm -rf build/docs_src && mkdir -p build && cp -r docs build/docs_src && cp CHANGELOG.md build/docs_src/changelog.md
+	KFNAV_ROOT=$(CURDIR) $(PY) -m sphinx -W --keep-going -q -b html -d build/docs_doctrees build/docs_src build/docs
+	@echo "documentation: build/docs/index.html"
+
+pages: setup  ## rewrite docs/results/*.md and README's headline table from results/*.json
+	$(PY) -m cosim.tools.pages
 
 bench: setup  ## run every benchmark but suite-time (~4.7 h on 2 cores); results go to results/ (shown in README.md)
 	$(PY) -m cosim bench dsp-speed

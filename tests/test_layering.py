@@ -1,4 +1,4 @@
-"""The architecture's import rules (docs/architecture.md), read from the source with ``ast``.
+"""The architecture's import rules (docs/explanation/architecture.md), read from the source with ``ast``.
 
 * ``dsp`` imports neither ``hdl`` nor ``cosim``; ``hdl`` does not import ``cosim``.
 * Inside ``cosim`` the layers are ordered core < backends < tools < receivers < cli: a module

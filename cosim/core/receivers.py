@@ -5,7 +5,7 @@ its signal generator and run in ``cosim/<name>/``) plus one :class:`Receiver` en
 handed to :func:`register` when its entry module is imported. The command line is built
 from the entries: the subcommand ``python -m cosim <name>``, the tops of ``verilog``,
 ``check-equivalence --top`` and ``synth --top``, and ``sweep <name>`` / ``faults <name>``.
-How to add one: ``docs/adding_a_receiver.md``.
+How to add one: ``docs/howto/add_a_receiver.md``.
 
 Options are derived from the receiver's configuration dataclasses (:class:`Option`): the
 field name gives the flag (``duration_s`` -> ``--duration-s``), its annotation the type

@@ -18,7 +18,7 @@ the truth (fast path). Figures: ``phase_rmse_deg`` (the receiver's primary figur
 half of the record, wrapped to the Costas lock point), ``doppler_rmse_hz``, ``locked`` (no
 cycle slip and not diverged), the core's events (Cholesky failures, P not PD,
 saturations). No cycle-accurate re-check: the core is DSP software (its word lengths are an
-emulation, docs/aukf.md); the HDL channel's bits are checked by the closed-loop tests.
+emulation, docs/explanation/gnss_aukf.md); the HDL channel's bits are checked by the closed-loop tests.
 """
 from __future__ import annotations
 

@@ -225,7 +225,7 @@ def bench_convergence(out, quick: bool = False) -> dict:
     same runs; ``results/aukf_convergence.{md,json}``.
 
     Why the run length matters: per 0.5 s block the slave's measurement carries ~0.065
-    nats^2 of Fisher information on ln q at q = 0.5 (the noise floor dominates; docs/aukf.md)
+    nats^2 of Fisher information on ln q at q = 0.5 (the noise floor dominates; docs/explanation/gnss_aukf.md)
     against the prior's precision 1, so after 10 s the posterior still keeps ~45 % of
     ln q0 - ln q_true; the prior is outweighed only after tens of seconds."""
     import json
@@ -285,7 +285,7 @@ def _convergence_markdown(res) -> str:
                  f"{r['aukf_doppler_rmse_hz']:.4f} | {r['ukf_doppler_rmse_hz']:.4f} | {rr:.3f} | {a23} | "
                  f"{r['diverged']} | {r['slips']} |")
     L += ["", "At 0.1 q0 the slave's measurement is dominated by its noise floor (~0.065 nats^2 of "
-          "information on ln q per 0.5 s block against the prior's 1, docs/aukf.md), so q_hat "
+          "information on ln q per 0.5 s block against the prior's 1, docs/explanation/gnss_aukf.md), so q_hat "
           "leaves q0 slowly: compare the rows of one q_true across run lengths.", ""]
     return "\n".join(L)
 
@@ -303,7 +303,7 @@ def _bench_markdown(res, points, cols) -> str:
          "fixed-point `ChannelCore` for pll3; R from C/N0; RMSEs over the second half of each run "
          "(Doppler: the tracker's estimate vs the epoch's mean true frequency); lost = a slip or the "
          "last 100 ms Doppler RMS > 5 Hz (truth-based); diverged = the tracker's own rule "
-         "(docs/aukf.md: phase test + narrow/wide-band frequency test). Phase RMSE wrapped to the "
+         "(docs/explanation/gnss_aukf.md: phase test + narrow/wide-band frequency test). Phase RMSE wrapped to the "
          "Costas lock point (count the slips).", "",
          _table(points, cols), "",
          "Fixed vs golden, largest relative difference of the Doppler RMSE over the points: " + ", ".join(

@@ -1,7 +1,7 @@
 """The two peak searches of the TACAN front end into its one FIFO: the cycle each peak is
 written (:func:`fifo_write_cycles`, the HDL's ``TacanFrontEnd._merge``) and the FIFO output
 predicted for a DSP ``ready`` pattern (:class:`FifoRun`). The merge rule and why one hold
-register suffices: ``docs/tacan_frontend_design.md``.
+register suffices: ``docs/explanation/tacan_frontend_design.md``.
 """
 from __future__ import annotations
 

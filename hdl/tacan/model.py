@@ -3,7 +3,7 @@
 Chain (one ``sync`` clock, the ADC rate): ADC -> DDC (NCO + real mixer) -> CIC -> FIR ->
 envelope (CORDIC ``|z|``) -> pulse-peak search(es) -> FIFO -> DSP. The parameters and word
 lengths are :class:`hdl.tacan.params.TacanFrontendParams`; the design rationale is in
-``docs/tacan_frontend_design.md``.
+``docs/explanation/tacan_frontend_design.md``.
 
 :class:`TacanFrontendModel` chains the block models (vectorised, chunkable with a
 :class:`TacanFrontendState`), or composes the blocks' compiled single-threaded kernels

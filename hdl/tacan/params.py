@@ -3,7 +3,7 @@ from which every block's parameters are built in one place so that each block's 
 width is the next one's input width, and the amplitude error budget of the chain
 (:func:`amp_error_terms`). The rates and structure are a
 :class:`dsp.tacan.frontend.FrontendConfig`, shared with the golden float model. Why each
-default word length is what it is: ``docs/tacan_frontend_design.md``.
+default word length is what it is: ``docs/explanation/tacan_frontend_design.md``.
 """
 from __future__ import annotations
 

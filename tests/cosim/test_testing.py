@@ -29,7 +29,7 @@ EX = _example()
 
 @pytest.mark.verilator
 def test_docs_example_runs():
-    """docs/testing_your_block.md's example, as its user would run it."""
+    """docs/howto/own_block.md's example, as its user would run it."""
     EX.test_fir_against_lfilter()
 
 

@@ -21,7 +21,7 @@ def test_q_hat_moves_towards_q_true_short():
 @functools.lru_cache(maxsize=None)
 def _point(factor, duration_s=10.0):
     """100 runs at 32 dB-Hz, seed 1, aukf and ukf on the same truths; A4 is judged on 60 s
-    runs (docs/aukf.md, results/aukf_convergence.md), A2/A3 on 10 s and 60 s."""
+    runs (docs/explanation/gnss_aukf.md, results/aukf_convergence.md), A2/A3 on 10 s and 60 s."""
     return run_point(factor * Q0, 32.0, trackers=("aukf", "ukf"), n_runs=100,
                      duration_s=duration_s, seed=1)
 

@@ -120,7 +120,7 @@ def test_kalman_loop_with_a_loop_latency(latency):
     assert un < 0.05, un          # unaided, the loop still holds the ramp with the latency
 
 
-# stated bounds (docs/ins.md): fixed within 0.005 Hz of Doppler and 0.05 deg of phase
+# stated bounds (docs/explanation/ins.md): fixed within 0.005 Hz of Doppler and 0.05 deg of phase
 # of the float loop on the same noise (measured: <= 0.0009 Hz, <= 0.011 deg)
 @pytest.mark.parametrize("loop", ["aided-kf", "unaided-kf", "aided-pll"])
 def test_fixed_within_bound_of_float(loop, dopp_hz=0.005, phase_deg=0.05):
