@@ -292,7 +292,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     if state is None:
         state = ReceiverState(kf=EnvelopeKalman(cfg.kalman, batch=B))
     elif state.kf.batch != B or state.kf.cfg != cfg.kalman:
-        raise ValueError("state belongs to a receiver with another batch size, filter or clock")
+        raise ValueError("state belongs to a receiver with another batch size or filter")
     kf = state.kf
     if thr is not None:      # amplitude codes: their threshold in signal units
         thr = math.ldexp(thr, -cfg.kalman.y.frac) if amps.dtype.kind == "i" else thr
