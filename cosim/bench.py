@@ -2,8 +2,9 @@
 
 :data:`BENCHMARKS` names every benchmark (``python -m cosim bench <name>``); each lives with
 its receiver or subsystem (the TACAN ones one per module, ``cosim.tacan.bench_accuracy``
-and the other ``cosim.tacan.bench_*``; GNSS in :mod:`cosim.gnss.bench`, ...). Here: the machine/commit record every result carries
-(:func:`machine_info`) and the process pool the benchmarks share (:func:`map_jobs`).
+and the other ``cosim.tacan.bench_*``; GNSS in :mod:`cosim.gnss.bench`, ...). Here: the
+machine/commit record every result carries (:func:`machine_info`) and the process pool the
+benchmarks share (:func:`map_jobs`).
 """
 from __future__ import annotations
 
