@@ -251,7 +251,7 @@ class SampleFile:
             i = int(np.argmax(bad))
             where = (f"sample {n0 + i // 2} ({'IQ'[i % 2]})" if self.is_complex
                      else f"sample {n0 + i}")
-            raise ValueError(f"--adc-map {self.adc_map}: {where} of {self.path} is {v[i]!r}, "
+            raise ValueError(f"--adc-map {self.adc_map}: {where} of {self.path} is {v[i].item()!r}, "
                              f"outside the map's {self.adc_map.range_text}")
 
     def read(self, n0: int, n: int) -> np.ndarray:
@@ -324,7 +324,7 @@ def write_samples(path, fmt: str, blocks, adc_map=None) -> int:
             bad = amap.bad(v)
             if bad.any():
                 i = int(np.argmax(bad))
-                raise ValueError(f"--adc-map {amap}: value {v[i]!r} at sample "
+                raise ValueError(f"--adc-map {amap}: value {v[i].item()!r} at sample "
                                  f"{n_done + (i // 2 if cplx else i)} is outside the map's "
                                  f"{amap.range_text}")
             f.write(v.astype(dtype).tobytes())
