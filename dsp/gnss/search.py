@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal as sps
 
-from .acquisition import acquire, refine_doppler
+from .acquisition import acquire, refine_doppler, threshold
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
 from .cn0 import cn0_m2m4
 
@@ -75,6 +75,13 @@ CN0_BLOCK_MS = 20
 #: A detection this far (dB) below a stronger one at its Doppler + k kHz is refused as its
 #: cross-correlation (C/A Gold codes: worst 1 ms cross-correlation -23.9 dB).
 XCORR_MARGIN_DB = 15.0
+#: False-alarm probability of a verification dwell over its cells (one bin / one cell
+#: around the first detection, predicted drift applied).
+VERIFY_PFA = 1e-3
+#: 1 ms periodic interference is removed above this power ratio (1: noise alone).
+PERIODIC_RATIO = 2.0
+#: Narrowband interference excision: spectrum bins this far (dB) above the median.
+EXCISE_DB = 10.0
 
 
 @dataclass(frozen=True)
@@ -171,7 +178,8 @@ class SearchReport:
     max_doppler_hz: float
     prns: list
     n_samples: int
-    notes: list = field(default_factory=list)
+    excised_hz: list = field(default_factory=list)
+    periodic_ratio: float | None = None
 
     def as_dict(self) -> dict:
         return {"detections": [d.as_dict() for d in self.detections], "rejected": self.rejected,
@@ -179,7 +187,8 @@ class SearchReport:
                 "fs_hz": self.fs_hz, "decimation": self.decimation,
                 "search_rate_hz": self.fs_hz / self.decimation, "pfa_per_prn": self.pfa,
                 "max_doppler_hz": self.max_doppler_hz, "prns": self.prns,
-                "n_samples": self.n_samples}
+                "n_samples": self.n_samples, "excised_hz": self.excised_hz,
+                "periodic_removed_ratio": self.periodic_ratio}
 
 
 def decimation(fs_hz: float, min_rate_hz: float = MIN_RATE_HZ) -> int:
@@ -208,6 +217,54 @@ def to_baseband(x, fs_hz: float, if_hz: float, inverted: bool = False, decim: in
     return y[::decim]
 
 
+def excise(x, fs_hz: float, threshold_db: float = EXCISE_DB):
+    """Narrowband interference excision on zero-IF samples: the power spectrum averaged over
+    segments of ``L = 2^ceil(log2(fs / 1 kHz))`` samples (about 1 kHz resolution); the
+    segment bins more than ``threshold_db`` above the median bin, and their neighbours, are
+    zeroed in the FFT of the whole of ``x``. The C/A signal itself lies far below that
+    (a 50 dB-Hz satellite puts about -10 dB of the noise into one 1 kHz spectral line).
+    Returns ``(x excised, list of the excised frequencies in Hz)``."""
+    x = np.asarray(x, dtype=np.complex128)
+    L = 1 << int(math.ceil(math.log2(fs_hz / 1000.0)))
+    k = x.size // L
+    if k < 4:
+        return x, []
+    P = np.mean(np.abs(np.fft.fft(x[:k * L].reshape(k, L), axis=1)) ** 2, axis=0)
+    bad = P > np.median(P) * 10.0 ** (threshold_db / 10.0)
+    if not bad.any():
+        return x, []
+    freqs = np.fft.fftfreq(L, 1.0 / fs_hz)[bad]
+    bad = bad | np.roll(bad, 1) | np.roll(bad, -1)
+    X = np.fft.fft(x)
+    j = np.floor(np.fft.fftfreq(x.size, 1.0 / fs_hz) * L / fs_hz + 0.5).astype(np.int64) % L
+    X[bad[j]] = 0.0
+    return np.fft.ifft(X), [float(f) for f in np.sort(freqs)]
+
+
+def remove_periodic(x, fs_hz: float, min_ratio: float = PERIODIC_RATIO):
+    """Subtract interference that repeats every 1 ms (and so every 0.5, 0.25 ms ...: a
+    front end's clock or bus activity): the mean of the ``k`` whole 1 ms periods of ``x``,
+    subtracted from each, if its power exceeds ``min_ratio`` times what noise alone leaves
+    in a mean of ``k`` periods (``var / k``). A satellite is 1 ms periodic only with a
+    Doppler within about ``1 / (k ms)`` of a multiple of 1 kHz (and its data bits average
+    out), so it is mostly kept. Returns ``(x, ratio)`` (``x`` unchanged below the ratio)."""
+    x = np.asarray(x)
+    N = int(round(fs_hz * CODE_PERIOD_S))
+    k = x.size // N
+    if k < 4:
+        return x, 0.0
+    v = x[:k * N].reshape(k, N)
+    m = v.mean(axis=0)
+    var = float(np.mean(np.abs(v - m) ** 2))
+    ratio = float(np.mean(np.abs(m) ** 2) * k / var) if var > 0 else 0.0
+    if ratio <= min_ratio:
+        return x, ratio
+    y = x.astype(np.complex128 if np.iscomplexobj(x) else np.float64)
+    y[:k * N] -= np.tile(m, k)
+    y[k * N:] -= m[:x.size - k * N]
+    return y, ratio
+
+
 def _check_stages(stages):
     st = tuple(stages)
     if not st or any(not isinstance(s, Stage) for s in st):
@@ -228,17 +285,53 @@ def _dwell(xb, fs_d, prn, stage, pfa_each, max_doppler_hz):
     return best
 
 
+def _verify(xb, fs_d, prn, stage, doppler_hz, code_phase_chips, pfa_v, max_doppler_hz):
+    """The second dwell: at each offset, the largest ``Lambda`` of the cells within one
+    Doppler bin and one cell of (``doppler_hz``, ``code_phase_chips``), against the
+    threshold for ``pfa_v`` over those cells and offsets. Returns (passed, best Lambda /
+    threshold, its Doppler, its code phase)."""
+    n = int(round(fs_d * CODE_PERIOD_S))
+    bw = stage.bin_width_hz
+    nb = int(math.floor(max_doppler_hz / bw))
+    dop = bw * np.arange(-nb, nb + 1)
+    bins = np.nonzero(np.abs(dop - doppler_hz) <= 1.01 * bw)[0]
+    m0 = int(round(code_phase_chips * fs_d / CHIP_RATE_HZ))
+    cells = (m0 + np.arange(-1, 2)) % n
+    th = threshold(pfa_v / len(stage.alignments_ms), bins.size * cells.size,
+                   stage.n_noncoherent)
+    best = (-1.0, 0.0, 0.0)
+    for a in stage.alignments_ms:
+        g = acquire(xb[a * n:], fs_d, prn, 0.0, n_coherent=stage.n_coherent,
+                    n_noncoherent=stage.n_noncoherent, max_doppler_hz=max_doppler_hz,
+                    bin_width_hz=bw, keep_grid=True).grid[np.ix_(bins, cells)]
+        i, j = np.unravel_index(int(np.argmax(g)), g.shape)
+        if g[i, j] / th > best[0]:
+            best = (float(g[i, j] / th), float(dop[bins[i]]),
+                    float(cells[j] * CHIP_RATE_HZ / fs_d))
+    return best[0] > 1.0, best[0], best[1], best[2]
+
+
 def _circ_diff(a, b, period=CODE_LENGTH):
     return (a - b + period / 2) % period - period / 2
 
 
-def _replica(fs, prn, f, cp, n):
-    """Code at phase ``cp`` (chips at sample 0) and the code rate of Doppler ``f``, times
-    the carrier ``exp(j 2 pi f n / fs)``, samples ``0 .. n - 1``."""
+def _code(fs, prn, f, cp, n):
+    """Code at phase ``cp`` (chips at sample 0) and the code rate of Doppler ``f``, samples
+    ``0 .. n - 1``."""
     code = ca_code_levels(prn).astype(np.float64)
     nn = np.arange(n)
     chips = np.floor(cp + nn * (CHIP_RATE_HZ * (1 + f / L1_HZ) / fs)).astype(np.int64)
-    return code[chips % CODE_LENGTH] * np.exp(2j * np.pi * (f / fs) * nn)
+    return code[chips % CODE_LENGTH]
+
+
+def _replica(fs, prn, f, cp, n):
+    """:func:`_code` times the carrier ``exp(j 2 pi f n / fs)``."""
+    return _code(fs, prn, f, cp, n) * np.exp(2j * np.pi * (f / fs) * np.arange(n))
+
+
+def _wipe(xf, fs, f, n):
+    """The first ``n`` samples with the carrier at ``f`` wiped off."""
+    return xf[:n] * np.exp(-2j * np.pi * (f / fs) * np.arange(n))
 
 
 def _epoch(fs, f, cp):
@@ -248,14 +341,15 @@ def _epoch(fs, f, cp):
     return int(math.ceil((CODE_LENGTH - cp % CODE_LENGTH) / rate))
 
 
-def _prompts(xf, fs, prn, f, cp, n_ms, epochs=False):
-    """1 ms prompt sums over up to ``n_ms`` ms against :func:`_replica` (zero IF); with
-    ``epochs`` the sums start at the first code epoch, so data-bit edges fall between them."""
+def _prompts(y, fs, prn, f, cp, n_ms, epochs=False):
+    """1 ms prompt sums over up to ``n_ms`` ms of carrier-wiped samples ``y``
+    (:func:`_wipe`) against :func:`_code`; with ``epochs`` the sums start at the first code
+    epoch, so data-bit edges fall between them."""
     N = int(round(fs * CODE_PERIOD_S))
     e = _epoch(fs, f, cp) if epochs else 0
-    n_ms = min(n_ms, (xf.size - e) // N)
-    y = xf[e:e + n_ms * N] * np.conj(_replica(fs, prn, f, cp, e + n_ms * N)[e:])
-    return y.reshape(n_ms, N).sum(axis=1)
+    n_ms = min(n_ms, (y.size - e) // N)
+    z = y[e:e + n_ms * N] * _code(fs, prn, f, cp, e + n_ms * N)[e:]
+    return z.reshape(n_ms, N).sum(axis=1)
 
 
 def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms):
@@ -268,7 +362,8 @@ def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms):
     h = int(round(0.5 / CODE_GRID_CHIPS))
     k = int(math.ceil(cell_chips / CODE_GRID_CHIPS))
     grid = cp + CODE_GRID_CHIPS * np.arange(-k - h, k + h + 1)
-    amp = np.sqrt([np.sum(np.abs(_prompts(xf, fs, prn, f, t, n_c)) ** 2) for t in grid])
+    y = _wipe(xf, fs, f, n_ms * N)
+    amp = np.sqrt([np.sum(np.abs(_prompts(y, fs, prn, f, t, n_c)) ** 2) for t in grid])
     el = amp[:-2 * h] - amp[2 * h:]             # early - late at grid[h:-h]
     mid = grid[h:-h]
     i = int(np.argmax(amp[h:-h]))
@@ -278,7 +373,7 @@ def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms):
         j = int(up[np.argmin(np.abs(up - i))])
         cp_f = mid[j] + CODE_GRID_CHIPS * (-el[j]) / (el[j + 1] - el[j])
     cp_f = float(cp_f % CODE_LENGTH)
-    p = _prompts(xf, fs, prn, f, cp_f, n_ms, epochs=True)
+    p = _prompts(y, fs, prn, f, cp_f, n_ms, epochs=True)
     return f, cp_f, cn0_blocks(p)
 
 
@@ -327,7 +422,8 @@ def cross_correlation_suspects(dets, margin_db: float = XCORR_MARGIN_DB) -> dict
 def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool = False,
                prns=range(1, 33), pfa: float = 1e-3, max_doppler_hz: float = 5000.0,
                stages=DEFAULT_STAGES, min_rate_hz: float = MIN_RATE_HZ,
-               refine_ms: int = 100) -> SearchReport:
+               refine_ms: int = 100, excise_db: float | None = EXCISE_DB,
+               verify_pfa: float = VERIFY_PFA) -> SearchReport:
     """Search every PRN of ``prns`` on a recording (module docstring).
 
     Parameters
@@ -351,6 +447,10 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
         Lowest decimated rate.
     refine_ms : int
         Recording used for the refinement and C/N0 (ms, up to the recording's length).
+    verify_pfa : float
+        False-alarm probability of the verification dwell over its few cells.
+    excise_db : float or None
+        Threshold of the narrowband interference excision (:func:`excise`); None: off.
     """
     prns = [check_prn(p) for p in prns]
     if not prns:
@@ -374,7 +474,10 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
     Nd = N // D
     need_ms = 2 * max(s.span_ms for s in run)
     rf_ms = max(2, min(int(refine_ms), n_ms))
-    xf = to_baseband(read(0, max(need_ms, rf_ms) * N), fs_hz, if_hz, inverted, 1)
+    raw, periodic = remove_periodic(read(0, max(need_ms, rf_ms) * N), fs_hz)
+    xf = to_baseband(raw, fs_hz, if_hz, inverted, 1)
+    del raw
+    xf, excised = excise(xf, fs_hz) if excise_db is not None else (xf, [])
     n_alarms = sum(len(s.alignments_ms) for s in run)
     pfa_each = pfa / n_alarms
     dets, rej = [], []
@@ -383,18 +486,14 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
         r1, a1 = _dwell(xb[:st.span_ms * Nd], fs_d, prn, st, pfa_each, max_doppler_hz)
         if not r1.detected:
             return None
-        r2, a2 = _dwell(xb[st.span_ms * Nd:2 * st.span_ms * Nd], fs_d, prn, st, pfa_each,
-                        max_doppler_hz)
         drift = r1.doppler_hz * st.span_ms * CODE_PERIOD_S / (L1_HZ / CHIP_RATE_HZ)
-        ok_f = abs(r2.doppler_hz - r1.doppler_hz) <= 1.01 * st.bin_width_hz
-        ok_c = abs(_circ_diff(r2.code_phase_chips, r1.code_phase_chips + drift)) \
-            <= 1.01 * CHIP_RATE_HZ / fs_d
-        if not (r2.detected and ok_f and ok_c):
+        ok, m2, f2, c2 = _verify(xb[st.span_ms * Nd:2 * st.span_ms * Nd], fs_d, prn, st,
+                                 r1.doppler_hz, (r1.code_phase_chips + drift) % CODE_LENGTH,
+                                 verify_pfa, max_doppler_hz)
+        if not ok:
             rej.append({"prn": prn, "stage": si, "doppler_hz": r1.doppler_hz,
                         "code_phase_chips": r1.code_phase_chips,
-                        "metric": r1.peak / r1.threshold, "verify_detected": r2.detected,
-                        "verify_doppler_hz": r2.doppler_hz,
-                        "verify_code_phase_chips": r2.code_phase_chips})
+                        "metric": r1.peak / r1.threshold, "verify_metric": m2})
             return None
         f, cp, cn0 = _refine(xf, fs_hz, prn, r1.doppler_hz, r1.code_phase_chips,
                              CHIP_RATE_HZ / fs_d, rf_ms)
@@ -402,7 +501,7 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
             f = r1.doppler_hz        # refinement outside the bin: keep the dwell's
         return Detection(prn, float(f), cp, cn0, r1.peak / r1.threshold, si, str(st),
                          r1.doppler_hz, r1.code_phase_chips, r1.peak, r1.threshold,
-                         r2.peak / r2.threshold, a1, st.bin_width_hz)
+                         m2, a1, st.bin_width_hz)
 
     # pass 1: the first stage for every PRN
     xb = to_baseband(xf[:need_ms * N], fs_hz, 0.0, False, D)
@@ -430,4 +529,5 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
                     "cn0_dbhz": d.cn0_dbhz, "cross_correlation_of": xc[d.prn]})
     dets.sort(key=lambda d: d.prn)
     return SearchReport(dets, rej, [str(s) for s in run], skipped, float(fs_hz), D, float(pfa),
-                        float(max_doppler_hz), prns, int(n_samples))
+                        float(max_doppler_hz), prns, int(n_samples), excised,
+                        periodic if periodic > PERIODIC_RATIO else None)
