@@ -87,7 +87,8 @@ def run(a) -> int:
           f"stages run: {'; '.join(rep.stages_run)}"
           + (f"; skipped (recording too short): {'; '.join(rep.stages_skipped)}"
              if rep.stages_skipped else ""))
-    print(f"{'PRN':>4} {'Doppler Hz':>11} {'code chips':>11} {'C/N0 dB-Hz':>11} {'metric':>7}  stage")
+    print(f"{'PRN':>4} {'Doppler Hz':>11} {'code chips':>11} {'C/N0 dB-Hz':>11} "
+          f"{'metric':>7}  stage")
     for x in rep.detections:
         print(f"{x.prn:>4} {x.doppler_hz:>11.1f} {x.code_phase_chips:>11.3f} "
               f"{x.cn0_dbhz:>11.1f} {x.metric:>7.2f}  {x.stage_text}")

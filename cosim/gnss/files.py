@@ -251,7 +251,8 @@ class SampleFile:
             i = int(np.argmax(bad))
             where = (f"sample {n0 + i // 2} ({'IQ'[i % 2]})" if self.is_complex
                      else f"sample {n0 + i}")
-            raise ValueError(f"--adc-map {self.adc_map}: {where} of {self.path} is {v[i].item()!r}, "
+            raise ValueError(f"--adc-map {self.adc_map}: {where} of {self.path} is "
+                             f"{v[i].item()!r}, "
                              f"outside the map's {self.adc_map.range_text}")
 
     def read(self, n0: int, n: int) -> np.ndarray:

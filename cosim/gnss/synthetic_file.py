@@ -117,7 +117,8 @@ class SyntheticRecording:
             self.step = agc_step_sigma(self.adc_map.bits) * self.rms
         self._bits = []
         for i, s in enumerate(sats):
-            chi_hi = s.code_phase_chips + duration_s * CHIP_RATE_HZ * (1 + abs(s.doppler_hz) / L1_HZ)
+            chi_hi = s.code_phase_chips + \
+                duration_s * CHIP_RATE_HZ * (1 + abs(s.doppler_hz) / L1_HZ)
             bit0 = -1
             nb = int(math.floor(chi_hi / CHIPS_PER_BIT)) - bit0 + 2
             rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(1, i)))

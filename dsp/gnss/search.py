@@ -3,16 +3,21 @@
 The search runs :func:`dsp.gnss.acquisition.acquire` (parallel code-phase FFT search, its
 docstring gives the statistic) PRN by PRN over a schedule of dwells, each detection checked
 by a second, independent dwell before it is reported, then refined at the full sample rate.
+Only the first ``max(2 x longest dwell, refine_ms)`` ms of the recording are read.
 
 Front end
 ---------
-The recording (real samples at IF ``f_IF``, or complex samples at a complex IF) is mixed to
-zero IF, ``y[n] = x[n] exp(-j 2 pi f_IF n / fs)``, conjugated when a real recording's
-spectrum is inverted (so the Doppler sign is right), low-pass filtered (a ``firwin`` FIR,
-cutoff ``fs / 2D``, ``16 D + 1`` taps, centred: no delay) and decimated by ``D``, the largest
-divisor of the samples per ms with ``fs / D >= min_rate_hz`` (2.046 MS/s by default, the C/A
-main lobe; 12 MS/s -> 2.4 MS/s). With ``D = 1`` nothing is filtered (a real recording's
-image at ``-2 f_IF`` averages out in the correlation). The search cells are then ``D`` samples of the recording apart.
+1. Interference that repeats every 1 ms (front-end clock or bus activity; one of the
+   PocketSDR recordings has it) is subtracted if present (:func:`remove_periodic`).
+2. The samples (real at IF ``f_IF``, or complex at a complex IF) are mixed to zero IF,
+   ``y[n] = x[n] exp(-j 2 pi f_IF n / fs)``, conjugated when a real recording's spectrum is
+   inverted (so the Doppler sign is right).
+3. Narrowband interference is excised in the frequency domain (:func:`excise`).
+4. For the dwells: low-pass filtered (``firwin`` FIR, cutoff ``fs / 2D``, ``16 D + 1`` taps,
+   centred: no delay) and decimated by ``D``, the largest divisor of the samples per ms with
+   ``fs / D >= min_rate_hz`` (2.046 MS/s by default, the C/A main lobe; 12 MS/s -> 2.4 MS/s);
+   with ``D = 1`` nothing is filtered (a real recording's image at ``-2 f_IF`` averages out).
+   The search cells are ``D`` samples of the recording apart.
 
 Dwells and the bit edge
 -----------------------
@@ -20,11 +25,14 @@ A :class:`Stage` is ``n_coherent`` ms summed coherently, ``n_noncoherent`` such 
 in power, tried at each start offset of ``alignments_ms``: a data-bit edge (every 20 ms, on a
 code epoch) inside a coherent sum cancels part of it, and one of the offsets puts the sums'
 boundaries within ``max gap / 2`` ms of the edges. Doppler bins are ``min(2 / (3 T), 500)``
-Hz wide (:func:`dsp.gnss.acquisition.refine_doppler` needs <= 500 Hz). The default schedule
-:data:`DEFAULT_STAGES` is 1 ms x 10, then 5 ms x 4 at offsets 0 / 2 ms, then 10 ms x 4 at
-offsets 0 / 3 / 6 ms: a PRN not detected at one stage is searched at the next (the dwell
-extends) until it is detected or the schedule (its stated limit) ends. A stage runs only if
-the recording holds it twice (the verification needs a second, disjoint window).
+Hz wide (:func:`dsp.gnss.acquisition.refine_doppler` needs <= 500 Hz).
+:data:`DEFAULT_STAGES` is 1 ms x 10, then 5 ms x 6 at offsets 0 / 2 ms;
+:data:`DEEP_STAGES` adds 10 ms x 4 at offsets 0 / 3 / 6 ms. A PRN not detected at one stage
+is searched at the next (the dwell extends) until it is detected or the schedule (its stated
+limit) ends. A stage runs only if the recording holds it twice (dwell and verification).
+All PRNs go through the first stage first; the satellites it finds are then subtracted from
+the samples (:func:`cancel`) before the longer dwells, whose sensitivity would otherwise reach
+their cross-correlation with the other codes.
 
 False alarms and the threshold
 ------------------------------
@@ -32,27 +40,34 @@ Under noise only, a cell's normalised statistic ``Lambda`` is chi-square with ``
 of freedom (``K = n_noncoherent``); ``acquire`` sets the threshold for a per-search
 false-alarm probability over all its cells. Here ``pfa`` is the false-alarm probability of
 one PRN's whole first-dwell schedule: each of the ``S`` stages that run and each of its
-``A`` offsets gets ``pfa / (S A)`` (union bound), so a PRN absent from the recording passes
-a first dwell with probability at most ``pfa``, and one of 32 absent PRNs at most ``32 pfa``.
+``A`` offsets gets ``pfa / (S A)`` (union bound), so a PRN absent from noise passes a first
+dwell with probability at most ``pfa``. Real recordings break "noise only" (interference,
+other satellites' cross-correlation), which is what the verification is for.
 
 Verification
 ------------
 A first-dwell detection at Doppler ``f`` and code phase ``tau`` is reported only if the same
-stage, run on the next, disjoint window of the recording (``Dt`` later) detects the PRN
-again with its own threshold, within one Doppler bin of ``f`` and within one search cell of
-``tau + f Dt / 1540`` chips (the code drift in between). Noise cells are independent across
-the two windows, so a false first detection passes with probability at most the second
-dwell's ``pfa`` times the share of the grid inside the tolerance (about ``9 / N_cells``).
+stage, run on the next, disjoint window of the recording (``Dt`` later), exceeds a threshold
+in the cells within one Doppler bin of ``f`` and one cell of ``tau + f Dt / 1540`` chips (the
+code drift in between), the threshold set for ``verify_pfa`` (1e-3) over those few cells and
+the offsets, and above every other cell of that grid. Noise in the two windows is
+independent, so an absent PRN is reported with probability at most ``pfa x verify_pfa``;
+the second condition holds whatever the cells' distribution (interference, cross-correlation)
+as long as no cell is favoured: an absent PRN's local cells are the grid's maximum with
+probability ``n_local / N_cells`` (about 1e-4). Last, a detection at a stronger one's Doppler plus
+a multiple of 1 kHz and :data:`XCORR_MARGIN_DB` or more below it is refused as its
+cross-correlation (:func:`cross_correlation_suspects`).
 
 Refinement and C/N0
 -------------------
 At the full sample rate (zero IF, no filter): the Doppler by
-:func:`dsp.gnss.acquisition.refine_doppler` over up to ``refine_ms`` ms (kept only if it lies
-within one bin of the dwell's), then the code phase as the peak of the 1 ms non-coherent
-correlation power over the cells within ``D + 1`` of the dwell's, interpolated by a parabola
-through the peak and its neighbours; then the 1 ms prompt sums with a replica at that code
-phase and code rate, and C/N0 by :func:`dsp.gnss.cn0.cn0_m2m4` (insensitive to data bits and
-carrier phase).
+:func:`dsp.gnss.acquisition.refine_doppler` over up to ``refine_ms`` ms, then of it and
+it +- 500 Hz (the squaring's ambiguity), within one bin of the dwell's, the one with the most
+1 ms prompt power; the code phase where early minus late (1 chip apart) of the
+1 ms non-coherent amplitude over 40 ms, on a 0.05-chip grid around the dwell's cell, crosses
+zero; then 1 ms prompt sums from code epoch to code epoch with a replica at that code phase
+and code rate, and C/N0 by :func:`dsp.gnss.cn0.cn0_m2m4` on 20 ms blocks averaged
+(:func:`cn0_blocks`; insensitive to data bits and carrier phase).
 """
 from __future__ import annotations
 
@@ -286,10 +301,10 @@ def _dwell(xb, fs_d, prn, stage, pfa_each, max_doppler_hz):
 
 
 def _verify(xb, fs_d, prn, stage, doppler_hz, code_phase_chips, pfa_v, max_doppler_hz):
-    """The second dwell: at each offset, the largest ``Lambda`` of the cells within one
-    Doppler bin and one cell of (``doppler_hz``, ``code_phase_chips``), against the
-    threshold for ``pfa_v`` over those cells and offsets. Returns (passed, best Lambda /
-    threshold, its Doppler, its code phase)."""
+    """The second dwell: at some offset, the largest ``Lambda`` of the cells within one
+    Doppler bin and one cell of (``doppler_hz``, ``code_phase_chips``) must exceed the
+    threshold for ``pfa_v`` over those cells and offsets *and* every other cell of that
+    grid. Returns (passed, best local Lambda / threshold, its Doppler, its code phase)."""
     n = int(round(fs_d * CODE_PERIOD_S))
     bw = stage.bin_width_hz
     nb = int(math.floor(max_doppler_hz / bw))
@@ -299,20 +314,19 @@ def _verify(xb, fs_d, prn, stage, doppler_hz, code_phase_chips, pfa_v, max_doppl
     cells = (m0 + np.arange(-1, 2)) % n
     th = threshold(pfa_v / len(stage.alignments_ms), bins.size * cells.size,
                    stage.n_noncoherent)
-    best = (-1.0, 0.0, 0.0)
+    best = (False, -1.0, 0.0, 0.0)
     for a in stage.alignments_ms:
-        g = acquire(xb[a * n:], fs_d, prn, 0.0, n_coherent=stage.n_coherent,
-                    n_noncoherent=stage.n_noncoherent, max_doppler_hz=max_doppler_hz,
-                    bin_width_hz=bw, keep_grid=True).grid[np.ix_(bins, cells)]
+        grid = acquire(xb[a * n:], fs_d, prn, 0.0, n_coherent=stage.n_coherent,
+                       n_noncoherent=stage.n_noncoherent, max_doppler_hz=max_doppler_hz,
+                       bin_width_hz=bw, keep_grid=True).grid
+        g = grid[np.ix_(bins, cells)].copy()
+        grid[np.ix_(bins, cells)] = -np.inf
         i, j = np.unravel_index(int(np.argmax(g)), g.shape)
-        if g[i, j] / th > best[0]:
-            best = (float(g[i, j] / th), float(dop[bins[i]]),
+        ok = g[i, j] > th and g[i, j] > grid.max()
+        if (ok, g[i, j] / th) > best[:2]:
+            best = (bool(ok), float(g[i, j] / th), float(dop[bins[i]]),
                     float(cells[j] * CHIP_RATE_HZ / fs_d))
-    return best[0] > 1.0, best[0], best[1], best[2]
-
-
-def _circ_diff(a, b, period=CODE_LENGTH):
-    return (a - b + period / 2) % period - period / 2
+    return best
 
 
 def _code(fs, prn, f, cp, n):
@@ -352,11 +366,16 @@ def _prompts(y, fs, prn, f, cp, n_ms, epochs=False):
     return z.reshape(n_ms, N).sum(axis=1)
 
 
-def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms):
+def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms, bin_width_hz):
     """Full-rate Doppler, code phase and C/N0 (module docstring)."""
     N = int(round(fs * CODE_PERIOD_S))
     n_ms = min(refine_ms, xf.size // N)
     f = refine_doppler(xf, fs, prn, 0.0, fd, cp, n_ms=n_ms) if n_ms >= 2 else fd
+    # the squaring leaves a 500 Hz ambiguity: keep the candidate with the most 1 ms power
+    cands = [c for c in (f, f - 500.0, f + 500.0) if abs(c - fd) <= bin_width_hz] or [fd]
+    pw = [np.sum(np.abs(_prompts(_wipe(xf, fs, c, n_ms * N), fs, prn, c, cp, n_ms)) ** 2)
+          for c in cands]
+    f = cands[int(np.argmax(pw))]
     # code phase: the zero of early - late (1 chip apart) of the 1 ms non-coherent amplitude
     n_c = min(n_ms, CODE_MS)
     h = int(round(0.5 / CODE_GRID_CHIPS))
@@ -496,9 +515,7 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
                         "metric": r1.peak / r1.threshold, "verify_metric": m2})
             return None
         f, cp, cn0 = _refine(xf, fs_hz, prn, r1.doppler_hz, r1.code_phase_chips,
-                             CHIP_RATE_HZ / fs_d, rf_ms)
-        if abs(f - r1.doppler_hz) > st.bin_width_hz:
-            f = r1.doppler_hz        # refinement outside the bin: keep the dwell's
+                             CHIP_RATE_HZ / fs_d, rf_ms, st.bin_width_hz)
         return Detection(prn, float(f), cp, cn0, r1.peak / r1.threshold, si, str(st),
                          r1.doppler_hz, r1.code_phase_chips, r1.peak, r1.threshold,
                          m2, a1, st.bin_width_hz)
