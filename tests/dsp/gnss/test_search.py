@@ -143,3 +143,53 @@ REAL = {"12": ("L1_20211125_004000_12MHz_I_70ms.bin", "int8", 12e6, 3e6, False),
 def _real(key):
     name, fmt, fs, f_if, inv = REAL[key]
     return SampleFile(DATA / name, fmt, fs, f_if, inverted=inv)
+
+
+#: What the first dwell (1 ms x 10) finds and verifies in the first 70 ms, all 32 PRNs
+#: searched; the same sets come out of the whole recordings (``python -m cosim gnss-acquire``).
+STRONG = {"12": {2, 5, 11, 13, 15, 18, 20, 29, 30}, "4": {4, 16, 18, 26, 29, 31, 32}}
+
+
+@pytest.mark.parametrize("key", ["12", "4"])
+def test_real_recording_strong_satellites(key):
+    f = _real(key)
+    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted,
+                     stages=(Stage(1, 10),))
+    assert {d.prn for d in rep.detections} == STRONG[key]
+    assert all(d.cn0_dbhz > 35 and d.metric > 1 and d.verify_metric > 1
+               for d in rep.detections)
+
+
+@pytest.mark.parametrize("key", ["12", "4"])
+def test_real_recording_consistent_across_parts(key):
+    """The same satellites, searched again from 30 ms later (dwells on 30-40 and 40-50 ms,
+    refinement on 30-60 ms; the first search: 0-10, 10-20 and 0-30 ms, independent): the
+    same Doppler within 10 Hz and the code phase moved by its drift, within 3 sigma of the
+    difference of two early-late estimates (1 chip spacing, 30 ms: sigma^2 = 1 / (2 C/N0
+    T) each) or one sample, whichever is larger."""
+    f = _real(key)
+    a = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted,
+                   prns=sorted(STRONG[key]), stages=(Stage(1, 10),), refine_ms=30)
+    off = 30 * f.samples_per_ms
+    b = search_all(lambda n0, n: f.read(n0 + off, n), f.n_samples - off, f.fs_hz, f.if_hz,
+                   f.doppler_sign_inverted, prns=sorted(STRONG[key]), stages=(Stage(1, 10),),
+                   refine_ms=30)
+    da, db = {d.prn: d for d in a.detections}, {d.prn: d for d in b.detections}
+    assert set(da) == set(db) == STRONG[key]
+    for p in da:
+        assert abs(da[p].doppler_hz - db[p].doppler_hz) <= 10.0, p
+        drift = da[p].doppler_hz * 0.030 / 1540
+        dc = (db[p].code_phase_chips - da[p].code_phase_chips - drift + 511.5) % 1023 - 511.5
+        cn0 = 10 ** (min(da[p].cn0_dbhz, db[p].cn0_dbhz) / 10)
+        tol = max(CHIP_RATE_HZ / f.fs_hz, 3 * np.sqrt(2 / (2 * cn0 * 0.030)))
+        assert abs(dc) <= tol, (p, dc, tol)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("key,weak", [("12", {24, 28}), ("4", {3, 25})])
+def test_real_recording_default_schedule(key, weak):
+    """The default schedule adds weaker satellites (the 5 ms x 6 dwell, after the strong
+    ones are cancelled)."""
+    f = _real(key)
+    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted)
+    assert {d.prn for d in rep.detections} == STRONG[key] | weak
