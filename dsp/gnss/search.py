@@ -64,13 +64,14 @@ At the full sample rate (zero IF, no filter): the Doppler by
 :func:`dsp.gnss.acquisition.refine_doppler` over up to ``refine_ms`` ms, then of it and
 it +- 500 Hz (the squaring's ambiguity), within one bin of the dwell's, the one with the most
 1 ms prompt power; the code phase where early minus late (1 chip apart) of the
-1 ms non-coherent amplitude over 40 ms, on a 0.05-chip grid around the dwell's cell, crosses
+1 ms non-coherent amplitude over 40 ms, on a 0.1-chip grid around the dwell's cell, crosses
 zero; then 1 ms prompt sums from code epoch to code epoch with a replica at that code phase
 and code rate, and C/N0 by :func:`dsp.gnss.cn0.cn0_m2m4` on 20 ms blocks averaged
 (:func:`cn0_blocks`; insensitive to data bits and carrier phase).
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -84,7 +85,7 @@ from .cn0 import cn0_m2m4
 #: The C/A main lobe, null to null (Hz): the lowest decimated complex rate by default.
 MIN_RATE_HZ = 2 * CHIP_RATE_HZ
 #: Code-phase refinement: grid step (chips) and recording used (ms).
-CODE_GRID_CHIPS, CODE_MS = 0.05, 40
+CODE_GRID_CHIPS, CODE_MS = 0.1, 40
 #: C/N0: M2M4 blocks (ms).
 CN0_BLOCK_MS = 20
 #: A detection this far (dB) below a stronger one at its Doppler + k kHz is refused as its
@@ -329,10 +330,15 @@ def _verify(xb, fs_d, prn, stage, doppler_hz, code_phase_chips, pfa_v, max_doppl
     return best
 
 
+@functools.lru_cache(maxsize=32)
+def _levels(prn: int) -> np.ndarray:
+    return ca_code_levels(prn).astype(np.float64)
+
+
 def _code(fs, prn, f, cp, n):
     """Code at phase ``cp`` (chips at sample 0) and the code rate of Doppler ``f``, samples
     ``0 .. n - 1``."""
-    code = ca_code_levels(prn).astype(np.float64)
+    code = _levels(prn)
     nn = np.arange(n)
     chips = np.floor(cp + nn * (CHIP_RATE_HZ * (1 + f / L1_HZ) / fs)).astype(np.int64)
     return code[chips % CODE_LENGTH]

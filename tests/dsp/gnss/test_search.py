@@ -100,15 +100,19 @@ def test_eight_satellites_every_format_all_prns(tmp_path, fmt, fs, f_if, amap):
     _check_found(rep, sats, fs)
 
 
-def test_ten_ms_dwell_with_bit_edges_finds_a_weak_satellite():
-    """32 dB-Hz with data bits: not found by the default dwells, found by the 10 ms
-    coherent stage of the deep schedule (bit-edge offsets 0 / 3 / 6 ms)."""
-    sat = [SatelliteSpec(11, 1750.0, 333.3, 32.0, 0.2)]
+def test_dwell_extends_and_ten_ms_dwell_finds_a_weak_satellite():
+    """33 dB-Hz with data bits: the 1 ms x 10 dwell misses it, the schedule goes on to a
+    longer dwell that finds it; the 10 ms coherent stage alone (bit-edge offsets 0 / 3 /
+    6 ms) finds it too, with the Doppler within 10 Hz."""
+    sat = [SatelliteSpec(11, 1750.0, 333.3, 33.0, 0.2)]
     r = SyntheticRecording("int8-iq", 2.048e6, 0.0, 0.1, sat, seed=3)
-    rep = search_all(r.samples, r.n_samples, 2.048e6, 0.0, prns=[11], stages=DEEP_STAGES[:2])
+    rep = search_all(r.samples, r.n_samples, 2.048e6, 0.0, prns=[11], stages=DEEP_STAGES[:1])
     assert rep.detections == []
     rep = search_all(r.samples, r.n_samples, 2.048e6, 0.0, prns=[11], stages=DEEP_STAGES)
-    assert [d.prn for d in rep.detections] == [11] and rep.detections[0].stage == 2
+    assert [d.prn for d in rep.detections] == [11] and rep.detections[0].stage >= 1
+    rep = search_all(r.samples, r.n_samples, 2.048e6, 0.0, prns=[11], stages=DEEP_STAGES[2:])
+    assert [d.prn for d in rep.detections] == [11]
+    assert rep.detections[0].stage_text == "10ms x 4 @ [0, 3, 6] ms"
     assert abs(rep.detections[0].doppler_hz - 1750.0) <= 10.0
 
 
