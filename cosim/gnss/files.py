@@ -2,20 +2,16 @@
 
 Formats (raw, headerless, little-endian, sample ``n`` at ``t = n / fs``)
 ----------------------------------------------------------------------
-==========  ============================================  ==================
-``format``  layout                                        sample
-==========  ============================================  ==================
-int8        one signed byte per sample                    real, at IF
-int8-iq     signed bytes I0 Q0 I1 Q1 ...                  complex ``I + jQ``
-int16-iq    signed 16-bit words I0 Q0 I1 Q1 ...           complex ``I + jQ``
-cf32        float32 pairs I0 Q0 ... (GNU Radio gr_complex)  complex ``I + jQ``
-==========  ============================================  ==================
+* ``int8``: one signed byte per sample, real samples at the IF;
+* ``int8-iq``: signed bytes I0 Q0 I1 Q1 ..., complex ``I + jQ``;
+* ``int16-iq``: signed 16-bit words I0 Q0 I1 Q1 ..., complex ``I + jQ``;
+* ``cf32``: float32 pairs I0 Q0 ... (GNU Radio's ``gr_complex``), complex ``I + jQ``.
 
 A real file carries the signal at ``if_hz`` (``0 <= if_hz < fs/2``); a complex file at a
 complex IF ``-fs/2 < if_hz < fs/2`` (0: zero-IF baseband). ``inverted`` declares a spectrum
 inverted by the front end: a complex file is then read as ``I - jQ`` (the Q sign flipped,
 which PocketSDR front ends need), a real file keeps its samples and the searcher turns its
-Doppler sign (:attr:`SampleFile.inverted`).
+Doppler sign (:attr:`SampleFile.doppler_sign_inverted`).
 
 ADC map
 -------

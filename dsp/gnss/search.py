@@ -485,6 +485,11 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
     if not (isinstance(max_doppler_hz, (int, float)) and 0 < max_doppler_hz <= 50e3):
         raise ValueError(f"--max-doppler-hz must be in (0, 50000] Hz, not {max_doppler_hz!r}")
     stages = _check_stages(stages)
+    if not (isinstance(verify_pfa, (int, float)) and 0 < verify_pfa < 1):
+        raise ValueError(f"verify_pfa must be in (0, 1), not {verify_pfa!r}")
+    if isinstance(refine_ms, bool) or not isinstance(refine_ms, (int, np.integer)) \
+            or refine_ms < 2:
+        raise ValueError(f"refine_ms must be an integer >= 2 (ms), not {refine_ms!r}")
     N = int(round(fs_hz * CODE_PERIOD_S))
     if abs(N - fs_hz * CODE_PERIOD_S) > 1e-6 * N:
         raise ValueError(f"--fs-hz {fs_hz:g} gives no whole number of samples per 1 ms")

@@ -197,3 +197,18 @@ def test_real_recording_default_schedule(key, weak):
     f = _real(key)
     rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted)
     assert {d.prn for d in rep.detections} == STRONG[key] | weak
+
+
+def test_search_errors():
+    r = SyntheticRecording("int8-iq", 2.048e6, 0.0, 0.01, [], seed=1)
+    with pytest.raises(ValueError, match=r"the recording \(10 ms\) is too short for any stage: "
+                                         r"the first needs 2 x 10 ms"):
+        search_all(r.samples, r.n_samples, 2.048e6, 0.0)
+    with pytest.raises(ValueError, match=r"--pfa must be in \(0, 1\), not 1.5"):
+        search_all(r.samples, r.n_samples, 2.048e6, 0.0, pfa=1.5)
+    with pytest.raises(ValueError, match="stage n_coherent must be <= 20 ms"):
+        Stage(25, 2)
+    with pytest.raises(ValueError, match="--stages entries must be TxK"):
+        Stage.parse("10-4")
+    assert Stage.parse("10x4@0/3/6") == DEEP_STAGES[2]
+    assert Stage.parse("1x10") == DEEP_STAGES[0]
