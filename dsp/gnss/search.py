@@ -66,7 +66,8 @@ it +- 500 Hz (the squaring's ambiguity), within one bin of the dwell's, the one 
 1 ms prompt power; the code phase where early minus late (1 chip apart) of the
 1 ms non-coherent amplitude over 40 ms, on a 0.1-chip grid around the dwell's cell, crosses
 zero; then 1 ms prompt sums from code epoch to code epoch with a replica at that code phase
-and code rate, and C/N0 by :func:`dsp.gnss.cn0.cn0_m2m4` on 20 ms blocks averaged
+(or at the grid's peak if that has more power) and code rate, and C/N0 by
+:func:`dsp.gnss.cn0.cn0_m2m4` on 20 ms blocks averaged
 (:func:`cn0_blocks`; insensitive to data bits and carrier phase).
 """
 from __future__ import annotations
@@ -86,7 +87,9 @@ from .cn0 import cn0_m2m4
 MIN_RATE_HZ = 2 * CHIP_RATE_HZ
 #: Code-phase refinement: grid step (chips) and recording used (ms).
 CODE_GRID_CHIPS, CODE_MS = 0.1, 40
-#: C/N0: M2M4 blocks (ms).
+#: C/N0: M2M4 blocks (ms). Short blocks follow a slowly changing amplitude (the code
+#: drifting across a sample grid commensurate with the chip rate); the price: an M2M4 on
+#: 20 prompts reads +0.6-0.9 dB high, 0.9-1.3 dB rms (Monte Carlo, 35-50 dB-Hz, 70 ms).
 CN0_BLOCK_MS = 20
 #: A detection this far (dB) below a stronger one at its Doppler + k kHz is refused as its
 #: cross-correlation (C/A Gold codes: worst 1 ms cross-correlation -23.9 dB).
@@ -398,7 +401,13 @@ def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms, bin_width_hz):
         j = int(up[np.argmin(np.abs(up - i))])
         cp_f = mid[j] + CODE_GRID_CHIPS * (-el[j]) / (el[j + 1] - el[j])
     cp_f = float(cp_f % CODE_LENGTH)
-    p = _prompts(y, fs, prn, f, cp_f, n_ms, epochs=True)
+    # C/N0 at the early-late phase or at the grid's peak, whichever has more power: with a
+    # sample rate commensurate with the chip rate the correlation is flat over a sample and
+    # the early-late zero may sit anywhere on that flat top, or just off it
+    cp_c = cp_f
+    if np.sum(np.abs(_prompts(y, fs, prn, f, cp_f, n_c)) ** 2) < amp[h + i] ** 2:
+        cp_c = float(mid[i] % CODE_LENGTH)
+    p = _prompts(y, fs, prn, f, cp_c, n_ms, epochs=True)
     return f, cp_f, cn0_blocks(p)
 
 
