@@ -296,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_adc_loss(sub)
     _add_bench(sub)
     _add_hdl(sub)
+    from .gnss.acquire_cli import add_parser as _add_gnss_acquire
+    _add_gnss_acquire(sub, _parser)
     return p
 
 

@@ -2,9 +2,10 @@
 
 Search
 ------
-The snapshot ``x[n]`` (real IF samples, ``n = 0 .. N_tot - 1`` from sample ``n0`` of the
-record) is cut into code periods of ``N = fs T_code`` samples (``fs`` must give a whole
-number per 1 ms period). For each Doppler bin ``f_D`` the carrier is wiped off,
+The snapshot ``x[n]`` (real IF samples, or complex samples at a complex IF such as 0;
+``n = 0 .. N_tot - 1`` from sample ``n0`` of the record) is cut into code periods of
+``N = fs T_code`` samples (``fs`` must give a whole number per 1 ms period). For each
+Doppler bin ``f_D`` the carrier is wiped off,
 ``y[n] = x[n] exp(-j 2 pi (f_IF + s f_D) n / fs)`` (``s = -1`` for an inverted spectrum),
 and for every code period ``p`` the circular correlation with the sampled replica
 ``c_r[n] = c(floor(n f_chip / fs))`` is taken by FFT::
@@ -53,6 +54,12 @@ import numpy as np
 from scipy import stats
 
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
+
+
+def _samples(x) -> np.ndarray:
+    """Real samples as float64, complex (baseband) samples as complex128."""
+    x = np.asarray(x)
+    return x.astype(np.complex128 if np.iscomplexobj(x) else np.float64, copy=False)
 
 
 def threshold(pfa: float, n_cells: int, n_noncoherent: int) -> float:
@@ -111,7 +118,7 @@ def acquire(x, fs_hz: float, prn: int, if_hz: float, inverted: bool = False,
     bw = 2.0 / (3.0 * T) if bin_width_hz is None else float(bin_width_hz)
     if not (math.isfinite(bw) and bw > 0):
         raise ValueError(f"bin_width_hz must be > 0, not {bin_width_hz!r}")
-    x = np.asarray(x, dtype=np.float64)
+    x = _samples(x)
     need = N * n_coherent * n_noncoherent
     if x.size < need:
         raise ValueError(f"the snapshot needs {need} samples ({n_coherent} x {n_noncoherent} ms), "
@@ -160,7 +167,7 @@ def refine_doppler(x, fs_hz: float, prn: int, if_hz: float, doppler_hz: float,
     N = int(round(fs * CODE_PERIOD_S))
     if isinstance(n_ms, bool) or not isinstance(n_ms, (int, np.integer)) or n_ms < 2:
         raise ValueError(f"n_ms (refinement length, ms) must be an integer >= 2, not {n_ms!r}")
-    x = np.asarray(x, dtype=np.float64)
+    x = _samples(x)
     if x.size < n_ms * N:
         raise ValueError(f"Doppler refinement needs {n_ms * N} samples ({n_ms} ms), not {x.size}")
     s = -1.0 if inverted else 1.0

@@ -1,0 +1,102 @@
+"""``python -m cosim gnss-acquire``: every GPS L1 C/A satellite in a sample file.
+
+Opens the recording (:class:`cosim.gnss.files.SampleFile`: format, rate, IF, spectrum,
+ADC map, all checked before any work), runs :func:`dsp.gnss.search.search_all` and prints
+the satellites found (PRN, Doppler, code phase, C/N0, metric = first-dwell peak /
+threshold), the first-dwell detections the verification refused, and the search's
+settings; ``--json`` prints the same as one JSON object.
+"""
+from __future__ import annotations
+
+import time
+
+from ..validate import check_float, dumps
+from .files import DEFAULT_ADC_MAP, FORMATS, SampleFile
+
+
+def _prns(text: str) -> list[int]:
+    out = []
+    try:
+        for part in text.split(","):
+            a, _, b = part.partition("-")
+            lo, hi = int(a), int(b) if b else int(a)
+            out.extend(range(lo, hi + 1))
+    except ValueError:
+        raise ValueError(f"--prns must be a list such as 1-32 or 3,7,10-12, not {text!r}") \
+            from None
+    if not out or any(not 1 <= p <= 32 for p in out):
+        raise ValueError(f"--prns must name PRNs in 1-32, not {text!r}")
+    return sorted(set(out))
+
+
+def add_parser(sub, make_parser) -> None:
+    """Register ``gnss-acquire`` on the subparsers ``sub`` (``make_parser(sub, name, **kw)``
+    adds the common options, as in :mod:`cosim.cli`)."""
+    p = make_parser(sub, "gnss-acquire",
+                    help="acquire every GPS L1 C/A PRN in a sample file (int8, int8-iq, "
+                         "int16-iq, cf32): the satellites found with Doppler, code phase, "
+                         "C/N0")
+    p.add_argument("--file", required=True, help="the recording (raw samples, no header)")
+    p.add_argument("--format", required=True, choices=list(FORMATS),
+                   help="int8 real; int8-iq / int16-iq interleaved I, Q; cf32 complex float32")
+    p.add_argument("--fs-hz", type=float, required=True,
+                   help="sample rate (S/s); a whole number of samples per 1 ms")
+    p.add_argument("--if-hz", type=float, default=0.0,
+                   help="IF (Hz): real [0, fs/2), complex (-fs/2, fs/2)")
+    p.add_argument("--invert-spectrum", action="store_true",
+                   help="the front end inverts the spectrum (complex: read as I - jQ)")
+    p.add_argument("--adc-map", default=None,
+                   help="odd:B, int:B, float or float:B (default by format: " +
+                        ", ".join(f"{k} {v}" for k, v in DEFAULT_ADC_MAP.items()) + ")")
+    p.add_argument("--prns", default="1-32", help="PRNs to search, e.g. 1-32 or 3,7,10-12")
+    p.add_argument("--pfa", type=float, default=1e-3,
+                   help="false-alarm probability of one PRN's first dwells (before "
+                        "verification)")
+    p.add_argument("--max-doppler-hz", type=float, default=5000.0, help="search +- Doppler (Hz)")
+    p.add_argument("--stages", default=None,
+                   help="dwell schedule, comma-separated TxK[@a/b] (coherent ms x sums @ "
+                        "offsets ms), e.g. 1x10,5x6@0/2,10x4@0/3/6 (default: 1x10,5x6@0/2)")
+    p.add_argument("--min-rate-hz", type=float, default=2.046e6,
+                   help="lowest decimated complex rate of the search (S/s)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(a) -> int:
+    from dsp.gnss.search import DEFAULT_STAGES, Stage, search_all
+    prns = _prns(a.prns)
+    check_float("--pfa", a.pfa, 0, 1, lo_open=True, hi_open=True)
+    check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
+    check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
+    stages = DEFAULT_STAGES if a.stages is None else \
+        tuple(Stage.parse(t) for t in a.stages.split(","))
+    f = SampleFile(a.file, a.format, a.fs_hz, a.if_hz, a.invert_spectrum, a.adc_map)
+    t0 = time.time()
+    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
+                     a.pfa, a.max_doppler_hz, stages, a.min_rate_hz)
+    out = {"recording": f.describe(), **rep.as_dict(), "wall_s": round(time.time() - t0, 1)}
+    if a.json:
+        print(dumps(out))
+        return 0
+    d = f.describe()
+    print(f"{d['file']}: {d['format']}, {d['fs_hz'] / 1e6:g} MS/s, IF {d['if_hz'] / 1e6:g} MHz"
+          f"{', spectrum inverted' if f.inverted else ''}, ADC map {d['adc_map']}, "
+          f"{d['duration_s'] * 1e3:.1f} ms")
+    print(f"search at {rep.fs_hz / rep.decimation / 1e6:g} MS/s (decimation {rep.decimation}), "
+          f"Doppler +-{rep.max_doppler_hz:g} Hz, pfa {rep.pfa:g} per PRN before verification; "
+          f"stages run: {'; '.join(rep.stages_run)}"
+          + (f"; skipped (recording too short): {'; '.join(rep.stages_skipped)}"
+             if rep.stages_skipped else ""))
+    print(f"{'PRN':>4} {'Doppler Hz':>11} {'code chips':>11} {'C/N0 dB-Hz':>11} "
+          f"{'metric':>7}  stage")
+    for x in rep.detections:
+        print(f"{x.prn:>4} {x.doppler_hz:>11.1f} {x.code_phase_chips:>11.3f} "
+              f"{x.cn0_dbhz:>11.1f} {x.metric:>7.2f}  {x.stage_text}")
+    print(f"{len(rep.detections)} satellites found in {out['wall_s']} s; "
+          f"{len(rep.rejected)} first-dwell detections refused"
+          + (": " + ", ".join(f"PRN {r['prn']}" + (f" (cross-correlation of PRN "
+                                                    f"{r['cross_correlation_of']})"
+                                                    if "cross_correlation_of" in r else
+                                                    " (not re-detected)")
+                             for r in rep.rejected) if rep.rejected else ""))
+    return 0
