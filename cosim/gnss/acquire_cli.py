@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 
-from ..validate import check_float, dumps
+from ..core.validate import check_float, dumps
 from .files import DEFAULT_ADC_MAP, FORMATS, SampleFile
 
 

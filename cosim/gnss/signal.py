@@ -93,7 +93,7 @@ def agc_step_sigma(adc_bits: int, agc_full_scale_sigma: float | None = None) -> 
 
 
 @njit_cached(nogil=True)
-def _if_kernel(n0, f_ratio, sign, phase0, chip0, chips_per_sample, motion, phi, code, bits,
+def if_kernel(n0, f_ratio, sign, phase0, chip0, chips_per_sample, motion, phi, code, bits,
                bit0, sigma, noise, amp, out):
     """One pass over a block: code x data x carrier (+ noise), the model of the docstring.
 
@@ -383,7 +383,7 @@ class GnssSignalGenerator:
         phi = m + self.osc.phase_cycles(t) if self.osc.active else m
         noise = self._noise(n0, n) if self.sigma > 0 else np.zeros(0)
         x = np.empty(n)
-        _if_kernel(n0, self.f_ratio, self.sign, self.cfg.carrier_phase_cycles,
+        if_kernel(n0, self.f_ratio, self.sign, self.cfg.carrier_phase_cycles,
                    self.cfg.code_phase_chips, CHIP_RATE_HZ / self.cfg.fs_hz, m, phi,
                    self.code, self.bits, self.bit0, self.sigma, noise,
                    1.0 if self.cfg.signal_present else 0.0, x)

@@ -41,7 +41,7 @@ from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, L1_HZ, ca_code_levels, c
 
 from .files import BLOCK_SAMPLES, FORMATS, AdcMap, check_format, check_if, samples_per_ms, \
     write_samples
-from .signal import CHIPS_PER_BIT, NOISE_CHUNK, _if_kernel, agc_step_sigma
+from .signal import CHIPS_PER_BIT, NOISE_CHUNK, if_kernel, agc_step_sigma
 
 
 @dataclass(frozen=True)
@@ -142,7 +142,7 @@ class SyntheticRecording:
         sign = -1.0 if (self.inverted and not self.is_complex) else 1.0
         out = np.empty(n)
         bit0, bits = self._bits[i]
-        _if_kernel(n0, self.if_hz / self.fs_hz, sign,
+        if_kernel(n0, self.if_hz / self.fs_hz, sign,
                    s.carrier_phase_cycles - (0.25 if quarter else 0.0), s.code_phase_chips,
                    CHIP_RATE_HZ / self.fs_hz, m, m, ca_code_levels(s.prn).astype(np.float64),
                    bits, bit0, 0.0, np.zeros(0), self.amps[i], out)
