@@ -1,7 +1,7 @@
 """``python -m cosim bench gnss-speed``: closed-loop simulation speed of one GNSS channel.
 
-The same record (default scenario: PRN 7, 45 dB-Hz, seed-002 dynamics, 16.368 MS/s, 2-bit
-ADC) is tracked closed loop (:func:`cosim.gnss.tracking.closed_loop`: pipeline, FIFO service
+The same record (default scenario: PRN 7, 45 dB-Hz, the AUKF patent's dynamics, 16.368
+MS/s, 2-bit ADC) is tracked closed loop (:func:`cosim.gnss.tracking.closed_loop`: pipeline, FIFO service
 every 0.5 ms, fixed-point 3rd-order PLL writing the NCO words back) on the bit-exact model
 and on Verilator, after an untimed warm-up (numba compilation, the Verilator build). The
 ADC words are generated before the clock starts: the figure is the closed loop's (channel,
@@ -30,7 +30,7 @@ def gnss_speed(out: Path, quick: bool = False, duration_s: float | None = None) 
     from .tracking import acquire_handover, adc_words, closed_loop
     from .signal import GnssSignalConfig, GnssSignalGenerator
     dur = duration_s if duration_s is not None else (0.1 if quick else 1.0)
-    sig = DynamicsChoice("seed002").apply(GnssSignalConfig(prn=7, cn0_dbhz=45.0,
+    sig = DynamicsChoice("aukf-patent").apply(GnssSignalConfig(prn=7, cn0_dbhz=45.0,
                                                            duration_s=dur + 0.05))
     run = GnssRunConfig(dsp="fixed", tracker="pll3", bn_hz=15.0)
     gen = GnssSignalGenerator(sig)
@@ -58,7 +58,7 @@ def gnss_speed(out: Path, quick: bool = False, duration_s: float | None = None) 
                      "samples_per_s": n / wall, "x_real_time": n / wall / REAL_TIME_SPS})
     same = len(set(json.dumps(d, sort_keys=True) for d in digests.values())) == 1
     res = {"machine": machine_info(), "benchmark": "gnss-speed", "duration_s": dur,
-           "scenario": "PRN 7, 45 dB-Hz, seed002 (1000 m/s, 1 g), 16.368 MS/s, 2-bit ADC, "
+           "scenario": "PRN 7, 45 dB-Hz, aukf-patent (1000 m/s, 1 g), 16.368 MS/s, 2-bit ADC, "
                        "pll3 fixed, Bn 15 Hz, DSP service 0.5 ms",
            "rows": rows, "same_bits": same, "digests": digests}
     if len(rows) == 2:
@@ -165,7 +165,7 @@ def _tracking_markdown(r: dict) -> str:
              f"3rd-order {lp['discriminator']} PLL, Bn {lp['bn_hz']:g} Hz, T "
              f"{lp['T_s'] * 1e3:g} ms (DLL Bn {lp['dll_bn_hz']:g} Hz, E-L "
              f"{lp['spacing_chips']:g} chip), closed loop on the correlation-domain fast path "
-             "(`cosim.gnss.loopsim`), seed-002 dynamics (1000 m/s, 1 g).", "",
+             "(`cosim.gnss.loopsim`), the AUKF patent's dynamics (1000 m/s, 1 g).", "",
              "## Thermal jitter vs Kaplan", "",
              f"{r['config']['jitter']['n_trials']} trials x "
              f"{r['config']['jitter']['duration_s']:g} s per C/N0 (first 0.3 s skipped); "

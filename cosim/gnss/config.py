@@ -23,7 +23,7 @@ __all__ = ["GnssRunConfig", "DynamicsChoice", "BACKENDS", "DSP_MODES", "SCENARIO
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
 DSP_MODES = ("float", "fixed")
-DYNAMICS = ("static", "seed002", "seed002-jerk", "seed002-process")
+DYNAMICS = ("static", "aukf-patent", "aukf-patent-jerk", "aukf-patent-process")
 #: Simulation speed of the cycle-accurate backends (cycles/s, one channel, this machine's
 #: order of magnitude) and the longest run started on them (s of wall time).
 CYCLES_PER_S = {"pysim": 2e3, "verilator": 2e6}
@@ -33,16 +33,16 @@ WORD_BITS = 32
 
 
 #: Named scenarios of ``python -m cosim gnss --scenario NAME``: the options each sets (an
-#: option given on the command line wins) and, under ``"tracker"``, what the seed fixes
+#: option given on the command line wins) and, under ``"tracker"``, what the patent fixes
 #: that the trackers take as their defaults (written into the run's JSON).
 SCENARIOS = {
-    "seed002": {
-        "help": "seed 002 (RECEIVERS.md section 1): the x0 dynamics (1000 m/s, 1 g), "
+    "aukf-patent": {
+        "help": "the AUKF patent's scenario: the x0 dynamics (1000 m/s, 1 g), "
                 "32 dB-Hz, T = 1 ms",
-        "options": {"cn0_dbhz": 32.0, "dynamics": "seed002"},
+        "options": {"cn0_dbhz": 32.0, "dynamics": "aukf-patent"},
         # an acquisition for 32 dB-Hz (the default 1 ms x 5 and 1 ms x 20 miss it):
         # 2 ms coherent (125 Hz bins) x 20 non-coherent, 40 ms Doppler refinement
-        # and the tracker started on the seed's x0 Doppler rate (w1 / 2 pi)
+        # and the tracker started on the patent's x0 Doppler rate (w1 / 2 pi)
         "run": {"acq_coherent_ms": 2, "acq_noncoherent": 20, "acq_bin_hz": 125.0,
                 "refine_ms": 40, "handover_doppler_rate_hz_s": 323.356 / (2 * math.pi)},
         "tracker": {"x0": [0.0, 32995.519, 323.356, 0.0], "T_s": 1e-3,
@@ -60,24 +60,24 @@ class DynamicsChoice:
     Parameters
     ----------
     dynamics : str
-        ``static`` (the signal's own profile, constant range by default), ``seed002`` (the
-        seed-002 initial dynamics, 1000 m/s and 1 g, deterministic), ``seed002-jerk`` (that
-        plus a constant jerk segment), ``seed002-process`` (the seed-002 Singer jerk process,
+        ``static`` (the signal's own profile, constant range by default), ``aukf-patent`` (the
+        AUKF patent's initial dynamics, 1000 m/s and 1 g, deterministic), ``aukf-patent-jerk`` (that
+        plus a constant jerk segment), ``aukf-patent-process`` (the patent's Singer jerk process,
         q = 5).
     jerk_g_per_s, jerk_start_s, jerk_duration_s : float
-        The jerk segment of ``seed002-jerk``.
+        The jerk segment of ``aukf-patent-jerk``.
     """
 
     dynamics: str = field(default="static", metadata={
-        "help": "line-of-sight dynamics: static, seed002 (1000 m/s, 1 g), seed002-jerk "
-                "(plus a jerk segment), seed002-process (Singer jerk process, q 5); default static",
+        "help": "line-of-sight dynamics: static, aukf-patent (1000 m/s, 1 g), aukf-patent-jerk "
+                "(plus a jerk segment), aukf-patent-process (Singer jerk process, q 5); default static",
         "choices": DYNAMICS, "case": "lower"})
     jerk_g_per_s: float = field(default=5.0, metadata={
-        "help": "jerk of the seed002-jerk segment (g/s)"})
+        "help": "jerk of the aukf-patent-jerk segment (g/s)"})
     jerk_start_s: float = field(default=2.0, metadata={
-        "help": "start of the seed002-jerk segment (s)"})
+        "help": "start of the aukf-patent-jerk segment (s)"})
     jerk_duration_s: float = field(default=2.0, metadata={
-        "help": "length of the seed002-jerk segment (s)"})
+        "help": "length of the aukf-patent-jerk segment (s)"})
 
     def __post_init__(self):
         if self.dynamics not in DYNAMICS:
@@ -88,16 +88,16 @@ class DynamicsChoice:
         check_float("jerk_duration_s", self.jerk_duration_s, 0.0, lo_open=True, unit="s")
 
     def apply(self, sig: GnssSignalConfig) -> GnssSignalConfig:
-        from .dynamics import seed002
+        from .dynamics import aukf_patent_dynamics
         if self.dynamics == "static":
             return sig
-        if self.dynamics == "seed002":
-            return sig.replace(dynamics=seed002(q=0))
-        if self.dynamics == "seed002-process":
-            return sig.replace(dynamics=seed002(q=5.0))
-        return sig.replace(dynamics=seed002(q=0, jerk_g_per_s=self.jerk_g_per_s,
-                                            jerk_start_s=self.jerk_start_s,
-                                            jerk_duration_s=self.jerk_duration_s))
+        if self.dynamics == "aukf-patent":
+            return sig.replace(dynamics=aukf_patent_dynamics(q=0))
+        if self.dynamics == "aukf-patent-process":
+            return sig.replace(dynamics=aukf_patent_dynamics(q=5.0))
+        return sig.replace(dynamics=aukf_patent_dynamics(q=0, jerk_g_per_s=self.jerk_g_per_s,
+                                                         jerk_start_s=self.jerk_start_s,
+                                                         jerk_duration_s=self.jerk_duration_s))
 
 
 @dataclass(frozen=True)
@@ -171,12 +171,12 @@ class GnssRunConfig:
     handover_doppler_sigma_hz: float = field(default=3.0, metadata={
         "help": "1-sigma error of the refined hand-over Doppler told to the tracker (Hz)"})
     r_mode: str = field(default="cn0", metadata={
-        "help": "measurement noise R of the seed-002 trackers (aukf, ukf): cn0 = 1/(2 T C/N0) "
-                "of the nominal C/N0, seed = the seed's 1e-9",
+        "help": "measurement noise R of the AUKF patent's trackers (aukf, ukf): cn0 = 1/(2 T C/N0) "
+                "of the nominal C/N0, seed = the patent's 1e-9",
         "choices": ("cn0", "seed"), "case": "lower"})
     handover_doppler_rate_hz_s: float = field(default=0.0, metadata={
         "help": "Doppler rate the tracker starts on (Hz/s; acquisition does not measure it; "
-                "--scenario seed002: the seed's x0, 51.464 Hz/s)"})
+                "--scenario aukf-patent: the patent's x0, 51.464 Hz/s)"})
     compare: str | None = field(default=None, metadata={
         "help": "also run the golden chain (float) and report the differences",
         "choices": ("golden",), "case": "lower"})
@@ -197,7 +197,7 @@ class GnssRunConfig:
         if self.r_mode != "cn0":
             from dsp.gnss.trackers import TRACKERS
             if "r_mode" not in inspect.signature(TRACKERS[self.tracker][0]).parameters:
-                raise ValueError(f"r_mode {self.r_mode} applies to the seed-002 trackers "
+                raise ValueError(f"r_mode {self.r_mode} applies to the AUKF patent's trackers "
                                  f"(aukf, ukf), not {self.tracker}")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")

@@ -14,16 +14,17 @@ Profiles
 * :class:`PolynomialProfile`: initial range, range rate and range acceleration, jerk
   segments (piecewise-constant jerk) and acceleration steps; :func:`constant` is its
   no-segment case.
-* :class:`JerkProcess`: RECEIVERS.md section 1 (seed 002), on the carrier-phase state
+* :class:`JerkProcess`: the AUKF patent's model (docs/explanation/gnss_aukf.md), on the
+  carrier-phase state
   ``X = [theta rad, w0 rad/s, w1 rad/s^2, w2 rad/s^3]`` at L1:
   ``dtheta/dt = w0, dw0/dt = w1, dw1/dt = w2, dw2/dt = -alpha w2 + w``, ``w`` white with
   intensity ``q`` (rad^2/s^7), ``q = 2 alpha sigma_j^2``. It is propagated exactly
   (:func:`jerk_phi`, :func:`jerk_q`) on a grid of ``step_s``; between grid points the phase
   is the quintic Hermite interpolant of ``(theta, w0, w1)`` at both ends, so phase,
-  frequency and frequency rate are continuous. The default ``x0`` is the seed's
+  frequency and frequency rate are continuous. The default ``x0`` is the patent's
   ``[0, 32995.519, 323.356, 0]``; those numbers are 1000 m/s and 1 g for c = 3e8 m/s and
   g = 9.8 m/s^2 (with the exact c they are 999.31 m/s and 0.9993 x 9.80 m/s^2); we keep the
-  seed's radian values.
+  patent's radian values.
 * :class:`CsvProfile`: a user table of time (s) / range (m), interpolated by a cubic spline
   (not-a-knot), derivatives from the spline.
 """
@@ -42,8 +43,8 @@ from dsp.gnss.jerk import phi_b, jerk_phi, jerk_q  # noqa: F401  (the model live
 C_MPS = 299792458.0
 #: L1 wavelength (m).
 L1_WAVELENGTH_M = C_MPS / L1_HZ
-#: The seed-002 initial state [theta rad, w0 rad/s, w1 rad/s^2, w2 rad/s^3].
-SEED002_X0 = (0.0, 32995.519, 323.356, 0.0)
+#: The AUKF patent's initial state [theta rad, w0 rad/s, w1 rad/s^2, w2 rad/s^3].
+PATENT_X0 = (0.0, 32995.519, 323.356, 0.0)
 #: Default range at t = 0 (m): a typical GPS satellite range, ~20 000 km.
 DEFAULT_RANGE_M = 2.2e7
 
@@ -189,21 +190,21 @@ def from_doppler(doppler_hz: float, doppler_rate_hz_s: float = 0.0,
 
 
 # ---------------------------------------------------------------------------------------------
-# The seed-002 jerk (Singer) process
+# The AUKF patent's jerk (Singer) process
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class JerkProcess:
-    """The seed-002 Singer-type jerk process on the L1 carrier phase (module docstring).
+    """The AUKF patent's Singer-type jerk process on the L1 carrier phase (module docstring).
 
     Parameters
     ----------
     x0 : 4 floats
-        Initial ``[theta rad, w0 rad/s, w1 rad/s^2, w2 rad/s^3]`` (the seed's by default).
+        Initial ``[theta rad, w0 rad/s, w1 rad/s^2, w2 rad/s^3]`` (the patent's by default).
     alpha_per_s : float
         Jerk decorrelation rate (1/s), >= 0 (0 = integrated random-walk jerk). Not in the
-        seed; default 0.1 /s (10 s correlation time, the length of a run).
+        patent; default 0.1 /s (10 s correlation time, the length of a run).
     q : float
-        True process-noise intensity (rad^2/s^7), >= 0. Default 5, the seed's initial slave
+        True process-noise intensity (rad^2/s^7), >= 0. Default 5, the patent's initial slave
         estimate q0.
     step_s : float
         Propagation grid (s); the code period by default.
@@ -211,7 +212,7 @@ class JerkProcess:
         Range at t = 0 (m).
     """
 
-    x0: tuple = SEED002_X0
+    x0: tuple = PATENT_X0
     alpha_per_s: float = 0.1
     q: float = 5.0
     step_s: float = 1e-3
@@ -384,14 +385,14 @@ class _SplineTrajectory(Trajectory):
         return self.s(t) - self.r0
 
 
-def seed002(q: float = 5.0, alpha_per_s: float = 0.1, jerk_g_per_s: float = 0.0,
-            jerk_start_s: float | None = None, jerk_duration_s: float | None = None):
-    """The seed-002 dynamics: the jerk process from x0 (``q > 0``), or, with ``q = 0`` and a
+def aukf_patent_dynamics(q: float = 5.0, alpha_per_s: float = 0.1, jerk_g_per_s: float = 0.0,
+                         jerk_start_s: float | None = None, jerk_duration_s: float | None = None):
+    """The AUKF patent's dynamics: the jerk process from x0 (``q > 0``), or, with ``q = 0`` and a
     jerk segment, the deterministic x0 dynamics (1000 m/s, 1 g) plus a ``jerk_g_per_s`` jerk
     from ``jerk_start_s`` for ``jerk_duration_s`` (issue 14's 5 g/s case)."""
     if q > 0 and jerk_g_per_s == 0:
         return JerkProcess(q=q, alpha_per_s=alpha_per_s)
-    x = SEED002_X0
+    x = PATENT_X0
     k = L1_WAVELENGTH_M / (2 * np.pi)
     segs = ()
     if jerk_g_per_s:

@@ -17,7 +17,7 @@ import numpy as np
 from dsp.gnss.ca_code import CHIP_RATE_HZ
 from dsp.gnss.loops import TrackingChannel, jerk_stress_deg, kaplan_jitter_deg
 
-from .dynamics import L1_WAVELENGTH_M, seed002
+from .dynamics import L1_WAVELENGTH_M, aukf_patent_dynamics
 from .fastpath import correlate_fast
 from .signal import GnssSignalConfig, GnssSignalGenerator
 
@@ -142,7 +142,7 @@ def tracking_threshold(cn0_grid_dbhz=np.arange(22.0, 34.01, 0.5), n_trials: int 
                        settle_s: float = 0.5, latency: int = 0, seed: int = 1,
                        hold_fraction: float = 1.0) -> dict:
     """Tracking threshold of the 3rd-order PLL (Costas) through a jerk segment on the fast
-    path: seed-002 initial dynamics (1000 m/s, 1 g), ``jerk_g_per_s`` from ``jerk_start_s``
+    path: the AUKF patent's initial dynamics (1000 m/s, 1 g), ``jerk_g_per_s`` from ``jerk_start_s``
     for ``jerk_duration_s``, then ``settle_s`` more. A trial holds lock if its true phase
     error never slips (:func:`cycle_slips` = 0). The threshold is the lowest C/N0 of the
     grid at and above which at least ``hold_fraction`` of the trials hold lock at every
@@ -155,8 +155,8 @@ def tracking_threshold(cn0_grid_dbhz=np.arange(22.0, 34.01, 0.5), n_trials: int 
     grid = np.asarray(cn0_grid_dbhz, float)
     dur = jerk_start_s + jerk_duration_s + settle_s
     n = int(round(dur / T_s))
-    truth = truth_for(seed002(q=0, jerk_g_per_s=jerk_g_per_s, jerk_start_s=jerk_start_s,
-                              jerk_duration_s=jerk_duration_s), dur + 0.01, seed=seed)
+    truth = truth_for(aukf_patent_dynamics(q=0, jerk_g_per_s=jerk_g_per_s, jerk_start_s=jerk_start_s,
+                                           jerk_duration_s=jerk_duration_s), dur + 0.01, seed=seed)
     r = track_fast(truth, grid[:, None], n, T_s, 3, bn_hz, shape=(grid.size, n_trials),
                    latency=latency, seed=seed)
     held = cycle_slips(r.phase_err_cycles) == 0
@@ -176,12 +176,13 @@ def tracking_threshold(cn0_grid_dbhz=np.arange(22.0, 34.01, 0.5), n_trials: int 
 def jitter_vs_kaplan(cn0_dbhz=(35.0, 40.0, 45.0, 50.0), n_trials: int = 100, bn_hz: float = 15.0,
                      T_s: float = 1e-3, duration_s: float = 4.0, skip_s: float = 0.3,
                      latency: int = 0, seed: int = 2) -> dict:
-    """Closed-loop thermal jitter (3rd-order Costas PLL, seed-002 1000 m/s + 1 g, fast path)
+    """Closed-loop thermal jitter (3rd-order Costas PLL, the AUKF patent's 1000 m/s + 1 g,
+    fast path)
     against Kaplan's formula with the nominal and with the actual digital-loop Bn."""
     from dsp.gnss.loops import noise_bandwidth
     c = np.asarray(cn0_dbhz, float)
     n = int(round(duration_s / T_s))
-    tr = truth_for(seed002(q=0), duration_s + 0.01, seed=seed)
+    tr = truth_for(aukf_patent_dynamics(q=0), duration_s + 0.01, seed=seed)
     r = track_fast(tr, c[:, None], n, T_s, 3, bn_hz, shape=(c.size, n_trials), latency=latency,
                    seed=seed)
     meas = (r.phase_err_cycles[int(round(skip_s / T_s)):] * 360.0).std(axis=(0, 2))
@@ -198,7 +199,8 @@ def jerk_stress(jerk_g_per_s: float = 5.0, bn_hz: float = 15.0, T_s: float = 1e-
                 latency: int = 0, duration_s: float = 4.0) -> dict:
     """Noise-free steady-state phase error (last second) under constant jerk vs
     ``0.4828 J / Bn^3``."""
-    tr = truth_for(seed002(q=0, jerk_g_per_s=jerk_g_per_s, jerk_start_s=0.0), duration_s + 0.01)
+    tr = truth_for(aukf_patent_dynamics(q=0, jerk_g_per_s=jerk_g_per_s, jerk_start_s=0.0),
+                   duration_s + 0.01)
     n = int(round(duration_s / T_s))
     r = track_fast(tr, None, n, T_s, 3, bn_hz, latency=latency)
     meas = float(r.phase_err_cycles[n - int(round(1.0 / T_s)):].mean() * 360.0)

@@ -8,7 +8,7 @@ The generator draws ``x`` on a uniform grid of ``step_s``:
 
 * white FM: ``x`` is a random walk, increment variance ``(h0 / 2) step``;
 * random-walk FM: ``y`` is a random walk with intensity ``2 pi^2 h_2`` (the two-state clock
-  model, RECEIVERS.md 2: q_phi = h0 / 2, q_omega = 2 pi^2 h-2), drawn with its exact
+  model: q_phi = h0 / 2, q_omega = 2 pi^2 h-2), drawn with its exact
   discrete covariance ``2 pi^2 h_2 [[T^3/3, T^2/2], [T^2/2, T]]``;
 * flicker FM: ``y`` shaped in the frequency domain (``|H(f)|^2 = S_y(f) fs / 2`` applied to
   unit white noise over twice the record, the first half kept), integrated to ``x``.

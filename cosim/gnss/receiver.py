@@ -176,7 +176,7 @@ def _aukf_convergence(out, quick: bool = False, jobs: int | None = None) -> dict
     return bench_convergence(out, quick=quick)
 
 
-#: ``python -m cosim bench <name>`` of the GNSS receiver (the seed-002 AUKF's among them).
+#: ``python -m cosim bench <name>`` of the GNSS receiver (the AUKF's among them).
 BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_gnss_tracking),
               "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence)}
 
@@ -195,7 +195,7 @@ GNSS = register(Receiver(
              "lock_fraction"),
     primary=Figure("phase_rmse_deg", "carrier phase RMSE", "deg"),
     frontend=_frontend(),
-    sweep=Study("word-length sweep of the fixed-point seed-002 AUKF core on the fast path "
+    sweep=Study("word-length sweep of the fixed-point AUKF core on the fast path "
                 "(paired with the float64 AUKF), proposal and its confirmation", SWEEP_OPTIONS,
                 cmd_sweep, model=SWEEP_MODEL),
     tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)},

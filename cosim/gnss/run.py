@@ -77,7 +77,7 @@ def _score(gen, track: Tracking, n_b, settle_s):
 def tracker_report(tracker) -> dict:
     """The tracker's own figures for the JSON: ``q_hat`` (final value, per-block trajectory
     of one stream, the slave's block length) and ``diverged`` (its own loss-of-lock rule) of
-    the seed-002 trackers, None for trackers without them, plus the rest of ``report()``
+    the AUKF patent's trackers (aukf, ukf), None for trackers without them, plus the rest of ``report()``
     under ``tracker_report``."""
     rep = tracker.report() if hasattr(tracker, "report") else {}
     out = {"q_hat": None, "diverged": None}
@@ -117,7 +117,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     from dsp.gnss.trackers import needs_aiding
     if needs_aiding(run.tracker) and tracker_setup is None:
         raise ValueError(f"tracker {run.tracker} needs an INS aiding source: run it with "
-                         f"`python -m cosim ins --loop {run.tracker}` (the seed-003 trajectory "
+                         f"`python -m cosim ins --loop {run.tracker}` (the INS paper's trajectory "
                          "and INS error model)")
     if sig.duration_s <= run.settle_s:
         raise ValueError(f"duration_s {sig.duration_s:g} s leaves nothing after settle_s "

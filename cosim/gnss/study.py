@@ -1,5 +1,5 @@
 """GNSS's side of the generic sweep engine (:mod:`cosim.studies.sweep`): the word lengths of
-the fixed-point seed-002 AUKF core (:class:`dsp.gnss.aukf_master.AukfFormats`) swept on the
+the fixed-point AUKF core (:class:`dsp.gnss.aukf_master.AukfFormats`) swept on the
 correlation-domain fast path, each point paired with the float64 (golden) AUKF on the same
 truth and the same correlator noise.
 
@@ -12,8 +12,8 @@ Parameters (``--param NAME=VALUES``)
                 with the width (as TACAN's ``dsp.<fmt>``).
 
 A record is one (C/N0, trial): the engine's ``snr_db`` values are **C/N0 in dB-Hz** here
-(the report's "SNR dB" column), one seed-002 jerk-process truth (``q_true = q0 = 5``,
-seeded by the study seed, the trial and the C/N0), ``duration_s`` long, the AUKF started on
+(the report's "SNR dB" column), one jerk-process truth (the AUKF patent's model,
+``q_true = q0 = 5``, seeded by the study seed, the trial and the C/N0), ``duration_s`` long, the AUKF started on
 the truth (fast path). Figures: ``phase_rmse_deg`` (the receiver's primary figure, second
 half of the record, wrapped to the Costas lock point), ``doppler_rmse_hz``, ``locked`` (no
 cycle slip and not diverged), the core's events (Cholesky failures, P not PD,
@@ -30,7 +30,7 @@ from ..core.receivers import SweepModel
 
 __all__ = ["FORMATS", "check_param", "formats_of", "check_point", "GnssSweepRecord", "SWEEP_MODEL"]
 
-#: Q0 of the seed (the truth's intensity in the sweep) and the records' true C/N0 unit.
+#: q0 of the AUKF patent (the truth's intensity in the sweep) and the records' true C/N0 unit.
 Q_TRUE = 5.0
 
 
@@ -73,10 +73,10 @@ def formats_of(combo: tuple):
 
 def _truth_and_ctx(cfg, cn0_dbhz: float, trial: int):
     from dsp.gnss.trackers import TrackerContext
-    from .dynamics import seed002
+    from .dynamics import aukf_patent_dynamics
     from .loopsim import truth_for
     seed = int(np.random.default_rng([cfg.seed, trial, int(round(cn0_dbhz * 1000))]).integers(1 << 31))
-    truth = truth_for(seed002(q=Q_TRUE), cfg.duration_s + 0.01, seed=seed)
+    truth = truth_for(aukf_patent_dynamics(q=Q_TRUE), cfg.duration_s + 0.01, seed=seed)
     a0 = truth(np.array([0.0]))
     ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][:1],
                          doppler_rate0_hz_s=a0["doppler_rate_hz_s"][:1], cn0_dbhz=float(cn0_dbhz))
@@ -86,10 +86,10 @@ def _truth_and_ctx(cfg, cn0_dbhz: float, trial: int):
 def check_point(cfg, combo: tuple) -> None:
     """Build the point's formats and the tracker (its range checks: "formats too narrow")."""
     from dsp.gnss.trackers import TrackerContext, make_tracker
-    from dsp.gnss.aukf import SEED_X0
+    from dsp.gnss.aukf import PATENT_X0
     fm = formats_of(combo)
-    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=np.array([SEED_X0[1] / (2 * np.pi)]),
-                         doppler_rate0_hz_s=np.array([SEED_X0[2] / (2 * np.pi)]),
+    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=np.array([PATENT_X0[1] / (2 * np.pi)]),
+                         doppler_rate0_hz_s=np.array([PATENT_X0[2] / (2 * np.pi)]),
                          cn0_dbhz=float(cfg.snr_db[0]))
     make_tracker("aukf", ctx, fm)
 
@@ -133,7 +133,7 @@ class GnssSweepRecord:
 SWEEP_MODEL = SweepModel(check_param=check_param, check_point=check_point, record=GnssSweepRecord,
                          confirm_recheck=None, default_params=(("dsp.P", (28, 32, 36, 40, 44, 48)),),
                          cpu_s_per_record_s=0.5, title="GNSS AUKF core word-length sweep",
-                         description="Path: seed-002 jerk truth (q = q0 = 5), correlation-domain "
+                         description="Path: jerk truth (the AUKF patent's model, q = q0 = 5), correlation-domain "
                                      "fast path, fixed-point AUKF core (AukfFormats, word-length "
                                      "emulation). Golden: float64 AUKF on the same truth and noise. "
                                      "'SNR dB' = C/N0 dB-Hz; RMSE = carrier phase RMSE (deg).")

@@ -1,8 +1,8 @@
-"""Monte Carlo study of the seed-002 trackers on the correlation-domain fast path.
+"""Monte Carlo study of the AUKF patent's trackers on the correlation-domain fast path.
 
 For each true process-noise intensity ``q_true`` (multiples of the prior ``q0 = 5``) and
-C/N0, one truth per trial is drawn from the jerk process (``cosim.gnss.dynamics.seed002``,
-seeded per trial), and the trackers ``aukf``, ``ukf`` (fixed q = q0) and ``pll3`` run on the
+C/N0, one truth per trial is drawn from the jerk process
+(``cosim.gnss.dynamics.aukf_patent_dynamics``, seeded per trial), and the trackers ``aukf``, ``ukf`` (fixed q = q0) and ``pll3`` run on the
 *same* truth and the *same* correlator noise (the fast path's generator seeded alike).
 Figures per (tracker, q_true, C/N0): Doppler RMSE (Hz: the tracker's Doppler estimate
 against the truth; ``nco_doppler_rmse_hz`` is the replica Doppler in force, which also
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dynamics import seed002
+from .dynamics import aukf_patent_dynamics
 from .loopsim import cycle_slips, track_fast, truth_for
 
 Q0 = 5.0
@@ -59,7 +59,8 @@ def run_point(q_true: float, cn0_dbhz: float, trackers=("aukf", "ukf", "pll3"), 
         raise ValueError(f"n_runs must be an integer >= 1, not {n_runs!r}")
     n = int(round(duration_s / 1e-3))
     half = n // 2
-    truth = stacked_truth([truth_for(seed002(q=q_true), duration_s + 0.01, seed=seed * 100003 + i)
+    truth = stacked_truth([truth_for(aukf_patent_dynamics(q=q_true), duration_s + 0.01,
+                                     seed=seed * 100003 + i)
                            for i in range(n_runs)])
     a0 = truth(np.array([0.0]))
     out = {"q_true": q_true, "cn0_dbhz": cn0_dbhz, "n_runs": n_runs, "duration_s": duration_s}
@@ -100,7 +101,7 @@ def study(q_factors=(0.1, 1.0, 10.0), cn0s=(32.0, 36.0, 40.0), **kw) -> list:
 
 def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_runs: int = 20,
                        duration_s: float = 10.0, seed: int = 1):
-    """The seed's figure 3 as a plot: RMS over runs of the Doppler-estimate error vs time,
+    """The patent's figure 3 as a plot: RMS over runs of the Doppler-estimate error vs time,
     UKF (fixed q0) and AUKF, truth with ``q_true = q_factor q0``."""
     import matplotlib
     matplotlib.use("Agg")
@@ -108,7 +109,8 @@ def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_r
     from dsp.gnss.loops_fixed import FLOAT
     from dsp.gnss.trackers import TrackerContext, make_tracker
     n = int(round(duration_s / 1e-3))
-    truth = stacked_truth([truth_for(seed002(q=q_factor * Q0), duration_s + 0.01, seed=seed * 100003 + i)
+    truth = stacked_truth([truth_for(aukf_patent_dynamics(q=q_factor * Q0), duration_s + 0.01,
+                                     seed=seed * 100003 + i)
                            for i in range(n_runs)])
     a0 = truth(np.array([0.0]))
     ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][0],
@@ -173,8 +175,8 @@ def _table(points, columns) -> str:
 
 
 def bench(out, quick: bool = False) -> dict:
-    """``python -m cosim bench aukf``: the seed-002 Monte Carlo table (golden and fixed, PLL
-    beside), the simulation cost and the seed's figure 3; ``results/aukf.{md,json}`` and
+    """``python -m cosim bench aukf``: the AUKF patent's Monte Carlo table (golden and fixed,
+    PLL beside), the simulation cost and the patent's figure 3; ``results/aukf.{md,json}`` and
     ``results/aukf_doppler_error.png``."""
     import json
     import time
@@ -264,7 +266,7 @@ def bench_convergence(out, quick: bool = False) -> dict:
 
 def _convergence_markdown(res) -> str:
     m = res["machine"]
-    L = ["# Seed-002 AUKF: q_hat at the end of the run vs run length (A4)", "",
+    L = ["# The AUKF patent's tracker: q_hat at the end of the run vs run length (A4)", "",
          f"Machine: {m['cpu']} ({m['cores']} cores, shared), {m['host']}; date {m['date']}; "
          f"commit {m['commit']}; command `{m['command']}` ({res['wall_s']:.0f} s wall).", "",
          f"{res['n_runs']} runs per row, {res['cn0_dbhz']:g} dB-Hz, q0 = {res['q0']:g}, the fast path "
@@ -292,12 +294,12 @@ def _convergence_markdown(res) -> str:
 
 def _bench_markdown(res, points, cols) -> str:
     m = res["machine"]
-    L = ["# Seed-002 trackers: Monte Carlo on the correlation-domain fast path", "",
+    L = ["# The AUKF patent's trackers: Monte Carlo on the correlation-domain fast path", "",
          f"Machine: {m['cpu']} ({m['cores']} cores, shared), {m['host']}; date {m['date']}; "
          f"commit {m['commit']}; command `{m['command']}` (Monte Carlo {res['monte_carlo_wall_s']:.0f} s "
          "wall under `nice -n 19`).", "",
          f"{res['n_runs']} runs x {res['duration_s']:g} s per point, one jerk-process truth per run "
-         "(seed002(q = q_true), alpha 0.1/s, x0 = 1000 m/s, 1 g), the same truths and noise for every "
+         "(aukf_patent_dynamics(q = q_true), alpha 0.1/s, x0 = 1000 m/s, 1 g), the same truths and noise for every "
          "tracker and arithmetic: aukf, ukf (q fixed at q0 = 5), pll3 (Bn 15 Hz); golden = float64, "
          f"fixed = `AukfFormats()` word lengths for the UKFs (`{res['formats']}`) and the "
          "fixed-point `ChannelCore` for pll3; R from C/N0; RMSEs over the second half of each run "
@@ -320,7 +322,7 @@ def _bench_markdown(res, points, cols) -> str:
          "| tracker | arithmetic | 1 stream | batch 100 |", "|---|---|---|---|"]
     for r in res["cost"]:
         L.append(f"| {r['tracker']} | {r['arithmetic']} | {r['one_stream']:,.0f} | {r['batch_100']:,.0f} |")
-    L += ["", "## Figure 3 of the seed", "",
+    L += ["", "## Figure 3 of the patent", "",
           f"`{res['figure']}`: RMS over runs (50-epoch moving window) of the Doppler-estimate error vs "
           "time, UKF (q fixed at q0) and AUKF, q_true = 10 q0, 32 dB-Hz, golden.", ""]
     return "\n".join(L)

@@ -1,8 +1,8 @@
-"""Seed-003 benchmark: the seed's Table 2 beside ours, figures 6-7, the loops' cost.
+"""INS paper benchmark: the paper's Table 2 beside ours, figures 6-7, the loops' cost.
 
 ``python -m cosim bench ins`` (the INS receiver's benchmark ``ins``) writes ``results/ins.json``,
 ``results/ins.md`` and ``results/ins_fig6_7.png``: for 40 dB-Hz and 35 dB-Hz, TCXO and OCXO,
-the three loops over the seed's trajectory (150 s; ``quick``: 35 s, 4 trials), 20 Monte
+the three loops over the paper's trajectory (150 s; ``quick``: 35 s, 4 trials), 20 Monte
 Carlo trials each on the fast path, velocity-error and range-error mean/std along the line
 of sight, PLI, lock fraction, cycle slips, and epochs per second of each loop.
 """
@@ -21,7 +21,7 @@ from .study import LOOPS, InsStudyConfig, lock_threshold, run_loop, scenario_for
 THRESHOLD = {"duration_s": 40.0, "trials": 8, "lo_dbhz": 26.0, "hi_dbhz": 42.0,
              "resolution_db": 1.0}
 
-SEED_TABLE2 = {  # std rows of the seed's Table 2 (position m, velocity m/s; x y z)
+PAPER_TABLE2 = {  # std rows of the INS paper's Table 2 (position m, velocity m/s; x y z)
     "unaided-kf": {"pos_std": (2.670, 2.431, 0.990), "vel_std": (0.043, 0.201, 0.007)},
     "aided-pll": {"pos_std": (2.728, 2.461, 1.022), "vel_std": (0.080, 0.125, 0.025)},
     "aided-kf": {"pos_std": (2.686, 2.425, 0.993), "vel_std": (0.038, 0.120, 0.007)},
@@ -88,7 +88,7 @@ def ins_bench(out: Path, quick: bool = False, jobs: int | None = None, *,
         summary = {"machine": machine, "duration_s": dur, "trials": trials,
                    "elapsed_s": time.time() - t_all, "jobs": jobs or 1,
                    "rows": [rows[p] for p in points if p in rows],
-                   "seed_table2_std": SEED_TABLE2, "threshold_search": th,
+                   "paper_table2_std": PAPER_TABLE2, "threshold_search": th,
                    "thresholds": [thr[p] for p in points if p in thr],
                    "pending": [list(p) for p in points if p not in done]}
         (out / "ins.json").write_text(json.dumps(summary, indent=1))
@@ -130,8 +130,8 @@ def _plot(path, series, segments=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from .trajectory import SeedTrajectory
-    segs = SeedTrajectory().jerk_segments() if segments is None else segments
+    from .trajectory import PaperTrajectory
+    segs = PaperTrajectory().jerk_segments() if segments is None else segments
     fig, ax = plt.subplots(2, 2, figsize=(13, 6.5), sharex=True)
     colours = {"aided-kf": "tab:blue", "aided-pll": "tab:orange", "unaided-kf": "tab:green"}
     for j, osc in enumerate(("ocxo", "tcxo")):
@@ -160,7 +160,7 @@ def _plot(path, series, segments=None):
 
 def figures(out: Path, duration_s: float = 150.0, seed: int = 1) -> Path:
     """Redraw :file:`ins_fig6_7.png` alone: one trial of each loop at 40 dB-Hz, OCXO and
-    TCXO, over the seed's trajectory (``python -c "from pathlib import Path; from
+    TCXO, over the paper's trajectory (``python -c "from pathlib import Path; from
     cosim.ins.bench import figures; figures(Path('results'))"``)."""
     series = {}
     for osc in ("ocxo", "tcxo"):
@@ -173,13 +173,13 @@ def figures(out: Path, duration_s: float = 150.0, seed: int = 1) -> Path:
 
 def _md(s: dict) -> str:
     m = s["machine"]
-    L = [f"# Seed 003: INS-aided Kalman carrier loop vs aided PLL vs unaided Kalman loop", "",
+    L = [f"# The INS paper: INS-aided Kalman carrier loop vs aided PLL vs unaided Kalman loop", "",
          f"`{m['command']}`, {m['date']}, {m['cpu']}, commit {m['commit']}; fast path, "
-         f"{s['trials']} trials per loop, {s['duration_s']:g} s of the seed's trajectory "
+         f"{s['trials']} trials per loop, {s['duration_s']:g} s of the paper's trajectory "
          f"(8300 m/s, 50 g, 5 g/s), INS 10 deg/h + 1 mg; {s['elapsed_s']:.0f} s wall in all on {s['jobs']} process(es).", "",
-         "Seed Table 2 (std rows; position m, velocity m/s, per ECEF axis, full PVT):", "",
+         "The paper's Table 2 (std rows; position m, velocity m/s, per ECEF axis, full PVT):", "",
          "| loop | pos std x y z | vel std x y z |", "|---|---|---|"]
-    for lp, v in s["seed_table2_std"].items():
+    for lp, v in s["paper_table2_std"].items():
         L.append(f"| {lp} | {' / '.join(map(str, v['pos_std']))} | {' / '.join(map(str, v['vel_std']))} |")
     L += ["", "Ours (one satellite, along the line of sight: velocity from the loop's Doppler "
           "estimate, range from the DLL's code error):", "",

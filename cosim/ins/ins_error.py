@@ -1,4 +1,4 @@
-"""INS error model along the seed-003 trajectory, and the INS-predicted Doppler rate.
+"""INS error model along the INS paper's trajectory, and the INS-predicted Doppler rate.
 
 A documented simplification of strapdown navigation over 150 s (the Schuler period is
 84 min, so the gravity feedback of position error is left out: < 0.1 % of the error over
@@ -11,10 +11,10 @@ white noise,
 so the INS acceleration error is ``da = -psi x f + b_a + w_a`` (local east-north-up,
 taken fixed along the track: the straight line spans < 1.3 km / 6378 km of arc, and the
 frame of :mod:`cosim.ins.trajectory` holds it fixed); the velocity and position errors
-are its integrals (trapezoid on the epoch grid). Seed values: gyro drift 10 deg/h on
-every axis, accelerometer bias 1 mg on every axis (RECEIVERS.md 2); noise: angle random
+are its integrals (trapezoid on the epoch grid). The INS paper's values: gyro drift 10
+deg/h on every axis, accelerometer bias 1 mg on every axis; noise: angle random
 walk 0.1 deg/sqrt(h) and velocity random walk 0.05 m/s/sqrt(h) by default (tactical grade;
-the seed gives none). 1 mg alone is 0.0515 Hz/s of Doppler rate on the line of sight; the
+the paper gives none). 1 mg alone is 0.0515 Hz/s of Doppler rate on the line of sight; the
 drift's misalignment times the 50 g specific force dominates during the manoeuvre.
 
 The aiding the loops get, :meth:`InsAiding.rate_hz_s`, is the Doppler-rate formula of
@@ -36,7 +36,7 @@ DEG_PER_H = math.pi / 180.0 / 3600.0
 
 @dataclass(frozen=True)
 class InsErrors:
-    """INS sensor errors (seed 003 values by default).
+    """INS sensor errors (the INS paper's values by default).
 
     Parameters
     ----------
@@ -136,7 +136,7 @@ class InsAiding:
 class EpochAiding:
     """The INS Doppler rate per tracked epoch when the epochs are not on a uniform grid
     (the HDL channel dumps on the received code's epochs, which drift from the receiver's
-    millisecond by the code Doppler: ~3 ms over the seed's 150 s). ``aiding(k)`` is
+    millisecond by the code Doppler: ~3 ms over the paper's 150 s). ``aiding(k)`` is
     :meth:`InsAiding.rate_at` at the midpoint of epoch ``k``, ``boundaries_s[k]`` to
     ``boundaries_s[k + 1]`` (s, receiver time); past the table it raises."""
 

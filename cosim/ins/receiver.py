@@ -1,7 +1,7 @@
-"""Seed 003's entry in the receiver registry (:mod:`cosim.core.receivers`): ``python -m cosim
-ins`` runs one of the three carrier loops (INS-aided Kalman, aided PLL, unaided Kalman)
-over the seed's trajectory on the GNSS channel (:func:`cosim.ins.run.run_ins`); its options
-are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP fields of
+"""The INS-aided loop's entry in the receiver registry (:mod:`cosim.core.receivers`):
+``python -m cosim ins`` runs one of the three carrier loops (INS-aided Kalman, aided PLL,
+unaided Kalman) over the INS paper's trajectory on the GNSS channel
+(:func:`cosim.ins.run.run_ins`); its options are the fields of :class:`~cosim.ins.run.InsRunConfig` and the channel/DSP fields of
 :class:`~cosim.gnss.config.GnssRunConfig`. The front end is the GNSS channel's (``gnss``)."""
 from __future__ import annotations
 
@@ -58,8 +58,8 @@ def _bench(out, quick: bool = False, jobs: int | None = None) -> dict:
 
 
 INS = register(Receiver(
-    name="ins", help="seed 003: INS-aided Kalman carrier loop, aided PLL or unaided Kalman "
-                     "loop over the seed's trajectory on the GNSS channel; LOS velocity and "
+    name="ins", help="the INS paper: INS-aided Kalman carrier loop, aided PLL or unaided Kalman "
+                     "loop over the paper's trajectory on the GNSS channel; LOS velocity and "
                      "range errors, PLI, lock, cycle slips",
     config=InsRunConfig, options=OPTIONS, run=cmd_ins,
     metrics=("vel_err_std_mps", "vel_err_mean_mps", "range_err_std_m", "range_err_mean_m",

@@ -1,16 +1,16 @@
-"""Seed 003 on the GNSS channel: the INS-aided Kalman loop, the aided PLL or the unaided
+"""The INS paper's loops on the GNSS channel: the INS-aided Kalman loop, the aided PLL or the unaided
 Kalman loop closing the loop of the GPS L1 channel (``golden`` correlators, the bit-exact
-``model``, ``pysim`` or ``verilator``) over the seed's trajectory.
+``model``, ``pysim`` or ``verilator``) over the INS paper's trajectory.
 
-The scenario is :mod:`cosim.ins.trajectory`'s (user on the seed trajectory, satellite on
+The scenario is :mod:`cosim.ins.trajectory`'s (user on the paper's trajectory, satellite on
 its orbit): the line-of-sight range on a 1 ms grid (plus the trajectory's knots) becomes the
 signal generator's range table (:class:`cosim.gnss.dynamics.CsvProfile`, a cubic spline:
 its error is < 1e-6 m in range), with the receiver oscillator's phase noise and no
 navigation data (a pilot-like signal, as on the fast path: a 10 ms PLI sum over a data-bit
 edge would measure the data, not the lock). The GNSS run (:func:`cosim.gnss.run.run_gnss`:
 acquisition, hand-over, FIFO, DSP service, the one-epoch loop latency) runs the loop as its
-tracker, told the INS Doppler rate (:class:`cosim.ins.ins_error.InsAiding`, seed 003's
-errors) at the midpoint of every tracked epoch: the channel dumps on the received code's
+tracker, told the INS Doppler rate (:class:`cosim.ins.ins_error.InsAiding`, the paper's
+INS errors) at the midpoint of every tracked epoch: the channel dumps on the received code's
 epochs, which drift from the receiver's millisecond by the code Doppler (~3 ms over 150 s),
 so the aiding is indexed by the epochs' times (:class:`cosim.ins.ins_error.EpochAiding`),
 which the DSP would read from the channel's sample counter; here they are the received
@@ -35,14 +35,14 @@ from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S
 
 from ..core.validate import check_float, check_int
 from .study import CHIP_M, LOOPS
-from .trajectory import L1_WAVELENGTH_M, Geometry, Scenario, SeedTrajectory
+from .trajectory import L1_WAVELENGTH_M, Geometry, Scenario, PaperTrajectory
 
 OSCILLATORS = ("tcxo", "ocxo")
 
 
 @dataclass(frozen=True)
 class InsRunConfig:
-    """One seed-003 run on the GNSS channel (the channel and DSP options are
+    """One INS paper run on the GNSS channel (the channel and DSP options are
     :class:`cosim.gnss.config.GnssRunConfig`'s).
 
     Parameters
@@ -54,11 +54,11 @@ class InsRunConfig:
     oscillator : str or None
         Receiver oscillator (``tcxo``, ``ocxo``; None: ideal).
     duration_s : float
-        Record length (s); the seed's trajectory is 150 s.
+        Record length (s); the paper's trajectory is 150 s.
     seed : int
         Noise, oscillator and INS sensor noise.
     start_s, jerk_g_s, accel_g, v_max_mps : float
-        The trajectory (:class:`cosim.ins.trajectory.SeedTrajectory`).
+        The trajectory (:class:`cosim.ins.trajectory.PaperTrajectory`).
     trajectory_csv : str or None
         A CSV of (time s, along-track distance m) instead of the profile.
     pli_epochs : int
@@ -75,7 +75,7 @@ class InsRunConfig:
         "help": "receiver oscillator phase noise: tcxo, ocxo, none (ideal)",
         "choices": OSCILLATORS + (None,), "case": "lower", "none": ("none",)})
     duration_s: float = field(default=150.0, metadata={
-        "help": "record length (s; the seed's trajectory is 150 s)"})
+        "help": "record length (s; the INS paper's trajectory is 150 s)"})
     seed: int = field(default=1, metadata={"help": "random seed (>= 0): noise, clock, INS"})
     start_s: float = field(default=5.0, metadata={"help": "start of the first jerk ramp (s)"})
     jerk_g_s: float = field(default=5.0, metadata={"help": "jerk of the ramps (g/s)"})
@@ -104,8 +104,8 @@ class InsRunConfig:
                 raise ValueError(f"trajectory_csv {self.trajectory_csv!r} ends at {a[-1, 0]:g} s: "
                                  f"it must cover duration_s + 0.05 s (from t <= 0)")
 
-    def trajectory(self) -> SeedTrajectory:
-        return SeedTrajectory(duration_s=self.duration_s, start_s=self.start_s,
+    def trajectory(self) -> PaperTrajectory:
+        return PaperTrajectory(duration_s=self.duration_s, start_s=self.start_s,
                               jerk_g_s=self.jerk_g_s, accel_g=self.accel_g,
                               v_max_mps=self.v_max_mps, csv_path=self.trajectory_csv)
 

@@ -1,4 +1,4 @@
-"""Seed-003 Monte Carlo on the correlation-domain fast path: the three loops through the
+"""INS paper Monte Carlo on the correlation-domain fast path: the three loops through the
 trajectory, velocity / range error along the line of sight, PLI, lock, cycle slips.
 
 One run = ``trials`` Monte Carlo trials of one loop, batched through
@@ -11,7 +11,7 @@ comparison is paired; the thermal noise is drawn by ``track_fast`` from ``seed``
 Figures (per trial, after ``skip_s``; then mean / std over epochs and trials):
 velocity error along the line of sight ``-(f_hat - f) lambda`` (m/s; ``f_hat`` the loop's
 Doppler estimate, ``f`` the LOS Doppler plus the clock's frequency error), range error ``code error x 293.05 m`` (the DLL's pseudorange error: no
-PVT is solved here, RECEIVERS.md B2), discriminator RMS over the jerk segments, PLI
+PVT is solved here), discriminator RMS over the jerk segments, PLI
 (prompt summed over ``pli_epochs``) and the fraction of PLI values above ``pli_threshold``,
 cycle slips of the true phase error (``cosim.gnss.loopsim.cycle_slips``, Costas).
 """
@@ -27,7 +27,7 @@ from dsp.gnss.loops_fixed import FLOAT, FixedArith
 from dsp.gnss.trackers import TrackerContext, make_tracker
 
 from .ins_error import InsAiding, InsErrors
-from .trajectory import Geometry, Scenario, SeedTrajectory, L1_WAVELENGTH_M
+from .trajectory import Geometry, Scenario, PaperTrajectory, L1_WAVELENGTH_M
 
 LOOPS = ("aided-kf", "aided-pll", "unaided-kf")
 CHIP_M = 299792458.0 / CHIP_RATE_HZ
@@ -45,7 +45,7 @@ class InsStudyConfig:
     trials : int
         Monte Carlo trials per loop (>= 1).
     duration_s : float
-        Scenario length (s); the seed's is 150.
+        Scenario length (s); the paper's is 150.
     skip_s : float
         Pull-in excluded from the statistics (s).
     pli_epochs : int
@@ -56,7 +56,7 @@ class InsStudyConfig:
         ``"float"`` or ``"fixed"``.
     seed : int
     start_s, accel_g, v_max_mps : float
-        The trajectory (:class:`SeedTrajectory`; the seed's by default, smaller for short
+        The trajectory (:class:`PaperTrajectory`; the paper's by default, smaller for short
         runs).
     """
 
@@ -85,7 +85,7 @@ class InsStudyConfig:
 
 
 def scenario_for(cfg: InsStudyConfig):
-    tr = SeedTrajectory(duration_s=cfg.duration_s, start_s=cfg.start_s, accel_g=cfg.accel_g,
+    tr = PaperTrajectory(duration_s=cfg.duration_s, start_s=cfg.start_s, accel_g=cfg.accel_g,
                         v_max_mps=cfg.v_max_mps)
     sc = Scenario(tr, Geometry(), cfg.oscillator, seed=cfg.seed)
     ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + 2, seed=cfg.seed)

@@ -1,10 +1,10 @@
-"""Seed-003 trajectory, satellite geometry and the line-of-sight carrier truth.
+"""The INS paper's trajectory, satellite geometry and the line-of-sight carrier truth.
 
-User trajectory (RECEIVERS.md section 2, "derived"): a straight line heading east, level
-(roll = pitch = 0), from rest; from ``start_s`` a +``jerk_g_s`` ramp of ``ramp_s`` (to
+User trajectory (derived from the INS paper's limits, docs/explanation/ins.md): a straight
+line heading east, level (roll = pitch = 0), from rest; from ``start_s`` a +``jerk_g_s`` ramp of ``ramp_s`` (to
 ``accel_g``), a hold at ``accel_g``, a -``jerk_g_s`` ramp back to 0 g, then cruise to
 ``duration_s``. The hold is sized so the cruise speed is ``v_max_mps``: with the defaults
-(5 g/s, 10 s, 50 g, 8300 m/s) the hold lasts 6.93 s. :class:`SeedTrajectory` also reads a
+(5 g/s, 10 s, 50 g, 8300 m/s) the hold lasts 6.93 s. :class:`PaperTrajectory` also reads a
 CSV (time s, along-track distance m) whose time must increase strictly.
 
 Geometry (a documented simplification): one inertial Cartesian frame whose origin is the
@@ -17,9 +17,9 @@ roughly along the satellite's ground track, the strongest line-of-sight dynamics
 
 Line of sight: ``rho = |Rs - Ru|``, ``rho' = (Vs - Vu) . e``, ``e = (Rs - Ru) / rho``,
 ``rho'' = (As - Au) . e + (|Vs - Vu|^2 - rho'^2) / rho``; carrier Doppler ``-rho' / lambda``
-and Doppler rate ``-rho'' / lambda``. The reconstruction in RECEIVERS.md keeps only the
-acceleration term; the second (centripetal) term is ~0.6 % of it at 8300 m/s and is needed
-for the derivative check (B4) at 1e-6.
+and Doppler rate ``-rho'' / lambda``. The INS paper's formula, as reconstructed
+(docs/explanation/ins.md), keeps only the acceleration term; the second (centripetal) term is ~0.6 % of it
+at 8300 m/s and is needed for the derivative check (B4) at 1e-6.
 """
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def _pos(name, v, allow_zero=False):
 
 
 @dataclass(frozen=True)
-class SeedTrajectory:
+class PaperTrajectory:
     """Along-track kinematics ``s(t), s', s'', s'''`` (m, m/s, m/s^2, m/s^3).
 
     Parameters
@@ -234,9 +234,9 @@ class Scenario:
     ``"ocxo"``, None) drawn from ``seed``.
     """
 
-    def __init__(self, trajectory: SeedTrajectory | None = None, geometry: Geometry | None = None,
+    def __init__(self, trajectory: PaperTrajectory | None = None, geometry: Geometry | None = None,
                  osc=None, seed: int = 0):
-        self.traj = trajectory or SeedTrajectory()
+        self.traj = trajectory or PaperTrajectory()
         self.geom = geometry or Geometry()
         self.p0, self.east, _, _ = self.geom.frame()
         self.rs0, self.vdir, self.w = self.geom.satellite_orbit()

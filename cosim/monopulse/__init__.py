@@ -1,1 +1,1 @@
-"""Monopulse angle tracking (seed 004): array, target, IF signal, snapshot fast path."""
+"""Monopulse angle tracking after the monopulse paper: array, target, IF signal, snapshot fast path."""

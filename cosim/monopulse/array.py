@@ -1,18 +1,18 @@
 """Planar monopulse array: 4 subarrays of Mx x My elements, quantised element steering.
 
-Geometry (RECEIVERS.md section 3), lengths in wavelengths
---------------------------------------------------------
+Geometry (docs/explanation/monopulse_signal.md), lengths in wavelengths
+-----------------------------------------------------------------------
 Subarray centres ``P1 = [0, 0]``, ``P2 = [0, Dy]``, ``P3 = [Dx, 0]``, ``P4 = [Dx, Dy]``;
 ``D = M d`` by default (8 x 8 at lambda/2: ``D = 4 lambda``). Direction cosines of a target
 at azimuth ``phi`` (from the x axis) and ``theta`` (from the z axis)::
 
     u = sin(theta) cos(phi),   v = sin(theta) sin(phi),   u^2 + v^2 < 1 (visible region)
 
-Sign convention (the seed's, kept so its equations hold as written): a plane wave from
+Sign convention (the monopulse paper's, kept so its equations hold as written): a plane wave from
 ``(u, v)`` reaches position ``p`` with phase ``-2 pi p.(u, v)`` relative to the origin, so
 subarray ``i`` sees ``exp(-j phi_i)``, ``phi_i = 2 pi P_i.(u, v)``. (A wave from ``r`` reaches
 ``p`` early, ``+2 pi p.r`` at RF; the minus is what a spectrum-inverting, high-side-LO RF
-down-conversion ahead of the IF delivers, and it is the seed's ``y_i = s exp(j dphi_i)``,
+down-conversion ahead of the IF delivers, and it is the paper's ``y_i = s exp(j dphi_i)``,
 ``dphi_i = phi_i0 - phi_i``.)
 
 Steering (decision): each element's phase shifter applies ``+2 pi p_e.(u0, v0)`` with

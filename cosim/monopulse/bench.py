@@ -1,5 +1,5 @@
 """Monopulse benchmark: Monte Carlo table (measurement RMS vs CRB, tracking RMS, adaptive vs
-fixed gains, float vs fixed DSP), SNR sweep, cost, and the seed's figures 6-7 (az/el
+fixed gains, float vs fixed DSP), SNR sweep, cost, and the monopulse paper's figures 6-7 (az/el
 measurement and tracking error vs time over 2 s) as plots. Writes ``results/monopulse.md``,
 ``.json`` and ``results/monopulse_fig6_7.png``.
 

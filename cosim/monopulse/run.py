@@ -54,7 +54,8 @@ def _h(text, **kw):
 
 @dataclass(frozen=True)
 class MonopulseRunConfig:
-    """One closed-loop monopulse scenario (defaults: the seed's -8 dB, 8192 snapshots, 2 s)."""
+    """One closed-loop monopulse scenario (defaults: the monopulse paper's -8 dB, 8192 snapshots,
+    2 s)."""
 
     snr_db: float = field(default=-8.0, metadata=_h("per-subarray SNR in the snapshot band (dB)"))
     snapshots: int = field(default=8192, metadata=_h("snapshots per measurement N (>= 1)"))
@@ -63,7 +64,7 @@ class MonopulseRunConfig:
         "adaptive (Kalata index from the last innovations) or fixed gains",
         choices=("adaptive", "fixed"), case="lower"))
     eq36: str = field(default="repaired", metadata=_h(
-        "adaptive index: repaired or literal (the seed's eq. 36)",
+        "adaptive index: repaired or literal (the paper's eq. 36 as printed)",
         choices=("repaired", "literal"), case="lower"))
     floor_scaling: str = field(default="gain", metadata=_h(
         "adaptive noise floor: gain (tau sigma_v^2 / (1 - alpha)) or fixed (tau sigma_v^2)",

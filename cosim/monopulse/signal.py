@@ -30,8 +30,8 @@ snapshot noise is circular with variance ``4 sigma_w^2 |g_i|^2 / D``, so::
 
     sigma_w^2 = A^2 D / (4 SNR)        (SNR at the ADC, over fs/2: SNR 2 chip_rate / fs)
 
-so the seed's -8 dB per snapshot becomes -15 dB over the ADC band, and the matched filter
-over N snapshots gives SNR N (8192: 31.1 dB, the seed's figure). The real per-channel SNR
+so the paper's -8 dB per snapshot becomes -15 dB over the ADC band, and the matched filter
+over N snapshots gives SNR N (8192: 31.1 dB, the paper's figure). The real per-channel SNR
 of a target off the steering direction is ``SNR |AF|^2``.
 
 The DDC's integrate-and-dump nulls the ``2 f_IF`` image exactly when ``2 f_IF D / fs`` is an

@@ -145,7 +145,7 @@ def _plot_accuracy(path: Path, snr_rows, brg_rows, both_rows=()):
     if all("amplitude_bound_deg" in r for r in rs):
         a1.semilogy([r["snr_db"] for r in rs], [r["amplitude_bound_deg"] for r in rs], "k:",
                     label="bound of an amplitude fit (single-pulse search output)")
-    a1.axhline(0.61, color="r", ls=":", label="seed hardware, 10 dB (0.61)")
+    a1.axhline(0.61, color="r", ls=":", label="paper's hardware, 10 dB (0.61)")
     a1.set_xlabel("SNR (dB, peak pulse power / noise in 2 MHz)")
     a1.set_ylabel("bearing error (deg)")
     a1.set_title("TACAN X mode, A = B = 0.21, golden chain")

@@ -328,7 +328,7 @@ FAULT_OPTIONS = (
            help="fifo target: FIFO words carry an even-parity bit, checked by the DSP"),
     Option(_FC, "detector", default=None, choices=DETECTORS, case="lower",
            help="the front end's peak search(es), as tacan --detector (default: the "
-                "receiver's, pulse)"),
+                "receiver's, both)"),
     Arg("--out", default="build/studies/faults", help="output directory"),
     Arg("--json", action="store_true", help="print one JSON object"),
 )

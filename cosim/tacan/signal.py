@@ -15,7 +15,7 @@ Conventions (written down once, used by the generator, the receivers and the tes
   where ``t_M`` is any main reference time. The positive-going zero crossing of the 15 Hz
   component lags the main reference by ``theta`` (of a 15 Hz cycle), and the 135 Hz
   component's lags the most recent auxiliary (or main) reference by ``9 theta mod 360``. At
-  ``theta = 90`` deg both components are at their minimum at every reference: the seed
+  ``theta = 90`` deg both components are at their minimum at every reference: the TACAN
   paper's worst case (references in the envelope trough).
 
 Pulse codes (MIL-STD-291C): :mod:`dsp.tacan.standard` (burst offsets, pair spacing, the
@@ -29,7 +29,7 @@ guard intervals, with exactly as many per rotation as keep the duty cycle consta
 Noise and SNR
 -------------
 SNR is the peak pulse power ``a0**2 / 2`` (unmodulated carrier amplitude ``a0``) over the
-noise power in ``noise_bw_hz`` (2 MHz), as in the seed paper's test set-up, where the noise
+noise power in ``noise_bw_hz`` (2 MHz), as in the TACAN paper's test set-up, where the noise
 source itself had that bandwidth. The noise is white Gaussian passed through a 4th-order
 Butterworth band-pass of that bandwidth centred on the IF (the analog IF filter); its
 passband density is ``N0 = (a0**2 / 2) / (SNR * noise_bw_hz)``.
@@ -84,7 +84,7 @@ class Multipath:
 
 @dataclass(frozen=True)
 class TacanSignalConfig:
-    """Everything that defines a TACAN IF scenario. Defaults: DESIGN.md 4.1.
+    """Everything that defines a TACAN IF scenario. Defaults: docs/explanation/tacan.md.
 
     Parameters
     ----------

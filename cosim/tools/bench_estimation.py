@@ -23,7 +23,7 @@ TARGET_UPS = 1000.0 * 12
 
 @njit_cached
 def _f_jerk(x, w, prm, q, out):
-    """Carrier phase / frequency / rate / jerk model of the GNSS UKF (seed 002): prm[0] = [T,
+    """Carrier phase / frequency / rate / jerk model of the GNSS UKF (the AUKF patent's): prm[0] = [T,
     T^2/2, T^3/6]."""
     T, T2, T3 = prm[0, 0], prm[0, 1], prm[0, 2]
     out[0] = x[0] + T * x[1] + T2 * x[2] + T3 * x[3] + w[0]
@@ -71,7 +71,7 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
         print(f"{name:10s} {kind:8s} {mode:8s} {ups:12,.0f} upd/s ({ups / TARGET_UPS:,.0f}x target)",
               flush=True)
 
-    # 3-state Kalman loop (phase, frequency, rate; scalar phase measurement), seed 003 shape
+    # 3-state Kalman loop (phase, frequency, rate; scalar phase measurement), the INS paper's shape
     kf_model = white_jerk(T_s, q=1e3, r=0.05)
     for kind, arith in (("float64", "float64"), ("float32", "float32"), ("fixed", KalmanFormats())):
         z1 = rng.normal(0, 0.2, (steps, 1))
@@ -81,7 +81,7 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
         add("KF n=3", kind, f"{trials} trials",
             lambda a=arith: KalmanFilter(kf_model, np.zeros(3), np.eye(3), a, trials=trials), zb,
             trials * bsteps, zb[:, :16])
-    # 4-state UKF on I/Q (seed 002 shape), additive noise
+    # 4-state UKF on I/Q (the AUKF patent's shape), additive noise
     prm = np.array([[T_s, T_s ** 2 / 2, T_s ** 3 / 6]])
     ukf_model = NonlinearModel(_f_jerk, _h_iq, np.diag([1e-8, 1e-6, 1e-4, 1e-2]), np.eye(2) * 1e-2,
                                prm_f=prm, prm_h=[[1.0]])
@@ -96,8 +96,8 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
         mkb = lambda k=kind: UnscentedKalmanFilter(ukf_model, np.zeros(4), np.eye(4) * 0.01, alpha=1.0,
                                                    beta=2.0, kappa=0.0, arithmetic=k, trials=trials)
         add("UKF n=4", kind, f"{trials} trials", mkb, zb, trials * ub, zb[:, :16])
-    # 4-state UKF on I/Q with augmented noise (L = 10) and the seed-002 UT (alpha 1.027, beta 2,
-    # kappa 0): float and fixed point (the phase model of tests/dsp/estimation/test_ukf_fixed.py)
+    # 4-state UKF on I/Q with augmented noise (L = 10) and the AUKF patent's UT (alpha 1.027,
+    # beta 2, kappa 0): float and fixed point (the phase model of tests/dsp/estimation/test_ukf_fixed.py)
     Fp = np.array([[0.98, 0.1, 0.005, 0.0], [0, 0.95, 0.1, 0.005], [0, 0, 0.95, 0.1], [0, 0, 0, 0.95]])
     aug_model = NonlinearModel.phase_iq(Fp, np.diag([1e-3, 1e-4, 1e-5, 1e-6]), np.eye(2) * 0.05)
     for kind, arith in (("float64", "float64"), ("float32", "float32"), ("fixed", UkfFormats())):
@@ -129,7 +129,7 @@ def estimation_speed(out: Path, quick: bool = False) -> dict:
                "target": "1 kHz loop x 12 channels", "cores_used": 1,
                "scenario": {"T_s": T_s, "kf": "white-jerk 3-state, scalar measurement, Joseph update",
                             "ukf": "4-state phase/frequency/rate/jerk, I/Q measurement, additive noise",
-                            "ukf_aug": "4-state damped phase model, I/Q, augmented noise L = 10, seed-002 UT "
+                            "ukf_aug": "4-state damped phase model, I/Q, augmented noise L = 10, the AUKF patent's UT "
                                        "(alpha 1.027, beta 2, kappa 0); float and fixed (UkfFormats)",
                             "alpha_beta": "Kalata gains, fixed and adaptive (window 4, manoeuvre estimate)",
                             "single_stream_steps": steps, "batch_trials": trials},

@@ -13,9 +13,9 @@ Kalata (1984): tracking index ``lambda = sigma_w T^2 / sigma_v``, ``r = (4 + lam
 sqrt(lambda^2 + 8 lambda)) / 4``, ``alpha = 1 - r^2``, ``beta = 2 (2 - alpha) - 4 sqrt(1 -
 alpha) = 2 (1 - r)^2``.
 
-Adaptive mode (alpha-beta only; seed 004 with RECEIVERS.md's decision): the manoeuvre
-(acceleration) standard deviation is estimated from the last ``window`` innovations (the
-seed's 3-5) as ``sigma_a T^2 = k sqrt(max(mean e^2 - tau sigma_v^2, 0))`` (``k =
+Adaptive mode (alpha-beta only; the monopulse paper's, with the project's decision, see
+docs/explanation/monopulse_tracker.md): the manoeuvre (acceleration) standard deviation is
+estimated from the last ``window`` innovations (the paper's 3-5) as ``sigma_a T^2 = k sqrt(max(mean e^2 - tau sigma_v^2, 0))`` (``k =
 manoeuvre_gain``, the decision's 2; ``tau = noise_floor``), the tracking index is ``lambda =
 sigma_a T^2 / sigma_v`` and alpha, beta are Kalata's: ``r = 4 / (4 + lambda + sqrt(lambda^2
 + 8 lambda))`` (the same r as above, without the cancellation), ``alpha = clip(1 - r^2,
@@ -276,7 +276,7 @@ class AlphaBetaFilter:
     sigma_v : float
         Measurement noise standard deviation (adaptive mode).
     window : int
-        Innovations averaged by the adaptive mode (2..64; the seed's 3-5).
+        Innovations averaged by the adaptive mode (2..64; the monopulse paper's 3-5).
     noise_floor : float
         ``tau``: innovation power ``tau sigma_v^2`` taken as noise, not manoeuvre.
     manoeuvre_gain : float

@@ -97,7 +97,7 @@ class NonlinearModel:
 
     @classmethod
     def phase_iq(cls, F, Q, R, amplitude: float = 1.0) -> "NonlinearModel":
-        """A carrier-phase model (seed 002 shape): linear dynamics ``x[k+1] = F x + w`` of a
+        """A carrier-phase model (the AUKF patent's shape): linear dynamics ``x[k+1] = F x + w`` of a
         state whose first element is the phase (rad), measured as the I/Q pair ``A [cos
         x0, sin x0] + v``. Runs in every arithmetic."""
         F = np.asarray(F, np.float64)

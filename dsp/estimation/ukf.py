@@ -10,7 +10,7 @@ are van der Merwe's scaled set (as filterpy's ``MerweScaledSigmaPoints``)::
     lambda = alpha^2 (L + kappa) - L,  X = [x, x + U_i, x - U_i],  U^T U = (L + lambda) P
     Wm_0 = lambda / (L + lambda), Wc_0 = Wm_0 + 1 - alpha^2 + beta, W_i = 1 / (2 (L + lambda))
 
-(``alpha`` is the seed's UT scaling ``epsilon``). Noise is *additive* (``L = n``; Q added to
+(``alpha`` is the AUKF patent's UT scaling ``epsilon``). Noise is *additive* (``L = n``; Q added to
 the predicted covariance, R to the innovation covariance) or *augmented* (``L = n + n + m``:
 the sigma points also span ``w ~ N(0, Q)`` and ``v ~ N(0, R)``, which ``f`` and ``h`` take
 as arguments; the augmented factor is block diagonal, its constant noise blocks factored once
@@ -37,8 +37,8 @@ Y``, ... ``Pyy``, ``Pxy``, ``chol -> Ls``, ``Ls^-1 Pxy^T -> V``, ``Ls^-T V -> K`
 Pxy^T`` (equal to ``Pp - K S K^T``; one exact accumulation) in every arithmetic. The UT
 weights must suit the ``W`` format (:func:`dsp.estimation.ukf_formats.weight_problem`): with small alpha (1e-3) the
 centre weight is ~-1e6 against positive weights of ~+1e5 and the rounding errors cancel
-badly, so such parameters are refused, naming the alpha that would do; the seed-002
-parameters (alpha = 1.027, beta = 2, kappa = 0, L = 10: Wm0 = 0.0519, Wc0 = 1.997, Wi =
+badly, so such parameters are refused, naming the alpha that would do; the AUKF
+patent's parameters (alpha = 1.027, beta = 2, kappa = 0, L = 10: Wm0 = 0.0519, Wc0 = 1.997, Wi =
 0.0474) are bounded and held to 2^-15 relative.
 
 Compilation: a numba kernel that takes the model functions as arguments is not cached, so
@@ -352,7 +352,7 @@ class UnscentedKalmanFilter:
     x0 : (n,) or (B, n) array
     P0 : (n, n) or (B, n, n) array, symmetric PSD
     alpha : float
-        Spread of the sigma points, in (0, 1] (the seed's ``epsilon`` may exceed 1: allowed
+        Spread of the sigma points, in (0, 1] (the AUKF patent's ``epsilon`` may exceed 1: allowed
         up to 10).
     beta : float
         Prior-distribution term (2 for a Gaussian), >= 0.

@@ -1,13 +1,13 @@
-"""Seed 002: master-slave adaptive UKF carrier tracker (``"aukf"``) and its fixed-q UKF
+"""The AUKF patent's master-slave adaptive UKF carrier tracker (``"aukf"``) and its fixed-q UKF
 baseline (``"ukf"``), float64 / float32 / fixed point from one source.
 
-Master (RECEIVERS.md section 1): state ``x = [theta, w0, w1, w2]`` (rad, rad/s, rad/s^2,
+Master (docs/explanation/gnss_aukf.md): state ``x = [theta, w0, w1, w2]`` (rad, rad/s, rad/s^2,
 rad/s^3) of the Singer jerk model (``cosim.gnss.dynamics.jerk_phi`` / ``jerk_q``), where
 ``theta`` is the carrier phase *minus the replica (NCO) phase* at the epoch's midpoint (the
 residual the I/Q pair measures) and ``w0..w2`` are absolute. Prediction (linear, exact in
 any UKF): ``x- = Phi x - [2 pi T (f_k + f_k+1) / 2, 0, 0, 0]`` (the NCO's advance between
 the midpoints, ``f`` the replica Doppler in force, Hz), ``P- = Phi P Phi^T + q_hat Q_bar``.
-Update: the seed's closed form (its eqs 7.1-7.11, reconstructed in RECEIVERS.md) of the
+Update: the patent's closed form (its eqs 7.1-7.11, as reconstructed for this project) of the
 augmented UKF with ``n = 10`` (4 states, 4 process noise, 2 measurement noise), lower
 Cholesky ``S`` of ``P-``: ``c = sqrt((n + lambda) P-_11)``, ``a = W1 + 18 W2 + 2 cos(c) W2``,
 ``y_hat = A a u``, ``Pyy = A^2 ((W4 - l) u u^T + m I) + R``, ``Pxy = 2 A W2 sin(c)
@@ -16,10 +16,10 @@ sqrt(n + lambda) S[:, 0] v^T`` (``u = [cos th, sin th]``, ``v = [-sin th, cos th
 ``g = 2 A W2 sin c``). :func:`dsp.gnss.aukf_master.master_update` is this form (a numba kernel);
 :func:`dsp.gnss.aukf_master.master_update_generic` runs the same update through the generic augmented UKF of
 :mod:`dsp.estimation.ukf` (identity transition, zero process noise: its 21 sigma points are
-then exactly the seed's); test A1 holds them to 1e-12.
+then exactly the patent's); test A1 holds them to 1e-12.
 
 Measurement: the prompt ``P = I + jQ`` divided by the amplitude ``A_c`` so that ``A = 1`` and
-the noise variance is ``1 / (2 T C/N0)`` ("R from C/N0", default) or the seed's ``1e-9``
+the noise variance is ``1 / (2 T C/N0)`` ("R from C/N0", default) or the patent's ``1e-9``
 (``r_mode="seed"``); the navigation bit is removed by the sign of the prompt rotated by the
 predicted residual (``data_wipe``). ``A_c`` is in the correlator's own units, which the
 tracker is not told (the fast path's correlations have unit noise per component, the HDL
@@ -27,17 +27,17 @@ channel's are integer accumulators thousands of times larger), so by default
 (``amplitude="auto"``) it is estimated from the prompt power with the nominal C/N0:
 ``E|P|^2 = A_c^2 + 2 sigma^2 = A_c^2 (1 + 1 / (T C/N0))``, the mean of ``|P|^2`` taken over
 the epochs so far, then exponentially over ``amp_epochs`` epochs (the bit and the phase do
-not enter it). A number fixes ``A_c``. ``P0`` defaults to the seed's ``1e-3 I`` (a start on the
+not enter it). A number fixes ``A_c``. ``P0`` defaults to the patent's ``1e-3 I`` (a start on the
 truth), its ``w0`` entry widened to ``(2 pi sigma)^2`` when the context gives the hand-over's
 ``doppler0_sigma_hz``. The initial Doppler rate is the context's ``doppler_rate0_hz_s``
-(the HDL run: ``GnssRunConfig.handover_doppler_rate_hz_s``, the seed's x0 rate under
-``--scenario seed002``; started on rate 0 with the seed's ``P0`` the seed's own 1 g drove
+(the HDL run: ``GnssRunConfig.handover_doppler_rate_hz_s``, the patent's x0 rate under
+``--scenario aukf-patent``; started on rate 0 with the patent's ``P0`` the patent's own 1 g drove
 the 32 dB-Hz loop off lock, 175 slips, and widening ``P0[w1]`` to 100 (Hz/s)^2 did too).
 
-Slave (scalar ``q``). Order per block (RECEIVERS.md): slave predict -> master epochs with
-``q_hat_k|k-1`` -> slave update. **Deviation from the seed** (``slave="block"``, default):
+Slave (scalar ``q``). Order per block (the patent's): slave predict -> master epochs with
+``q_hat_k|k-1`` -> slave update. **Deviation from the patent** (``slave="block"``, default):
 at 32 dB-Hz the q-dependent part of one epoch's innovation covariance is ~1 % of the thermal
-noise (the steady-state ``P-_11 / R`` is 0.009 at q = 5), so the seed's per-epoch measurement
+noise (the steady-state ``P-_11 / R`` is 0.009 at q = 5), so the patent's per-epoch measurement
 ``z = diag(nu nu^T)`` hardly moves ``q_hat`` (a previous attempt failed A2/A4 that way). The
 slave instead measures, once per block of ``M`` epochs, ``z = (w2_hat_end - s^M w2_hat_start)^2``
 (``s = e^-alpha T``) -- the sum of the master's jerk corrections ``sum s^(M-k) K4 nu_k``
@@ -48,14 +48,14 @@ mismatched-filter Lyapunov equation of the linearised loop (:func:`dsp.gnss.aukf
 tabulated on a log grid of ``q_hat``); ``Rq = 2 h(q_hat)^2`` (``z`` is a squared Gaussian).
 The block slave's state is ``ln q`` (a scalar UKF in ``q`` let a quarter of the runs at
 ``q_true = 0.1 q0`` collapse onto the floor ``q >= 0``); its prior is derived: ``P_lnq0 = 1``
-(a factor e at 1 sigma), ``Q_lnq = 0.01`` per block (the seed's ``Pq0 = 1e-8`` on ``q`` would
-freeze ``q_hat`` at ``q0``). ``slave="seed"`` runs the seed's slave
+(a factor e at 1 sigma), ``Q_lnq = 0.01`` per block (the patent's ``Pq0 = 1e-8`` on ``q`` would
+freeze ``q_hat`` at ``q0``). ``slave="seed"`` runs the patent's slave
 literally: per epoch, ``z = diag(nu nu^T)``, ``h(q_j) = diag Pyy(q_j)``, ``q0 = 5``,
 ``Pq0 = 1e-8``, ``Qq = 1e-10``, ``Rq = diag(1e-8, 1e-8)``. ``eq414="literal"`` takes the
-seed's eq. 4.14 as written (``P_k|k-1 = Qq``), default ``P_k|k-1 = P_k-1 + Qq``.
+patent's eq. 4.14 as written (``P_k|k-1 = Qq``), default ``P_k|k-1 = P_k-1 + Qq``.
 
 Loop: ``f_next = w0_pred / 2 pi + (C1 e + C2 sum e) / T`` with ``e = theta_hat / 2 pi``
-(cycles; RECEIVERS.md's 2nd-order filter, ``K0 Kd = 1``, ``wn`` from ``loop_bn_hz``) and
+(cycles; a 2nd-order filter, ``K0 Kd = 1``, ``wn`` from ``loop_bn_hz``) and
 ``w0_pred`` the master's ``w0`` predicted to the epoch the write takes effect in
 (``latency_epochs``); carrier-aided 1st-order DLL as ``loops_fixed.ChannelCore``.
 
@@ -96,9 +96,9 @@ from .aukf_master import (N_AUG, TWO_PI, AukfFormats, master_kernel, master_upda
 from .aukf_slave import Q_TABLE, block_table, wipe_gain
 from .trackers import register_tracker
 
-SEED_X0 = (0.0, 32995.519, 323.356, 0.0)
-SEED_P0 = 1e-3
-SEED_R = 1e-9
+PATENT_X0 = (0.0, 32995.519, 323.356, 0.0)
+PATENT_P0 = 1e-3
+PATENT_R = 1e-9
 EVENTS = ("chol_fail", "s_not_pd", "saturations")
 #: P0[theta] after a hand-over: the carrier phase is unknown, uniform over the Costas
 #: half-cycle: (pi / 2)^2 / 3 rad^2.
@@ -119,7 +119,7 @@ def _check_pos(name, v):
 
 
 class AukfTracker:
-    """The seed-002 carrier tracker (``adaptive=False``: the fixed-q UKF baseline); see the
+    """The AUKF patent's carrier tracker (``adaptive=False``: the fixed-q UKF baseline); see the
     module docstring. Tracker interface of :mod:`dsp.gnss.trackers`."""
 
     def __init__(self, ctx, arith="float64", *, adaptive: bool = True, epsilon: float = 1.027,
@@ -174,12 +174,12 @@ class AukfTracker:
         self.shape = np.shape(ctx.doppler0_hz)
         Bn = f0.size
         fd0 = np.broadcast_to(np.asarray(ctx.doppler_rate0_hz_s, float), np.shape(ctx.doppler0_hz)).ravel()
-        if P0 is None:     # the seed's, widened on w0 to the hand-over Doppler's error if told
-            P0 = np.diag([SEED_P0] * 4)
+        if P0 is None:     # the patent's, widened on w0 to the hand-over Doppler's error if told
+            P0 = np.diag([PATENT_P0] * 4)
             sd = ctx.doppler0_sigma_hz
             if sd is not None:
                 sd = _check_pos("doppler0_sigma_hz (tracker context)", sd)
-                P0[1, 1] = max(SEED_P0, (TWO_PI * sd) ** 2)
+                P0[1, 1] = max(PATENT_P0, (TWO_PI * sd) ** 2)
                 P0[0, 0] = HANDOVER_P_THETA
         P0 = np.asarray(P0, float)
         if P0.shape != (4, 4):
@@ -202,7 +202,7 @@ class AukfTracker:
         self.amp_gain = 1.0 / (1.0 + 1.0 / (T * c)) if auto else 1.0   # A_c^2 / E|P|^2
         self.amp = np.full(Bn, np.nan if auto else float(amplitude))
         self.p2 = np.zeros(Bn)                   # running mean of |P|^2 (amplitude="auto")
-        self.r = 1.0 / (2 * T * c) if r_mode == "cn0" else SEED_R
+        self.r = 1.0 / (2 * T * c) if r_mode == "cn0" else PATENT_R
         self.R = np.diag([self.r, self.r])
         # the block slave's model: the data wipe's mean discriminator gain at the nominal C/N0
         self.wipe_kd = wipe_gain(1.0 / (2 * T * c)) if (data_wipe and c is not None) else 1.0
@@ -252,7 +252,7 @@ class AukfTracker:
         self.k = 0
         self.w2_start = self.x[:, 3].copy()
         self.qmin = 1e-4 * max(q0, 1e-3)
-        # loop filter (RECEIVERS.md): bilinear 2nd order, K0 Kd = 1
+        # loop filter: bilinear 2nd order, K0 Kd = 1
         wn = 2.0 * loop_bn_hz / (loop_xi + 1.0 / (4 * loop_xi))
         wt = wn * T
         den = 4 + 4 * loop_xi * wt + wt * wt
@@ -481,5 +481,5 @@ def _make_ukf(ctx, arith, *, r_mode: str = "cn0", **opts):
     return AukfTracker(ctx, arith, adaptive=False, r_mode=r_mode, **opts)
 
 
-register_tracker("aukf", _make_aukf, "seed-002 master-slave adaptive UKF (jerk model, I/Q)")
-register_tracker("ukf", _make_ukf, "seed-002 master UKF with fixed q (baseline)")
+register_tracker("aukf", _make_aukf, "the AUKF patent's master-slave adaptive UKF (jerk model, I/Q)")
+register_tracker("ukf", _make_ukf, "the AUKF patent's master UKF with fixed q (baseline)")

@@ -1,5 +1,5 @@
-"""The master of the adaptive UKF carrier tracker (:mod:`dsp.gnss.aukf`): the seed's closed
-form of the augmented UKF update on the carrier phase (:func:`master_update`, a numba
+"""The master of the adaptive UKF carrier tracker (:mod:`dsp.gnss.aukf`): the AUKF patent's
+closed form of the augmented UKF update on the carrier phase (:func:`master_update`, a numba
 kernel; :func:`master_update_generic` runs the same update through the generic augmented UKF
 of :mod:`dsp.estimation.ukf`), its weights (:func:`ut_weights`) and the formats of its fixed-point
 emulation (:class:`AukfFormats`)."""
@@ -202,7 +202,7 @@ def master_kernel(x, P, y, ok, dphi, qhat, Phi, Qbar, R, A, W, pfloor, mode, fm,
 
 @njit_cached
 def pyy_diag_kernel(p11, th, A, W, R, out):
-    """``diag Pyy`` for ``P-_11`` values ``p11 (B, J)`` (the seed slave's ``h_q``)."""
+    """``diag Pyy`` for ``P-_11`` values ``p11 (B, J)`` (the patent's slave's ``h_q``)."""
     ev = np.zeros(3, np.int64)
     fm = np.zeros((9, 2))
     for b in range(p11.shape[0]):
@@ -213,7 +213,7 @@ def pyy_diag_kernel(p11, th, A, W, R, out):
 
 
 def ut_weights(epsilon: float = 1.027, beta: float = 2.0, kappa: float = 0.0, L: int = N_AUG):
-    """``[W1 = Wm0, W2 = Wi, W3 = Wc0, n + lambda]`` of the seed's scaled UT."""
+    """``[W1 = Wm0, W2 = Wi, W3 = Wc0, n + lambda]`` of the patent's scaled UT."""
     wm, wc, c = sigma_weights(L, epsilon, beta, kappa)
     return np.array([wm[0], wm[1], wc[0], c])
 

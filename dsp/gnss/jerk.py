@@ -1,4 +1,4 @@
-"""The jerk (Singer-type) line-of-sight model of seed 002 (RECEIVERS.md 1): its exact
+"""The jerk (Singer-type) line-of-sight model of the AUKF patent: its exact
 transition matrix and discrete process noise. A model both sides use -- the DSP's UKF
 predicts with it, the signal generator (:mod:`cosim.gnss.dynamics`) draws truth from it --
 so it lives here, below both (the DSP never imports the generator).
@@ -39,7 +39,7 @@ def phi_b(alpha: float, tau):
 
 
 def jerk_phi(alpha_per_s: float, step_s: float) -> np.ndarray:
-    """The exact 4x4 transition matrix of the jerk model over ``step_s`` (RECEIVERS.md 1)."""
+    """The exact 4x4 transition matrix of the jerk model over ``step_s``."""
     T = float(step_s)
     p, q1, r, s = (float(v) for v in phi_b(float(alpha_per_s), T))
     return np.array([[1.0, T, T * T / 2, p], [0.0, 1.0, T, q1], [0.0, 0.0, 1.0, r],

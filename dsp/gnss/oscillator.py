@@ -10,8 +10,8 @@ section 9.3, p. 327 (Table 9.2, the clock models of the GPS chapter): "tcxo" is 
 same values, with that citation, are in independent open-source GNSS code (navtools'
 clock models, Auburn GAVLab; D. Sturdivant's sturdr ``clock.hpp``), which also lists the
 book's high-quality TCXO (2e-21, 1e-22, 2e-20), rubidium (2e-22, 4.5e-26, 1e-30) and
-cesium (2e-22, 5e-27, 1.5e-33) rows. (Seed 003 cites O'Driscoll & Lachapelle 2011 for its
-oscillator table, which is empty in the seed's text; we have not checked that paper.)
+cesium (2e-22, 5e-27, 1.5e-33) rows. (The INS paper cites O'Driscoll & Lachapelle 2011 for its
+oscillator table, which is empty in the paper's text; we have not checked that paper.)
 
 =========  ========  ========  ========
 class      h0        h-1       h-2

@@ -1,7 +1,7 @@
 """The carrier/code tracker interface of the GNSS channel, and the registry of trackers.
 
-Every tracker the GNSS channel runs (the classic PLLs here; the adaptive UKF of seed 002,
-the INS-aided Kalman loop of seed 003 in their own modules) is built by a factory
+Every tracker the GNSS channel runs (the classic PLLs here; the adaptive UKF of the AUKF
+patent, the INS-aided Kalman loop of the INS paper in their own modules) is built by a factory
 ``make(ctx, arith, **options) -> tracker`` registered under a name with
 :func:`register_tracker`; the closed-loop runs (fast path, bit-exact channel, Verilator)
 and the command line's ``--tracker`` look it up with :func:`make_tracker`, and nothing

@@ -1,8 +1,8 @@
-"""Seed-003 carrier tracking loops: the (INS-aided) 3rd-order Kalman loop and the
+"""The INS paper's carrier tracking loops: the (INS-aided) 3rd-order Kalman loop and the
 INS-aided 3rd-order PLL, registered as GNSS trackers ``aided-kf``, ``unaided-kf``,
 ``aided-pll``.
 
-Kalman loop (RECEIVERS.md 2; O'Driscoll & Lachapelle 2011 for the form). State at the end
+Kalman loop (docs/explanation/ins.md; O'Driscoll & Lachapelle 2011 for the form). State at the end
 of interval ``k`` (NCO frequency ``f_k`` in force over it), units cycles, Hz, Hz/s::
 
     x = [theta - phi_nco,  f_D - f_k,  r_res]
@@ -335,9 +335,9 @@ def _kf(aided):
     return make
 
 
-register_tracker("aided-kf", _kf(True), "seed-003 INS-aided 3rd-order Kalman carrier loop + DLL",
+register_tracker("aided-kf", _kf(True), "the INS paper's INS-aided 3rd-order Kalman carrier loop + DLL",
                  needs_aiding=True)
-register_tracker("unaided-kf", _kf(False), "seed-003 unaided 3rd-order Kalman carrier loop + DLL")
+register_tracker("unaided-kf", _kf(False), "the INS paper's unaided 3rd-order Kalman carrier loop + DLL")
 register_tracker("aided-pll", lambda ctx, arith, **o: AidedPll(ctx, arith, **o),
-                 "seed-003 INS-aided 3rd-order PLL (Kaplan, Bn 15 Hz, rate feed-forward) + DLL",
+                 "the INS paper's INS-aided 3rd-order PLL (Kaplan, Bn 15 Hz, rate feed-forward) + DLL",
                  needs_aiding=True)

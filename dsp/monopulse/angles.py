@@ -1,4 +1,4 @@
-"""Monopulse angle equations (RECEIVERS.md section 3) and the angle Cramer-Rao bound.
+"""Monopulse angle equations (the monopulse paper's) and the angle Cramer-Rao bound.
 
 Model: after the digital steering correction, channel ``i`` carries ``s exp(j dphi_i)``,
 ``dphi_i = phi_i0 - phi_i``, ``phi_2 = 2 pi Dy v``, ``phi_3 = 2 pi Dx u``,
@@ -11,7 +11,7 @@ formulation the tests compare against). Noise-free they are equal; to first orde
 noise they are equal too (both have derivative ``-2 Im(d r) / (1 + tan^2(dphi/2))`` in the
 ratio ``r = S_d / S_S``). The Im form is kept because in the model the in-phase part of
 ``S_d / S_S`` is zero: any real part is noise or channel mismatch, and the Im form discards it
-(a projection) where the arg form lets it in at second order; it is the ratio the seed's
+(a projection) where the arg form lets it in at second order; it is the ratio the paper's
 board forms and its output is bounded (|dphi| < pi) for any input.
 
 Direction cosines: ``v = v0 - dphi_2 / (2 pi Dy)``, ``u = u0 - dphi_3 / (2 pi Dx)``; azimuth

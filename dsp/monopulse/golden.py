@@ -12,7 +12,7 @@ The low-pass is an integrate-and-dump over one chip (a first-order CIC of length
 filter matched to a rectangular chip, whose decimated noise is white, and which nulls the
 ``2 f_IF`` image exactly when ``2 f_IF D / fs`` is an integer (the generator's rule).
 
-Beams, with the quadrant mapping of RECEIVERS.md section 3 (keep it: the sign of
+Beams, with the monopulse paper's quadrant mapping (keep it: the sign of
 Delta / Sigma depends on it)::
 
     S_S = S_1 + S_2 + S_3 + S_4

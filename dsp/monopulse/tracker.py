@@ -1,8 +1,8 @@
 """Monopulse DSP after the angle measurement: per-axis alpha-beta trackers on the direction
 cosines, the predicted direction as the next beam-steering command, channel calibration and
-the search / capture sequence (RECEIVERS.md section 3).
+the search / capture sequence (docs/explanation/monopulse_tracker.md).
 
-Tracker (seed eqs. 27-37 as reconstructed). One alpha-beta filter per axis of the direction
+Tracker (the monopulse paper's eqs. 27-37 as reconstructed). One alpha-beta filter per axis of the direction
 cosines, state ``[u, du/dt]``, ``F = [[1, T], [0, 1]]``, ``Gamma = [T^2/2, T]``, ``z = u +
 noise``; gains ``K = [alpha, beta / T]`` from Kalata's tracking index ``lambda = sigma_a T^2 /
 sigma_v``. Decision: the u and v axes are tracked; the third cosine ``w = sqrt(1 - u^2 - v^2)``
@@ -14,7 +14,7 @@ filter would only re-filter the same data.
 * ``mode="adaptive"``: the manoeuvre level is re-estimated every step from the last
   ``window`` (3-5) innovations and alpha, beta recomputed from it
   (:class:`dsp.estimation.AlphaBetaFilter` with ``adaptive=True``). ``eq36="repaired"``
-  (RECEIVERS.md's decision): ``sigma_a T^2 = k sqrt(max(mean e^2 - tau sigma_v^2 / (1 -
+  (the project's decision): ``sigma_a T^2 = k sqrt(max(mean e^2 - tau sigma_v^2 / (1 -
   alpha), 0))`` (``k = manoeuvre_gain`` 2, ``tau = noise_floor`` 6), alpha relaxing back by
   at most ``alpha_relax`` 1.1 in ``1 - alpha`` a step (``dsp/estimation/alphabeta``'s
   ``floor_scaling="gain"``, ``alpha_relax``). Why: with the fixed floor ``4 sigma_v^2`` (the
@@ -25,7 +25,7 @@ filter would only re-filter the same data.
   the manoeuvre (low-index 3.1e-4), with the manoeuvre lag 6.3e-4 (low-index 82e-4);
   tau 6: the mean of 4 squared innovations passes 6 times its variance with probability
   8e-5 (chi-square, 4 dof), 4 times with 3e-3 (a false manoeuvre every ~170 blocks a axis);
-  ``eq36="literal"``: the seed's eq. 36 as printed, ``sigma_w = sqrt(mean e^2)`` taken as the
+  ``eq36="literal"``: the paper's eq. 36 as printed, ``sigma_w = sqrt(mean e^2)`` taken as the
   acceleration standard deviation although it is in direction-cosine units (``k = T^2``,
   ``tau = 0``): the index then is ``T^2`` times too small and the filter never leaves
   ``alpha_min`` (kept to show it).
@@ -82,19 +82,19 @@ def _int(name, v, lo, hi=None):
 
 @dataclass(frozen=True)
 class TrackerConfig:
-    """Angle tracker settings (defaults: the seed's adaptive filter, repaired eq. 36)."""
+    """Angle tracker settings (defaults: the monopulse paper's adaptive filter, repaired eq. 36)."""
 
     mode: str = field(default="adaptive", metadata={
         "help": "adaptive (Kalata index from the last innovations) or fixed gains",
         "choices": MODES, "case": "lower"})
     eq36: str = field(default="repaired", metadata={
-        "help": "adaptive index: repaired (RECEIVERS.md) or literal (the seed's eq. 36)",
+        "help": "adaptive index: repaired or literal (the monopulse paper's eq. 36 as printed)",
         "choices": EQ36, "case": "lower"})
     sigma_a: float = field(default=2.0, metadata={
         "help": "acceleration std of the direction cosines giving the fixed tracking index "
                 "(1/s^2; also the adaptive filter's start)"})
     window: int = field(default=4, metadata={"help": "innovations averaged by the adaptive "
-                                                     "filter (3-5 in the seed; 2..64)"})
+                                                     "filter (3-5 in the monopulse paper; 2..64)"})
     noise_floor: float = field(default=6.0, metadata={
         "help": "innovation power (x sigma_v^2, x 1 / (1 - alpha) with floor_scaling gain) "
                 "taken as noise by the adaptive filter"})

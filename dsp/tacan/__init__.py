@@ -1,1 +1,1 @@
-"""TACAN bearing DSP: reference decoding, the seed's 5-state Kalman filter, coarse/fine bearing."""
+"""TACAN bearing DSP: reference decoding, the TACAN paper's 5-state Kalman filter, coarse/fine bearing."""

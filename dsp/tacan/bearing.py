@@ -2,13 +2,13 @@
 
 With the convention of :mod:`cosim.tacan.signal` (the 15 Hz component is
 ``A sin(2 pi 15 (t - t_M) - theta)``), the Kalman state at a pulse at ``t_k`` has 15 Hz
-phase ``alpha_k = 2 pi 15 (t_k - t_M) - theta``, hence the seed's eq. 15
+phase ``alpha_k = 2 pi 15 (t_k - t_M) - theta``, hence the TACAN paper's eq. 15
 ``theta = theta_a - theta_b`` with ``theta_a = 2 pi 15 (t_k - t_M)`` (phase of the pulse
 after the reference) and ``theta_b = alpha_k = atan2(x1, x2)`` (eq. 16). The 135 Hz
 component gives ``9 theta mod 2 pi`` the same way from the latest auxiliary (or main)
 reference.
 
-Coarse/fine combination: the seed's eq. 17, ``40 floor(theta_15 / 40) + theta_135 / 9``,
+Coarse/fine combination: the paper's eq. 17, ``40 floor(theta_15 / 40) + theta_135 / 9``,
 takes the 40-degree sector from the coarse bearing alone, so it slips a whole sector
 whenever the true bearing is near a sector edge and the coarse error crosses it. Here the
 fine bearing's nine candidates ``(phi + 360 i) / 9`` are compared with the coarse bearing and
@@ -78,8 +78,8 @@ def combine_coarse_fine(coarse_rad, fine9_rad, w_coarse=None, w_fine=None):
     return (fine + frac * wrap_pi(coarse - fine)) % TWO_PI
 
 
-def seed_eq17(coarse_deg, fine135_deg):
-    """The seed's eq. 17 as printed (kept to show the sector slip it suffers)."""
+def paper_eq17(coarse_deg, fine135_deg):
+    """The TACAN paper's eq. 17 as printed (kept to show the sector slip it suffers)."""
     return 40.0 * np.floor(np.asarray(coarse_deg) / 40.0) + np.asarray(fine135_deg) / 9.0
 
 

@@ -4,7 +4,7 @@ Two bounds, both for the joint coarse + fine bearing from ``n_pulses`` pulses of
 ``a = a0 (1 + A sin(u) + B sin(9 u))`` (``u`` the 15 Hz rotation phase less the bearing):
 
 * :func:`crb_deg`, the Cramer-Rao bound with every pulse's position known and its amplitude
-  measured by a matched filter (noise ``sigma``, relative to ``a0``): DESIGN.md 4.1. It is
+  measured by a matched filter (noise ``sigma``, relative to ``a0``): docs/explanation/bounds.md. It is
   the bound the benchmarks divide by.
 * :func:`detection_bound_deg`, the Fisher-information bound of the **output of a threshold
   detector**: the times and peak amplitudes of the envelope maxima over a threshold, with the
@@ -52,7 +52,7 @@ USES = ("both", "rate", "marks")
 def crb_deg(rel_sigma: float, mod_15: float, mod_135: float, n_pulses: float) -> float:
     """Cramer-Rao bound (deg) of the joint coarse+fine bearing from ``n_pulses`` amplitudes.
 
-    ``var >= 2 sigma^2 / (N (A^2 + 81 B^2))`` rad^2 (DESIGN.md 4.1), sigma relative to the
+    ``var >= 2 sigma^2 / (N (A^2 + 81 B^2))`` rad^2 (docs/explanation/bounds.md), sigma relative to the
     unmodulated amplitude.
     """
     den = n_pulses * (mod_15 ** 2 + 81.0 * mod_135 ** 2)

@@ -1,4 +1,4 @@
-"""The seed's 5-state Kalman filter for the TACAN envelope (seed eqs. 6-14), one source for
+"""The TACAN paper's 5-state Kalman filter for the envelope (its eqs. 6-14), one source for
 float (golden) and fixed point.
 
 State ``x = [m1 sin a, m1 cos a, m2 sin b, m2 cos b, u]`` (15 Hz and 135 Hz components and
@@ -19,8 +19,8 @@ from its configuration: a :class:`KalmanConfig` runs in float, a :class:`KalmanF
 (which contains the :class:`KalmanConfig`) in fixed point. The two therefore differ only
 where quantisation happens.
 
-Design choices (the seed leaves them open)
-------------------------------------------
+Design choices (the paper leaves them open)
+-------------------------------------------
 * The filter works in units of the measurement noise variance (``R = 1``); ``P``
   and ``Q`` are scaled by ``r``, so the gains do not depend on the signal level and only
   the outlier gate needs ``r``, which is estimated from the innovations.

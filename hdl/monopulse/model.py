@@ -34,7 +34,7 @@ coefficient register, ``(re + j im) / 2**(corr_coef_bits - 1)``, each part in
 steering ``exp(j phi_i0)`` times its calibration into it. Output scaled by
 ``2**-corr_headroom_bits`` of full scale, saturating.
 
-*Beams* (RECEIVERS.md section 3 mapping)::
+*Beams* (the monopulse paper's quadrant mapping)::
 
     S = w1 + w2 + w3 + w4,  dA = (w1 + w2) - (w3 + w4),  dE = (w1 + w3) - (w2 + w4),
     dd = (w1 + w4) - (w2 + w3)

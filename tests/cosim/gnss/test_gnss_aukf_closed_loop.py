@@ -1,9 +1,9 @@
-"""Issue 15, criterion A5: the seed-002 AUKF (and its fixed-q UKF) closes the bit-exact HDL
+"""Issue 15, criterion A5: the AUKF patent's tracker (and its fixed-q UKF) closes the bit-exact HDL
 channel loop (model backend, 40 dB-Hz, static, acquisition hand-over) without a cycle slip.
 
 Two interface points made it diverge before (phase 52 deg rms, 448 slips, lock 0): the
 prompt was divided by ``sqrt(2 T C/N0)`` (the fast path's unit-noise scale) although the
-HDL accumulators are integers ~500 times larger, and the seed's ``P0 = 1e-3`` on ``w0``
+HDL accumulators are integers ~500 times larger, and the patent's ``P0 = 1e-3`` on ``w0``
 (0.005 Hz) froze the hand-over Doppler error (-1.6 Hz here)."""
 import numpy as np
 import pytest

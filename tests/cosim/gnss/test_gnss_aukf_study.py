@@ -1,4 +1,4 @@
-"""Seed-002 acceptance A2/A4 on the fast path (cosim.gnss.study_aukf): >= 100 Monte Carlo
+"""AUKF patent acceptance A2/A4 on the fast path (cosim.gnss.study_aukf): >= 100 Monte Carlo
 runs slow-marked, plus a short unmarked form."""
 import functools
 

@@ -5,7 +5,7 @@ import pytest
 
 from cosim.cli import main
 
-BASE = ["gnss", "--prn", "7", "--cn0-dbhz", "40", "--dynamics", "seed002", "--tracker",
+BASE = ["gnss", "--prn", "7", "--cn0-dbhz", "40", "--dynamics", "aukf-patent", "--tracker",
         "pll3", "--bn-hz", "15", "--backend", "model", "--dsp", "fixed"]
 
 

@@ -11,7 +11,7 @@ from dsp.gnss.jerk import jerk_phi, jerk_q
 
 
 def _q_alpha0(q, T):
-    # RECEIVERS.md section 1, alpha -> 0.
+    # The jerk model's discrete process noise, alpha -> 0.
     return q * np.array([[T**7 / 252, T**6 / 72, T**5 / 30, T**4 / 24],
                          [T**6 / 72, T**5 / 20, T**4 / 8, T**3 / 6],
                          [T**5 / 30, T**4 / 8, T**3 / 3, T**2 / 2],
@@ -74,8 +74,8 @@ def test_hermite_trajectory_is_exact_for_deterministic_jerk_and_continuous():
     np.testing.assert_allclose(lo[:3], hi[:3], rtol=1e-7, atol=1e-9)  # float round-off of the quintic
 
 
-def test_seed002_initial_doppler():
-    traj = dy.seed002(q=0.0).realise(1.0)
+def test_aukf_patent_initial_doppler():
+    traj = dy.aukf_patent_dynamics(q=0.0).realise(1.0)
     ev = traj.evaluate(np.array([0.0]))
     assert -ev[1, 0] / L1_WAVELENGTH_M == pytest.approx(32995.519 / (2 * np.pi), rel=1e-12)
     assert -ev[2, 0] / L1_WAVELENGTH_M == pytest.approx(323.356 / (2 * np.pi), rel=1e-12)

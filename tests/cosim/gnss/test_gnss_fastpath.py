@@ -64,7 +64,8 @@ def test_batched_shapes_and_bad_input():
 
 
 def test_epoch_errors_from_the_generator_truth():
-    g = GnssSignalGenerator(GnssSignalConfig(duration_s=0.1, dynamics=dy.seed002(q=0.0), cn0_dbhz=None))
+    g = GnssSignalGenerator(GnssSignalConfig(duration_s=0.1, dynamics=dy.aukf_patent_dynamics(q=0.0),
+                                             cn0_dbhz=None))
     t0 = np.arange(50) * 1e-3
     tr = g.truth_at(t0)
     # A replica on the truth at each start, at the start's Doppler: the phase error at the

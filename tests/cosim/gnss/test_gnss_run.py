@@ -1,5 +1,5 @@
-"""The GNSS run end to end on the bit-exact channel: 45 dB-Hz, seed-002 dynamics (1000 m/s,
-1 g) plus a 5 g/s jerk segment, 3rd-order PLL at Bn 15 Hz: acquisition within half a bin
+"""The GNSS run end to end on the bit-exact channel: 45 dB-Hz, the AUKF patent's dynamics
+(1000 m/s, 1 g) plus a 5 g/s jerk segment, 3rd-order PLL at Bn 15 Hz: acquisition within half a bin
 and half a chip, no cycle slip, the fixed-point tracker within a stated bound of the float
 one on the same channel, and (10 s form) the jerk's steady-state phase error against
 Kaplan's 0.4828 J / Bn^3."""
@@ -24,7 +24,7 @@ def _wrap(e):
 
 
 def _pair(duration_s, jerk_start_s, jerk_duration_s, settle_s):
-    sig = DynamicsChoice("seed002-jerk", jerk_g_per_s=5.0, jerk_start_s=jerk_start_s,
+    sig = DynamicsChoice("aukf-patent-jerk", jerk_g_per_s=5.0, jerk_start_s=jerk_start_s,
                          jerk_duration_s=jerk_duration_s).apply(
         GnssSignalConfig(prn=7, cn0_dbhz=45.0, duration_s=duration_s,
                          code_phase_chips=300.25, seed=3))

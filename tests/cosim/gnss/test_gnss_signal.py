@@ -28,7 +28,7 @@ from dsp.gnss.correlator import correlate
     (dict(duration_s=-1.0), "duration_s must be > 0, not -1.0"),
     (dict(code_phase_chips=1023.0), r"code_phase_chips must be in \[0, 1023\), not 1023.0"),
     (dict(oscillator="rubidium"), "oscillator must be None, an Oscillator or one of"),
-    (dict(dynamics="seed002"), "dynamics must be a PolynomialProfile, JerkProcess or CsvProfile, not str"),
+    (dict(dynamics="aukf-patent"), "dynamics must be a PolynomialProfile, JerkProcess or CsvProfile, not str"),
 ])
 def test_bad_config_is_refused_with_the_rule_and_the_value(kw, msg):
     with pytest.raises(ValueError, match=msg):

@@ -1,4 +1,4 @@
-"""``python -m cosim ins``: the seed-003 loops on the GNSS channel run (registry entry, JSON
+"""``python -m cosim ins``: the INS paper's loops on the GNSS channel run (registry entry, JSON
 report, INS aiding at the channel's epoch times, bad input -> exit 2), and the aided
 Kalman loop's closed loop bit-identical on the bit-exact model, Amaranth and Verilator."""
 from __future__ import annotations
@@ -20,7 +20,7 @@ from hdl.gnss.params import GnssChannelParams
 needs_verilator = pytest.mark.skipif(not verilator_available(),
                                      reason="Verilator, make or a C++ compiler not on PATH")
 
-#: A 1 s trajectory with the seed's shape (1 g peak at 5 g/s, 5 m/s cruise).
+#: A 1 s trajectory with the paper's shape (1 g peak at 5 g/s, 5 m/s cruise).
 SHORT = ["--duration-s", "1.0", "--start-s", "0.2", "--accel-g", "1.0", "--v-max-mps", "5"]
 SHORT_KW = dict(duration_s=1.0, start_s=0.2, accel_g=1.0, v_max_mps=5.0)
 

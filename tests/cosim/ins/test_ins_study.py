@@ -1,6 +1,6 @@
-"""Seed-003 acceptance B1-B3 (RECEIVERS.md section 2) on the fast path.
+"""INS paper acceptance B1-B3 (docs/explanation/ins.md) on the fast path.
 
-The full form is the seed's trajectory (150 s, 8300 m/s, 50 g, 5 g/s), INS errors 10 deg/h
+The full form is the paper's trajectory (150 s, 8300 m/s, 50 g, 5 g/s), INS errors 10 deg/h
 and 1 mg, 20 Monte Carlo trials per loop, 40 dB-Hz, OCXO; the short form runs a scaled
 trajectory (1.5 g / 0.3 s ramps at 5 g/s) for 1.5 s with the same loops.
 """
@@ -69,7 +69,7 @@ def test_bench_writes_table_thresholds_plot_and_machine(tmp_path):
         for lp in ("aided-kf", "aided-pll", "unaided-kf")}
     assert all(r["epochs_per_s"] > 0 and r["trials"] == 2 for r in s["rows"])
     md = (tmp_path / "ins.md").read_text()
-    for text in ("Seed Table 2", "C/N0 tracking threshold", "ins_fig6_7.png", s["machine"]["commit"]):
+    for text in ("The paper's Table 2", "C/N0 tracking threshold", "ins_fig6_7.png", s["machine"]["commit"]):
         assert text in md
     assert json.loads((tmp_path / "ins.json").read_text())["rows"][0]["loop"] == "aided-kf"
     assert (tmp_path / "ins_fig6_7.png").stat().st_size > 10000

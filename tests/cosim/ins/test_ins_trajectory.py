@@ -3,11 +3,11 @@ import pytest
 
 from cosim.gnss.dynamics import L1_WAVELENGTH_M
 from cosim.ins.ins_error import InsAiding, InsErrors
-from cosim.ins.trajectory import G_MPS2, Scenario, SeedTrajectory, los_kinematics
+from cosim.ins.trajectory import G_MPS2, Scenario, PaperTrajectory, los_kinematics
 
 
 def test_seed_profile_figures():
-    tr = SeedTrajectory()
+    tr = PaperTrajectory()
     t = np.arange(0, 150, 1e-3)
     s, v, a, j = tr.kinematics(t)
     assert v.max() == pytest.approx(8300.0, rel=1e-12)
@@ -36,7 +36,7 @@ def test_b4_doppler_rate_formula_vs_numerical_derivative():
 
 
 def test_b4_acceleration_only_formula_fails_the_same_check():
-    # RECEIVERS.md's reconstruction keeps only (As - Au).e: ~0.6 % short at 8300 m/s
+    # The INS paper's formula as reconstructed keeps only (As - Au).e: ~0.6 % short at 8300 m/s
     sc = Scenario()
     t = np.array([100.0])
     Ru, Vu, Au = sc.user(t)
@@ -60,14 +60,14 @@ def test_csv_trajectory_and_non_monotonic_time(tmp_path):
     good = tmp_path / "ok.csv"
     t = np.linspace(0, 10, 50)
     np.savetxt(good, np.c_[t, 3.0 * t ** 2], delimiter=",")
-    k = SeedTrajectory(duration_s=10, csv_path=str(good)).kinematics(np.array([5.0]))
+    k = PaperTrajectory(duration_s=10, csv_path=str(good)).kinematics(np.array([5.0]))
     assert k[1, 0] == pytest.approx(30.0, rel=1e-9) and k[2, 0] == pytest.approx(6.0, rel=1e-9)
     bad = tmp_path / "bad.csv"
     tt = t.copy()
     tt[7] = tt[5]
     np.savetxt(bad, np.c_[tt, t], delimiter=",")
     with pytest.raises(ValueError, match=r"time must increase strictly; row 7 .* does not follow row 6"):
-        SeedTrajectory(duration_s=10, csv_path=str(bad))
+        PaperTrajectory(duration_s=10, csv_path=str(bad))
 
 
 @pytest.mark.parametrize("kw, msg", [
@@ -78,11 +78,11 @@ def test_csv_trajectory_and_non_monotonic_time(tmp_path):
 ])
 def test_trajectory_bad_input(kw, msg):
     with pytest.raises(ValueError, match=msg):
-        SeedTrajectory(**kw)
+        PaperTrajectory(**kw)
 
 
 def test_ins_aiding_errors():
-    sc = Scenario(SeedTrajectory(duration_s=40.0))
+    sc = Scenario(PaperTrajectory(duration_s=40.0))
     none = InsAiding(sc, InsErrors(0, 0, 0, 0), n_epochs=40000)
     np.testing.assert_array_equal(none.rate, none.true_rate)
     # accelerometer bias alone: a constant acceleration error -> rate error b.e / lambda at t~0

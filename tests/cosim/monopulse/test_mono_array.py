@@ -5,7 +5,7 @@ from cosim.monopulse.array import (ArrayConfig, angles_from_uv, check_visible,
                                    direction_cosines, quantise_phase)
 
 
-def test_default_geometry_is_the_seed_array():
+def test_default_geometry_is_the_paper_array():
     a = ArrayConfig()
     assert (a.dx_wl, a.dy_wl) == (4.0, 4.0)
     assert a.unambiguous_offset == (0.125, 0.125)
@@ -88,7 +88,7 @@ def test_pattern_peak_and_quantisation_loss():
     assert 0.6 < g < 0.999  # 2-bit shifters lose gain (sinc(1/4)^2 = 0.81 for uniform error)
 
 
-def test_corrected_channels_follow_the_seed_model():
+def test_corrected_channels_follow_the_paper_model():
     """After the digital steering, channel i / channel 1 = exp(j dphi_i), dphi_i = phi_i0 - phi_i,
     with phi_2 = 2 pi Dy v, phi_3 = 2 pi Dx u, phi_4 = phi_2 + phi_3; mismatch multiplies."""
     a = ArrayConfig(phase_bits=5, gain_db=(0.0, 0.5, -0.3, 0.2), phase_deg=(0.0, 4.0, -3.0, 1.0))

@@ -2,7 +2,7 @@
 and calibration written over the control path into the front-end session, the measurements
 read from its FIFO records. The bit-exact model, the Amaranth simulation and Verilator give
 the same FIFO words on the same cycles, the same register writes and the same DSP bits; on
-the seed's scenario the model backend tracks inside the unambiguous region (C5) and measures
+the monopulse paper's scenario the model backend tracks inside the unambiguous region (C5) and measures
 what the golden float chain measures on the same samples."""
 from dataclasses import replace
 
@@ -89,7 +89,7 @@ def test_record_gain_matches_the_model():
     assert abs(got / want - 1) < 1e-3, got / want
 
 
-def test_model_closed_loop_tracks_the_seed_scenario_like_the_golden_chain():
+def test_model_closed_loop_tracks_the_paper_scenario_like_the_golden_chain():
     """-8 dB, N = 8192, 40 ms (49 blocks; the 2 s run is in results/monopulse.md): the
     model backend acquires, tracks with the pointing error inside the unambiguous region
     (C5), measures within 1.5x the CRB, and its measurements are the golden chain's on the

@@ -16,7 +16,7 @@ def small(**kw):
     return MonopulseSignalConfig(**base)
 
 
-def test_default_config_is_the_seed_scenario():
+def test_default_config_is_the_paper_scenario():
     c = MonopulseSignalConfig()
     assert (c.fs_hz, c.if_hz, c.chip_rate_hz, c.decimation) == (100e6, 20e6, 10e6, 10)
     assert c.snapshots == 8192 and c.snr_db == -8.0 and c.adc_bits == 12
@@ -121,7 +121,7 @@ def test_adc_clipping_is_counted():
 
 
 def test_one_default_block():
-    """The seed's block: 8192 snapshots = 81920 samples per ADC, 12-bit codes, no clipping
+    """The monopulse paper's block: 8192 snapshots = 81920 samples per ADC, 12-bit codes, no clipping
     expected at 4 sigma full scale beyond a handful (P = 6e-5 per sample)."""
     c = MonopulseSignalConfig()
     r = generate(c, (0.3, 0.2), 0, 1)

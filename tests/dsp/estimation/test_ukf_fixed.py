@@ -1,6 +1,6 @@
-"""Fixed-point unscented filter: bit for bit against Python integers (seed-002 parameters,
-augmented n = 10, a carrier-phase model with an I/Q measurement), against float64 over many
-steps (stated bound, P PSD, no events), the counted Cholesky recovery after a P upset, and
+"""Fixed-point unscented filter: bit for bit against Python integers (the AUKF patent's
+parameters, augmented n = 10, a carrier-phase model with an I/Q measurement), against
+float64 over many steps (stated bound, P PSD, no events), the counted Cholesky recovery after a P upset, and
 the refusal of UT weights the formats cannot hold."""
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from dsp.estimation.ukf import psd_sqrt
 
 from estimation_reference import IntArith, rnd_int, trig_int, ukf_step_int
 
-# seed 002: epsilon (alpha) 1.027, kappa 0, beta 2; 4 states + 4 process + 2 measurement noises
+# the AUKF patent's UT: epsilon (alpha) 1.027, kappa 0, beta 2; 4 states + 4 process + 2 measurement noises
 UT = dict(alpha=1.027, beta=2.0, kappa=0.0)
 F = np.array([[0.98, 0.1, 0.005, 0.0], [0, 0.95, 0.1, 0.005], [0, 0, 0.95, 0.1], [0, 0, 0, 0.95]])
 Q = np.diag([1e-3, 1e-4, 1e-5, 1e-6])
@@ -39,7 +39,7 @@ def simulate(seed: int, T: int):
     return xs, z
 
 
-def test_seed002_weights():
+def test_aukf_patent_weights():
     wm, wc, c = sigma_weights(10, 1.027, 2.0, 0.0)
     np.testing.assert_allclose([wm[0], wc[0], wm[1]], [0.051889, 1.99716, 0.047406], atol=5e-6)
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cosim.gnss.dynamics import constant, seed002
+from cosim.gnss.dynamics import constant, aukf_patent_dynamics
 from cosim.gnss.signal import GnssSignalConfig, GnssSignalGenerator
 from dsp.gnss.acquisition import acquire, threshold
 from dsp.gnss.ca_code import CODE_LENGTH
@@ -19,7 +19,7 @@ def _snapshot(ms, **kw):
 
 
 @pytest.mark.parametrize("kw", [
-    dict(prn=7, dynamics=seed002(q=0), code_phase_chips=345.6, seed=3),
+    dict(prn=7, dynamics=aukf_patent_dynamics(q=0), code_phase_chips=345.6, seed=3),
     dict(prn=19, dynamics=constant(-650.0), code_phase_chips=1010.3, seed=4),
 ])
 def test_acquires_at_40_dbhz_within_half_bin_and_half_chip(kw):
@@ -95,7 +95,7 @@ def test_handover_to_the_tracking_channel_pulls_in():
     from dsp.gnss.correlator import GoldenCorrelator
     from dsp.gnss.loops import TrackingChannel
     cfg = GnssSignalConfig(prn=7, cn0_dbhz=45.0, duration_s=0.42, code_phase_chips=345.6,
-                           dynamics=seed002(q=0), seed=3)
+                           dynamics=aukf_patent_dynamics(q=0), seed=3)
     g = GnssSignalGenerator(cfg)
     src = SampleStream(g)
     r = acquire(src(0, N * 10), FS, 7, cfg.digital_if_hz, n_noncoherent=10)

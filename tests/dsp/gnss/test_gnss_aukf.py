@@ -1,9 +1,9 @@
-"""Seed-002 adaptive UKF tracker: A1 (closed form == generic augmented UKF), bad
-configuration, fixed vs float on the seed scenario, A3 (short form)."""
+"""The AUKF patent's adaptive UKF tracker: A1 (closed form == generic augmented UKF), bad
+configuration, fixed vs float on the patent's scenario, A3 (short form)."""
 import numpy as np
 import pytest
 
-from cosim.gnss.dynamics import seed002
+from cosim.gnss.dynamics import aukf_patent_dynamics
 from cosim.gnss.loopsim import cycle_slips, track_fast, truth_for
 from dsp.gnss.aukf import AukfTracker
 from dsp.gnss.aukf_master import AukfFormats, QFormat, master_update, master_update_generic
@@ -65,7 +65,7 @@ def test_formats_too_narrow():
 
 
 def _run(name, arith, q_true, n, trials, seed=5, nav=True, **opts):
-    tr = truth_for(seed002(q=q_true), n * 1e-3 + 0.01, seed=seed, nav_data=nav)
+    tr = truth_for(aukf_patent_dynamics(q=q_true), n * 1e-3 + 0.01, seed=seed, nav_data=nav)
     ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=np.full(trials, tr(np.array([0.0]))["doppler_hz"][0]),
                          doppler_rate0_hz_s=tr(np.array([0.0]))["doppler_rate_hz_s"][0], cn0_dbhz=32.0)
     trk = make_tracker(name, ctx, arith, **opts)
@@ -73,8 +73,8 @@ def _run(name, arith, q_true, n, trials, seed=5, nav=True, **opts):
     return r, trk
 
 
-def test_fixed_vs_float_seed_scenario():
-    """Seed scenario (x0 dynamics, q = q0, 32 dB-Hz): the fixed-format tracker's Doppler
+def test_fixed_vs_float_patent_scenario():
+    """The AUKF patent's scenario (x0 dynamics, q = q0, 32 dB-Hz): the fixed-format tracker's Doppler
     within 0.01 Hz of float64's on the same noise, P PSD at the end, no saturation, every
     Cholesky failure counted (none expected here)."""
     n, B = 2000, 8

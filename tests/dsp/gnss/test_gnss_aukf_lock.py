@@ -1,4 +1,4 @@
-"""Seed-002 AUKF: the block slave's noise-floor model (the data wipe's discriminator gain),
+"""The AUKF patent's tracker: the block slave's noise-floor model (the data wipe's discriminator gain),
 q_hat kept inside the slave's table, and the divergence rule's frequency-loss test."""
 import math
 

@@ -3,7 +3,7 @@ a short IF-path closed loop through the golden correlator."""
 import numpy as np
 import pytest
 
-from cosim.gnss.dynamics import seed002
+from cosim.gnss.dynamics import aukf_patent_dynamics
 from cosim.gnss.loopsim import (cycle_slips, jerk_cycles_s3, kaplan_threshold_dbhz, track_fast,
                                 tracking_threshold, truth_for)
 from cosim.gnss.signal import GnssSignalConfig, GnssSignalGenerator, SampleStream
@@ -56,9 +56,10 @@ def test_noise_bandwidth_of_the_digital_loop():
 
 @pytest.mark.parametrize("latency", [0, 1])
 def test_jerk_stress_within_5_percent_of_kaplan(latency):
-    """Constant 5 g/s jerk on top of the seed-002 start, noise free: the steady-state
+    """Constant 5 g/s jerk on top of the AUKF patent's start, noise
+    free: the steady-state
     phase error vs 0.4828 J / Bn^3 (J in deg/s^3 -> deg)."""
-    tr = truth_for(seed002(q=0, jerk_g_per_s=5.0, jerk_start_s=0.0), 4.1)
+    tr = truth_for(aukf_patent_dynamics(q=0, jerk_g_per_s=5.0, jerk_start_s=0.0), 4.1)
     r = track_fast(tr, None, 4000, bn_hz=15.0, latency=latency)
     J = jerk_cycles_s3(5.0) * 360.0
     theory = jerk_stress_deg(J, 15.0)
@@ -69,9 +70,9 @@ def test_jerk_stress_within_5_percent_of_kaplan(latency):
 
 
 def test_thermal_jitter_within_10_percent_of_kaplan_above_35_dbhz():
-    """Closed-loop Monte Carlo (Costas, 3rd order, Bn 15 Hz, T 1 ms), static-rate seed-002
-    dynamics, against Kaplan's formula evaluated with the *actual* Bn of the digital loop."""
-    tr = truth_for(seed002(q=0), 2.2)
+    """Closed-loop Monte Carlo (Costas, 3rd order, Bn 15 Hz, T 1 ms), static-rate AUKF
+    patent dynamics, against Kaplan's formula evaluated with the *actual* Bn of the digital loop."""
+    tr = truth_for(aukf_patent_dynamics(q=0), 2.2)
     bn = noise_bandwidth(3, 15.0, T)
     cn0 = np.array([35.0, 40.0, 45.0])
     r = track_fast(tr, cn0[:, None], 2000, bn_hz=15.0, shape=(3, 60), seed=11)
@@ -83,20 +84,20 @@ def test_thermal_jitter_within_10_percent_of_kaplan_above_35_dbhz():
 
 
 def _jerk_run(duration_s, n_trials, seed):
-    tr = truth_for(seed002(q=0, jerk_g_per_s=5.0, jerk_start_s=0.5, jerk_duration_s=duration_s),
+    tr = truth_for(aukf_patent_dynamics(q=0, jerk_g_per_s=5.0, jerk_start_s=0.5, jerk_duration_s=duration_s),
                    duration_s + 1.01)
     return track_fast(tr, 45.0, int(round((duration_s + 1.0) / T)), bn_hz=15.0,
                       shape=(n_trials,), seed=seed)
 
 
-def test_pll3_45_dbhz_seed002_jerk_no_slip_short():
+def test_pll3_45_dbhz_aukf_patent_jerk_no_slip_short():
     r = _jerk_run(1.5, 8, 3)
     assert np.all(cycle_slips(r.phase_err_cycles) == 0)
     assert np.abs(r.phase_err_cycles).max() < 0.125    # 45 deg: 13 deg stress + noise
 
 
 @pytest.mark.slow
-def test_pll3_45_dbhz_seed002_jerk_10_s_no_slip():
+def test_pll3_45_dbhz_aukf_patent_jerk_10_s_no_slip():
     r = _jerk_run(10.0, 8, 4)
     assert np.all(cycle_slips(r.phase_err_cycles) == 0)
     assert np.abs(r.phase_err_cycles).max() < 0.125
@@ -104,7 +105,7 @@ def test_pll3_45_dbhz_seed002_jerk_10_s_no_slip():
 
 def test_cycle_slip_counter_counts_a_real_slip():
     """The criterion can fail: at 22 dB-Hz through the jerk the loop slips."""
-    tr = truth_for(seed002(q=0, jerk_g_per_s=5.0, jerk_start_s=0.2, jerk_duration_s=1.0), 1.6)
+    tr = truth_for(aukf_patent_dynamics(q=0, jerk_g_per_s=5.0, jerk_start_s=0.2, jerk_duration_s=1.0), 1.6)
     r = track_fast(tr, 22.0, 1500, bn_hz=15.0, shape=(20,), seed=5)
     assert np.count_nonzero(cycle_slips(r.phase_err_cycles)) > 0
     assert cycle_slips(np.array([0.0, 0.1, 0.3, 0.5, 0.52])) == 1
@@ -122,10 +123,10 @@ def test_tracking_threshold_benchmark_short():
 
 def test_if_path_closed_loop_golden_correlator():
     """Generator -> GoldenCorrelator -> TrackingChannel -> set_frequencies, 300 ms at
-    45 dB-Hz with the seed-002 dynamics (1000 m/s, 1 g) and 5 g/s jerk from 0.1 s; the
+    45 dB-Hz with the AUKF patent's dynamics (1000 m/s, 1 g) and 5 g/s jerk from 0.1 s; the
     channel starts 4 Hz and 0.15 chip off the truth."""
     cfg = GnssSignalConfig(prn=7, cn0_dbhz=45.0, duration_s=0.32, code_phase_chips=100.25,
-                           dynamics=seed002(q=0, jerk_g_per_s=5.0, jerk_start_s=0.1), seed=9)
+                           dynamics=aukf_patent_dynamics(q=0, jerk_g_per_s=5.0, jerk_start_s=0.1), seed=9)
     g = GnssSignalGenerator(cfg)
     src = SampleStream(g)
     t0 = g.truth_at(0.0)
@@ -189,11 +190,11 @@ def test_lock_detectors_in_lock_and_out():
 
 
 def test_fll_assist_pulls_in_what_the_pll_alone_cannot():
-    """150 Hz initial frequency error (a fraction of an acquisition bin), 45 dB-Hz, seed-002
-    dynamics: with a 10 Hz FLL assist (cross/dot, Costas-safe atan form) the loop's mean
+    """150 Hz initial frequency error (a fraction of an acquisition bin), 45 dB-Hz, the AUKF
+    patent's dynamics: with a 10 Hz FLL assist (cross/dot, Costas-safe atan form) the loop's mean
     frequency error over the last 200 ms of 2 s is below 1 Hz in every trial; the 3rd-order
     PLL alone (Bn 15 Hz) does not pull in."""
-    tr = truth_for(seed002(q=0), 2.1)
+    tr = truth_for(aukf_patent_dynamics(q=0), 2.1)
     ok = []
     for fll in (10.0, None):
         r = track_fast(tr, 45.0, 2000, shape=(12,), seed=3, freq0_err_hz=150.0, fll_bn_hz=fll)

@@ -4,7 +4,7 @@ in closed loop."""
 import numpy as np
 import pytest
 
-from cosim.gnss.dynamics import seed002
+from cosim.gnss.dynamics import aukf_patent_dynamics
 from cosim.gnss.loopsim import cycle_slips, track_fast, truth_for
 from dsp.gnss.discriminators import costas_atan, dll_nelp
 from dsp.gnss.loops import TrackingChannel, hz_to_word
@@ -96,7 +96,7 @@ def test_fixed_is_bit_exact_against_python_ints(order, inverted):
 
 
 def _closed(duration_s, n_trials, seed):
-    tr = truth_for(seed002(q=0, jerk_g_per_s=5.0, jerk_start_s=0.5, jerk_duration_s=duration_s),
+    tr = truth_for(aukf_patent_dynamics(q=0, jerk_g_per_s=5.0, jerk_start_s=0.5, jerk_duration_s=duration_s),
                    duration_s + 1.01)
     n = int(round((duration_s + 1.0) / T))
     fx = FixedArith()
@@ -119,5 +119,5 @@ def test_fixed_within_bound_of_float_closed_loop_short():
 
 
 @pytest.mark.slow
-def test_fixed_within_bound_of_float_seed002_jerk_10_s():
+def test_fixed_within_bound_of_float_aukf_patent_jerk_10_s():
     _check_closed(*_closed(10.0, 8, 2))

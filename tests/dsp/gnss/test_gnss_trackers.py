@@ -23,9 +23,9 @@ def test_unknown_tracker_named():
 
 def test_fast_path_runs_a_registered_tracker_like_the_core():
     from dsp.gnss.loops_fixed import FixedArith
-    from cosim.gnss.dynamics import seed002
+    from cosim.gnss.dynamics import aukf_patent_dynamics
     from cosim.gnss.loopsim import track_fast, truth_for
-    truth = truth_for(seed002(q=0), 0.3)
+    truth = truth_for(aukf_patent_dynamics(q=0), 0.3)
     a = track_fast(truth, 45.0, 200, arith=FixedArith(), seed=3)
     b = track_fast(truth, 45.0, 200, arith=FixedArith(), seed=3, tracker="pll3")
     assert np.array_equal(a.doppler_hz, b.doppler_hz)

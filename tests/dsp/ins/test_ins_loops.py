@@ -5,7 +5,7 @@ import pytest
 
 from cosim.ins.ins_error import InsAiding, InsErrors
 from cosim.ins.study import InsStudyConfig, run_loop, scenario_for
-from cosim.ins.trajectory import Scenario, SeedTrajectory
+from cosim.ins.trajectory import Scenario, PaperTrajectory
 from dsp.estimation.kalman import KalmanFilter
 from dsp.gnss.loops_fixed import FLOAT
 from dsp.gnss.trackers import TrackerContext, make_tracker, tracker_names
@@ -83,7 +83,7 @@ def test_bad_input_messages():
 def test_aiding_removes_the_dynamic_stress_noise_free():
     # ideal clock, perfect INS, no noise: the aided loops follow the 5 g/s ramp with a
     # phase error far below the unaided loop's
-    sc = Scenario(SeedTrajectory(duration_s=4.0, start_s=0.5, accel_g=5.0, v_max_mps=100.0), osc=None)
+    sc = Scenario(PaperTrajectory(duration_s=4.0, start_s=0.5, accel_g=5.0, v_max_mps=100.0), osc=None)
     ins = InsAiding(sc, InsErrors(0, 0, 0, 0), T, 4002)
     res = {lp: _noise_free(lp, sc, ins) for lp in ("aided-kf", "unaided-kf", "aided-pll")}
     assert res["unaided-kf"] > 5e-4, res
@@ -108,7 +108,7 @@ def test_kalman_loop_with_a_loop_latency(latency):
     # the HDL channel's writes take effect one epoch late: the loop that knows it tracks the
     # 5 g/s ramp noise-free as well as with no latency; told no latency, it does far worse
     from dsp.gnss.loops_fixed import FixedArith
-    sc = Scenario(SeedTrajectory(duration_s=4.0, start_s=0.5, accel_g=5.0, v_max_mps=100.0), osc=None)
+    sc = Scenario(PaperTrajectory(duration_s=4.0, start_s=0.5, accel_g=5.0, v_max_mps=100.0), osc=None)
     ins = InsAiding(sc, InsErrors(0, 0, 0, 0), T, 4004)
     base = _noise_free("aided-kf", sc, ins)
     for arith in (FLOAT, FixedArith()):

@@ -95,7 +95,7 @@ def test_crb_equals_the_numerical_fisher_information():
     assert abs(crb[0, 1]) < 1e-9 * vu
 
 
-def _seed_scenario_mc(du, dv, trials=20000):
+def _paper_scenario_mc(du, dv, trials=20000):
     u0, v0 = 0.3, 0.2
     arr = ArrayConfig(phase_bits=None)
     cfg = MonopulseSignalConfig(array=arr, snapshots=8192, snr_db=-8.0, adc_bits=None,
@@ -108,13 +108,13 @@ def _seed_scenario_mc(du, dv, trials=20000):
 
 
 @pytest.mark.parametrize("du, dv", [(0.0005, -0.0003), (0.03, -0.02), (-0.06, 0.08)])
-def test_monopulse_variance_at_the_seed_scenario(du, dv):
+def test_monopulse_variance_at_the_paper_scenario(du, dv):
     """-8 dB, N = 8192 (31 dB after the matched filter), ideal shifters, fast path over 20000
     trials (1 sigma of a variance: 1 %): var(u), var(v), var(az), var(el) and the u-v
     correlation as the estimator's first-order covariance (``monopulse_covariance_uv``),
     which is the CRB on boresight and above it off boresight. The CRB takes the SNR the channel sees,
     snr |AF|^2."""
-    (u, v), est, snr = _seed_scenario_mc(du, dv)
+    (u, v), est, snr = _paper_scenario_mc(du, dv)
     vu, vv, cuv = angles.monopulse_covariance_uv(snr, 8192, 4.0, 4.0, du, dv)
     vaz, vel = angles.angle_variances(u, v, vu, vv, cuv)
     cu, cv = angles.crb_uv(snr, 8192, 4.0, 4.0)

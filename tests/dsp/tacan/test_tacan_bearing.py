@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from cosim.tacan.signal import TacanSignalConfig, pulse_observations, pulse_schedule
-from dsp.tacan.bearing import combine_coarse_fine, seed_eq17, wrap_deg
+from dsp.tacan.bearing import combine_coarse_fine, paper_eq17, wrap_deg
 from dsp.tacan.decode import DecoderConfig, decode
 from dsp.tacan.scoring import REF_AUX, REF_MAIN
 from dsp.tacan.kalman_config import KalmanConfig
@@ -21,11 +21,11 @@ def test_combination_exact_for_every_bearing_with_coarse_error_below_20_degrees(
     np.testing.assert_allclose(wrap_deg(got - theta), 0, atol=1e-9)
 
 
-def test_seed_eq17_slips_at_sector_edges_and_ours_does_not():
+def test_paper_eq17_slips_at_sector_edges_and_ours_does_not():
     theta = np.array([39.9, 80.05, 359.8])
     coarse = theta + np.array([0.3, -0.2, 0.5])  # small coarse errors across an edge
     fine135 = (9 * theta) % 360
-    eq17 = seed_eq17(coarse, fine135)
+    eq17 = paper_eq17(coarse, fine135)
     assert np.all(np.abs(wrap_deg(eq17 - theta)) > 30)  # whole-sector slips
     ours = np.degrees(combine_coarse_fine(np.radians(coarse), np.radians(fine135)))
     np.testing.assert_allclose(wrap_deg(ours - theta), 0, atol=1e-9)

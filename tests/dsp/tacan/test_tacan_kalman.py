@@ -1,4 +1,4 @@
-"""The seed's 5-state envelope Kalman filter (float form of the one source), checked against
+"""The TACAN paper's 5-state envelope Kalman filter (float form of the one source), checked against
 independent formulations: batch least squares and a plain numpy matrix Kalman filter."""
 import numpy as np
 import pytest
