@@ -253,22 +253,20 @@ class RegisterSession(FrontendSession):
     pulse ``reg_we = 1`` with its address and data at bus cycle ``b = max(e, previous b +
     1)`` and ``reg_we = 0`` at ``b + 1`` (the bus takes one write per cycle, so two
     registers written for the same cycle go out on consecutive cycles, in the order
-    written). Each value is checked by ``params.check_write(address, value)`` when written.
+    written). Each value is checked by the register map's
+    :meth:`~dsp.register_map.RegisterMap.check_write` when written.
 
     Parameters
     ----------
     inner : FrontendSession
         A fresh session of the front end (model, pysim or verilator); this session owns it
         (closing this closes it).
-    params
-        The front end's parameters (its ``check_write``).
-    names : dict
-        Register name -> bus address.
-    what : str
-        The front end's name in error messages.
+    registers : dsp.register_map.RegisterMap
+        The front end's register map (its params' ``registers``): names, bus addresses,
+        write checks and its name in error messages.
     """
 
-    def __init__(self, inner: FrontendSession, params, names: dict, what: str = "front-end"):
+    def __init__(self, inner: FrontendSession, registers):
         if not isinstance(inner, FrontendSession):
             raise ValueError(f"inner must be a FrontendSession, not {type(inner).__name__}")
         if inner.cycle != 0:
@@ -276,27 +274,25 @@ class RegisterSession(FrontendSession):
                              f"{inner.cycle}")
         super().__init__()
         self.inner = inner
-        self.params = params
-        self.names = dict(names)
-        self.what = what
+        self.registers = registers
+        self.what = registers.what
         self.backend = inner.backend
         self._next_bus = 0
         #: Bus writes ``(bus cycle, address, value)`` made, in order.
         self.bus_writes: list[tuple[int, int, int]] = []
 
     def _check_port(self, port) -> None:
-        if port not in self.names:
-            raise KeyError(f"{self.what} registers are {', '.join(self.names)}, not {port!r}")
+        self.registers.address(port)   # KeyError naming the registers
 
     def write(self, port: str, value: int, cycle: int | None = None) -> int:
         self._check_port(port)
-        self.params.check_write(self.names[port], int(value))
+        self.registers.check_write(self.registers.address(port), value)
         return super().write(port, value, cycle)
 
     def _step(self, queue, ready, n, writes):
         for c, reg, v in writes:
             b = max(int(c), self._next_bus)
-            a = self.names[reg]
+            a = self.registers.address(reg)
             self.inner.write("reg_addr", a, cycle=b)
             self.inner.write("reg_data", int(v), cycle=b)
             self.inner.write("reg_we", 1, cycle=b)

@@ -16,10 +16,11 @@ Amaranth simulation and Verilator:
 
 The DSP thinks in registers, not bus cycles: :class:`GnssRegisterSession` wraps a session
 of any backend and takes writes to ``carr_freq``, ``code_freq``, ``prn`` and ``slew``
-(:data:`hdl.gnss.params.REG_NAMES`). A register write taking effect at cycle ``e`` is the
-bus pulse ``reg_we = 1`` with its address and data at bus cycle ``b = max(e, previous
-b + 1)`` and ``reg_we = 0`` at ``b + 1`` (the bus takes one write per cycle, so two
-registers written for the same cycle go out on consecutive cycles, in the order written).
+(:attr:`hdl.gnss.params.GnssChannelParams.registers`). A register write taking effect at
+cycle ``e`` is the bus pulse ``reg_we = 1`` with its address and data at bus cycle ``b =
+max(e, previous b + 1)`` and ``reg_we = 0`` at ``b + 1`` (the bus takes one write per
+cycle, so two registers written for the same cycle go out on consecutive cycles, in the
+order written).
 :func:`open_gnss` opens one.
 """
 from __future__ import annotations
@@ -126,8 +127,7 @@ class GnssRegisterSession(RegisterSession):
     """
 
     def __init__(self, inner: FrontendSession, params):
-        from hdl.gnss.params import REG_NAMES
-        super().__init__(inner, params, REG_NAMES, "GNSS")
+        super().__init__(inner, params.registers)
 
 
 def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:

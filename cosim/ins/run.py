@@ -133,12 +133,12 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     hand-over writes), on the golden chain the end of its first record (its local code
     starts at the acquired code phase)."""
     from cosim.gnss.tracking import SKIP_RECORDS, handover_writes, record_boundaries
-    from hdl.gnss.params import REG_NAMES
     if backend == "golden":
         kf = CHIP_RATE_HZ * (1 + hand["doppler_hz"] / 1575.42e6)
         return (CODE_LENGTH - hand["code_phase_chips"]) / kf
-    w = [(c, REG_NAMES[r], v) for c, r, v in handover_writes(p, hand["doppler_hz"],
-                                                             hand["code_phase_chips"], inverted)]
+    w = [(c, p.registers.address(r), v)
+         for c, r, v in handover_writes(p, hand["doppler_hz"], hand["code_phase_chips"],
+                                        inverted)]
     n = int((SKIP_RECORDS + 2) * CODE_PERIOD_S * p.fs_hz)
     return float(record_boundaries(p, w, SKIP_RECORDS, n)[-1]) / p.fs_hz
 

@@ -264,7 +264,6 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
     """Run ``loop`` (one trial) on the HDL front end of ``run.backend``; fills the loop's
     arrays and returns the FIFO/pipeline figures (``fifo_dropped``, digests, writes; with
     ``faults``: the bad and missing records and the record receiver's counters)."""
-    from hdl.monopulse.params import REG_NAMES
     from hdl.monopulse.params import pack_input
     from ..core.pipeline import Pipeline
     from ..core.session import RegisterSession
@@ -279,7 +278,7 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
     svc = _service(run)
     K, D, N = loop.K, sig.decimation, sig.snapshots
     boundary0 = N * D - 1 + p.latency_pre
-    with RegisterSession(open_frontend(run.backend, p), p, REG_NAMES, "monopulse") as fe:
+    with RegisterSession(open_frontend(run.backend, p), p.registers) as fe:
         pipe = Pipeline(fe, svc, dsp, compute_cycles=run.compute_cycles,
                         control_latency_cycles=run.control_latency_cycles, keep_words=False)
         # Scenario blocks 0 and 1 (HDL blocks 1, 2): the first two search positions.

@@ -25,7 +25,7 @@ from hdl.fifo import DspFifo
 from hdl.mixer import Mixer
 from hdl.nco import Nco
 
-from .params import ACC_FIELDS, REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW, GnssChannelParams
+from .params import ACC_FIELDS, GnssChannelParams
 
 __all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
            "record_layout", "gnss_top"]
@@ -107,7 +107,7 @@ class GnssCorrelator(wiring.Component):
         ADC samples, one per ``valid`` cycle (gaps allowed).
     reg_we, reg_addr (2 bits), reg_data (``reg_data_width`` bits) : In
         Register bus: a write when ``reg_we`` is high (addresses
-        :data:`~hdl.gnss.params.REG_CARR_FREQ` ...), into the shadow registers.
+        :attr:`~hdl.gnss.params.GnssChannelParams.registers`), into the shadow registers.
     rec : Out(stream.Signature(record_layout(params), always_ready=True))
         One record per dump, :attr:`GnssChannelParams.latency` cycles after the input cycle
         of the dump's first sample; the payload holds until the next dump.
@@ -201,15 +201,19 @@ class GnssCorrelator(wiring.Component):
         # Bus writes after the latch: a write in the boundary cycle waits for the next one.
         # (Separate Ifs, not a Switch: the export of a Switch over all 4 addresses leaves
         # per-register case statements Verilator flags as incomplete.)
-        we = self.reg_we
-        with m.If(we & (self.reg_addr == REG_CARR_FREQ)):
-            m.d.sync += sh_carr.eq(self.reg_data[:PB])
-        with m.If(we & (self.reg_addr == REG_CODE_FREQ)):
-            m.d.sync += sh_code.eq(self.reg_data[:CB])
-        with m.If(we & (self.reg_addr == REG_PRN)):
-            m.d.sync += sh_prn.eq(self.reg_data[:6])
-        with m.If(we & (self.reg_addr == REG_SLEW)):
-            m.d.sync += [sh_slew.eq(self.reg_data[:SB]), slew_pend.eq(1)]
+        we, regs = self.reg_we, p.registers
+
+        def write(name):   # bus write of register ``name``: its data bits
+            r = regs[name]
+            return we & (self.reg_addr == r.address), self.reg_data[:r.width]
+
+        for name, sh in (("carr_freq", sh_carr), ("code_freq", sh_code), ("prn", sh_prn)):
+            hit, bits = write(name)
+            with m.If(hit):
+                m.d.sync += sh.eq(bits)
+        hit, bits = write("slew")
+        with m.If(hit):
+            m.d.sync += [sh_slew.eq(bits), slew_pend.eq(1)]
 
         # -- delay line: (code bit, epoch, first) per sample --------------------------------
         taps = [Signal(3, name=f"line{k}") for k in range(L)]

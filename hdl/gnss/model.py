@@ -252,7 +252,8 @@ class GnssChannelModel:
             scyc = np.arange(self.next_cycle, self.next_cycle + x.size, dtype=np.int64)
         else:
             scyc = np.ascontiguousarray(cycles, dtype=np.int64)
-        w = [(int(c), int(a), p.check_write(int(a), v)) for c, a, v in writes]
+        regs = p.registers
+        w = [(int(c), int(a), regs.check_write(int(a), v)) for c, a, v in writes]
         if w:
             new = np.array(w, np.int64)
             allw = np.concatenate([self._writes, new])

@@ -1,5 +1,5 @@
 """GPS L1 C/A tracking channel: its parameters and word lengths (:class:`GnssChannelParams`),
-register map (:data:`REG_NAMES`), record layout (:attr:`GnssChannelParams.record`) and the
+register map (:attr:`GnssChannelParams.registers`), record layout (:attr:`GnssChannelParams.record`) and the
 register words (:func:`code_freq_word`, :meth:`GnssChannelParams.carr_word`). What each
 register and field means is specified with the model, :mod:`hdl.gnss.model`.
 """
@@ -13,16 +13,15 @@ from typing import NamedTuple
 import numpy as np
 
 from dsp.fixed import check_width
-from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, check_prn
+from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, PRN_MAX, PRN_MIN, check_prn
 from dsp.record_layout import RecordLayout
+from dsp.register_map import Register, RegisterMap
 from hdl.model.fifo import FifoParams
 from hdl.model.mixer import MixerParams
 from hdl.model.nco import NcoParams, nco_freq_word
 
 #: Register addresses (per channel; an array adds ``4 * channel``).
 REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW = range(4)
-REG_NAMES = {"carr_freq": REG_CARR_FREQ, "code_freq": REG_CODE_FREQ, "prn": REG_PRN,
-             "slew": REG_SLEW}
 #: Signal bandwidth of C/A (main lobe, null to null), Hz: the lowest sample rate accepted.
 CA_BANDWIDTH_HZ = 2 * CHIP_RATE_HZ
 #: Record fields before ``channel``.
@@ -216,7 +215,8 @@ class GnssChannelParams:
 
     @property
     def reg_data_width(self) -> int:
-        return max(self.carr_phase_bits, self.code_phase_bits, self.slew_bits, 6)
+        """Bus data width: the widest register."""
+        return max(r.width for r in self.registers.registers)
 
     @property
     def record(self) -> RecordLayout:
@@ -252,17 +252,12 @@ class GnssChannelParams:
         return code_freq_word(chip_rate_hz, fs_hz=self.fs_hz,
                               code_phase_bits=self.code_phase_bits).word
 
-    def check_write(self, reg: int, value: int) -> int:
-        """A register write's value, refused if it does not fit (PRN: 1-32)."""
-        widths = {REG_CARR_FREQ: self.carr_phase_bits, REG_CODE_FREQ: self.code_phase_bits,
-                  REG_SLEW: self.slew_bits}
-        if reg == REG_PRN:
-            return check_prn(value)
-        if reg not in widths:
-            raise ValueError(f"GNSS register must be one of {sorted(REG_NAMES.values())}, "
-                             f"not {reg!r}")
-        v = int(value)
-        if not 0 <= v < 1 << widths[reg]:
-            raise ValueError(f"GNSS register {reg} takes unsigned {widths[reg]}-bit values, "
-                             f"not {value!r}")
-        return v
+    @property
+    def registers(self) -> RegisterMap:
+        """The register map (per channel; an array adds ``4 * channel``): ``carr_freq``,
+        ``code_freq`` (the NCO words), ``prn`` (1-32, 6 bits) and ``slew``."""
+        return RegisterMap("GNSS", (
+            Register("carr_freq", REG_CARR_FREQ, self.carr_phase_bits),
+            Register("code_freq", REG_CODE_FREQ, self.code_phase_bits),
+            Register("prn", REG_PRN, 6, minimum=PRN_MIN, maximum=PRN_MAX),
+            Register("slew", REG_SLEW, self.slew_bits)))

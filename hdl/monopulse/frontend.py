@@ -19,7 +19,7 @@ from ..fifo import DspFifo
 from ..fir import Fir
 from ..mixer import Mixer
 from ..nco import Nco
-from .params import REG_COEF, REG_U0, REG_V0, MonopulseFrontendParams
+from .params import MonopulseFrontendParams
 
 __all__ = ["MonopulseFrontEnd", "monopulse_top"]
 
@@ -37,7 +37,7 @@ class MonopulseFrontEnd(wiring.Component):
         One sample of the four ADCs (channel ``j`` in bits ``[j b, (j + 1) b)``, signed) and
         the replica bit of its chip (bit ``4 b``; 0 = +1, 1 = -1); gaps in ``valid`` allowed.
     reg_we, reg_addr (3 bits), reg_data (``reg_data_width`` bits) : In
-        Register bus (:data:`~hdl.monopulse.params.REG_COEF` + i, ``REG_U0``, ``REG_V0``);
+        Register bus (:attr:`~hdl.monopulse.params.MonopulseFrontendParams.registers`);
         a write when ``reg_we`` is high, into the shadow registers.
     o : Out(stream.Signature(DspFifo out layout))
         Tagged FIFO words, ``record_words`` per record (the first tagged 1), real ``ready``.
@@ -93,14 +93,20 @@ class MonopulseFrontEnd(wiring.Component):
         sh_u0, sh_v0 = Signal(signed(dcw)), Signal(signed(dcw))
         ac_u0, ac_v0 = Signal(signed(dcw)), Signal(signed(dcw))
         rec_u0, rec_v0 = Signal(signed(dcw)), Signal(signed(dcw))
-        we, data = self.reg_we, self.reg_data
+        we, regs = self.reg_we, p.registers
+
+        def write(name):   # bus write of register ``name``: its data bits
+            r = regs[name]
+            return we & (self.reg_addr == r.address), self.reg_data[:r.width]
+
         for c in range(4):
-            with m.If(we & (self.reg_addr == REG_COEF + c)):
-                m.d.sync += [sh_re[c].eq(data[:cb]), sh_im[c].eq(data[cb:2 * cb])]
-        with m.If(we & (self.reg_addr == REG_U0)):
-            m.d.sync += sh_u0.eq(data[:dcw])
-        with m.If(we & (self.reg_addr == REG_V0)):
-            m.d.sync += sh_v0.eq(data[:dcw])
+            hit, bits = write(f"coef{c + 1}")
+            with m.If(hit):
+                m.d.sync += [sh_re[c].eq(bits[:cb]), sh_im[c].eq(bits[cb:2 * cb])]
+        for name, sh in (("u0", sh_u0), ("v0", sh_v0)):
+            hit, bits = write(name)
+            with m.If(hit):
+                m.d.sync += sh.eq(bits)
 
         # -- four channels: DDC, CIC, (FIR), correction ------------------------------------
         corr = []

@@ -265,7 +265,8 @@ class MonopulseFrontendModel:
             scyc = np.asarray(cycles, np.int64).ravel()
             if scyc.size != n:
                 raise ValueError(f"monopulse cycles must give one cycle per sample ({n})")
-        new = [(int(cy), int(a), p.check_write(int(a), v)) for cy, a, v in writes]
+        regs = p.registers
+        new = [(int(cy), int(a), regs.check_write(int(a), v)) for cy, a, v in writes]
         if new:
             self._writes = sorted(self._writes + new, key=lambda w: w[0])
         cos, sin, self._nco_state = self.nco.run(n, p.nco_freq_word, self._nco_state)

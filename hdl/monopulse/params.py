@@ -1,6 +1,6 @@
 """Monopulse FPGA front end: its parameters and word lengths
 (:class:`MonopulseFrontendParams`, every block's parameters built in one place), register
-map (:data:`REG_NAMES`), record layout (:attr:`MonopulseFrontendParams.record`) and the
+map (:attr:`MonopulseFrontendParams.registers`), record layout (:attr:`MonopulseFrontendParams.record`) and the
 register and input word codecs (:func:`coef_word`, :func:`dc_word`, :func:`pack_input`,
 :func:`unpack_input`). What each register, field and word means is specified with the
 model, :mod:`hdl.monopulse.model`.
@@ -15,6 +15,7 @@ import numpy as np
 from dsp.cordic import CordicConfig
 from dsp.fixed import ROUNDINGS, check_width
 from dsp.record_layout import RecordLayout
+from dsp.register_map import Register, RegisterMap
 from hdl.model.cic import CicParams
 from hdl.model.ddc import DdcParams
 from hdl.model.fifo import FifoParams
@@ -22,14 +23,11 @@ from hdl.model.fir import FirParams
 from hdl.model.mixer import MixerParams
 from hdl.model.nco import NcoParams, nco_freq_word
 
-__all__ = ["MonopulseFrontendParams", "REG_COEF", "REG_U0", "REG_V0", "REG_NAMES", "BEAMS",
+__all__ = ["MonopulseFrontendParams", "REG_COEF", "REG_U0", "REG_V0", "BEAMS",
            "ACC_FIELDS", "coef_word", "dc_word", "pack_input", "unpack_input"]
 
 #: Register addresses.
 REG_COEF, REG_U0, REG_V0 = 0, 4, 5
-#: Register names (the DSP's view, :class:`cosim.session.RegisterSession`) -> addresses.
-REG_NAMES = {"coef1": REG_COEF, "coef2": REG_COEF + 1, "coef3": REG_COEF + 2,
-             "coef4": REG_COEF + 3, "u0": REG_U0, "v0": REG_V0}
 #: Accumulated beams of the record, in order, and their fields (re, im).
 BEAMS = ("s", "da", "de", "dd")
 ACC_FIELDS = tuple(f"{b}_{c}" for b in BEAMS for c in ("re", "im"))
@@ -311,7 +309,8 @@ class MonopulseFrontendParams:
 
     @property
     def reg_data_width(self) -> int:
-        return max(2 * self.corr_coef_bits, self.dc_bits)
+        """Bus data width: the widest register."""
+        return max(r.width for r in self.registers.registers)
 
     @property
     def record(self) -> RecordLayout:
@@ -357,32 +356,17 @@ class MonopulseFrontendParams:
         return self.latency_pre + self.corr.latency + 2 + self.latency_angle
 
     # -- registers -------------------------------------------------------------------------
-    def check_write(self, reg: int, value: int) -> int:
-        """A register write's value, refused if it does not fit (``ValueError`` naming it)."""
-        v = int(value)
-        if REG_COEF <= reg < REG_COEF + 4:
-            if not 0 <= v < 1 << (2 * self.corr_coef_bits):
-                raise ValueError(f"monopulse coefficient register {reg} takes "
-                                 f"{2 * self.corr_coef_bits}-bit words (re | im << "
-                                 f"{self.corr_coef_bits}), not {value!r}")
-            b, m = self.corr_coef_bits, self.coef_max
-            for part, name in ((v & ((1 << b) - 1), "re"), (v >> b, "im")):
-                s = part - (1 << b) if part >> (b - 1) else part
-                if s < -m:
-                    raise ValueError(f"monopulse coefficient {name} part must be in "
-                                     f"[-{m}, {m}] (symmetric), not {s}")
-            return v
-        if reg in (REG_U0, REG_V0):
-            if not 0 <= v < 1 << self.dc_bits:
-                raise ValueError(f"monopulse steering register {reg} takes {self.dc_bits}-bit "
-                                 f"two's complement words, not {value!r}")
-            s = v - (1 << self.dc_bits) if v >> (self.dc_bits - 1) else v
-            if abs(s) > 1 << self.dc_frac_bits:
-                raise ValueError(f"monopulse steering direction cosine must be in [-1, 1], "
-                                 f"not {s / 2 ** self.dc_frac_bits!r}")
-            return v
-        raise ValueError(f"monopulse register must be one of {REG_COEF}..{REG_COEF + 3}, "
-                         f"{REG_U0}, {REG_V0}, not {reg!r}")
+    @property
+    def registers(self) -> RegisterMap:
+        """The register map: ``coef1``..``coef4`` at ``REG_COEF + i`` (``re | im <<
+        corr_coef_bits``, each part symmetric, ``|part| <= coef_max``), ``u0`` and ``v0``
+        (``dc_bits`` two's complement, ``|u| <= 1``, i.e. ``2**dc_frac_bits``)."""
+        b, m, d = self.corr_coef_bits, self.coef_max, 1 << self.dc_frac_bits
+        coefs = tuple(Register(f"coef{i + 1}", REG_COEF + i, 2 * b, True, -m, m, 2)
+                      for i in range(4))
+        return RegisterMap("monopulse", coefs + (
+            Register("u0", REG_U0, self.dc_bits, True, -d, d),
+            Register("v0", REG_V0, self.dc_bits, True, -d, d)))
 
 
 # -- words ---------------------------------------------------------------------------------

@@ -7,7 +7,6 @@ from cosim.core.link import DspServiceConfig
 from cosim.backends.factory import open_stream_session
 from hdl.gnss.model import GnssArrayModel
 from hdl.gnss.params import GnssChannelParams
-from hdl.gnss.params import REG_CODE_FREQ, REG_CARR_FREQ
 
 #: Reduced rate (as tests/hdl/gnss/test_channel.py): 2 samples per chip, 2046 per epoch.
 SMALL = GnssChannelParams(fs_hz=2.046e6, if_hz=0.3e6, el_spacing_samples=2, slew_bits=6,
@@ -83,10 +82,15 @@ def test_bad_writes_and_ports():
     s = GnssRegisterSession(GnssModelSession(p), p)
     with pytest.raises(KeyError, match="GNSS registers are carr_freq, code_freq, prn, slew"):
         s.write("freq", 1)
-    with pytest.raises(ValueError, match="PRN must be"):
+    with pytest.raises(ValueError, match=r"GNSS register prn \(address 2\) takes unsigned "
+                                         r"6-bit words in \[1, 32\], not 33"):
         s.write("prn", 33)
-    with pytest.raises(ValueError, match="register 3 takes unsigned 6-bit values"):
+    with pytest.raises(ValueError, match=r"GNSS register slew \(address 3\) takes unsigned "
+                                         r"6-bit words in \[0, 63\], not 64"):
         s.write("slew", 64)
+    with pytest.raises(ValueError, match=r"GNSS register carr_freq \(address 0\) takes "
+                                         r"unsigned 32-bit words in \[0, 4294967295\], not 0.5"):
+        s.write("carr_freq", 0.5)
     m = GnssModelSession(p)
     with pytest.raises(KeyError, match="writable ports are reg_we, reg_addr, reg_data"):
         m.write("carr_freq", 1)

@@ -133,10 +133,15 @@ def test_dump_length_and_write_errors():
                                          r"1 ms code periods, not 0.0015 s"):
         dump_epochs_for(0.0015)
     p = GnssChannelParams()
-    with pytest.raises(ValueError, match=r"PRN must be an integer in \[1, 32\], not 40"):
+    with pytest.raises(ValueError, match=r"GNSS register prn \(address 2\) takes unsigned "
+                                         r"6-bit words in \[1, 32\], not 40"):
         GnssChannelModel(p).step(np.zeros(10, np.int64), [(1, REG_PRN, 40)])
-    with pytest.raises(ValueError, match=r"register 3 takes unsigned 16-bit values, not 70000"):
+    with pytest.raises(ValueError, match=r"GNSS register slew \(address 3\) takes unsigned "
+                                         r"16-bit words in \[0, 65535\], not 70000"):
         GnssChannelModel(p).step(np.zeros(10, np.int64), [(1, REG_SLEW, 70000)])
+    with pytest.raises(ValueError, match=r"GNSS register address must be one of 0, 1, 2, 3, "
+                                         r"not 4"):
+        GnssChannelModel(p).step(np.zeros(10, np.int64), [(1, 4, 0)])
     with pytest.raises(ValueError, match=r"GnssChannel needs a GnssChannelParams, not 3"):
         GnssChannel(3)
     with pytest.raises(ValueError, match=r"channel array needs channels in \[1, 64\], not 0"):

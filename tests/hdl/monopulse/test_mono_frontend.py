@@ -163,13 +163,22 @@ def test_write_and_input_errors():
     m = MonopulseFrontendModel(p)
     z = np.zeros((8, 4), np.int64)
     b = p.corr_coef_bits
-    with pytest.raises(ValueError, match=r"coefficient re part must be in \[-131071, 131071\] "
-                                         r"\(symmetric\), not -131072"):
+    with pytest.raises(ValueError, match=r"monopulse register coef1 \(address 0\) takes 36-bit "
+                                         r"words of 2 two's complement 18-bit parts \(LSB "
+                                         r"first\), each in \[-131071, 131071\], not 131072"):
         m.step(z, np.zeros(8, int), [(1, REG_COEF, 1 << (b - 1))])
-    with pytest.raises(ValueError, match=r"steering direction cosine must be in \[-1, 1\], "
-                                         r"not 1.5"):
+    with pytest.raises(ValueError, match=r"monopulse register coef2 \(address 1\) takes .*, "
+                                         r"not 34359738368"):   # im part -131072
+        m.step(z, np.zeros(8, int), [(1, REG_COEF + 1, 1 << (2 * b - 1))])
+    with pytest.raises(ValueError, match=r"monopulse register v0 \(address 5\) takes 25-bit "
+                                         r"two's complement words in \[-4194304, 4194304\], "
+                                         r"not 6291456"):
         m.step(z, np.zeros(8, int), [(1, REG_V0, dc_word(0.75, p) * 2)])
-    with pytest.raises(ValueError, match=r"register must be one of 0..3, 4, 5, not 6"):
+    with pytest.raises(ValueError, match=r"monopulse register u0 \(address 4\) takes .*, "
+                                         r"not -1"):   # a word is the register's bits
+        m.step(z, np.zeros(8, int), [(1, REG_U0, -1)])
+    with pytest.raises(ValueError, match=r"monopulse register address must be one of 0, 1, 2, "
+                                         r"3, 4, 5, not 6"):
         m.step(z, np.zeros(8, int), [(1, 6, 0)])
     with pytest.raises(ValueError, match=r"replica bits must be 0 \(\+1\) or 1 \(-1\)"):
         m.step(z, np.full(8, 2))
