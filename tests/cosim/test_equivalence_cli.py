@@ -26,7 +26,7 @@ def test_pysim_limit_is_reported():
 
 
 def test_verilator_missing_is_a_note(monkeypatch):
-    import cosim.backends.verilator as v
+    import cosim.backends.verilator_harness as v
     monkeypatch.setattr(v, "verilator_available", lambda: False)
     r = check_equivalence(samples=5000, backends=("model", "verilator"))
     assert r["backends"] == ["model"] and "Verilator not found" in r["skipped"]["verilator"]
@@ -36,7 +36,7 @@ def test_mismatch_gives_nonzero_exit(monkeypatch, capsys):
     import cosim.tacan.equivalence as eq
     real = eq.check_equivalence
 
-    import cosim.backends.verilator as v
+    import cosim.backends.verilator_harness as v
     monkeypatch.setattr(v, "verilator_available", lambda: False)
 
     def broken(**kw):

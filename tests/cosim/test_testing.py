@@ -96,8 +96,8 @@ def test_schedule_and_probe_and_bad_arguments():
 
 
 def test_without_verilator_pysim_is_checked_then_skipped(monkeypatch):
-    import cosim.backends.verilator
-    monkeypatch.setattr(cosim.backends.verilator, "verilator_available", lambda: False)
+    import cosim.backends.verilator_harness
+    monkeypatch.setattr(cosim.backends.verilator_harness, "verilator_available", lambda: False)
     x, ready = _stim(6, 100)
     want = EX.fir_model(EX.TAPS, x)
     with pytest.raises(pytest.skip.Exception, match=r"verilator not run: Verilator, make or a "
