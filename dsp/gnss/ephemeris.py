@@ -59,8 +59,9 @@ WEEK_S = 604800.0
 HALF_WEEK_S = 302400.0
 
 __all__ = ["PI_GPS", "MU_GPS", "OMEGA_E_DOT", "F_REL", "C_LIGHT", "WEEK_S", "Ephemeris",
-           "KlobucharParameters", "UtcParameters", "select_ephemeris", "SatelliteState", "fold_time", "satellite_position_velocity", "satellite_clock",
-           "satellite_states", "system_time", "sagnac_rotate"]
+           "KlobucharParameters", "UtcParameters", "select_ephemeris", "SatelliteState",
+           "fold_time", "satellite_position_velocity", "satellite_clock", "satellite_states",
+           "system_time", "sagnac_rotate"]
 
 _FLOATS = tuple(EPHEMERIS_FIELDS)
 
