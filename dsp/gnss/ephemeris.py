@@ -269,13 +269,14 @@ def fold_time(dt):
 
 
 def _kepler(M, e):
-    """Eccentric anomaly E of ``M = E - e sin E`` by Newton's method until the update stops
-    changing E (machine precision; |e| < 1)."""
+    """Eccentric anomaly E of ``M = E - e sin E`` by Newton's method until every update is
+    within a few ulps of E (machine precision; |e| < 1; at most 30 passes)."""
     E = np.array(M, dtype=np.float64, copy=True)
+    tol = 4.0 * np.finfo(np.float64).eps
     for _ in range(30):
         dE = (M - E + e * np.sin(E)) / (1.0 - e * np.cos(E))
         E = E + dE
-        if np.all(np.abs(dE) <= 1e-15):
+        if np.all(np.abs(dE) <= tol * np.maximum(1.0, np.abs(E))):
             break
     return E
 
