@@ -1,6 +1,7 @@
 """The LNAV message (IS-GPS-200 20.3): parity of Table 20-XIV, field positions of Figure
 20-1, encode -> decode bit-exact for every ephemeris of the real RINEX files, frame sync at
 either polarity, and decoding under seeded random bit errors."""
+import itertools
 from dataclasses import replace
 from pathlib import Path
 
@@ -52,6 +53,23 @@ def test_every_single_bit_error_fails_parity():
             assert L.check_word(w ^ (1 << k), prev) is None
         for k in range(2):                       # a flipped D29* or D30*
             assert L.check_word(w, prev ^ (1 << k)) is None
+
+
+def test_every_error_of_up_to_three_bits_fails_parity():
+    # Over the 32-bit window (D29*, D30*, D1..D30) the code's minimum distance is 4.
+    rng = np.random.default_rng(5)
+    for _ in range(4):
+        d24, prev = int(rng.integers(1 << 24)), int(rng.integers(1 << 30))
+        w = L.encode_word(d24, prev)
+        for k in (2, 3):
+            for pos in itertools.combinations(range(32), k):
+                ww, pp = w, prev
+                for b in pos:
+                    if b < 30:
+                        ww ^= 1 << b
+                    else:
+                        pp ^= 1 << (b - 30)
+                assert L.check_word(ww, pp) is None, pos
 
 
 def test_data_complemented_after_d30_and_t_bits_zero_d29_d30():
@@ -201,7 +219,7 @@ def test_random_bit_errors_never_use_a_failed_word(navs):
     counts = {}
     for ber in (1e-3, 3e-3, 1e-2, 3e-2):
         rng = np.random.default_rng(int(ber * 1e5))
-        ok = withheld = missed_single = 0
+        ok = withheld = missed_single = undetected = no_sync = 0
         for _ in range(60):
             flips = (rng.random(bits.size) < ber).astype(np.uint8)
             r = decode_lnav(bits ^ flips, e.prn, reference_week=e.week)
@@ -211,6 +229,7 @@ def test_random_bit_errors_never_use_a_failed_word(navs):
                 assert r.ephemeris == truth
                 ok += 1
             if r.sync_bit is None:
+                no_sync += 1
                 continue
             failed = {f.bit_index for f in r.parity_failures}
             for i in range(r.sync_bit, bits.size - 29, 30):
@@ -220,10 +239,13 @@ def test_random_bit_errors_never_use_a_failed_word(navs):
             for sf in r.subframes:
                 for w in range(10):
                     i = sf.bit_index + 30 * w
+                    # the code's distance is 4: an undetected pattern has 4 errors or more
                     assert not flips[i:i + 30].any() or flips[max(i - 2, 0):i + 30].sum() >= 4
-        assert missed_single == 0
-        counts[ber] = (ok, withheld)
-    print("LNAV decode under bit errors (decoded, withheld of 60 two-frame streams):", counts)
+                    undetected += int(flips[i:i + 30].any())
+        assert missed_single == 0 and undetected == 0
+        counts[ber] = (ok, withheld, no_sync)
+    print("LNAV decode under bit errors (decoded, withheld, of which no sync; 60 two-frame "
+          "streams):", counts)
     assert counts[1e-3][0] >= 50 and counts[3e-2][1] >= 50
 
 
