@@ -27,9 +27,10 @@ Clock (section 20.3.3.3.3.1, 20.3.3.3.3.2): ``dtsv = af0 + af1 (t - toc) + af2 (
 dtr`` with the relativistic term ``dtr = F e sqrtA sin Ek``, ``F = -2 sqrt(mu) / c^2``; an L1
 C/A (single-frequency) user subtracts ``TGD``. ``t - toc`` is folded like ``tk``.
 
-Earth rotation during signal travel (section 20.3.3.4.3.3.2 notes the ECEF frame of the
-transmission time): :func:`sagnac_rotate` turns the position from the ECEF frame of the
-transmission time into that of the reception time, a rotation by ``OmegaE_dot * tau`` about z.
+Earth rotation during signal travel (IS-GPS-200 20.3.3.4.3.4, geometric range: the Earth's
+rotation during the propagation time is to be accounted for): :func:`sagnac_rotate` turns the
+position from the ECEF frame of the transmission time into that of the reception time, a
+rotation by ``OmegaE_dot * tau`` about z.
 
 The constants are those of IS-GPS-200 (WGS-84 values the standard fixes for the user
 algorithm): ``MU_GPS = 3.986005e14 m^3/s^2``, ``OMEGA_E_DOT = 7.2921151467e-5 rad/s``,
@@ -52,7 +53,7 @@ MU_GPS = 3.986005e14
 OMEGA_E_DOT = 7.2921151467e-5
 #: Relativistic clock constant F = -2 sqrt(mu) / c^2 of IS-GPS-200 20.3.3.3.3.1 (s/m^(1/2)).
 F_REL = -4.442807633e-10
-#: Speed of light (m/s), IS-GPS-200 20.3.4.3.
+#: Speed of light (m/s), the value of IS-GPS-200 and of WGS-84.
 C_LIGHT = 299792458.0
 #: Seconds in a GPS week, and half of it (the tk fold of Table 20-IV).
 WEEK_S = 604800.0
