@@ -72,9 +72,8 @@ def gps_datetime(week: int, tow_s: float) -> dt.datetime:
     return GPS_EPOCH + dt.timedelta(weeks=int(week), microseconds=round(tow_s * 1e6))
 
 
-def transmit_time(tow_sf, n_bits, n_codes, chips):
-    """Satellite time of transmission (s of week) from the channel counts (module doc).
-    Raises on counts outside their ranges."""
+def _counts(tow_sf, n_bits, n_codes, chips):
+    """The validated subframe edges and the time since them (s)."""
     tow_sf = np.asarray(tow_sf, dtype=np.float64)
     n_bits, n_codes = np.asarray(n_bits), np.asarray(n_codes)
     chips = np.asarray(chips, dtype=np.float64)
@@ -87,19 +86,42 @@ def transmit_time(tow_sf, n_bits, n_codes, chips):
             np.any(np.mod(tow_sf, 6.0) != 0):
         raise ValueError(f"tow_sf must be a subframe edge (a multiple of 6 s in the week), "
                          f"not {tow_sf!r}")
-    return tow_sf + BIT_S * n_bits + CODE_S * n_codes + chips / CHIP_RATE_HZ
+    return tow_sf, BIT_S * n_bits + CODE_S * n_codes + chips / CHIP_RATE_HZ
 
 
-def pseudoranges_from_channels(t_rx_s: float, tow_sf, n_bits, n_codes, chips,
+def transmit_time(tow_sf, n_bits, n_codes, chips):
+    """Satellite time of transmission (s of week) from the channel counts (module doc).
+    Raises on counts outside their ranges."""
+    tow_sf, since = _counts(tow_sf, n_bits, n_codes, chips)
+    return tow_sf + since
+
+
+def pseudoranges_from_channels(t_rx_s, tow_sf, n_bits, n_codes, chips,
                                travel_range_s=(0.060, 0.100)):
     """Pseudoranges (m) ``c (t_rx - t_tx)`` of the channels at the common receiver epoch
     ``t_rx_s`` (module doc), and a mask of those whose apparent travel time lies in
     ``travel_range_s`` (a ground receiver whose clock is set to within a few ms: 64-89 ms);
-    the others are NaN (a wrong frame sync or a clock far off), not made up."""
-    t_tx = transmit_time(tow_sf, n_bits, n_codes, chips)
-    if not (np.isfinite(t_rx_s) and 0 <= t_rx_s < WEEK_S):
+    the others are NaN (a wrong frame sync or a clock far off), not made up.
+
+    ``t_rx_s`` is seconds of week, a float or a pair ``(whole_s, fraction_s)``: a float
+    near the end of the week resolves only 1.2e-10 s (3.5 cm), the pair keeps the fraction
+    exact. The travel time is formed as ``(whole - tow_sf) + fraction - (0.020 n_bits +
+    0.001 n_codes + chips / 1.023e6)``, small numbers only, so no further precision is lost.
+    """
+    tow_sf, since = _counts(tow_sf, n_bits, n_codes, chips)
+    if isinstance(t_rx_s, tuple):
+        whole, frac = t_rx_s
+        if isinstance(whole, bool) or not isinstance(whole, (int, np.integer)) or \
+                not (np.isfinite(frac) and 0 <= frac < 1):
+            raise ValueError(f"t_rx_s as a pair must be (integer s, fraction in [0, 1)), "
+                             f"not {t_rx_s!r}")
+    else:
+        whole = int(np.floor(t_rx_s)) if np.isfinite(t_rx_s) else -1
+        frac = t_rx_s - whole if np.isfinite(t_rx_s) else np.nan
+    if not 0 <= whole < WEEK_S:
         raise ValueError(f"t_rx_s must be in [0, {WEEK_S}) s, not {t_rx_s!r}")
-    travel = np.mod(t_rx_s - t_tx + WEEK_S / 2, WEEK_S) - WEEK_S / 2
+    edge = np.mod(whole - tow_sf + WEEK_S / 2, WEEK_S) - WEEK_S / 2    # exact (integers)
+    travel = (edge + frac) - since
     ok = (travel >= travel_range_s[0]) & (travel <= travel_range_s[1])
     return np.where(ok, C_M_PER_S * travel, np.nan), ok
 
