@@ -52,7 +52,8 @@ def _utc(sol: PvtSolution, leap_seconds: int) -> dt.datetime:
                          f"not {leap_seconds!r}")
     if sol.gps_week is None or sol.gps_tow_s is None:
         raise ValueError("an NMEA sentence needs the solution's GPS week and time of week")
-    t = gps_datetime(sol.gps_week, float(sol.gps_tow_s) % 604_800.0)
+    weeks, tow = divmod(float(sol.gps_tow_s), 604_800.0)  # the clock bias may cross a week
+    t = gps_datetime(sol.gps_week + int(weeks), tow)
     t -= dt.timedelta(seconds=int(leap_seconds))
     cs = round(t.microsecond / 1e4)                        # to the hundredth of a second
     return t.replace(microsecond=0) + dt.timedelta(milliseconds=10 * cs)

@@ -270,7 +270,8 @@ def _atmosphere(prob, llh, el, az):
     return d, tuple(names)
 
 
-def _wls(prob: _Problem, x0) -> _Wls | PvtStatus:
+def _wls(prob: _Problem, x0) -> _Wls | tuple:
+    """The converged solve, or (status, iterations) when there is none."""
     n = len(prob.pr)
     x = np.array(x0, dtype=np.float64)
     tau = np.full(n, 0.075)
@@ -292,15 +293,15 @@ def _wls(prob: _Problem, x0) -> _Wls | PvtStatus:
         try:
             cov = np.linalg.inv(normal)
         except np.linalg.LinAlgError:
-            return PvtStatus.NO_FIX_GEOMETRY
+            return PvtStatus.NO_FIX_GEOMETRY, it
         if not np.all(np.isfinite(cov)) or np.linalg.cond(normal) > 1e14:
-            return PvtStatus.NO_FIX_GEOMETRY
+            return PvtStatus.NO_FIX_GEOMETRY, it
         dx = cov @ (h.T @ (w * resid))
         x = x + dx
         if np.linalg.norm(dx) < prob.cfg.tol_m:
             resid = resid - h @ dx            # the residuals at the final estimate
             return _Wls(x, rot, tau, el, az, sigma, h, resid, cov, it, names)
-    return PvtStatus.NO_FIX_DIVERGED
+    return PvtStatus.NO_FIX_DIVERGED, prob.cfg.max_iterations
 
 
 def _standardised(sol: _Wls):
@@ -315,7 +316,7 @@ def _subset(prob: _Problem, keep):
                     prob.beta, prob.tropo, prob.cfg)
 
 
-def _no_fix(status, message, prns, unusable, iterations, week, tow):
+def _no_fix(status, message, unusable, iterations, week, tow):
     nan3 = np.full(3, np.nan)
     return PvtSolution(status, message, nan3, np.nan, np.nan, np.nan, nan3.copy(),
                        nan3.copy(), np.nan, np.nan, Dop.nan(), (), (), tuple(unusable),
@@ -398,16 +399,16 @@ def solve(prns, sat_pos_m, sat_clock_s, pseudorange_m, *, cn0_dbhz=None, sat_vel
 
     def too_few():
         return _no_fix(PvtStatus.NO_FIX_TOO_FEW,
-                       f"{len(idx)} usable satellites, a fix needs 4", prn, unusable,
+                       f"{len(idx)} usable satellites, a fix needs 4", unusable,
                        iterations, gps_week, gps_tow_s)
 
     while True:                                  # solve; drop satellites below the mask
         if len(idx) < 4:
             return too_few()
         sol = _wls(_subset(full, idx), x)
-        if isinstance(sol, PvtStatus):
-            return _no_fix(sol, f"{sol.value} with {len(idx)} satellites", prn,
-                           unusable, iterations + cfg.max_iterations, gps_week, gps_tow_s)
+        if isinstance(sol, tuple):
+            return _no_fix(sol[0], f"{sol[0].value} with {len(idx)} satellites", unusable,
+                           iterations + sol[1], gps_week, gps_tow_s)
         iterations += sol.iterations
         x = sol.x
         low = sol.el < cfg.elevation_mask_deg
@@ -437,14 +438,15 @@ def solve(prns, sat_pos_m, sat_clock_s, pseudorange_m, *, cn0_dbhz=None, sat_vel
                      f"PRN {excluded[-1]} excluded")
         idx = np.delete(idx, worst)
         sol2 = _wls(_subset(full, idx), x)
-        if isinstance(sol2, PvtStatus):
-            return _no_fix(sol2, f"{sol2.value} after excluding {excluded}", prn,
-                           unusable, iterations + cfg.max_iterations, gps_week, gps_tow_s)
+        if isinstance(sol2, tuple):
+            return _no_fix(sol2[0], f"{sol2[0].value} after excluding {excluded}",
+                           unusable, iterations + sol2[1], gps_week, gps_tow_s)
         sol, x = sol2, sol2.x
         iterations += sol.iterations
         status = PvtStatus.FIX_EXCLUDED
 
     lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*x[:3]))
+    az, el = _az_el(sol.rot, (lat, lon, h))       # at the final position, whatever its height
     v_ecef, drift_mps = np.full(3, np.nan), np.nan
     if prr is None:
         notes.append("no velocity: no Doppler or range rates")
@@ -463,7 +465,7 @@ def solve(prns, sat_pos_m, sat_clock_s, pseudorange_m, *, cn0_dbhz=None, sat_vel
     message = "; ".join([f"{status.value}: {len(used)} satellites"] + notes)
     tow = None if gps_tow_s is None else float(gps_tow_s) - x[3] / C_M_PER_S
     return PvtSolution(status, message, x[:3].copy(), lat, lon, h, v_ecef, v_enu,
-                       float(x[3]), drift_mps, dop_enu(sol.el, sol.az), used,
-                       tuple(excluded), tuple(unusable), sol.resid, sol.sigma, sol.el,
-                       sol.az, stat, thr, sol.cov, iterations, gps_week, tow,
+                       float(x[3]), drift_mps, dop_enu(el, az), used,
+                       tuple(excluded), tuple(unusable), sol.resid, sol.sigma, el,
+                       az, stat, thr, sol.cov, iterations, gps_week, tow,
                        sol.corrections)

@@ -108,3 +108,18 @@ def test_bad_input_raises():
     untimed = pvt.solve(PRN, pos, np.zeros(8), pr)           # no gps_week / gps_tow_s
     with pytest.raises(ValueError, match="week"):
         nmea.gga(untimed, leap_seconds=LEAP)
+
+
+def test_a_fix_time_before_the_week_start_is_in_the_previous_week():
+    """Receiver time 1 ms into the week with a 2 ms clock bias: the fix is 1 ms before the
+    week's start, Saturday 23:59:59.999 GPS (rounded to .00 of the next second, 18 s
+    earlier in UTC)."""
+    b = 2e-3 * pvt.C_M_PER_S
+    pos, _ = ob.nominal_constellation(48.15, 11.58, 520.0, AZ, EL)
+    r = np.array(pymap3d.geodetic2ecef(48.15, 11.58, 520.0))
+    pr, _ = ob.predict_pseudoranges(r, b, pos, np.zeros(8))
+    sol = pvt.solve(PRN, pos, np.zeros(8), pr, gps_week=WEEK, gps_tow_s=1e-3)
+    assert sol.gps_tow_s == pytest.approx(-1e-3, abs=1e-9)
+    r_msg = pynmea2.parse(nmea.rmc(sol, leap_seconds=LEAP), check=True)
+    assert r_msg.datestamp == dt.date(2026, 1, 3)
+    assert r_msg.timestamp == dt.time(23, 59, 42, 0, tzinfo=dt.timezone.utc)

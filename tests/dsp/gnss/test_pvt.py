@@ -287,7 +287,8 @@ def test_klobuchar_agrees_with_gnss_lib_py():
     el_r = np.deg2rad(EL)
     f_ours = 1 + 16 * (0.53 - EL / 180) ** 3
     f_theirs = 1 + 0.516 * (1.6755 - el_r) ** 3
-    np.testing.assert_allclose(ours / f_ours, np.ravel(ref) / f_theirs, rtol=0.001)  # observed: 0.07 %
+    # observed: 0.07 %
+    np.testing.assert_allclose(ours / f_ours, np.ravel(ref) / f_theirs, rtol=0.001)
 
 
 def test_saastamoinen_zenith_delay_and_range():
@@ -300,3 +301,9 @@ def test_saastamoinen_zenith_delay_and_range():
         saastamoinen_delay_m(45.0, 50_000.0, 45.0)
     with pytest.raises(ValueError, match="elevation"):
         saastamoinen_delay_m(45.0, 0.0, 1.0)
+
+
+def test_no_convergence_gives_no_fix():
+    sol = solve(scene(), config=pvt.PvtConfig(max_iterations=2))
+    assert sol.status is pvt.PvtStatus.NO_FIX_DIVERGED and not sol.valid
+    assert np.all(np.isnan(sol.position_ecef_m)) and sol.iterations == 2
