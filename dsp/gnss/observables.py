@@ -32,7 +32,7 @@ The satellite-clock time of transmission of the signal received at ``t_rx`` is t
 time whatever the Doppler), and ``P = c (t_rx - t_tx)`` with ``t_rx - t_tx`` wrapped into
 ``[-302400, 302400)`` s across the week. A ground receiver sees 64-89 ms of travel time
 plus its clock bias; the PVT removes the bias and the satellite clock ``dt_s``
-(``t_tx`` is satellite time: GPS time is ``t_tx + dt_s``).
+(``t_tx`` is satellite time: GPS time is ``t_tx - dt_s``, IS-GPS-200 20.3.3.3.3.1).
 
 :func:`predict_pseudoranges` is the forward model of ``dsp.gnss.pvt`` (same Earth-rotation
 convention) for a generator or a test; :func:`nominal_constellation` places satellites on

@@ -8,9 +8,9 @@ side, not in the per-sample or per-millisecond loops that the fixed-point kernel
 Inputs per epoch, one row per satellite (arrays, so the PVT does not depend on where the
 satellite states come from): ECEF position (m) and velocity (m/s) of each satellite at its
 time of transmission, in the ECEF frame of that instant (not corrected for the Earth's
-rotation during the travel time: :func:`solve` does it); its clock correction ``dt_s`` (s,
-to add to the satellite time to get GPS time; relativistic term and group delay included by
-the caller) and clock drift (s/s); the pseudorange ``P`` (m); the Doppler ``D`` (Hz,
+rotation during the travel time: :func:`solve` does it); its clock offset ``dt_s`` (s), the
+``Delta t_sv`` of IS-GPS-200 20.3.3.3.3.1 (``t_GPS = t_sv - dt_s``; relativistic term and
+group delay included by the caller) and its drift (s/s); the pseudorange ``P`` (m); the Doppler ``D`` (Hz,
 positive for an approaching satellite) or the pseudorange rate (m/s); C/N0 (dB-Hz).
 
 Measurement models (``b = c dt_r`` the receiver clock bias, ``b' = c d(dt_r)/dt`` its
@@ -350,7 +350,7 @@ def solve(prns, sat_pos_m, sat_clock_s, pseudorange_m, *, cn0_dbhz=None, sat_vel
     """Position, velocity and clock of one epoch (module doc).
 
     ``prns`` (n,) distinct satellite numbers; ``sat_pos_m`` (n, 3) ECEF at transmission;
-    ``sat_clock_s`` (n,) satellite clock corrections; ``pseudorange_m`` (n,); optional
+    ``sat_clock_s`` (n,) satellite clock offsets ``dt_s``; ``pseudorange_m`` (n,); optional
     ``cn0_dbhz`` (n,) for the weights; ``sat_vel_mps`` (n, 3), ``sat_clock_drift`` (n,, s/s)
     and either ``doppler_hz`` (n,) or ``pseudorange_rate_mps`` (n,) for the velocity;
     ``gps_week``, ``gps_tow_s`` the receiver time of the measurements (needed by the

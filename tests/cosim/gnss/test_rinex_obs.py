@@ -143,3 +143,49 @@ def test_pseudoranges_from_channel_counts():
         ob.transmit_time(tow_sf, n_bits, np.array([19, 20, 0]), chips)
     with pytest.raises(ValueError, match="subframe edge"):
         ob.transmit_time([345_595.0], [0], [0], [0.0])
+
+
+def test_channel_counts_to_rinex_to_a_fix(tmp_path):
+    """End to end: the channel counts of a nominal constellation at a receiver epoch give
+    pseudoranges ``c (t_rx - t_tx)``; written to RINEX and read back with georinex they
+    solve (dsp.gnss.pvt) to the true position within the file's 1 mm resolution times the
+    geometry."""
+    import pymap3d
+
+    from dsp.gnss import pvt
+    lat, lon, h = 35.0, 139.0, 40.0
+    az = np.array([0.0, 70.0, 130.0, 190.0, 250.0, 310.0])
+    el = np.array([80.0, 35.0, 20.0, 50.0, 25.0, 40.0])
+    prns = np.array([2, 5, 9, 17, 23, 30])
+    pos, _ = ob.nominal_constellation(lat, lon, h, az, el)
+    r = np.array(pymap3d.geodetic2ecef(lat, lon, h))
+    dt_s = np.array([1e-4, -2e-4, 5e-5, 0.0, 3e-4, -1e-4])    # satellite clock offsets
+    bias_s = 1.5e-3                                          # receiver clock
+    t_rx_whole, t_rx_frac = 345_617, 0.25                    # receiver-clock epoch
+    _, tau = ob.predict_pseudoranges(r, 0.0, pos, dt_s)
+    # satellite-clock transmit time: t_sv = t_GPS + dt_s, t_GPS = t_rx - bias - tau
+    since_edge = (t_rx_whole - 345_612) + t_rx_frac - bias_s - tau + dt_s
+    n_bits = np.floor(since_edge / 0.020).astype(int)
+    rest = since_edge - 0.020 * n_bits
+    n_codes = np.floor(rest / 0.001).astype(int)
+    chips = (rest - 0.001 * n_codes) * 1.023e6
+    pr, ok = ob.pseudoranges_from_channels((t_rx_whole, t_rx_frac), np.full(6, 345_612.0),
+                                           n_bits, n_codes, chips)
+    assert ok.all()
+    want, _ = ob.predict_pseudoranges(r, bias_s * pvt.C_M_PER_S, pos, dt_s)
+    np.testing.assert_allclose(pr, want, rtol=0, atol=1e-6)
+    epoch = ob.ObservationEpoch(WEEK, t_rx_whole + t_rx_frac, prns, pr, np.full(6, np.nan),
+                                np.full(6, np.nan), np.full(6, 45.0), np.zeros(6, int))
+    path = tmp_path / "fix.26o"
+    write_rinex_obs(path, [epoch], HEADER)
+    back = georinex.load(path)
+    pr_back = np.array([float(back["C1C"].sel(sv=f"G{p:02d}")[0]) for p in prns])
+    np.testing.assert_allclose(pr_back, pr, rtol=0, atol=0.0005 + 1e-7)
+    # equal weights (elevation floor 90 deg): the rounding error e (|e_i| <= 0.5 mm) moves
+    # the position by at most sqrt(lambda_max((H^T H)^-1)) |e| <= PDOP |e|, the bias by TDOP |e|
+    sol = pvt.solve(prns, pos, dt_s, pr_back, gps_week=WEEK, gps_tow_s=epoch.tow_s,
+                    config=pvt.PvtConfig(elevation_floor_deg=90.0))
+    assert sol.valid and sol.used_prns == tuple(prns)
+    e_max = 0.0005 * np.sqrt(6)
+    assert np.linalg.norm(sol.position_ecef_m - r) < e_max * sol.dop.pdop
+    assert abs(sol.clock_bias_m - bias_s * pvt.C_M_PER_S) < e_max * sol.dop.tdop
