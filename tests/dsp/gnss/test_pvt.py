@@ -307,3 +307,21 @@ def test_no_convergence_gives_no_fix():
     sol = solve(scene(), config=pvt.PvtConfig(max_iterations=2))
     assert sol.status is pvt.PvtStatus.NO_FIX_DIVERGED and not sol.valid
     assert np.all(np.isnan(sol.position_ecef_m)) and sol.iterations == 2
+
+
+def test_the_velocity_error_covariance_matches_the_weighted_geometry():
+    """Range-rate noise proportional to the pseudorange sigmas (k sigma_i, the same relative
+    weights): the velocity and drift errors have covariance k^2 (H^T W H)^-1 (seeded)."""
+    s = scene()
+    sig = pvt.pseudorange_sigma_m(s["cn0"], EL)
+    k = 0.01
+    rate = -s["dop"] * pvt.L1_WAVELENGTH_M
+    rng = np.random.default_rng(4242)
+    trials, nees = 300, 0.0
+    for _ in range(trials):
+        sol = solve(s, sat_vel_mps=s["vel"], sat_clock_drift=s["drift"],
+                    pseudorange_rate_mps=rate + k * sig * rng.standard_normal(8))
+        dv = np.append(sol.velocity_ecef_mps - s["v"], sol.clock_drift_mps - DRIFT_MPS)
+        nees += dv @ np.linalg.solve(k ** 2 * sol.covariance_m2, dv)
+    lo, hi = chi2.ppf([0.0005, 0.9995], 4 * trials)
+    assert lo < nees < hi
