@@ -10,7 +10,8 @@ Satellites
 From broadcast ephemerides (a RINEX file through :mod:`cosim.gnss.rinex_nav`, or
 :func:`dsp.gnss.constellation.nominal_constellation`): per PRN the healthy ephemeris valid at
 the start (:func:`dsp.gnss.ephemeris.select_ephemeris`), *quantised* to its LNAV grid, is used
-for the whole record, both for the orbit and clock and for the message, so a receiver that
+for the whole record (it must stay valid to the record's end, at most
+:data:`MAX_DURATION_S`), both for the orbit and clock and for the message, so a receiver that
 decodes the message computes the positions the generator used. The satellites in the record
 are those above the elevation mask at some instant of a scan every 10 s of the record (start
 and end included); a satellite sounds while it is above the mask (its amplitude is 0 on the
@@ -72,6 +73,8 @@ L1_WAVELENGTH_M = C_LIGHT / L1_HZ
 CHIP_M = C_LIGHT / CHIP_RATE_HZ
 #: Grid points per page of precomputed geometry.
 PAGE_POINTS = 1000
+#: Longest record (s): one ephemeris per satellite serves the whole record.
+MAX_DURATION_S = 3600.0
 #: Interval of the visibility scan (s).
 SCAN_S = 10.0
 STREAM_OSC = 3
@@ -228,7 +231,7 @@ class ConstellationConfig:
         if not self.complex_output and not (half < f_if < fs / 2 - half):
             raise ValueError(f"if_hz {f_if:g} Hz: a real stream must keep the C/A main lobe "
                              f"(IF +- {half:g} Hz) inside (0, fs/2 = {fs / 2:g} Hz)")
-        _check_number("duration_s", self.duration_s, 0.0, 7 * 86400.0, lo_open=True)
+        _check_number("duration_s", self.duration_s, 0.0, MAX_DURATION_S, lo_open=True)
         if not isinstance(self.clock, ReceiverClock):
             raise ValueError("clock must be a ReceiverClock")
         _check_number("mask_deg", self.mask_deg, 0.0, 89.999)
@@ -352,8 +355,14 @@ class ConstellationSignal:
         out = []
         for p in prns:
             e = select_ephemeris(cfg.ephemerides, p, cfg.week, cfg.tow_s)
-            if e is not None:
-                out.append(e.quantised())
+            if e is None:
+                continue
+            if not e.valid_at(cfg.week, cfg.tow_s + cfg.duration_s):
+                raise ValueError(f"G{p:02d}: the ephemeris valid at the start (toe {e.toe:.0f} s "
+                                 f"of week {e.week}) runs out of its fit interval before the "
+                                 f"record's end (tow {cfg.tow_s + cfg.duration_s:.0f} s); "
+                                 f"start the record nearer a toe or shorten it")
+            out.append(e.quantised())
         if not out:
             raise ValueError(f"no healthy ephemeris valid at GPS week {cfg.week}, tow "
                              f"{cfg.tow_s:g} s among {len(cfg.ephemerides)} given"

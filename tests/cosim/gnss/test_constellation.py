@@ -230,6 +230,20 @@ def test_stream_matches_the_truth(nav):
                 abs(np.sinc(250.0 * n / cfg.fs_hz)), abs=0.01)
 
 
+def test_stream_follows_the_ins_trajectory(nav):
+    # the INS paper's trajectory (50 g, 8300 m/s) from 30 N 10 E, 200 m, flying east: the
+    # satellite's own signal correlates at the truth in the jerk ramp and in the 50 g hold
+    cfg = config(nav, receiver=_ins_receiver(), duration_s=35.0, tow_s=TOW - 2 * 3600,
+                 noise=False)
+    prn = ConstellationSignal(cfg).prns[0]
+    sig = ConstellationSignal(cfg.replace(prns=(prn,)))
+    for s in (0.3, 9.71, 18.2, 33.0):
+        n0, n, j, t0 = _epoch_window(sig, prn, s)
+        a = float(np.sqrt(10 ** (t0.cn0_dbhz[0, j] / 10) * 2 / cfg.fs_hz))
+        p = np.vdot(_replica(sig, j, t0, n), sig.analog(n0, n)) / n / (a * t0.nav_bit[0, j])
+        assert abs(p - 1.0) < 0.01, (s, p)
+
+
 def test_bit_edges_fall_on_code_epochs_and_bits_match_truth(nav):
     cfg = config(nav, noise=False, prns=(1, 11), duration_s=0.25, nav_data=True)
     sig = ConstellationSignal(cfg)
@@ -362,5 +376,8 @@ def test_bad_inputs_are_refused_before_work(nav):
         config(nav, complex_output=False, if_hz=0.0)
     with pytest.raises(ValueError, match="duration_s"):
         config(nav, duration_s=0.0)
+    with pytest.raises(ValueError, match="runs out of its fit interval"):
+        ConstellationSignal(config(nav, ephemerides=nominal_constellation(WEEK, 259200.0),
+                                   tow_s=259200.0 + 5400.0, duration_s=3000.0))
     with pytest.raises(ValueError, match="clock drift_s_s"):
         ReceiverClock(drift_s_s=1e-3)
