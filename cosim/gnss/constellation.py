@@ -32,8 +32,8 @@ phase))`` (stored as ``I - jQ`` when inverted). Doppler is ``-Phi' / lambda``.
 
 Noise, C/N0 and the ADC follow :mod:`cosim.gnss.synthetic_file`: unit-variance white noise
 per real component (``N0 = 2 / fs``), ``C = (C/N0) N0``, ``A = sqrt(2 C)`` (real),
-``a = sqrt(C)`` (complex); C/N0 by elevation (:class:`~cosim.gnss.constellation_geometry.
-Cn0Model`). The AGC step is set once from the satellites' C/N0 at the start.
+``a = sqrt(C)`` (complex); C/N0 by elevation
+(:class:`cosim.gnss.constellation_geometry.Cn0Model`). The AGC step is set once from the satellites' C/N0 at the start.
 
 Interpolation
 -------------
