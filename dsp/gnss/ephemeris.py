@@ -27,9 +27,10 @@ Clock (section 20.3.3.3.3.1, 20.3.3.3.3.2): ``dtsv = af0 + af1 (t - toc) + af2 (
 dtr`` with the relativistic term ``dtr = F e sqrtA sin Ek``, ``F = -2 sqrt(mu) / c^2``; an L1
 C/A (single-frequency) user subtracts ``TGD``. ``t - toc`` is folded like ``tk``.
 
-Earth rotation during signal travel (section 20.3.3.4.3.3.2 notes the ECEF frame of the
-transmission time): :func:`sagnac_rotate` turns the position from the ECEF frame of the
-transmission time into that of the reception time, a rotation by ``OmegaE_dot * tau`` about z.
+Earth rotation during signal travel (IS-GPS-200 20.3.3.4.3.4, geometric range: the Earth's
+rotation during the propagation time is to be accounted for): :func:`sagnac_rotate` turns the
+position from the ECEF frame of the transmission time into that of the reception time, a
+rotation by ``OmegaE_dot * tau`` about z.
 
 The constants are those of IS-GPS-200 (WGS-84 values the standard fixes for the user
 algorithm): ``MU_GPS = 3.986005e14 m^3/s^2``, ``OMEGA_E_DOT = 7.2921151467e-5 rad/s``,
@@ -52,15 +53,16 @@ MU_GPS = 3.986005e14
 OMEGA_E_DOT = 7.2921151467e-5
 #: Relativistic clock constant F = -2 sqrt(mu) / c^2 of IS-GPS-200 20.3.3.3.3.1 (s/m^(1/2)).
 F_REL = -4.442807633e-10
-#: Speed of light (m/s), IS-GPS-200 20.3.4.3.
+#: Speed of light (m/s), the value of IS-GPS-200 and of WGS-84.
 C_LIGHT = 299792458.0
 #: Seconds in a GPS week, and half of it (the tk fold of Table 20-IV).
 WEEK_S = 604800.0
 HALF_WEEK_S = 302400.0
 
 __all__ = ["PI_GPS", "MU_GPS", "OMEGA_E_DOT", "F_REL", "C_LIGHT", "WEEK_S", "Ephemeris",
-           "KlobucharParameters", "UtcParameters", "select_ephemeris", "SatelliteState", "fold_time", "satellite_position_velocity", "satellite_clock",
-           "satellite_states", "system_time", "sagnac_rotate"]
+           "KlobucharParameters", "UtcParameters", "select_ephemeris", "SatelliteState",
+           "fold_time", "satellite_position_velocity", "satellite_clock", "satellite_states",
+           "system_time", "sagnac_rotate"]
 
 _FLOATS = tuple(EPHEMERIS_FIELDS)
 
@@ -268,13 +270,14 @@ def fold_time(dt):
 
 
 def _kepler(M, e):
-    """Eccentric anomaly E of ``M = E - e sin E`` by Newton's method until the update stops
-    changing E (machine precision; |e| < 1)."""
+    """Eccentric anomaly E of ``M = E - e sin E`` by Newton's method until every update is
+    within a few ulps of E (machine precision; |e| < 1; at most 30 passes)."""
     E = np.array(M, dtype=np.float64, copy=True)
+    tol = 4.0 * np.finfo(np.float64).eps
     for _ in range(30):
         dE = (M - E + e * np.sin(E)) / (1.0 - e * np.cos(E))
         E = E + dE
-        if np.all(np.abs(dE) <= 1e-15):
+        if np.all(np.abs(dE) <= tol * np.maximum(1.0, np.abs(E))):
             break
     return E
 

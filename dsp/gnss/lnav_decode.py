@@ -105,8 +105,8 @@ def hard_bits(symbols) -> np.ndarray:
     bad = ~np.isfinite(xf) | (xf == 0.0)
     if bad.any():
         i = int(np.argmax(bad))
-        raise ValueError(f"symbols[{i}] = {x[i]!r}: a soft value must be finite and non-zero "
-                         f"(its sign is the bit)")
+        raise ValueError(f"symbols[{i}] = {x[i].item()!r}: a soft value must be finite and "
+                         f"non-zero (its sign is the bit)")
     return (xf < 0).astype(np.uint8)
 
 

@@ -4,6 +4,9 @@ reader; the Sagnac rotation against pymap3d; the nominal constellation."""
 from dataclasses import replace
 from pathlib import Path
 
+import gnss_lib_py.navdata.navdata as glp_navdata
+import gnss_lib_py.utils.constants as glp_consts
+import gnss_lib_py.utils.sv_models as glp_sv
 import numpy as np
 import pymap3d
 import pytest
@@ -14,9 +17,6 @@ from dsp.gnss.constellation import SLOT_NAMES, SLOTS, EPOCH_GHA_DEG, EPOCH_GPS_S
     nominal_constellation, nodal_rate
 from dsp.gnss.lnav_fields import EPHEMERIS_FIELDS
 
-glp_navdata = pytest.importorskip("gnss_lib_py.navdata.navdata")
-glp_sv = pytest.importorskip("gnss_lib_py.utils.sv_models")
-glp_consts = pytest.importorskip("gnss_lib_py.utils.constants")
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "gnss"
 RINEX2 = DATA / "brdc2800.15n"
@@ -124,17 +124,20 @@ def _navdata(ephs):
 
 
 def _glp_states(ephs, dt):
-    """gnss-lib-py's states of each ephemeris at toe + dt (one call per satellite: it takes
-    one time for all its columns), in integer milliseconds so its time is exact."""
+    """gnss-lib-py's states of each ephemeris at toe + dt. It takes one time for all the
+    columns of a call: one call per (week, toe) group, in integer milliseconds so its time
+    is exact."""
     nd = _navdata(ephs)
-    pos, vel, clk = [], [], []
-    for i, e in enumerate(ephs):
-        ms = int(round((e.week * E.WEEK_S + e.toe + dt) * 1000))
-        r = glp_sv.find_sv_states(ms, nd.copy(cols=[i]))
-        pos.append([float(np.ravel(r[k])[0]) for k in ("x_sv_m", "y_sv_m", "z_sv_m")])
-        vel.append([float(np.ravel(r[k])[0]) for k in ("vx_sv_mps", "vy_sv_mps", "vz_sv_mps")])
-        clk.append(float(np.ravel(r["b_sv_m"])[0]) / E.C_LIGHT)
-    return np.array(pos), np.array(vel), np.array(clk)
+    pos, vel, clk = np.zeros((len(ephs), 3)), np.zeros((len(ephs), 3)), np.zeros(len(ephs))
+    keys = np.array([e.week * E.WEEK_S + e.toe for e in ephs])
+    for k in np.unique(keys):
+        cols = np.flatnonzero(keys == k)
+        r = glp_sv.find_sv_states(int(round((k + dt) * 1000)), nd.copy(cols=cols))
+        pos[cols] = np.stack([np.ravel(r[c]) for c in ("x_sv_m", "y_sv_m", "z_sv_m")], axis=1)
+        vel[cols] = np.stack([np.ravel(r[c]) for c in ("vx_sv_mps", "vy_sv_mps", "vz_sv_mps")],
+                             axis=1)
+        clk[cols] = np.ravel(r["b_sv_m"]) / E.C_LIGHT
+    return pos, vel, clk
 
 
 DTS = (0.0, 1234.0, -3600.0, 7199.0)
