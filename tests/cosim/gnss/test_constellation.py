@@ -407,3 +407,25 @@ def test_bad_inputs_are_refused_before_work(nav):
                                    tow_s=259200.0 + 5400.0, duration_s=3000.0))
     with pytest.raises(ValueError, match="clock drift_s_s"):
         ReceiverClock(drift_s_s=1e-3)
+
+
+def test_a_satellite_sounds_only_above_the_mask(nav):
+    # over 20 minutes a satellite crosses the mask set at its elevation half-way: it is in
+    # the record, with amplitude on the grid exactly where the truth has it above the mask
+    probe = ConstellationSignal(config(nav, mask_deg=0.0, duration_s=1200.0))
+    tr = probe.truth_at([0.0, 1200.0])
+    j = int(np.argmax(np.abs(tr.elevation_deg[1] - tr.elevation_deg[0])))
+    prn = probe.prns[j]
+    mask = float(probe.truth_at([600.0]).elevation_deg[0, j])
+    sig = ConstellationSignal(config(nav, mask_deg=mask, duration_s=1200.0))
+    assert prn in sig.prns
+    k = sig.prns.index(prn)
+    for page in (0, 1199):
+        amp = sig.page(page)["amp"][k]
+        s = page * 1.0 + np.arange(amp.size) * 1e-3
+        up = sig.truth_at(s).sounding[:, k]
+        assert np.array_equal(amp > 0, up)
+    assert sig.page(0)["amp"][k].any() != sig.page(1199)["amp"][k].any()
+    # a satellite below the mask throughout is not in the record
+    low = [p for i, p in enumerate(probe.prns) if tr.elevation_deg[:, i].max() < mask]
+    assert low and not set(low) & set(sig.prns)
