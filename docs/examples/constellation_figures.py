@@ -53,10 +53,11 @@ def interpolation(nav):
                      iono=lambda la, lo, az, el, tow: 5.0 / np.sin(np.radians(el)),
                      tropo=lambda el, h: 2.4 / np.sin(np.radians(el))),
             np.linspace(0.0, 2.2, 4001) + 0.3e-3 / 7),
-        "INS paper trajectory (jerk ramps, 50 g hold)": (
+        "INS paper trajectory (jerk ramps, 50 g hold), OCXO, seed 3": (
             scenario(nav, receiver=along_track_receiver(PaperTrajectory(), 30.0, 10.0, 200.0,
                                                         90.0),
-                     duration_s=40.0, tow_s=TOW - 2 * 3600),
+                     duration_s=40.0, tow_s=TOW - 2 * 3600,
+                     clock=ReceiverClock(oscillator="ocxo"), seed=3),
             np.concatenate([np.linspace(a, a + 1, 2003) for a in (4.5, 14.6, 21.5, 31.5)])),
     }
     print("| scenario | satellites | points | max code-range error (m) | "
