@@ -9,7 +9,7 @@ import numpy as np
 import pymap3d
 import pytest
 
-from cosim.gnss.constellation import CHIP_M, L1_WAVELENGTH_M, ConstellationConfig, \
+from cosim.gnss.constellation import L1_WAVELENGTH_M, ConstellationConfig, \
     ConstellationSignal, write_constellation
 from cosim.gnss.constellation_geometry import Cn0Model, ReceiverClock, StaticReceiver, \
     TrajectoryReceiver, along_track_receiver
