@@ -1,6 +1,6 @@
-"""Equivalence of the monopulse front end's bit-exact model, Amaranth simulation and Verilated
-Verilog (``python -m cosim check-equivalence --top monopulse``): the same seeded record through
-the three sessions (:func:`cosim.backends.factory.open_frontend`), every FIFO word and the cycle it
+"""Equivalence of the monopulse front end's bit-exact model, Amaranth simulation and its Verilog
+under Verilator and Icarus Verilog (``python -m cosim check-equivalence --top monopulse``): the
+same seeded record through the four sessions (:func:`cosim.backends.factory.open_frontend`), every FIFO word and the cycle it
 leaves on compared with the model's.
 
 The record: full-scale random ADC codes on the 4 channels and random replica bits, with
@@ -78,7 +78,7 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
 
     return compare_backends("monopulse", int(samples), backends, run, seed=seed, stall=stall,
                             record_words=params.record_words,
-                            pysim_max_samples=pysim_max_samples,
+                            pysim_max_samples=pysim_max_samples, n_cycles=n_cycles,
                             empty_hint=f"a record every "
                                        f"{params.snapshots * params.snapshot_decimation} "
                                        f"samples at most")
