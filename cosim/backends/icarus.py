@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import logging
 import os
 import shutil
 import socket
@@ -226,6 +227,10 @@ class IcarusStreamSim:
             raise ValueError(f"n_cycles must be an integer >= 0, not {n_cycles!r}")
         if in_words is not None and "i__valid" not in self._by_name:
             raise ValueError("in_words given but the component has no input stream `i`")
+        if out_ready is not None:   # as run_stream: entries past n_cycles are not used
+            out_ready = np.asarray(out_ready, dtype=bool).ravel()[:int(n_cycles)]
+        if in_valid is not None:
+            in_valid = np.asarray(in_valid, dtype=bool).ravel()[:int(n_cycles)]
         with self.open(inputs) as s:
             for c, p, v in writes or []:
                 s.write(self.input_port(p).name, int(v), cycle=int(c))
@@ -233,6 +238,13 @@ class IcarusStreamSim:
             fin = {k: s.read(self.port(p).name) for k, p in (final or {}).items()}
         return StreamResult(words=r.words, cycles=r.cycles, n_cycles=r.n_cycles,
                             in_accepted=r.in_accepted, final=fin)
+
+
+class _QuietSkip(logging.Filter):
+    """Drops the runner's "Skipping compilation" warning of a session's set-up build."""
+
+    def filter(self, record):
+        return not record.getMessage().startswith("Skipping compilation")
 
 
 class IcarusSession(FrontendSession):
@@ -270,8 +282,13 @@ class IcarusSession(FrontendSession):
         # The runner's test() needs its build() called first; the design is built (sim.vvp is
         # newer than its source), so this only sets the runner up and compiles nothing.
         runner = get_runner("icarus")
-        runner.build(sources=[sim.build_path / f"{sim.name}.v"], hdl_toplevel=sim.name,
-                     build_dir=sim.build_path, log_file=self.run_dir / "build.log")
+        quiet = _QuietSkip()
+        runner.log.addFilter(quiet)
+        try:
+            runner.build(sources=[sim.build_path / f"{sim.name}.v"], hdl_toplevel=sim.name,
+                         build_dir=sim.build_path, log_file=self.run_dir / "build.log")
+        finally:
+            runner.log.removeFilter(quiet)
 
         def serve():
             try:

@@ -50,7 +50,8 @@ def test_stimulus_correlates_and_writes_every_register():
 @pytest.mark.verilator
 @pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
 def test_cli_three_backends_agree(capsys):
-    rc = main(["check-equivalence", "--top", "gnss", "--samples", "20000", "--json"])
+    rc = main(["check-equivalence", "--top", "gnss", "--samples", "20000", "--backends",
+               "model,pysim,verilator", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0, out["verdict"]
     assert out["top"] == "gnss" and out["backends"] == ["model", "pysim", "verilator"]
