@@ -7,23 +7,28 @@ coroutine runs the step's cycles on the design and answers with the output words
 
 Messages (pickled tuples, :class:`multiprocessing.connection.Connection`):
 
-- ``("init", {port: value})``: every input port of the top set (``clk``, ``rst`` and the
-  undriven ones to 0, the constant inputs to their values), settled; answer ``"ok"``.
+- ``("init", {port: value})``: every input port of the top but ``clk`` set (``rst`` and the
+  inputs nobody writes to 0, the constant inputs to their values) and the clock started (a
+  cocotb :class:`~cocotb.clock.Clock`, period 2 ns, first rising edge at 1 ns); answer
+  ``"ok"``.
 - ``("step", words, valid, ready, n, writes)``: run ``n`` cycles. ``words`` are the input
   payloads still queued (ints, already masked to the port width), offered one per cycle in
   order; ``valid`` (list of bool, may be shorter than ``n``: valid after its end) gates the
   offer; ``ready`` (list of bool, shorter: ready after its end) is ``o.ready``; ``writes``
   ``(cycle of the step, port, value)`` in cycle order set a port before that cycle's edge.
   Answer ``(out_words, out_cycles, accepted)``, the cycles counted from the step's start.
-- ``("read", port)``: the port's value (an unsigned int) after the last edge.
+- ``("read", port)``: the port's value (an unsigned int) after the last edge, settled.
 - ``("close",)``: end the test (answer ``"ok"``).
 
-Per cycle it does what the Verilator harness (:mod:`cosim.backends.verilator_harness`) and
-:func:`cosim.backends.pysim.run_stream` do: set ``i.valid``/``i.payload`` (the payload only
-when offering, so it holds its last value otherwise) and ``o.ready`` with ``clk`` low, let
-the logic settle, sample ``o.valid``/``o.payload`` and ``i.ready`` (what the edge sees),
-then raise ``clk`` and let the edge settle. Only values that change are written. This module
-imports nothing of the project: it runs in the simulator's embedded Python.
+The simulator does not advance while the coroutine waits for a message, so the clock stops
+between steps. Per cycle it does what the Verilator harness
+(:mod:`cosim.backends.verilator_harness`) and :func:`cosim.backends.pysim.run_stream` do:
+the cycle's inputs (``i.valid``, ``i.payload`` only when offering, so it holds its last
+value otherwise, ``o.ready``, the writes) are written after the previous rising edge (cocotb
+applies writes in the read-write phase, after the edge's register updates) and settle before
+the next; at that edge, before its updates, ``o.valid``/``o.payload`` and ``i.ready`` are
+sampled (the values the edge sees). Only values that change are written. This module imports
+nothing of the project: it runs in the simulator's embedded Python.
 """
 from __future__ import annotations
 
