@@ -72,22 +72,27 @@ def skip_reason(name: str, samples: int, *, pysim_max_samples: int = PYSIM_MAX_S
 
 
 def simulators_line(per: dict, n_cycles: int | None = None) -> str:
-    """One line on the backends that ran (``per``: backend -> ``mismatches``, ``seconds``):
-    ``model == pysim == verilator == icarus`` (``!=`` before a backend that differs from the
-    model), the cycles each ran (when ``n_cycles`` is given) and each one's wall time, with
-    its cycles per second."""
+    """One line on the backends that ran (``per``: backend -> ``mismatches``, ``seconds``
+    and optionally its own ``cycles``): ``model == pysim == verilator == icarus`` (``!=``
+    before a backend that differs from the model), the cycles they ran (``n_cycles``, the
+    same for all, or each one's ``cycles``) and each one's wall time, with its cycles per
+    second."""
     chain = "model"
     for name, v in per.items():
         if name != "model":
             chain += f" {'==' if v['mismatches'] == 0 else '!='} {name}"
     times = []
     for name, v in per.items():
+        cyc = v.get("cycles", n_cycles)
         t = f"{name} {v['seconds']:.3g} s"
-        if n_cycles and v["seconds"] > 0:
-            t += f" ({n_cycles / v['seconds']:,.0f} cycles/s)"
+        if cyc and v["seconds"] > 0:
+            own = "" if n_cycles else f"{cyc:,} cycles, "
+            t += f" ({own}{cyc / v['seconds']:,.0f} cycles/s)"
         times.append(t)
-    cycles = f"{n_cycles:,} cycles" if n_cycles else "same stimulus"
-    return f"{chain} over {cycles}: {', '.join(times)}"
+    over = f"{n_cycles:,} cycles" if n_cycles else (
+        "the same stimulus" if all("cycles" not in v for v in per.values()) else
+        "the same stimulus, each its own length")
+    return f"{chain} over {over}: {', '.join(times)}"
 
 
 def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall: bool,
