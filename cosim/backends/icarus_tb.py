@@ -2,7 +2,7 @@
 
 It is not a test of its own: :class:`cosim.backends.icarus.IcarusSession` starts ``vvp`` with
 this module as cocotb's test module (``cocotb_tools.runner``) and then drives it over a
-Unix socket (:envvar:`KFNAV_ICARUS_SOCKET`): the session sends one message per step, this
+Unix socket (``KFNAV_ICARUS_SOCKET``): the session sends one message per step, this
 coroutine runs the step's cycles on the design and answers with the output words.
 
 Messages (pickled tuples, :class:`multiprocessing.connection.Connection`):

@@ -32,6 +32,27 @@ def test_verilator_missing_is_a_note(monkeypatch):
     assert r["backends"] == ["model"] and "Verilator not found" in r["skipped"]["verilator"]
 
 
+def test_icarus_missing_is_a_note(monkeypatch):
+    """Without iverilog/cocotb the Icarus backend is skipped with the reason (the check still
+    needs two backends that ran), and a simulator of it refuses to start, saying why."""
+    import cosim.backends.icarus as ic
+    monkeypatch.setattr(ic, "icarus_available", lambda: False)
+    r = check_equivalence(samples=5000, backends=("model", "icarus"))
+    assert r["backends"] == ["model"] and "make setup" in r["skipped"]["icarus"]
+    assert r["equivalent"] is False and "icarus skipped: Icarus Verilog" in r["verdict"]
+    from hdl.tacan.frontend import TacanFrontEnd
+    from hdl.tacan.params import TacanFrontendParams
+    with pytest.raises(RuntimeError, match="Icarus Verilog .* not found"):
+        ic.IcarusStreamSim(TacanFrontEnd(TacanFrontendParams()), name="tacan_frontend")
+
+
+def test_icarus_limit_is_reported():
+    from cosim.tools.equivalence import ICARUS_MAX_SAMPLES
+    r = check_equivalence(samples=ICARUS_MAX_SAMPLES + 1, backends=("model", "icarus"))
+    assert r["backends"] == ["model"]
+    assert f"samples <= {ICARUS_MAX_SAMPLES}" in r["skipped"]["icarus"]
+
+
 def test_mismatch_gives_nonzero_exit(monkeypatch, capsys):
     import cosim.tacan.equivalence as eq
     real = eq.check_equivalence
