@@ -263,6 +263,8 @@ class IcarusSession(FrontendSession):
         self.sim = sim
         self._conn: Connection | None = None
         self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self._sock_dir: str | None = None
         self._valid = None
         self._pin = sim.port("i__payload") if "i__payload" in sim._by_name else None
         self._pout = sim.port("o__payload")
@@ -301,7 +303,7 @@ class IcarusSession(FrontendSession):
                 self._error = e
         self._thread = threading.Thread(target=serve, name=f"icarus-{sim.name}", daemon=True)
         self._thread.start()
-        try:
+        try:   # on failure, __del__ -> close() stops vvp and removes the socket's directory
             server.settimeout(0.2)
             t0 = time.monotonic()
             while True:
@@ -377,7 +379,9 @@ class IcarusSession(FrontendSession):
                 ok = False
             self._conn.close()
             self._conn = None
-        self._thread.join(timeout=60)
-        shutil.rmtree(self._sock_dir, ignore_errors=True)
+        if self._thread is not None:
+            self._thread.join(timeout=60)
+        if self._sock_dir is not None:
+            shutil.rmtree(self._sock_dir, ignore_errors=True)
         if ok and self._error is None and not self._thread.is_alive():
             shutil.rmtree(self.run_dir, ignore_errors=True)

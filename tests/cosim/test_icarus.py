@@ -231,9 +231,9 @@ def test_cli_four_backends_on_tacan(capsys):
 @pytest.mark.slow
 def test_tacan_long_window_with_drops_and_markers():
     from cosim.tacan.equivalence import check_equivalence
-    r = check_equivalence(samples=40_000, backends=("model", "icarus"), stall=True, seed=1)
+    r = check_equivalence(samples=30_000, backends=("model", "icarus"), stall=True, seed=1)
     _equivalent(r)
-    assert r["markers"] + r["dropped"] > 0
+    assert r["markers"] > 0 and r["dropped"] > 0
 
 
 @pytest.mark.slow
@@ -256,7 +256,7 @@ def test_gnss_channel_default_parameters():
     x, writes, ready = _array_stimulus(p, 1, 2 * 16368 + 100, seed=7)
     n_cycles = len(x) + 200
     want = GnssArrayModel(p).run(x, writes, n_cycles=n_cycles, out_ready=ready)
-    assert len(want.records) >= 2
+    assert len(want.records) >= 1
     got = IcarusStreamSim(GnssChannel(p), name="gnss_channel").run(
         x, out_ready=ready, n_cycles=n_cycles,
         writes=bus_writes(writes, data_width=p.reg_data_width))
@@ -270,15 +270,19 @@ def test_gnss_array12_default_parameters():
     from hdl.gnss.params import GnssChannelParams
     want = _array_check(GnssChannelParams(), 12, 2 * 16368 + 100, seed=13,
                         name="gnss_channel_array12")
-    assert len(want.records) >= 24
+    assert len(want.records) >= 12
 
 
 @pytest.mark.slow
 def test_monopulse_default_parameters():
-    """The registered monopulse_frontend top (default parameters) under stalls."""
-    from cosim.monopulse.equivalence import check_monopulse_equivalence
+    """The registered monopulse_frontend top (default parameters: a record every 81,920
+    samples) under stalls, with register writes."""
+    from cosim.tools.equivalence import compare_backends
     from hdl.monopulse.params import MonopulseFrontendParams
     p = MonopulseFrontendParams()
-    r = check_monopulse_equivalence(20_000, backends=("model", "icarus"), seed=2, stall=True,
-                                    params=replace(p, fifo_depth=p.record_words + 2))
+    p = replace(p, fifo_depth=p.record_words + 2)
+    n = p.snapshots * p.snapshot_decimation + 2000
+    run, n_cycles = _monopulse_runs(p, p, n=n, seed=2)
+    r = compare_backends("monopulse", n, ("model", "icarus"), run, seed=2, stall=True,
+                         empty_hint="", n_cycles=n_cycles, icarus_max_samples=n)
     _equivalent(r)
