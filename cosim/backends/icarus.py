@@ -22,8 +22,8 @@ text that is linted and synthesised), unmodified, as its top module.
   :func:`cosim.backends.pysim.run_stream` (:meth:`IcarusStreamSim.run`, one session from
   reset) or opens sessions (:meth:`IcarusStreamSim.open`).
 
-Speed: a few thousand cycles per second (the coroutine's two timer awaits per cycle, plus
-Icarus' own event scheduling); short windows only. :func:`icarus_available` says whether
+Speed: ~0.3-2e3 cycles per second for a whole top (Icarus' event scheduling of the design
+and one cocotb edge trigger per cycle); short windows only. :func:`icarus_available` says whether
 ``iverilog``/``vvp`` and cocotb are installed (``make setup`` installs both).
 """
 from __future__ import annotations
