@@ -286,3 +286,19 @@ def test_monopulse_default_parameters():
     r = compare_backends("monopulse", n, ("model", "icarus"), run, seed=2, stall=True,
                          empty_hint="", n_cycles=n_cycles, icarus_max_samples=n)
     _equivalent(r)
+
+
+@pytest.mark.slow
+def test_tacan_run_rechecked_on_icarus(capsys):
+    """``python -m cosim tacan --backend model --recheck icarus``: the start of a model run
+    (its first pulse pairs leave after ~25,000 samples) re-run on Icarus gives the same FIFO
+    words on the same cycles."""
+    import json
+    from cosim.cli import main
+    rc = main(["tacan", "--backend", "model", "--duration-s", "0.7", "--memory-s", "0.15",
+               "--recheck", "icarus", "--recheck-samples", "30000", "--json"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    c = json.loads(out)["recheck"]
+    assert c["backend"] == "icarus" and c["samples"] == 30000
+    assert c["same_bits"] is True and c["words"] > 0
