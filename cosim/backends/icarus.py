@@ -45,7 +45,6 @@ import numpy as np
 
 from ..core.provenance import REPO_ROOT
 from ..core.session import FrontendSession, ready_window
-from . import icarus_tb
 from .pysim import StreamResult, input_items
 from .verilator_harness import as_value
 from .verilog import PortInfo, component_ports, verilog_text
@@ -53,6 +52,12 @@ from .verilog import PortInfo, component_ports, verilog_text
 __all__ = ["IcarusStreamSim", "IcarusSession", "icarus_available", "icarus_missing_message",
            "icarus_version"]
 
+#: The cocotb test module run inside ``vvp`` (imported there, not here: it needs cocotb).
+TB_MODULE = "cosim.backends.icarus_tb"
+#: Its source (part of the build key).
+TB_PATH = Path(__file__).with_name("icarus_tb.py")
+#: The environment variable naming a session's socket (``icarus_tb.SOCKET_ENV``).
+SOCKET_ENV = "KFNAV_ICARUS_SOCKET"
 #: Seconds to wait for ``vvp`` to start and connect to a session's socket.
 CONNECT_TIMEOUT_S = 120.0
 #: The ports the stream protocol drives (not settable through ``inputs``/``writes``).
@@ -145,7 +150,7 @@ class IcarusStreamSim:
     def _cache_key(self) -> str:
         h = hashlib.sha256()
         for part in (self.verilog, self.name, icarus_version(),
-                     Path(icarus_tb.__file__).read_text()):
+                     TB_PATH.read_text()):
             h.update(part.encode())
             h.update(b"\0")
         return h.hexdigest()
@@ -294,10 +299,10 @@ class IcarusSession(FrontendSession):
 
         def serve():
             try:
-                runner.test(test_module=icarus_tb.__name__, hdl_toplevel=sim.name,
+                runner.test(test_module=TB_MODULE, hdl_toplevel=sim.name,
                             build_dir=sim.build_path, test_dir=self.run_dir,
                             results_xml=str(self.run_dir / "results.xml"),
-                            extra_env={icarus_tb.SOCKET_ENV: sock_path},
+                            extra_env={SOCKET_ENV: sock_path},
                             log_file=self.log_path)
             except BaseException as e:   # SystemExit from the runner included
                 self._error = e

@@ -40,7 +40,7 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, ReadOnly, RisingEdge
 
-#: Environment variable naming the session's socket.
+#: Environment variable naming the session's socket (``cosim.backends.icarus.SOCKET_ENV``).
 SOCKET_ENV = "KFNAV_ICARUS_SOCKET"
 
 
