@@ -96,7 +96,7 @@ def test_nothing_compared_and_bad_arguments(capsys):
     capsys.readouterr()
     with pytest.raises(ValueError, match=r"samples must be an integer >= 1, not 0"):
         check_gnss_equivalence(0)
-    with pytest.raises(ValueError, match=r"backends must be among .* not \['icarus'\]"):
-        check_gnss_equivalence(100, backends=("model", "icarus"))
+    with pytest.raises(ValueError, match=r"backends must be among .* not \['fpga'\]"):
+        check_gnss_equivalence(100, backends=("model", "fpga"))
     assert main(["check-equivalence", "--top", "gnss", "--samples", "0"]) == 2
     assert "error: --samples must be an integer >= 1, not 0" in capsys.readouterr().err
