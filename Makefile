@@ -1,5 +1,6 @@
 # FPGA+DSP co-design toolkit for Kalman-filter navigation receivers.
-# `make run` and `make test` set up everything they need (.venv, pip packages, Verilator).
+# `make run` and `make test` set up everything they need (.venv, pip packages, Verilator,
+# Icarus Verilog).
 
 VENV   ?= .venv
 PYTHON ?= python3
@@ -20,14 +21,17 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[test,synth,cluster,docs]"
 	touch $(STAMP)
 
-tools:  ## install Verilator when missing (apt-get, as root)
-	@if ! command -v verilator >/dev/null 2>&1; then \
+tools:  ## install Verilator and Icarus Verilog when missing (apt-get, as root)
+	@missing=""; \
+	command -v verilator >/dev/null 2>&1 || missing="$$missing verilator"; \
+	command -v iverilog >/dev/null 2>&1 || missing="$$missing iverilog"; \
+	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    echo "installing verilator with apt-get"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq verilator >/dev/null; \
+	    echo "installing$$missing with apt-get"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
 	  else \
-	    echo "warning: verilator not found and cannot install it here (not root or no apt-get):" \
-	         "install it yourself; the Verilator tests will be skipped"; \
+	    echo "warning:$$missing not found and cannot install here (not root or no apt-get):" \
+	         "install them yourself; the Verilator / Icarus tests will be skipped"; \
 	  fi; \
 	fi
 

@@ -111,15 +111,15 @@ def _cmd_bench(a) -> int:
 
 def _add_hdl(sub):
     p = _parser(sub, "check-equivalence",
-                help="run the bit-exact model, Amaranth sim and Verilator on one record "
-                     "and count mismatching FIFO words (exit 1 on any, or when fewer than "
-                     "two backends compared a non-empty record)")
+                help="run the bit-exact model, Amaranth sim, Verilator and Icarus Verilog on "
+                     "one record and count mismatching FIFO words (exit 1 on any, or when "
+                     "fewer than two backends compared a non-empty record)")
     tops = [r.name for r in receivers() if r.equivalence is not None]
     p.add_argument("--top", type=str.lower, default=tops[0], choices=tops, help="design")
     p.add_argument("--samples", type=parse_int, default=20_000,
-                   help="ADC samples (20 MS/s; pysim runs up to 40000)")
-    p.add_argument("--backends", default="model,pysim,verilator",
-                   help="comma-separated subset of model,pysim,verilator (at least two)")
+                   help="ADC samples (20 MS/s; pysim and icarus run up to 40000)")
+    p.add_argument("--backends", default="model,pysim,verilator,icarus",
+                   help="comma-separated subset of model,pysim,verilator,icarus (at least two)")
     p.add_argument("--seed", type=int, default=1, help="signal seed (>= 0)")
     p.add_argument("--stall", action="store_true",
                    help="DSP ready pattern with long stalls and a 4-word FIFO (drops, markers)")
@@ -179,6 +179,7 @@ def _cmd_check_equivalence(a) -> int:
             print(f"  compared {c}")
         for name, why in r["skipped"].items():
             print(f"  skipped {name}: {why}")
+        print(f"  simulators: {r['simulators']}")
     if not r["equivalent"] or r["mismatches"]:
         print(f"error: {r['verdict'] if not r['equivalent'] else str(r['mismatches']) + ' mismatches'}",
               file=sys.stderr)

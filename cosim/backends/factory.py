@@ -2,10 +2,11 @@
 
 :func:`open_frontend` opens a receiver's front end (looked up in the receiver registry by
 its parameters' type) on ``"model"`` (the receiver's bit-exact model session), ``"pysim"``
-(:class:`cosim.backends.pysim.PysimSession`) or ``"verilator"``
-(:class:`cosim.backends.verilator.VerilatorSession`); :func:`open_stream_session` opens any
-stream component on one of the two HDL simulators. The session interface is
-:class:`cosim.core.session.FrontendSession`.
+(:class:`cosim.backends.pysim.PysimSession`), ``"verilator"``
+(:class:`cosim.backends.verilator.VerilatorSession`) or ``"icarus"``
+(:class:`cosim.backends.icarus.IcarusSession`, Icarus Verilog driven by cocotb);
+:func:`open_stream_session` opens any stream component on one of the three HDL simulators.
+The session interface is :class:`cosim.core.session.FrontendSession`.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from .pysim import PysimSession
 __all__ = ["BACKENDS", "FRONTEND_TYPES", "open_frontend", "open_stream_session"]
 
 #: The backends a front end opens on.
-BACKENDS = ("model", "pysim", "verilator")
+BACKENDS = ("model", "pysim", "verilator", "icarus")
 
 #: Front ends :func:`open_frontend` knows besides the registered receivers' (parameter
 #: class -> :class:`cosim.core.receivers.Frontend`); a receiver declares its front end in its
@@ -35,7 +36,7 @@ def _frontend_entry(params):
 
 def open_stream_session(backend: str, dut, *, name: str = "dut", inputs: dict | None = None,
                         vcd: str | Path | None = None, **kw) -> FrontendSession:
-    """A session of any stream component on ``"pysim"`` or ``"verilator"``."""
+    """A session of any stream component on ``"pysim"``, ``"verilator"`` or ``"icarus"``."""
     if backend == "pysim":
         return PysimSession(dut, inputs=inputs, vcd=vcd, **kw)
     if backend == "verilator":
@@ -44,14 +45,21 @@ def open_stream_session(backend: str, dut, *, name: str = "dut", inputs: dict | 
                                       "VerilatorStreamSim.run(trace=...) for one run")
         from .verilator import VerilatorStreamSim
         return VerilatorStreamSim(dut, name=name, **kw).open(inputs=inputs)
-    raise ValueError(f"backend must be pysim or verilator for a component, not {backend!r}")
+    if backend == "icarus":
+        if vcd is not None:
+            raise NotImplementedError("waveforms of an Icarus session: not supported; use "
+                                      "pysim or VerilatorStreamSim.run(trace=...)")
+        from .icarus import IcarusStreamSim
+        return IcarusStreamSim(dut, name=name, **kw).open(inputs=inputs)
+    raise ValueError(f"backend must be pysim, verilator or icarus for a component, not "
+                     f"{backend!r}")
 
 
 def open_frontend(backend: str, params, *, log_ranges: bool = False,
                   vcd: str | Path | None = None) -> FrontendSession:
     """A front-end session for ``params`` (an instance of a registered front end's parameter
-    class, :class:`cosim.core.receivers.Frontend`) on ``backend`` (``"model"``, ``"pysim"`` or
-    ``"verilator"``), reset, with its control ports at their reset values
+    class, :class:`cosim.core.receivers.Frontend`) on ``backend`` (``"model"``, ``"pysim"``,
+    ``"verilator"`` or ``"icarus"``), reset, with its control ports at their reset values
     (``Frontend.inputs``)."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")

@@ -1,6 +1,6 @@
-"""Equivalence of the monopulse front end's bit-exact model, Amaranth simulation and Verilated
-Verilog (``python -m cosim check-equivalence --top monopulse``): the same seeded record through
-the three sessions (:func:`cosim.backends.factory.open_frontend`), every FIFO word and the cycle it
+"""Equivalence of the monopulse front end's bit-exact model, Amaranth simulation and its Verilog
+under Verilator and Icarus Verilog (``python -m cosim check-equivalence --top monopulse``): the
+same seeded record through the four sessions (:func:`cosim.backends.factory.open_frontend`), every FIFO word and the cycle it
 leaves on compared with the model's.
 
 The record: full-scale random ADC codes on the 4 channels and random replica bits, with
@@ -22,7 +22,7 @@ from hdl.monopulse.params import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendPar
 from ..core.session import write_register
 from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
 
-__all__ = ["check_monopulse_equivalence", "EQUIV_PARAMS"]
+__all__ = ["check_monopulse_equivalence", "stimulus", "EQUIV_PARAMS"]
 
 #: Reduced block for the check (4 samples a snapshot, 12 snapshots a block).
 EQUIV_PARAMS = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decimation=4,
@@ -31,7 +31,9 @@ EQUIV_PARAMS = MonopulseFrontendParams(snapshots=12, cic_rate=4, snapshot_decima
 WRITE_SPACING = 500
 
 
-def _stimulus(p, samples, seed):
+def stimulus(p, samples, seed):
+    """``(words, writes)``: the check's packed input words (4 ADC channels, replica bit) and
+    its register writes ``(cycle, register address, value)``, seeded."""
     rng = np.random.default_rng(seed)
     lo = -(1 << (p.adc_bits - 1))
     x = rng.integers(lo, -lo, (samples, 4))
@@ -63,7 +65,7 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
     if params is None:
         params = (replace(EQUIV_PARAMS, fifo_depth=EQUIV_PARAMS.record_words + 2) if stall
                   else EQUIV_PARAMS)
-    words, writes = _stimulus(params, int(samples), seed)
+    words, writes = stimulus(params, int(samples), seed)
     n_cycles = int(samples) + params.latency + 400
     ready = stall_pattern(n_cycles, seed) if stall else np.ones(n_cycles, bool)
 
@@ -78,7 +80,7 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
 
     return compare_backends("monopulse", int(samples), backends, run, seed=seed, stall=stall,
                             record_words=params.record_words,
-                            pysim_max_samples=pysim_max_samples,
+                            pysim_max_samples=pysim_max_samples, n_cycles=n_cycles,
                             empty_hint=f"a record every "
                                        f"{params.snapshots * params.snapshot_decimation} "
                                        f"samples at most")

@@ -317,7 +317,7 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
 
 #: Approximate simulated cycles per second of each backend on the closed loop (measured on
 #: the 2-core development machine, results/monopulse.md), for refusing hours-long runs.
-CYCLES_PER_S = {"model": 7e5, "pysim": 2e3, "verilator": 1e6}
+CYCLES_PER_S = {"model": 7e5, "pysim": 2e3, "verilator": 1e6, "icarus": 1e3}
 #: Longest HDL closed-loop run accepted (s of wall time, estimated).
 MAX_WALL_S = 2 * 3600
 

@@ -17,7 +17,7 @@ centre instead of averaged over the block's snapshots (the smear over one 0.8 ms
 ~1e-7 relative at the default rates; ``test_mono_run`` checks it against
 ``fastpath.mean_outputs``), batched over ``trials``; ``golden`` -- the IF generator and the
 float golden chain, block by block (one trial; slow: ~N D samples x 4 per block). The HDL
-backends (``model``, ``pysim``, ``verilator``) are refused until the front end of
+backends (``model``, ``pysim``, ``verilator``, ``icarus``) are refused until the front end of
 ``hdl/monopulse`` exists (:func:`_hdl_frontend` is the hook). No FIFO on these paths:
 ``fifo_dropped`` is 0 by construction and says so (``fifo``).
 
@@ -43,8 +43,8 @@ from .fastpath import mean_outputs, noise_variance
 from .signal import STREAM_FAST, MonopulseSignalConfig, generate
 from .trajectory import ConstantRate, Manoeuvre
 
-BACKENDS = ("fast", "golden", "model", "pysim", "verilator")
-HDL_BACKENDS = ("model", "pysim", "verilator")
+BACKENDS = ("fast", "golden", "model", "pysim", "verilator", "icarus")
+HDL_BACKENDS = ("model", "pysim", "verilator", "icarus")
 SEARCH, CAPTURE, TRACK = 0, 1, 2
 
 
@@ -78,7 +78,8 @@ class MonopulseRunConfig:
     latency_blocks: int = field(default=1, metadata=_h(
         "measurement blocks between a steering command and the beam moving (>= 0)"))
     backend: str = field(default="fast", metadata=_h(
-        "fast (snapshot fast path), golden (IF + float chain), model/pysim/verilator (HDL)",
+        "fast (snapshot fast path), golden (IF + float chain), model/pysim/verilator/icarus "
+        "(HDL)",
         choices=BACKENDS, case="lower"))
     dsp: str = field(default="float", metadata=_h("tracker arithmetic", choices=("float", "fixed"),
                                                   case="lower"))

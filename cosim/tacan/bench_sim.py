@@ -5,9 +5,11 @@ on the same TACAN IF record with
 
 * the Amaranth simulator (``amaranth.sim``, cycle-accurate, Python per clock),
 * the exported Verilog compiled with Verilator (cycle-accurate, compiled, driven in batches),
+* the exported Verilog in Icarus Verilog driven by cocotb (event-driven, on pysim's cycles),
 * the bit-exact numpy/numba model (vectorised, one core),
 
-checks that the three agree bit for bit on the part they all ran, and writes
+checks that they agree bit for bit with the model on the part each ran (``simulators``: one
+line, ``model == pysim == verilator == icarus``, cycles and wall times), and writes
 ``results/sim_speed.json`` / ``.md`` (machine, date, command, figures and the ratios, which
 are what to compare on a shared machine: they are measured in one run).
 """
@@ -80,12 +82,29 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
         vl = {"cycles": n_vl, "seconds": t_vl, "cycles_per_s": n_vl / t_vl,
               "build_or_load_s": t_build, "built": bool(sim.built),
               "version": verilator_version()}
+    # -- Icarus Verilog (pysim's cycles: it runs at a few 1e3 cycles/s) ----------------------
+    from ..backends.icarus import IcarusStreamSim, icarus_available, icarus_version
+    ic = None
+    if icarus_available():
+        t0 = time.perf_counter()
+        isim = IcarusStreamSim(TacanFrontEnd(p), name="tacan_frontend")
+        t_build = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        ir = isim.run(x[:n_pysim], out_ready=ready[:n_pysim], n_cycles=n_pysim, inputs=inputs)
+        t_ic = time.perf_counter() - t0
+        ic = {"cycles": n_pysim, "seconds": t_ic, "cycles_per_s": n_pysim / t_ic,
+              "build_or_load_s": t_build, "built": bool(isim.built), "version": icarus_version()}
     # -- agreement on the common part (pysim's cycles) ---------------------------------------
     from .frontends import FRONTENDS
     short = FRONTENDS["model"](x[:n_pysim], run)
     words_model = short.words
     same_pysim = bool(np.array_equal(ps.words, words_model[:len(ps.words)])
                       and np.array_equal(ps.cycles, short.cycles[:len(ps.cycles)]))
+    same_ic = None
+    if ic is not None:
+        same_ic = bool(len(ir.words) == len(ps.words)
+                       and np.array_equal(ir.words, words_model[:len(ir.words)])
+                       and np.array_equal(ir.cycles, short.cycles[:len(ir.cycles)]))
     same_vl = None
     if vl is not None:
         long_model = FRONTENDS["model"](x[:n_vl], run)
@@ -95,13 +114,21 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
 
     rows = {"pysim_cycles_per_s": n_pysim / t_pysim,
             "verilator_cycles_per_s": vl["cycles_per_s"] if vl else None,
+            "icarus_cycles_per_s": ic["cycles_per_s"] if ic else None,
             "model_samples_per_s": n_model / t_model}
+    from ..tools.equivalence import simulators_line
+    per = {"model": {"mismatches": 0, "seconds": t_model, "cycles": n_model},
+           "pysim": {"mismatches": int(not same_pysim), "seconds": t_pysim, "cycles": n_pysim}}
+    if vl is not None:
+        per["verilator"] = {"mismatches": int(not same_vl), "seconds": t_vl, "cycles": n_vl}
+    if ic is not None:
+        per["icarus"] = {"mismatches": int(not same_ic), "seconds": t_ic, "cycles": n_pysim}
     fs = sig.fs_hz
     summary = {
         "benchmark": "sim-speed", "machine": machine_info(), "quick": quick,
         "design": "TACAN front end (hdl.tacan.frontend.TacanFrontEnd, default parameters)",
         "workload": {"pysim_cycles": n_pysim, "verilator_cycles": n_vl,
-                     "model_samples": n_model, "fs_hz": fs},
+                     "icarus_cycles": n_pysim, "model_samples": n_model, "fs_hz": fs},
         "speed": rows,
         "real_time": {k: (v / fs if v else None) for k, v in rows.items()},
         "ratios": {
@@ -113,7 +140,10 @@ def sim_speed(out: Path, quick: bool = False) -> dict:
         "targets": {"verilator_cycles_per_s": 20e6, "verilator_over_pysim": 1000,
                     "model_samples_per_s": 20e6},
         "verilator": vl,
-        "bit_identical": {"pysim_vs_model": same_pysim, "verilator_vs_model": same_vl},
+        "icarus": ic,
+        "bit_identical": {"pysim_vs_model": same_pysim, "verilator_vs_model": same_vl,
+                          "icarus_vs_model": same_ic},
+        "simulators": simulators_line(per),
         "elapsed_s": None,
     }
     summary["elapsed_s"] = time.perf_counter() - t_start
@@ -137,10 +167,15 @@ def _md(s: dict) -> str:
              f"{f(rt['pysim_cycles_per_s'], '.2e')} | |",
              f"| Verilator (cycle-accurate, compiled) | {f(r['verilator_cycles_per_s'])} | "
              f"{f(rt['verilator_cycles_per_s'], '.3f')} | {t['verilator_cycles_per_s']:,.0f} |",
+             f"| Icarus Verilog + cocotb (cycle-accurate, event-driven) | "
+             f"{f(r.get('icarus_cycles_per_s'))} | "
+             f"{f(rt.get('icarus_cycles_per_s'), '.2e')} | |",
              f"| bit-exact model (one core) | {f(r['model_samples_per_s'])} | "
              f"{f(rt['model_samples_per_s'], '.2f')} | {t['model_samples_per_s']:,.0f} |", "",
              f"Verilator / pysim: {f(q['verilator_over_pysim'])}x (target 1000x); model / "
              f"pysim: {f(q['model_over_pysim'])}x; model / Verilator: "
              f"{f(q['model_over_verilator'], '.1f')}x. Bit-identical FIFO words: pysim vs "
-             f"model {bi['pysim_vs_model']}, Verilator vs model {bi['verilator_vs_model']}."]
+             f"model {bi['pysim_vs_model']}, Verilator vs model {bi['verilator_vs_model']}, "
+             f"Icarus vs model {bi.get('icarus_vs_model')}.", "",
+             f"Simulators: {s.get('simulators', '-')}."]
     return "\n".join(lines) + "\n"

@@ -22,7 +22,7 @@ from ..core.control import ControlPath
 from ..core.link import DspServiceConfig
 from .signal import TacanSignalConfig
 
-BACKENDS = ("golden", "model", "pysim", "verilator")
+BACKENDS = ("golden", "model", "pysim", "verilator", "icarus")
 DSP_MODES = ("float", "fixed")
 
 
@@ -123,10 +123,10 @@ class TacanRunConfig:
     recheck: str | None = field(default=None, metadata={
         "help": "with --backend model: re-run the start of the record cycle-accurately "
                 "(auto = Verilator when installed) and compare the FIFO words",
-        "choices": ("auto", "pysim", "verilator"), "case": "lower"})
+        "choices": ("auto", "pysim", "verilator", "icarus"), "case": "lower"})
     recheck_samples: int | None = field(default=None, metadata={
         "help": "ADC samples re-checked with --recheck (default 1e6 with Verilator, 4e4 "
-                "with pysim)"})
+                "with pysim and icarus)"})
 
     def __post_init__(self):
         if self.backend not in BACKENDS:
@@ -177,8 +177,8 @@ class TacanRunConfig:
             if len(w) != 3 or w[1] not in ("freq",):
                 raise ValueError(f"control writes are (cycle, 'freq', value), not {w!r}")
         if self.recheck is not None:
-            if self.recheck not in ("auto", "pysim", "verilator"):
-                raise ValueError(f"recheck must be auto, pysim or verilator, not "
+            if self.recheck not in ("auto", "pysim", "verilator", "icarus"):
+                raise ValueError(f"recheck must be auto, pysim, verilator or icarus, not "
                                  f"{self.recheck!r}")
             if self.backend != "model":
                 raise ValueError("recheck compares a model run with a cycle-accurate one: "

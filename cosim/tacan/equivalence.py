@@ -1,5 +1,5 @@
-"""Equivalence of the TACAN front end's bit-exact model, Amaranth simulation and Verilated
-Verilog (``python -m cosim check-equivalence --top tacan``).
+"""Equivalence of the TACAN front end's bit-exact model, Amaranth simulation and its Verilog
+under Verilator and Icarus Verilog (``python -m cosim check-equivalence --top tacan``).
 
 :func:`check_equivalence` feeds one realistic TACAN IF record (seeded
 :func:`cosim.tacan.signal.generate`, SNR 10 dB; :func:`tacan_record`) through every backend
@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 
-from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, stall_pattern
+from ..tools.equivalence import (BACKENDS, ICARUS_MAX_SAMPLES, PYSIM_MAX_SAMPLES,
+                                 simulators_line, skip_reason, stall_pattern)
 from .signal import TacanSignalConfig, generate
 
 __all__ = ["check_equivalence", "tacan_record", "TOPS"]
@@ -34,6 +35,7 @@ def tacan_record(samples: int, seed: int, snr_db: float | None = 10.0) -> np.nda
 def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
                       backends=BACKENDS, seed: int = 1, stall: bool = False,
                       params=None, pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                      icarus_max_samples: int = ICARUS_MAX_SAMPLES,
                       progress: bool = False) -> dict:
     """Run the backends on the same stimulus and count mismatching FIFO words.
 
@@ -42,9 +44,10 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     top : {"tacan"}
     samples : int
         ADC samples (20 MS/s: 20_000 = 1 ms).
-    backends : sequence of {"model", "pysim", "verilator"}
+    backends : sequence of {"model", "pysim", "verilator", "icarus"}
         ``model`` is the reference; ``pysim`` is skipped above :data:`PYSIM_MAX_SAMPLES`,
-        ``verilator`` when it is not installed (both with a note).
+        ``icarus`` above :data:`ICARUS_MAX_SAMPLES`, ``verilator`` and ``icarus`` when not
+        installed (all with a note: :func:`cosim.tools.equivalence.skip_reason`).
     seed : int
         Signal (and stall pattern) seed.
     stall : bool
@@ -54,6 +57,8 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     pysim_max_samples : int
         Longest record the Amaranth simulation is run on (default
         :data:`PYSIM_MAX_SAMPLES`: about 15 s at ~3k cycles/s).
+    icarus_max_samples : int
+        Longest record Icarus Verilog is run on (default :data:`ICARUS_MAX_SAMPLES`).
 
     Returns
     -------
@@ -64,7 +69,8 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         ``per_backend`` ({backend: {"mismatches", "words", "seconds"}}), ``compared``
         (which backend was compared with the model on how many words), ``equivalent``
         (True only when at least two backends compared a non-empty record and nothing
-        differed) and ``verdict`` (why, in words).
+        differed), ``verdict`` (why, in words), ``n_cycles`` (cycles each backend ran) and
+        ``simulators`` (:func:`cosim.tools.equivalence.simulators_line`).
     """
     from hdl.tacan.model import TacanFrontendModel
     if top not in TOPS:
@@ -109,29 +115,27 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         run.append(name)
         bar.update()
 
-    if "pysim" in backends:
-        if samples > pysim_max_samples:
-            skipped["pysim"] = (f"pysim runs only for samples <= {pysim_max_samples} "
-                                f"(~3e3 cycles/s for the whole top)")
-        else:
-            from hdl.tacan.frontend import TacanFrontEnd
+    from hdl.tacan.frontend import TacanFrontEnd
+    for name in [b for b in BACKENDS if b in backends and b != "model"]:
+        why = skip_reason(name, int(samples), pysim_max_samples=pysim_max_samples,
+                          icarus_max_samples=icarus_max_samples)
+        if why is not None:
+            skipped[name] = why
+            continue
+        t = time.perf_counter()
+        if name == "pysim":
             from ..backends.pysim import run_stream
-            t = time.perf_counter()
             res = run_stream(TacanFrontEnd(params), x, out_ready=ready, n_cycles=n_cycles,
                              inputs={"freq": freq})
-            compare("pysim", res, time.perf_counter() - t)
-    if "verilator" in backends:
-        from ..backends.verilator import VerilatorStreamSim
-        from ..backends.verilator_harness import verilator_available
-        if not verilator_available():
-            from ..backends.verilog import verilator_missing_message
-            skipped["verilator"] = verilator_missing_message()
-        else:
-            from hdl.tacan.frontend import TacanFrontEnd
-            t = time.perf_counter()
+        elif name == "verilator":
+            from ..backends.verilator import VerilatorStreamSim
             sim = VerilatorStreamSim(TacanFrontEnd(params), name="tacan_frontend")
             res = sim.run(x, out_ready=ready, n_cycles=n_cycles, inputs={"freq": freq})
-            compare("verilator", res, time.perf_counter() - t)
+        else:
+            from ..backends.icarus import IcarusStreamSim
+            sim = IcarusStreamSim(TacanFrontEnd(params), name="tacan_frontend")
+            res = sim.run(x, out_ready=ready, n_cycles=n_cycles, inputs={"freq": freq})
+        compare(name, res, time.perf_counter() - t)
 
     bar.close()
     fields = model.unpack(ref.words)
@@ -165,4 +169,6 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
         "markers": int(markers.sum()),
         "dropped": int(ref.dropped.sum()),
         "per_backend": per,
+        "n_cycles": int(n_cycles),
+        "simulators": simulators_line(per, n_cycles),
     }

@@ -7,8 +7,10 @@ the bearing DSP receives (:class:`FrontendOutput`).
 ``pysim``      the Amaranth design in ``amaranth.sim`` (cycle-accurate, ~1k cycles/s: short
                scenarios only).
 ``verilator``  the exported Verilog compiled with Verilator (cycle-accurate, compiled speed).
+``icarus``     the exported Verilog in Icarus Verilog, driven by cocotb (cycle-accurate,
+               ~1e3 cycles/s: short scenarios only).
 
-The three HDL backends produce the same FIFO words on the same cycles (the tests check it;
+The four HDL backends produce the same FIFO words on the same cycles (the tests check it;
 :func:`recheck_cycle_accurate` re-checks the start of a model run); on their DSP side
 (:func:`dsp_receive`) the tagged FIFO words (data / gap markers) are decoded, the 32-bit
 timestamps unwrapped and the amplitudes scaled to full scale. :data:`FRONTENDS` maps each
@@ -145,7 +147,8 @@ def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:
 
 FRONTENDS = {"golden": golden_frontend, "model": model_frontend,
              "pysim": lambda s, r: _hdl_sim(s, r, "pysim"),
-             "verilator": lambda s, r: _hdl_sim(s, r, "verilator")}
+             "verilator": lambda s, r: _hdl_sim(s, r, "verilator"),
+             "icarus": lambda s, r: _session_frontend(s, r, "icarus")}
 
 
 def frontend_key(run: TacanRunConfig) -> tuple:
@@ -161,14 +164,16 @@ def recheck_cycle_accurate(run: TacanRunConfig, samples, backend: str = "auto",
     """Re-run the first ``n`` ADC samples of a model run on a cycle-accurate backend and
     compare the FIFO words and their cycles (and the overflow count) bit for bit.
 
-    ``backend``: ``"verilator"``, ``"pysim"`` or ``"auto"`` (Verilator when installed);
-    ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with pysim.
+    ``backend``: ``"verilator"``, ``"pysim"``, ``"icarus"`` or ``"auto"`` (Verilator when
+    installed); ``n`` defaults to 1,000,000 samples (50 ms) with Verilator and 40,000 with
+    pysim and Icarus.
     """
     from ..backends.verilator_harness import verilator_available
     if backend == "auto":
         backend = "verilator" if verilator_available() else "pysim"
-    if backend not in ("pysim", "verilator"):
-        raise ValueError(f"recheck backend must be auto, pysim or verilator, not {backend!r}")
+    if backend not in ("pysim", "verilator", "icarus"):
+        raise ValueError(f"recheck backend must be auto, pysim, verilator or icarus, not "
+                         f"{backend!r}")
     n = int(n or (1_000_000 if backend == "verilator" else 40_000))
     x = np.asarray(samples)[:n]
     t0 = time.perf_counter()

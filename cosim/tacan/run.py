@@ -31,10 +31,10 @@ from .signal import generate
 
 #: Memory a run holds per ADC sample (bytes; measured ~14 on the model backend: the IF
 #: record, the ADC codes and the front end's working arrays), with margin.
-BYTES_PER_SAMPLE = {"golden": 32, "model": 32, "pysim": 48, "verilator": 48}
+BYTES_PER_SAMPLE = {"golden": 32, "model": 32, "pysim": 48, "verilator": 48, "icarus": 48}
 #: Simulation speed of the cycle-accurate backends (cycles/s, whole TACAN top) and the
 #: longest run they are started for (s of wall time).
-CYCLES_PER_S = {"pysim": 3e3, "verilator": 5e6}
+CYCLES_PER_S = {"pysim": 3e3, "verilator": 5e6, "icarus": 1.5e3}
 MAX_WALL_S = 3600.0
 
 
@@ -98,7 +98,7 @@ def check_run_size(run: TacanRunConfig) -> None:
                 f"{MAX_WALL_S / 3600:g} h, {CYCLES_PER_S[be] * MAX_WALL_S:,.0f} cycles): "
                 f"reduce {opt}" + ("; long records run on --backend model (with --recheck "
                                    "for the cycle-accurate proof of its start)"
-                                   if be == "pysim" else ""))
+                                   if be in ("pysim", "icarus") else ""))
 
 
 def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = None,

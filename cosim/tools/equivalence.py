@@ -1,24 +1,30 @@
-"""Equivalence of the bit-exact model, the Amaranth simulation and the Verilated Verilog:
-the generic part of ``python -m cosim check-equivalence``.
+"""Equivalence of the bit-exact model and the three simulators of the design (the Amaranth
+simulation, the Verilog under Verilator and under Icarus Verilog): the generic part of
+``python -m cosim check-equivalence``.
 
 A receiver's check (``Receiver.equivalence``, e.g.
-:func:`cosim.tacan.equivalence.check_equivalence`) runs its front end on every backend (:data:`BACKENDS`) on the same stimulus and hands the
-outputs to :func:`compare_backends`, which compares every FIFO word, its cycle and the
-overflow counter against the model and states a verdict. :func:`stall_pattern` is the seeded
-DSP ``ready`` pattern with long stalls (drops, markers); :func:`check_record_size` refuses a
-record that cannot fit this machine.
+:func:`cosim.tacan.equivalence.check_equivalence`) runs its front end on every backend
+(:data:`BACKENDS`) on the same stimulus and hands the outputs to :func:`compare_backends`,
+which compares every FIFO word, its cycle and the overflow counter against the model and
+states a verdict; :func:`skip_reason` says why a backend does not run (too long a record for
+the slow simulators, a tool not installed) and :func:`simulators_line` sums the run up in one
+line (``model == pysim == verilator == icarus``, the cycles, each one's wall time).
+:func:`stall_pattern` is the seeded DSP ``ready`` pattern with long stalls (drops, markers);
+:func:`check_record_size` refuses a record that cannot fit this machine.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_record_size", "compare_backends", "stall_pattern", "PYSIM_MAX_SAMPLES",
-           "BACKENDS"]
+__all__ = ["check_record_size", "compare_backends", "stall_pattern", "skip_reason",
+           "simulators_line", "PYSIM_MAX_SAMPLES", "ICARUS_MAX_SAMPLES", "BACKENDS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
+#: Longest record Icarus Verilog is run on (~1e3..2e3 cycles/s for a whole top under cocotb).
+ICARUS_MAX_SAMPLES = 40_000
 #: The backends compared, the first (the bit-exact model) the reference.
-BACKENDS = ("model", "pysim", "verilator")
+BACKENDS = ("model", "pysim", "verilator", "icarus")
 
 
 #: Memory per ADC sample of a check (the IF record, the codes, the model's working arrays
@@ -43,17 +49,65 @@ def stall_pattern(n_cycles: int, seed: int, *, p_ready: float = 0.5,
     return on & (rng.random(n_cycles) < 0.5)
 
 
+def skip_reason(name: str, samples: int, *, pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                icarus_max_samples: int = ICARUS_MAX_SAMPLES) -> str | None:
+    """Why backend ``name`` does not run on a record of ``samples`` (None: it runs):
+    ``pysim`` above ``pysim_max_samples``, ``icarus`` above ``icarus_max_samples`` or when
+    Icarus/cocotb is not installed, ``verilator`` when it is not installed."""
+    if name == "pysim" and samples > pysim_max_samples:
+        return f"pysim runs only for samples <= {pysim_max_samples} (~3e3 cycles/s)"
+    if name == "icarus":
+        if samples > icarus_max_samples:
+            return (f"icarus runs only for samples <= {icarus_max_samples} (~1e3 cycles/s "
+                    f"under cocotb)")
+        from ..backends.icarus import icarus_available, icarus_missing_message
+        if not icarus_available():
+            return icarus_missing_message()
+    if name == "verilator":
+        from ..backends.verilator_harness import verilator_available
+        if not verilator_available():
+            from ..backends.verilog import verilator_missing_message
+            return verilator_missing_message()
+    return None
+
+
+def simulators_line(per: dict, n_cycles: int | None = None) -> str:
+    """One line on the backends that ran (``per``: backend -> ``mismatches``, ``seconds``
+    and optionally its own ``cycles``): ``model == pysim == verilator == icarus`` (``!=``
+    before a backend that differs from the model), the cycles they ran (``n_cycles``, the
+    same for all, or each one's ``cycles``) and each one's wall time, with its cycles per
+    second."""
+    chain = "model"
+    for name, v in per.items():
+        if name != "model":
+            chain += f" {'==' if v['mismatches'] == 0 else '!='} {name}"
+    times = []
+    for name, v in per.items():
+        cyc = v.get("cycles", n_cycles)
+        t = f"{name} {v['seconds']:.3g} s"
+        if cyc and v["seconds"] > 0:
+            own = "" if n_cycles else f"{cyc:,} cycles, "
+            t += f" ({own}{cyc / v['seconds']:,.0f} cycles/s)"
+        times.append(t)
+    over = f"{n_cycles:,} cycles" if n_cycles else (
+        "the same stimulus" if all("cycles" not in v for v in per.values()) else
+        "the same stimulus, each its own length")
+    return f"{chain} over {over}: {', '.join(times)}"
+
+
 def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall: bool,
                      empty_hint: str, record_words: int = 1,
-                     pysim_max_samples: int = PYSIM_MAX_SAMPLES) -> dict:
+                     pysim_max_samples: int = PYSIM_MAX_SAMPLES,
+                     icarus_max_samples: int = ICARUS_MAX_SAMPLES,
+                     n_cycles: int | None = None) -> dict:
     """The comparison and verdict of a session-based check (a receiver's
     ``Receiver.equivalence``): ``run(backend) -> (words, cycles, overflow_count, seconds)``
     for the same stimulus on each backend; the model is the reference, every FIFO word, its
-    cycle and the overflow counter are compared. ``pysim`` is skipped above
-    ``pysim_max_samples``, ``verilator`` when it is not installed (both noted).
-    ``empty_hint`` ends the verdict when the model gave no word. Returns the keys of
-    :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's records,
-    ``markers``: 0, ``dropped``: the model's overflow count)."""
+    cycle and the overflow counter are compared. A backend that cannot run is skipped with
+    a note (:func:`skip_reason`). ``empty_hint`` ends the verdict when the model gave no
+    word; ``n_cycles``, the cycles each backend ran, goes into ``simulators``. Returns the
+    keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's
+    records, ``markers``: 0, ``dropped``: the model's overflow count)."""
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
@@ -61,15 +115,11 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
     per = {"model": {"mismatches": 0, "words": int(len(ref_w)), "seconds": secs}}
     ran, skipped = ["model"], {}
     for name in [b for b in BACKENDS if b in backends and b != "model"]:
-        if name == "pysim" and samples > pysim_max_samples:
-            skipped["pysim"] = f"pysim runs only for samples <= {pysim_max_samples}"
+        why = skip_reason(name, samples, pysim_max_samples=pysim_max_samples,
+                          icarus_max_samples=icarus_max_samples)
+        if why is not None:
+            skipped[name] = why
             continue
-        if name == "verilator":
-            from ..backends.verilator_harness import verilator_available
-            if not verilator_available():
-                from ..backends.verilog import verilator_missing_message
-                skipped["verilator"] = verilator_missing_message()
-                continue
         w, c, ovf, secs = run(name)
         n = min(len(w), len(ref_w))
         bad = int(np.count_nonzero(w[:n] != ref_w[:n]) + np.count_nonzero(c[:n] != ref_c[:n]))
@@ -93,4 +143,6 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
             "verdict": verdict, "compared": compared, "backends": ran, "skipped": skipped,
             "stall": bool(stall), "seed": int(seed),
             "peaks": int(len(ref_w) // record_words), "words": int(len(ref_w)),
-            "markers": 0, "dropped": int(ref_ovf), "per_backend": per}
+            "markers": 0, "dropped": int(ref_ovf), "per_backend": per,
+            "n_cycles": None if n_cycles is None else int(n_cycles),
+            "simulators": simulators_line(per, n_cycles)}

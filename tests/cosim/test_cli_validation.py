@@ -109,8 +109,8 @@ def test_no_noise_run_has_valid_json(capsys):
                               "not 'model'"),
     (["--backends", ""], "--backends must name at least two backends"),
     (["--backends", "model,model"], "at least two backends"),
-    (["--backends", "model,gpu"], "--backends takes a subset of model,pysim,verilator, "
-                                  "not ['gpu']"),
+    (["--backends", "model,gpu"], "--backends takes a subset of "
+                                  "model,pysim,verilator,icarus, not ['gpu']"),
 ])
 def test_equivalence_needs_two_backends(capsys, argv, message):
     refused(capsys, ["check-equivalence"] + argv, message)

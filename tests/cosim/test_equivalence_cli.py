@@ -32,6 +32,27 @@ def test_verilator_missing_is_a_note(monkeypatch):
     assert r["backends"] == ["model"] and "Verilator not found" in r["skipped"]["verilator"]
 
 
+def test_icarus_missing_is_a_note(monkeypatch):
+    """Without iverilog/cocotb the Icarus backend is skipped with the reason (the check still
+    needs two backends that ran), and a simulator of it refuses to start, saying why."""
+    import cosim.backends.icarus as ic
+    monkeypatch.setattr(ic, "icarus_available", lambda: False)
+    r = check_equivalence(samples=5000, backends=("model", "icarus"))
+    assert r["backends"] == ["model"] and "make setup" in r["skipped"]["icarus"]
+    assert r["equivalent"] is False and "icarus skipped: Icarus Verilog" in r["verdict"]
+    from hdl.tacan.frontend import TacanFrontEnd
+    from hdl.tacan.params import TacanFrontendParams
+    with pytest.raises(RuntimeError, match="Icarus Verilog .* not found"):
+        ic.IcarusStreamSim(TacanFrontEnd(TacanFrontendParams()), name="tacan_frontend")
+
+
+def test_icarus_limit_is_reported():
+    from cosim.tools.equivalence import ICARUS_MAX_SAMPLES
+    r = check_equivalence(samples=ICARUS_MAX_SAMPLES + 1, backends=("model", "icarus"))
+    assert r["backends"] == ["model"]
+    assert f"samples <= {ICARUS_MAX_SAMPLES}" in r["skipped"]["icarus"]
+
+
 def test_mismatch_gives_nonzero_exit(monkeypatch, capsys):
     import cosim.tacan.equivalence as eq
     real = eq.check_equivalence
@@ -51,15 +72,17 @@ def test_mismatch_gives_nonzero_exit(monkeypatch, capsys):
 def test_bad_arguments(capsys):
     assert main(["check-equivalence", "--samples", "0", "--backends", "model,pysim"]) == 2
     assert "samples must be an integer >= 1, not 0" in capsys.readouterr().err
-    assert main(["check-equivalence", "--backends", "model,icarus"]) == 2
-    assert "--backends takes a subset of model,pysim,verilator" in capsys.readouterr().err
+    assert main(["check-equivalence", "--backends", "model,fpga"]) == 2
+    assert "--backends takes a subset of model,pysim,verilator,icarus" in capsys.readouterr().err
 
 
 @pytest.mark.verilator
 @pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
 def test_check_equivalence_all_backends(capsys):
-    """The issue's command on a short record: model, pysim (~20 s) and Verilator agree."""
-    rc = main(["check-equivalence", "--top", "tacan", "--samples", "16000", "--json"])
+    """The issue's command on a short record: model, pysim (~20 s) and Verilator agree
+    (Icarus: tests/cosim/test_icarus.py)."""
+    rc = main(["check-equivalence", "--top", "tacan", "--samples", "16000", "--backends",
+               "model,pysim,verilator", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0 and out["mismatches"] == 0
     assert out["backends"] == ["model", "pysim", "verilator"]
