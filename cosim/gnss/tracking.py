@@ -191,7 +191,8 @@ class PipelineDsp:
         self.p, self.sinks, self.before = p, sinks, before
         self.fifo = p.fifo
         self.rx = RecordRxState()
-        self.fields = p.record.fields
+        self.layout = p.record          # (derived on every access of the property)
+        self.fields = self.layout.fields
 
     def __call__(self, call):
         from dsp.records import receive_records
@@ -207,7 +208,7 @@ class PipelineDsp:
             v = 0
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
-            d = p.record.unpack(v)
+            d = self.layout.unpack(v)
             ch = d.get("channel", 0)
             r = self.sinks[ch](d)
             if r is not None:
