@@ -64,7 +64,8 @@ def complex_input_supported() -> bool:
 
 
 def channel_params_for(f, hdl_changes: tuple = ()):
-    """The channel for recording ``f`` (its rate, IF, ADC word length); a complex recording
+    """The channel for recording ``f`` (its rate, IF, ADC word length, an early-minus-late
+    spacing of about half a chip; ``hdl_changes`` override); a complex recording
     needs the channel's complex input (:func:`complex_input_supported`), refused otherwise."""
     from hdl.gnss.params import GnssChannelParams
     from .config import WORD_BITS
@@ -72,7 +73,10 @@ def channel_params_for(f, hdl_changes: tuple = ()):
     if bits is None:
         raise ValueError(f"--adc-map {f.adc_map} has no ADC word length: the channel takes "
                          f"ADC words (give float:B to quantise)")
-    kw = dict(fs_hz=f.fs_hz, if_hz=f.if_hz, adc_bits=int(bits), **dict(hdl_changes))
+    # early-minus-late about half a chip (even, >= 2 samples): 8 at 16.368 MS/s, 6 at 12
+    el = max(2, 2 * round(f.fs_hz / CHIP_RATE_HZ / 4))
+    kw = dict(fs_hz=f.fs_hz, if_hz=f.if_hz, adc_bits=int(bits), el_spacing_samples=el)
+    kw.update(dict(hdl_changes))
     if f.is_complex:
         if not complex_input_supported():
             raise ValueError(f"--format {f.fmt}: the HDL channel has no complex (I/Q) input "
@@ -91,12 +95,12 @@ class TrackConfig:
 
     channels: int = 12
     lock_window_ms: int = 20
-    pli_block_ms: int = 5
+    pli_block_ms: int = 10
     pli_min: float = 0.8
     cn0_min_dbhz: float = 30.0
     confirm_windows: int = 2
     pull_in_ms: int = 100
-    lost_windows: int = 3
+    lost_windows: int = 5
     reacq_ms: int = 70
     pfa: float = 1e-3
     max_doppler_hz: float = 5000.0
