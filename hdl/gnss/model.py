@@ -247,6 +247,11 @@ class GnssChannelModel:
             Input cycle of each sample (default: one per cycle, continuing from the last
             step).
         """
+        x, scyc = self._prepare(samples, cycles)
+        return self._advance(x, scyc, writes)
+
+    def _prepare(self, samples, cycles):
+        """The checked samples (int64, the 1-bit map applied) and their input cycles."""
         p = self.params
         x = np.asarray(samples)
         if x.dtype.kind not in "iu":
@@ -261,6 +266,11 @@ class GnssChannelModel:
             scyc = np.arange(self.next_cycle, self.next_cycle + x.size, dtype=np.int64)
         else:
             scyc = np.ascontiguousarray(cycles, dtype=np.int64)
+        return x, scyc
+
+    def _advance(self, x, scyc, writes) -> ChannelRecords:
+        """:meth:`step` on prepared samples (:meth:`_prepare`)."""
+        p = self.params
         _, _, regs, lat = _layout(p)
         w = [(int(c), int(a), regs.check_write(int(a), v)) for c, a, v in writes]
         if w:
@@ -383,8 +393,10 @@ class GnssArrayModel:
                                  f"channels")
             per[ch].append((c, reg, v))
         cyc, vals, chans = [], [], []
-        for ch, m in enumerate(self.models):
-            r = m.step(samples, per[ch], cycles=cycles)
+        # the samples are checked once for every channel (all at the same cycle)
+        x, scyc = self.models[0]._prepare(samples, cycles)
+        recs = [m._advance(x, scyc, w) for m, w in zip(self.models, per)]
+        for ch, r in enumerate(recs):
             cyc.append(r.cycles)
             vals += r.values(self.params, ch)
             chans.append(np.full(r.cycles.size, ch))
