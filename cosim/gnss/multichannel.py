@@ -114,7 +114,7 @@ class TrackConfig:
                              f"pli_block_ms {self.pli_block_ms}")
         check_float("pli_min", self.pli_min, -1.0, 1.0)
         check_float("cn0_min_dbhz", self.cn0_min_dbhz, 0.0, 70.0, unit="dB-Hz")
-        check_int("pull_in_ms", self.pull_in_ms, self.lock_window_ms, 100_000)
+        check_int("--pull-in-ms", self.pull_in_ms, self.lock_window_ms, 100_000)
         check_int("lost_windows", self.lost_windows, 1, 1000)
         check_int("confirm_windows", self.confirm_windows, 1, 1000)
         check_int("reacq_ms", self.reacq_ms, 20, 1000)

@@ -9,7 +9,7 @@ Per assignment (a PRN on a channel, :class:`cosim.gnss.multichannel.Assignment`)
   records since lock (all tracked records if it never locked);
 * ``code_phase_chips``: the prompt's code phase at the recording's last 1 ms grid sample
   before the last record (the acquisition's convention: the code phase at a whole ms of the
-  recording's clock);
+  recording's clock), that sample's time ``code_phase_at_s``;
 * ``cn0_dbhz``: M2M4 (:func:`dsp.gnss.cn0.cn0_m2m4`, data-insensitive) on the prompts since
   lock, at most the last :data:`CN0_RECORDS`; ``windows``: per lock window its time, PLI,
   C/N0 and the phase and C/N0 locks; ``locked_at_end``: both locks in the last window;
@@ -61,6 +61,7 @@ def nav_bits(t, ip) -> dict:
 
 def _one(a, fs_hz: float) -> dict:
     from dsp.gnss.cn0 import cn0_m2m4
+    n_ms = int(round(fs_hz * CODE_PERIOD_S))
     t = np.asarray(a.t)
     dop = np.asarray(a.doppler)
     prompt = np.asarray(a.ip) + 1j * np.asarray(a.qp)
@@ -87,6 +88,8 @@ def _one(a, fs_hz: float) -> dict:
         "doppler_hz": float(dop[-w:].mean()) if dop.size else None,
         "doppler_rate_hz_s": rate,
         "code_phase_chips": float(a.code_phase[-1]) if a.code_phase else None,
+        "code_phase_at_s": (int(round(t[-1] * fs_hz)) // n_ms) * n_ms / fs_hz
+        if t.size else None,
         "cn0_dbhz": float(cn0_m2m4(p_cn0, CODE_PERIOD_S)) if p_cn0.size >= 2 else None,
         "pli": a.win_pli[-1] if a.win_pli else None,
         "phase_lock": a.win_phase_lock[-1] if a.win_phase_lock else False,
