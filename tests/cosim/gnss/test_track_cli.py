@@ -120,12 +120,20 @@ def test_every_satellite_of_the_real_window_tracked_to_its_end(capsys):
 
 @pytest.mark.slow
 @pytest.mark.skipif(not FULL.exists(), reason=f"{FULL} not present")
-def test_every_satellite_of_the_full_recording_confirmed_in_lock(capsys):
+def test_every_satellite_of_the_full_recording_locked_until_its_sample_slip(capsys):
+    """The full 100 ms: the same 11 satellites, each in lock in its last window (62-82 ms,
+    ten confirmed); the recording skips about 965 samples near 88 ms (every code phase
+    jumps by 82.3 chips: gnss-acquire on 89-99 ms finds them there), and every channel's
+    records after its last window show it (C/N0 under the lock threshold)."""
     s = _track(capsys, "--file", FULL, *REAL_OPTS)
     assert {d["prn"] for d in s["acquisition"]["detections"]} == REAL_PRNS
-    assert set(s["tracked"]) == REAL_PRNS and not s["dropped"] and not s["lost"]
+    assert {a["prn"] for a in s["assignments"]} == REAL_PRNS
+    assert len(s["tracked"]) >= 10 and not s["dropped"] and not s["lost"]
     for a in s["assignments"]:
         assert a["locked_at_end"] and a["end_s"] == pytest.approx(0.1)
+        assert a["cn0_dbhz"] > 33.0
+        assert a["tail_records"] >= 15 and (a["tail_cn0_dbhz"] is None
+                                             or a["tail_cn0_dbhz"] < 30.0)
 
 
 # -- synthetic recordings with known truth --------------------------------------------------
@@ -180,7 +188,7 @@ def test_eight_synthetic_satellites_found_and_tracked_to_the_truth(capsys, tmp_p
     for a in s["assignments"]:
         x = truth[a["prn"]]
         assert a["locked_at_end"] and a["end_s"] == pytest.approx(0.6)
-        assert a["end_s"] - a["locked_at_s"] >= 0.5
+        assert a["end_s"] - a["start_s"] >= 0.5 and a["locked_at_s"] < 0.2
         assert abs(a["doppler_hz"] - x.doppler_hz) < 5.0, a["prn"]
         g = round(a["code_phase_at_s"] * 4e6)
         tau = (x.code_phase_chips + g * CHIP_RATE_HZ * (1 + x.doppler_hz / L1_HZ) / 4e6) \
