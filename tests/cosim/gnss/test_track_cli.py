@@ -205,3 +205,18 @@ def test_eight_synthetic_satellites_found_and_tracked_to_the_truth(capsys, tmp_p
         cn0[a["prn"]] = (round(a["cn0_dbhz"], 2), round(held, 2), x.cn0_dbhz)
     # (tracked, in the recording, nominal) per PRN
     assert all(abs(v[0] - v[1]) < 1.0 for v in cn0.values()), str(cn0)
+
+
+def test_the_throughput_bench_is_registered_and_measures_every_count(tmp_path):
+    from cosim.gnss.track_bench import COUNTS, gnss_throughput
+    from cosim.tools.bench import benchmarks
+    assert "gnss-throughput" in benchmarks()
+    r = gnss_throughput(tmp_path, quick=True)
+    assert [x["channels"] for x in r["rows"]] == list(COUNTS)
+    for x in r["rows"]:
+        assert x["channel_samples_per_s"] > 0 and x["x_real_time"] > 0
+        assert x["fifo_dropped"] == 0
+    p = r["profile_12_channels"]
+    assert 0 < p["array_kernel_s"] < p["total_s"] and 0 < p["trackers_s"] < p["total_s"]
+    assert json.loads((tmp_path / "gnss_throughput.json").read_text())["rows"] == r["rows"]
+    assert "x real time" in (tmp_path / "gnss_throughput.md").read_text()
