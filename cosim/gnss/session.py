@@ -36,7 +36,9 @@ __all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss"]
 class GnssModelSession(BusModelSession):
     """The bit-exact model of :class:`hdl.gnss.channel.GnssChannel` as a session (module
     doc). Samples are offered one per cycle while queued; cycles without a queued sample
-    have ``i.valid`` low.
+    have ``i.valid`` low. The input words are the ``i`` port's payloads, as for the HDL
+    backends: the ADC words (real input) or the packed ``(I, Q)`` pairs of
+    :meth:`~hdl.gnss.params.GnssChannelParams.pack_samples` (complex input).
 
     Parameters
     ----------
@@ -95,10 +97,10 @@ class GnssModelSession(BusModelSession):
     def _step(self, queue, ready, n, writes):
         p, fp = self.params, self._fifo
         start, stop = self.cycle, self.cycle + n
-        x = queue[:n]
+        x = p.unpack_samples(queue[:n])     # the input port's payload words -> samples
         bus = self._bus_cycles(writes, start, stop)
         self.bus_writes += bus
-        r = self.model.step(x, bus, cycles=np.arange(start, start + x.size, dtype=np.int64))
+        r = self.model.step(x, bus, cycles=np.arange(start, start + len(x), dtype=np.int64))
         vals = r.values(p)
         self.n_records += len(vals)
         rw, m = fp.record_words, (1 << fp.width) - 1
@@ -110,7 +112,7 @@ class GnssModelSession(BusModelSession):
         self._carry_wc, self._carry_w = wc[~now], w[~now]
         words, cycles, self._fifo_state = fifo_step(wc[now], w[now], ready, n, start, fp,
                                                     self._fifo_state)
-        return words, cycles, x.size
+        return words, cycles, len(x)
 
 
 class GnssRegisterSession(RegisterSession):
