@@ -442,8 +442,17 @@ class GnssChannelArray(wiring.Component):
         return m
 
 
-def gnss_top(channels: int = 1, params: GnssChannelParams | None = None):
+def gnss_top(channels: int = 1, params: GnssChannelParams | None = None, *,
+             input: str | None = None):
     """The synthesis / export top for ``channels`` channels: :class:`GnssChannel` for 1,
-    :class:`GnssChannelArray` otherwise (default parameters)."""
-    p = GnssChannelParams() if params is None else params
+    :class:`GnssChannelArray` otherwise; default parameters unless ``params`` is given,
+    with ``input="complex"`` the default parameters' complex-input build at zero IF."""
+    if params is None:
+        p = GnssChannelParams() if input in (None, "real") else \
+            GnssChannelParams(input=input, if_hz=0.0)   # refuses an unknown input kind
+    elif input is not None and input != params.input:
+        raise ValueError(f"gnss_top: input {input!r} contradicts params.input "
+                         f"{params.input!r}")
+    else:
+        p = params
     return GnssChannel(p) if channels == 1 else GnssChannelArray(p, channels)
