@@ -253,7 +253,7 @@ class GnssCorrelator(wiring.Component):
         mp = p.mixer
         pay = self.i.payload
         comps = {"i": pay.i, "q": pay.q} if p.complex_input else {"": pay}
-        m.submodules.mixer = mixer = Mixer(mp)
+        delayed = {}
         for comp, x in comps.items():
             if p.adc_bits == 1:
                 x = Cat(Const(1, 1), x).as_signed()   # s in {0, -1} -> 2 s + 1
@@ -261,8 +261,13 @@ class GnssCorrelator(wiring.Component):
                 r = Signal(signed(mp.in_width), name=f"x{comp}_d{k + 1}")
                 m.d.sync += r.eq(x)
                 x = r
-            dst = getattr(mixer.i.payload.x, comp) if comp else mixer.i.payload.x
-            m.d.comb += dst.eq(x)
+            delayed[comp] = x
+        m.submodules.mixer = mixer = Mixer(mp)
+        if p.complex_input:
+            m.d.comb += [mixer.i.payload.x.i.eq(delayed["i"]),
+                         mixer.i.payload.x.q.eq(delayed["q"])]
+        else:
+            m.d.comb += mixer.i.payload.x.eq(delayed[""])
         m.d.comb += [mixer.i.valid.eq(nco.o.valid), mixer.i.payload.lo.eq(nco.o.payload)]
         flags = Cat(bit_e, bit_p, bit_l, ep_p, first_p)
         for k in range(p.nco.latency + mp.latency):
