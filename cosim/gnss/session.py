@@ -130,6 +130,15 @@ class GnssRegisterSession(RegisterSession):
 
     def __init__(self, inner: FrontendSession, params):
         super().__init__(inner, params.registers)
+        self.params = params
+
+    def step(self, in_words=None, ready=None, *, n_cycles=None):
+        """:meth:`cosim.core.session.FrontendSession.step`; ``in_words`` are the ``i``
+        port's payloads, and for a complex-input channel also an ``(n, 2)`` array of
+        ``(I, Q)`` ADC words, packed here (:meth:`GnssChannelParams.pack_samples`)."""
+        if in_words is not None and self.params.complex_input and np.ndim(in_words) == 2:
+            in_words = self.params.pack_samples(in_words)
+        return super().step(in_words, ready, n_cycles=n_cycles)
 
 
 def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:

@@ -26,7 +26,7 @@ def _stimulus(p, n, seed):
 
 
 def _run_blocks(session, x, writes, n_blocks, n_extra=80):
-    edges = np.linspace(0, x.size, n_blocks + 1).astype(int)
+    edges = np.linspace(0, len(x), n_blocks + 1).astype(int)
     words, cycles = [], []
     pending = list(writes)
     for a, b in zip(edges[:-1], edges[1:]):
@@ -98,6 +98,12 @@ def test_complex_input_session_blocks_match_pysim():
         np.testing.assert_array_equal(got[1], m1[1])
     with pytest.raises(ValueError, match=r"I/Q input words are unsigned 4-bit"):
         GnssModelSession(p).step(np.array([16]))
+    # The register session takes the (n, 2) pairs as well and packs them.
+    pairs = _run_blocks(GnssRegisterSession(GnssModelSession(p), p), iq, writes, 1)
+    np.testing.assert_array_equal(pairs[0], m1[0])
+    with pytest.raises(ValueError, match=r"\(n, 2\) array of \(I, Q\) pairs, not shape "
+                                         r"\(4, 3\)"):
+        GnssRegisterSession(GnssModelSession(p), p).step(np.zeros((4, 3), np.int64))
 
 
 def test_bad_writes_and_ports():
