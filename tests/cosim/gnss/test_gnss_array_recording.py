@@ -39,6 +39,9 @@ CHANNELS = 12
 #: A PRN in view in neither recording (the search refuses it in both): the noise floor.
 ABSENT_PRN = 1
 
+#: Verilog name of each array (the I/Q one is tests/hdl/gnss/test_channel_iq.py's 4 MS/s
+#: zero-IF array: one Verilator build for both).
+VERILOG_NAMES = {"real_12M": "gnss_channel_12m_array12", "iq_4M": "gnss_channel_iq_4m_array12"}
 #: name -> (file, format, channel parameters, spectrum inverted, acquired satellites
 #: (prn, Doppler, code phase, C/N0)).
 RECORDINGS = {
@@ -135,7 +138,7 @@ def test_array_on_recording_model_equals_verilator_short(name):
     want = _model(ap, x, writes, n_cycles)
     assert len(want.records) >= 4 * CHANNELS and not want.dropped.any()
     got = _hdl_run(VerilatorStreamSim(GnssChannelArray(ap, CHANNELS),
-                                      f"gnss_rec_{name}_array12"), ap, x, writes, n_cycles)
+                                      VERILOG_NAMES[name]), ap, x, writes, n_cycles)
     _assert_same(got, want)
     _check_correlation(name, ap, x, writes, sats, cn0, want)
 
@@ -150,7 +153,7 @@ def test_array_on_recording_model_equals_verilator(name):
     want = _model(ap, x, writes, n_cycles)
     assert len(want.records) >= 9 * CHANNELS and not want.dropped.any()
     got = _hdl_run(VerilatorStreamSim(GnssChannelArray(ap, CHANNELS),
-                                      f"gnss_rec_{name}_array12"), ap, x, writes, n_cycles)
+                                      VERILOG_NAMES[name]), ap, x, writes, n_cycles)
     _assert_same(got, want)
     _check_correlation(name, ap, x, writes, sats, cn0, want)
 
