@@ -148,9 +148,12 @@ def _add_hdl(sub):
                    help="channels on one input stream (receivers with an array top: gnss)")
     p.add_argument("--timeout-min", type=parse_finite, default=30.0,
                    help="limit for each tool run (yosys, nextpnr) in minutes")
+    p.add_argument("--variant", default=None,
+                   help="another build of the top (receivers with variants: gnss iq, the "
+                        "complex I/Q input)")
     p.add_argument("--results", default=None,
                    help="also write the figures with machine/date/command to "
-                        "DIR/synth_<top>.json (DIR/synth_<top>_<N>ch.json for --channels N > 1)")
+                        "DIR/synth_<top>[_<variant>].json (..._<N>ch.json for --channels N > 1)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_synth)
 
@@ -252,7 +255,15 @@ def _cmd_synth(a) -> int:
         raise ValueError(f"--timeout-min must be in (0, 1440] minutes, not {a.timeout_min:g}")
     rx = get(a.top)
     name, make = next(iter(rx.tops.items()))
-    if a.channels != 1:
+    if a.variant is not None:
+        if a.variant not in rx.variants:
+            have = ", ".join(rx.variants) or "none"
+            raise ValueError(f"--variant: the {a.top} top has variants {have}, not "
+                             f"{a.variant!r}")
+        build = rx.variants[a.variant]
+        top = build(a.channels)             # refuses a count it cannot build, before work
+        name = f"{name}_{a.variant}" + (f"_array{a.channels}" if a.channels != 1 else "")
+    elif a.channels != 1:
         if rx.array_top is None:
             raise ValueError(f"--channels: the {a.top} top has no multi-channel array "
                              f"(only --channels 1), not {a.channels}")
@@ -275,12 +286,16 @@ def _cmd_synth(a) -> int:
                "timing_met": r["timing_met"], "seed": a.seed, "router": a.router,
                "tmg_ripup": not a.no_tmg_ripup, "wall_s": round(wall_s, 1),
                "tools": tool_versions(), "machine": machine_info()}
-        suffix = f"_{a.channels}ch" if a.channels != 1 else ""
+        if a.variant is not None:
+            rec = {"variant": a.variant, **rec}
+        suffix = (f"_{a.variant}" if a.variant is not None else "") + \
+            (f"_{a.channels}ch" if a.channels != 1 else "")
         (Path(a.results) / f"synth_{a.top}{suffix}.json").write_text(dumps(rec, indent=1) + "\n")
     if a.json:
         print(dumps(short))
     else:
-        chans = f" x{a.channels}" if a.channels != 1 else ""
+        chans = (f" ({a.variant})" if a.variant is not None else "") + \
+            (f" x{a.channels}" if a.channels != 1 else "")
         print(f"{a.top}{chans} on {r['device']}: {r['lut4']} LUT4, {r['ff']} FF, {r['mult18']} MULT18, "
               f"{r['bram']} DP16KD, Fmax {r['fmax_mhz']:.1f} MHz "
               f"(target {r['target_mhz']:g}: {'met' if r['timing_met'] else 'MISSED'})")

@@ -362,6 +362,11 @@ class Receiver:
         ``array_top(channels)`` -> a top of ``channels`` channels on one input stream
         (``synth --top <name> --channels N``, Verilog name ``<first top>_array<N>``); it
         refuses a channel count it cannot build (ValueError).
+    variants : dict, optional
+        Variant name -> ``make(channels)``, a top of another build of the front end (e.g.
+        GNSS ``iq``: complex input) of ``channels`` channels (``synth --top <name> --variant
+        V [--channels N]``, Verilog name ``<first top>_<V>`` and ``..._array<N>``); like
+        ``array_top`` it refuses a channel count it cannot build.
     equivalence : callable, optional
         ``equivalence(samples=, backends=, seed=, stall=, progress=) -> dict`` for
         ``check-equivalence --top <name>`` (the keys of
@@ -386,6 +391,7 @@ class Receiver:
     frontend: Frontend | None = None
     tops: dict = field(default_factory=dict)
     array_top: Callable[[int], Any] | None = None
+    variants: dict = field(default_factory=dict)
     equivalence: Callable[..., dict] | None = None
     sweep: Study | None = None
     faults: Study | None = None

@@ -14,6 +14,13 @@ samples, and PRN changes (another PRN, then back to 7), so every register and th
 buffering are exercised on a signal that correlates (the prompt on the peak, E = L).
 ``stall=True``: the DSP ``ready`` follows :func:`cosim.tools.equivalence.stall_pattern` and the
 FIFO holds one record and a marker (``record_words + 2`` words: records dropped, the counter compared).
+
+The complex-input channel (``params.input == "complex"``, e.g. :data:`EQUIV_PARAMS_IQ`:
+the same rate at zero IF) is checked on a zero-IF I/Q record of the same satellite from the
+synthetic-recording generator (:class:`cosim.gnss.synthetic_file.SyntheticRecording`,
+``int8-iq``, 2-bit ``odd`` ADC words, 45 dB-Hz, the same Doppler held constant), with the
+same hand-over and seeded writes; every backend is fed the packed I/Q payload words
+(:meth:`hdl.gnss.params.GnssChannelParams.pack_samples`).
 """
 from __future__ import annotations
 
@@ -27,11 +34,14 @@ from hdl.gnss.params import GnssChannelParams
 
 from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
 
-__all__ = ["check_gnss_equivalence", "gnss_equivalence_stimulus", "EQUIV_PARAMS", "EQUIV_PRN"]
+__all__ = ["check_gnss_equivalence", "gnss_equivalence_stimulus", "EQUIV_PARAMS",
+           "EQUIV_PARAMS_IQ", "EQUIV_PRN"]
 
 #: Reduced rate for the check: 5 samples per chip, IF fs/4, 0.4-chip early-late spacing.
 EQUIV_PARAMS = GnssChannelParams(fs_hz=5.115e6, if_hz=5.115e6 / 4, el_spacing_samples=2,
                                  slew_bits=13, fifo_depth=64)
+#: The complex-input channel of the check: the same, I and Q at zero IF.
+EQUIV_PARAMS_IQ = replace(EQUIV_PARAMS, input="complex", if_hz=0.0)
 #: The satellite in the record.
 EQUIV_PRN = 7
 #: Mean cycles between two seeded register writes.
@@ -41,22 +51,33 @@ FLUSH_CYCLES = 400
 
 
 def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int):
-    """``(adc_words, writes)``: the record's ADC words and its register writes
-    ``(cycle, register name, value)``, in cycle order."""
+    """``(adc_words, writes)``: the record's ADC words (complex input: ``(n, 2)`` I/Q
+    pairs) and its register writes ``(cycle, register name, value)``, in cycle order."""
     from .dynamics import PolynomialProfile
     from .tracking import adc_words, handover_writes
     from .signal import GnssSignalConfig, generate
     rng = np.random.default_rng(seed)
     code0 = float(rng.uniform(0, 1023))
-    cfg = GnssSignalConfig(prn=EQUIV_PRN, if_hz=params.if_hz, fs_hz=params.fs_hz,
-                           adc_bits=params.adc_bits, cn0_dbhz=45.0,
-                           duration_s=(samples + 1) / params.fs_hz,
-                           dynamics=PolynomialProfile(range_rate_mps=-900.0,
-                                                      range_accel_mps2=10.0),
-                           code_phase_chips=code0, seed=seed)
-    x = adc_words(generate(cfg).samples[:samples])
     doppler = 900.0 * L1_HZ / 299_792_458.0
-    writes = handover_writes(params, doppler, code0, cfg.spectrum_inverted)
+    if params.complex_input:
+        from .synthetic_file import SatelliteSpec, SyntheticRecording
+        rec = SyntheticRecording("int8-iq", params.fs_hz, params.if_hz,
+                                 (samples + 1) / params.fs_hz,
+                                 [SatelliteSpec(EQUIV_PRN, doppler, code0, 45.0)],
+                                 adc_map=f"odd:{params.adc_bits}", seed=seed)
+        z = rec.samples(0, samples)
+        x = adc_words(np.stack([z.real, z.imag], axis=-1).astype(np.int64))
+        inverted = False
+    else:
+        cfg = GnssSignalConfig(prn=EQUIV_PRN, if_hz=params.if_hz, fs_hz=params.fs_hz,
+                               adc_bits=params.adc_bits, cn0_dbhz=45.0,
+                               duration_s=(samples + 1) / params.fs_hz,
+                               dynamics=PolynomialProfile(range_rate_mps=-900.0,
+                                                          range_accel_mps2=10.0),
+                               code_phase_chips=code0, seed=seed)
+        x = adc_words(generate(cfg).samples[:samples])
+        inverted = cfg.spectrum_inverted
+    writes = handover_writes(params, doppler, code0, inverted)
     writes = [(0, "prn", EQUIV_PRN)] + [(c + 1, r, v) for c, r, v in writes]
     # The hand-over takes effect at the first dump boundary and its slew during the second
     # code period: the seeded writes start after it, so the third record is on the peak.
@@ -101,6 +122,7 @@ def check_gnss_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: in
         raise ValueError(f"params must be a single-channel GnssChannelParams, not {params!r}")
     samples = int(samples)
     x, writes = gnss_equivalence_stimulus(params, samples, seed)
+    words = params.pack_samples(x)      # the i port's payloads (I/Q packed if complex)
     n_cycles = samples + params.latency + params.fifo.record_words + FLUSH_CYCLES
     ready = stall_pattern(n_cycles, seed) if stall else np.ones(n_cycles, bool)
 
@@ -109,7 +131,7 @@ def check_gnss_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: in
         with open_gnss(backend, params) as fe:
             for c, reg, v in writes:
                 fe.write(reg, v, cycle=c)
-            r = fe.step(x, ready, n_cycles=n_cycles)
+            r = fe.step(words, ready, n_cycles=n_cycles)
             ovf = int(fe.read("overflow_count"))
         return (np.asarray(r.words, np.int64), np.asarray(r.cycles, np.int64), ovf,
                 time.perf_counter() - t)

@@ -151,6 +151,11 @@ def _top(channels: int = 1):
     return gnss_top(channels)
 
 
+def _top_iq(channels: int = 1):
+    from hdl.gnss.channel import gnss_top
+    return gnss_top(channels, input="complex")
+
+
 def _equivalence(**kw) -> dict:
     from .equivalence import check_gnss_equivalence
     return check_gnss_equivalence(**kw)
@@ -204,7 +209,9 @@ GNSS = register(Receiver(
     sweep=Study("word-length sweep of the fixed-point AUKF core on the fast path "
                 "(paired with the float64 AUKF), proposal and its confirmation", SWEEP_OPTIONS,
                 cmd_sweep, model=SWEEP_MODEL),
-    tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12)},
+    tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12),
+          "gnss_channel_iq": _top_iq, "gnss_channel_array12_iq": lambda: _top_iq(12)},
     array_top=_top,
+    variants={"iq": _top_iq},
     equivalence=_equivalence,
     benchmarks=BENCHMARKS))

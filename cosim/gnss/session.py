@@ -36,7 +36,9 @@ __all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss"]
 class GnssModelSession(BusModelSession):
     """The bit-exact model of :class:`hdl.gnss.channel.GnssChannel` as a session (module
     doc). Samples are offered one per cycle while queued; cycles without a queued sample
-    have ``i.valid`` low.
+    have ``i.valid`` low. The input words are the ``i`` port's payloads, as for the HDL
+    backends: the ADC words (real input) or the packed ``(I, Q)`` pairs of
+    :meth:`~hdl.gnss.params.GnssChannelParams.pack_samples` (complex input).
 
     Parameters
     ----------
@@ -95,10 +97,10 @@ class GnssModelSession(BusModelSession):
     def _step(self, queue, ready, n, writes):
         p, fp = self.params, self._fifo
         start, stop = self.cycle, self.cycle + n
-        x = queue[:n]
+        x = p.unpack_samples(queue[:n])     # the input port's payload words -> samples
         bus = self._bus_cycles(writes, start, stop)
         self.bus_writes += bus
-        r = self.model.step(x, bus, cycles=np.arange(start, start + x.size, dtype=np.int64))
+        r = self.model.step(x, bus, cycles=np.arange(start, start + len(x), dtype=np.int64))
         vals = r.values(p)
         self.n_records += len(vals)
         rw, m = fp.record_words, (1 << fp.width) - 1
@@ -110,7 +112,7 @@ class GnssModelSession(BusModelSession):
         self._carry_wc, self._carry_w = wc[~now], w[~now]
         words, cycles, self._fifo_state = fifo_step(wc[now], w[now], ready, n, start, fp,
                                                     self._fifo_state)
-        return words, cycles, x.size
+        return words, cycles, len(x)
 
 
 class GnssRegisterSession(RegisterSession):
@@ -128,6 +130,15 @@ class GnssRegisterSession(RegisterSession):
 
     def __init__(self, inner: FrontendSession, params):
         super().__init__(inner, params.registers)
+        self.params = params
+
+    def step(self, in_words=None, ready=None, *, n_cycles=None):
+        """:meth:`cosim.core.session.FrontendSession.step`; ``in_words`` are the ``i``
+        port's payloads, and for a complex-input channel also an ``(n, 2)`` array of
+        ``(I, Q)`` ADC words, packed here (:meth:`GnssChannelParams.pack_samples`)."""
+        if in_words is not None and self.params.complex_input and np.ndim(in_words) == 2:
+            in_words = self.params.pack_samples(in_words)
+        return super().step(in_words, ready, n_cycles=n_cycles)
 
 
 def open_gnss(backend: str, params, **kw) -> GnssRegisterSession:

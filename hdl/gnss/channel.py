@@ -6,11 +6,13 @@ file builds it. Pipeline of one sample (input cycle ``c``):
 
 * ``c``: code NCO / generator / delay line / carrier accumulator update (registers);
   the replicas and the carrier phase of the sample are the registers' values in ``c``;
-* ``c .. c+5``: carrier NCO (:class:`hdl.nco.Nco`, phase port), the ADC word delayed
-  alongside; ``c+5 .. c+9``: real mixer (:class:`hdl.mixer.Mixer`); replica bits and
-  epoch flags delayed 9 cycles;
-* ``c+9``: the six replica products ``+-I``, ``+-Q`` (registered); ``c+10``: accumulators
-  (a dump loads the record registers); ``c+11``: record valid.
+* ``c .. c+5``: carrier NCO (:class:`hdl.nco.Nco`, phase port), the ADC word (real input)
+  or words (I and Q, ``input="complex"``) delayed alongside; ``c+5 .. c+9``: real mixer
+  (:class:`hdl.mixer.Mixer`; complex input: the complex mixer, one cycle more, ``c+5 ..
+  c+10``); replica bits and epoch flags delayed alongside;
+* then the six replica products ``+-I``, ``+-Q`` (registered), the accumulators (a dump
+  loads the record registers) and the record valid: :attr:`GnssChannelParams.latency`
+  cycles (11 real, 12 complex) from ``c``.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from dsp.gnss.ca_code import G1_FEEDBACK, G2_FEEDBACK, G2_TAPS
+from hdl.common import iq_layout
 from hdl.fifo import DspFifo
 from hdl.mixer import Mixer
 from hdl.nco import Nco
@@ -28,7 +31,16 @@ from hdl.nco import Nco
 from .params import ACC_FIELDS, GnssChannelParams
 
 __all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
-           "record_layout", "gnss_top"]
+           "input_shape", "record_layout", "gnss_top"]
+
+
+def input_shape(params: GnssChannelParams):
+    """The ADC input payload: ``signed(adc_bits)`` (real input), or ``{"i", "q"}`` of
+    ``signed(adc_bits)`` each, ``i`` at the LSB (complex input,
+    :meth:`GnssChannelParams.pack_samples`)."""
+    if params.complex_input:
+        return iq_layout(params.adc_bits)
+    return signed(params.adc_bits)
 
 
 def record_layout(params: GnssChannelParams) -> data.StructLayout:
@@ -103,8 +115,9 @@ class GnssCorrelator(wiring.Component):
 
     Ports
     -----
-    i : In(stream.Signature(signed(adc_bits), always_ready=True))
-        ADC samples, one per ``valid`` cycle (gaps allowed).
+    i : In(stream.Signature(input_shape(params), always_ready=True))
+        ADC samples (real, or I and Q: :func:`input_shape`), one per ``valid`` cycle (gaps
+        allowed).
     reg_we, reg_addr (2 bits), reg_data (``reg_data_width`` bits) : In
         Register bus: a write when ``reg_we`` is high (addresses
         :attr:`~hdl.gnss.params.GnssChannelParams.registers`), into the shadow registers.
@@ -118,7 +131,7 @@ class GnssCorrelator(wiring.Component):
         self.params = params
         self.layout = record_layout(replace(params, channel_bits=0))
         super().__init__({
-            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "i": In(stream.Signature(input_shape(params), always_ready=True)),
             "reg_we": In(1),
             "reg_addr": In(2),
             "reg_data": In(unsigned(params.reg_data_width)),
@@ -238,18 +251,24 @@ class GnssCorrelator(wiring.Component):
 
         # -- ADC word and flags alongside the NCO / mixer pipelines -------------------------
         mp = p.mixer
-        if p.adc_bits == 1:
-            x0 = Cat(Const(1, 1), self.i.payload).as_signed()   # s in {0, -1} -> 2 s + 1
-        else:
-            x0 = self.i.payload
-        x = x0
-        for k in range(p.nco.latency):
-            r = Signal(signed(mp.in_width), name=f"x_d{k + 1}")
-            m.d.sync += r.eq(x)
-            x = r
+        pay = self.i.payload
+        comps = {"i": pay.i, "q": pay.q} if p.complex_input else {"": pay}
+        delayed = {}
+        for comp, x in comps.items():
+            if p.adc_bits == 1:
+                x = Cat(Const(1, 1), x).as_signed()   # s in {0, -1} -> 2 s + 1
+            for k in range(p.nco.latency):
+                r = Signal(signed(mp.in_width), name=f"x{comp}_d{k + 1}")
+                m.d.sync += r.eq(x)
+                x = r
+            delayed[comp] = x
         m.submodules.mixer = mixer = Mixer(mp)
-        m.d.comb += [mixer.i.valid.eq(nco.o.valid), mixer.i.payload.x.eq(x),
-                     mixer.i.payload.lo.eq(nco.o.payload)]
+        if p.complex_input:
+            m.d.comb += [mixer.i.payload.x.i.eq(delayed["i"]),
+                         mixer.i.payload.x.q.eq(delayed["q"])]
+        else:
+            m.d.comb += mixer.i.payload.x.eq(delayed[""])
+        m.d.comb += [mixer.i.valid.eq(nco.o.valid), mixer.i.payload.lo.eq(nco.o.payload)]
         flags = Cat(bit_e, bit_p, bit_l, ep_p, first_p)
         for k in range(p.nco.latency + mp.latency):
             r = Signal(5, name=f"flags_d{k + 1}")
@@ -293,8 +312,8 @@ class GnssChannel(wiring.Component):
 
     Ports
     -----
-    i : In(stream.Signature(signed(adc_bits), always_ready=True))
-        ADC samples.
+    i : In(stream.Signature(input_shape(params), always_ready=True))
+        ADC samples (real, or I and Q: :func:`input_shape`).
     reg_we, reg_addr (2 bits), reg_data : In
         Register bus (see :class:`GnssCorrelator`).
     o : Out(stream.Signature(DspFifo out layout))
@@ -309,7 +328,7 @@ class GnssChannel(wiring.Component):
         self.fifo_params = params.fifo
         self._fifo = DspFifo(self.fifo_params)
         super().__init__({
-            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "i": In(stream.Signature(input_shape(params), always_ready=True)),
             "reg_we": In(1),
             "reg_addr": In(2),
             "reg_data": In(unsigned(params.reg_data_width)),
@@ -341,7 +360,8 @@ class GnssChannelArray(wiring.Component):
 
     Ports
     -----
-    i : In(stream.Signature(signed(adc_bits), always_ready=True))
+    i : In(stream.Signature(input_shape(params), always_ready=True))
+        ADC samples, the same to every channel.
     reg_we, reg_addr (``2 + ceil(log2(channels))`` bits: ``4 * channel + reg``), reg_data : In
     o : Out(stream.Signature(DspFifo out layout))
     overflow_count : Out(unsigned(count_width))
@@ -365,7 +385,7 @@ class GnssChannelArray(wiring.Component):
         self._fifo = DspFifo(self.fifo_params)
         self.addr_bits = 2 + max(1, (channels - 1).bit_length())
         super().__init__({
-            "i": In(stream.Signature(signed(params.adc_bits), always_ready=True)),
+            "i": In(stream.Signature(input_shape(params), always_ready=True)),
             "reg_we": In(1),
             "reg_addr": In(self.addr_bits),
             "reg_data": In(unsigned(params.reg_data_width)),
@@ -427,8 +447,17 @@ class GnssChannelArray(wiring.Component):
         return m
 
 
-def gnss_top(channels: int = 1, params: GnssChannelParams | None = None):
+def gnss_top(channels: int = 1, params: GnssChannelParams | None = None, *,
+             input: str | None = None):
     """The synthesis / export top for ``channels`` channels: :class:`GnssChannel` for 1,
-    :class:`GnssChannelArray` otherwise (default parameters)."""
-    p = GnssChannelParams() if params is None else params
+    :class:`GnssChannelArray` otherwise; default parameters unless ``params`` is given,
+    with ``input="complex"`` the default parameters' complex-input build at zero IF."""
+    if params is None:
+        p = GnssChannelParams() if input in (None, "real") else \
+            GnssChannelParams(input=input, if_hz=0.0)   # refuses an unknown input kind
+    elif input is not None and input != params.input:
+        raise ValueError(f"gnss_top: input {input!r} contradicts params.input "
+                         f"{params.input!r}")
+    else:
+        p = params
     return GnssChannel(p) if channels == 1 else GnssChannelArray(p, channels)

@@ -29,9 +29,13 @@ record.
 
 *Carrier and wipe-off.* The carrier NCO (:class:`hdl.nco.Nco`, no dither, its phase port
 fed by the channel's ``carr_phase_bits`` accumulator) gives ``cos, sin`` of the sample's
-phase ``carr_acc`` (then ``carr_acc += carr_freq``); the real mixer gives
-``I = x cos``, ``Q = -x sin`` at full precision (no rounding). A 1-bit ADC word ``s`` in
-{0, -1} means ``x = 2 s + 1`` (sign samples +-1).
+phase ``carr_acc`` (then ``carr_acc += carr_freq``); the mixer multiplies the sample by
+``exp(-j phi)`` at full precision (no rounding, no overflow: :attr:`GnssChannelParams.mixer`):
+real input ``x``, ``I = x cos``, ``Q = -x sin``; complex input (``input="complex"``, I and Q
+words ``xi``, ``xq``), ``I = xi cos + xq sin``, ``Q = xq cos - xi sin``. A signal at ``+f``
+(``cos 2 pi f t`` real, ``exp(+j 2 pi f t)`` complex) is wiped off by a carrier word of
+``+f`` in both. A 1-bit ADC word ``s`` in {0, -1} means ``2 s + 1`` (sign samples +-1),
+per component.
 
 *Integrate and dump.* Six accumulators ``I/Q x E/P/L`` add ``I * r``, ``Q * r``. On the
 first sample of a prompt integration they are dumped as one record and restart from that
@@ -70,9 +74,10 @@ _NSTATE = _ACC0 + 6
 
 
 @njit_cached(nogil=True)
-def _channel_kernel(x, scyc, wc, wa, wv, wi, st, ring, table, cos_t, sin_t, K, d, code_bits,
-                    carr_bits, trunc, epoch_mask, lat, rec_cyc, rec_f):
-    """Advance over samples ``x`` (input cycles ``scyc``); returns (records, next write)."""
+def _channel_kernel(x, xq, cplx, scyc, wc, wa, wv, wi, st, ring, table, cos_t, sin_t, K, d,
+                    code_bits, carr_bits, trunc, epoch_mask, lat, rec_cyc, rec_f):
+    """Advance over samples ``x`` (complex input, ``cplx``: I in ``x``, Q in ``xq``; real:
+    ``xq`` unused) at input cycles ``scyc``; returns (records, next write)."""
     L = 2 * d
     cmask = (1 << code_bits) - 1
     pmask = (1 << carr_bits) - 1
@@ -95,8 +100,12 @@ def _channel_kernel(x, scyc, wc, wa, wv, wi, st, ring, table, cos_t, sin_t, K, d
         ph = st[_CARR_ACC]
         a = ph >> trunc
         xi = x[n]
-        i = xi * cos_t[a]
-        q = -xi * sin_t[a]
+        if cplx:
+            i = xi * cos_t[a] + xq[n] * sin_t[a]
+            q = xq[n] * cos_t[a] - xi * sin_t[a]
+        else:
+            i = xi * cos_t[a]
+            q = -xi * sin_t[a]
         if first_p:
             st[_CARR_AT] = ph
             st[_CODE_AT] = st[_CODE_EPOCH]
@@ -238,7 +247,9 @@ class GnssChannelModel:
         Parameters
         ----------
         samples : array of int
-            ADC words (signed ``adc_bits``), in order.
+            ADC words (signed ``adc_bits``), in order: real input, a 1-D array; complex input
+            (``input="complex"``), an ``(n, 2)`` array of ``(I, Q)`` pairs
+            (:meth:`GnssChannelParams.check_samples`).
         writes : iterable of (cycle, reg, value)
             Register writes on the bus (cycle from reset; ``reg`` 0-3 = :data:`REG_CARR_FREQ`
             ...); a write takes effect at the first dump boundary in a later cycle, in this
@@ -253,15 +264,13 @@ class GnssChannelModel:
     def _prepare(self, samples, cycles):
         """The checked samples (int64, the 1-bit map applied) and their input cycles."""
         p = self.params
-        x = np.asarray(samples)
-        if x.dtype.kind not in "iu":
-            raise ValueError(f"GNSS samples must be integers, not dtype {x.dtype}")
-        x = x.astype(np.int64)
-        lo, hi = -(1 << (p.adc_bits - 1)), (1 << (p.adc_bits - 1)) - 1
-        if x.size and (x.min() < lo or x.max() > hi):
-            raise ValueError(f"GNSS samples must be signed {p.adc_bits}-bit in [{lo}, {hi}]")
+        x = p.check_samples(samples)
         if p.adc_bits == 1:
             x = 2 * x + 1
+        if p.complex_input:
+            x, xq = np.ascontiguousarray(x[:, 0]), np.ascontiguousarray(x[:, 1])
+        else:
+            xq = x
         if cycles is None:
             scyc = np.arange(self.next_cycle, self.next_cycle + x.size, dtype=np.int64)
         else:
@@ -281,8 +290,11 @@ class GnssChannelModel:
         max_rec = x.size // 1000 + 2
         rec_cyc = np.zeros(max_rec, np.int64)
         rec_f = np.zeros((max_rec, 9), np.int64)
+        if scyc.shape != x.shape:
+            raise ValueError(f"GNSS cycles must give one input cycle per sample ({x.size}), "
+                             f"not shape {scyc.shape}")
         nrec, wi = _channel_kernel(
-            x, scyc, np.ascontiguousarray(wv[:, 0]), np.ascontiguousarray(wv[:, 1]),
+            x, xq, p.complex_input, scyc, np.ascontiguousarray(wv[:, 0]), np.ascontiguousarray(wv[:, 1]),
             np.ascontiguousarray(wv[:, 2]), 0, self.state, self.ring, self._table, self._cos,
             self._sin, p.dump_epochs, p.half_spacing, p.code_phase_bits, p.carr_phase_bits,
             self._trunc, (1 << p.epoch_bits) - 1, lat, rec_cyc, rec_f)

@@ -24,6 +24,8 @@ from hdl.model.nco import NcoParams, nco_freq_word
 REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW = range(4)
 #: Signal bandwidth of C/A (main lobe, null to null), Hz: the lowest sample rate accepted.
 CA_BANDWIDTH_HZ = 2 * CHIP_RATE_HZ
+#: The channel's input kinds (:attr:`GnssChannelParams.input`).
+INPUTS = ("real", "complex")
 #: Record fields before ``channel``.
 ACC_FIELDS = ("ie", "qe", "ip", "qp", "il", "ql")
 
@@ -77,9 +79,22 @@ class GnssChannelParams:
     fs_hz : float
         ADC sample rate = clock rate, Hz (>= 2.046 MHz, the C/A main-lobe bandwidth).
     if_hz : float
-        Nominal IF, Hz, in the first Nyquist zone ``[0, fs_hz / 2)``: the reset carrier word.
+        Nominal IF, Hz: the reset carrier word. Real input: in the first Nyquist zone
+        ``[0, fs_hz / 2)``; complex input: in ``(-fs_hz / 2, fs_hz / 2)`` (0: zero IF).
     adc_bits : int
-        Signed ADC word (1..16); 1 bit means sign samples +-1.
+        Signed ADC word (1..16), per component for a complex input; 1 bit means sign
+        samples +-1.
+    input : {"real", "complex"}
+        ``"real"``: one real ADC stream at ``if_hz``, real carrier wipe-off. ``"complex"``:
+        two ADC streams I and Q (the input payload ``{"i", "q"}``, I at the LSB: see
+        :meth:`pack_samples`), the signal ``I + jQ`` at the complex IF ``if_hz`` (0 for
+        zero-IF baseband), complex wipe-off ``(I + jQ) exp(-j phi)``. Both use one
+        carrier-word sign convention: a signal at ``+f`` (real: ``cos 2 pi f t``; complex:
+        ``exp(+j 2 pi f t)``) is wiped off by the word of ``+f``, so a positive Doppler
+        is tracked with ``carr_word(if_hz + doppler)``. A front end whose spectrum is
+        inverted delivers ``I - jQ``: its Q sign is turned before the channel (as
+        :class:`cosim.gnss.files.SampleFile` reads it), after which the Doppler sign is the
+        ordinary one.
     carr_phase_bits, carr_table_bits, lo_bits : int
         Carrier NCO accumulator (8..32), sine-table address (4..12) and LO amplitude bits
         (2..16).
@@ -123,14 +138,22 @@ class GnssChannelParams:
     fifo_depth: int = 512
     record_words: int | None = None
     channel_bits: int = 0
+    input: str = "real"
 
     def __post_init__(self):
+        if not isinstance(self.input, str) or self.input not in INPUTS:
+            raise ValueError(f"GNSS channel input must be one of {', '.join(INPUTS)} (one real "
+                             f"ADC stream, or I and Q), not {self.input!r}")
         fs = _number("fs_hz", self.fs_hz)
         if fs < CA_BANDWIDTH_HZ:
             raise ValueError(f"GNSS sample rate fs_hz must be >= the C/A signal bandwidth "
                              f"{CA_BANDWIDTH_HZ:g} Hz, not {self.fs_hz!r}")
         f_if = _number("if_hz", self.if_hz)
-        if not 0 <= f_if < fs / 2:
+        if self.input == "complex":
+            if not -fs / 2 < f_if < fs / 2:
+                raise ValueError(f"GNSS IF of a complex input must lie in (-fs_hz/2, fs_hz/2) = "
+                                 f"({-fs / 2:g}, {fs / 2:g}) Hz, not {self.if_hz!r}")
+        elif not 0 <= f_if < fs / 2:
             raise ValueError(f"GNSS IF must lie in the first Nyquist zone [0, fs_hz/2 = "
                              f"{fs / 2:g}) Hz, not {self.if_hz!r}")
         check_width("GNSS adc_bits", self.adc_bits, minimum=1, maximum=16)
@@ -185,20 +208,99 @@ class GnssChannelParams:
                          amp_bits=self.lo_bits, dither_bits=0, phase_port=True)
 
     @property
+    def complex_input(self) -> bool:
+        """Two ADC streams I and Q (``input == "complex"``)."""
+        return self.input == "complex"
+
+    @property
     def mixer_in_width(self) -> int:
         return max(2, self.adc_bits)
 
     @property
     def mixer(self) -> MixerParams:
-        """Full-precision real mixer (``drop_bits == 0``: nothing rounded, never overflows,
-        the NCO's peak being symmetric)."""
+        """Full-precision mixer: ``drop_bits == 0``, nothing rounded, and wide enough that
+        nothing overflows.
+
+        Bound: with ``a = mixer_in_width``, ``b = lo_bits``, an ADC component ``|x| <=
+        2**(a-1)`` and the NCO's symmetric peak ``|cos|, |sin| <= A = 2**(b-1) - 1``:
+
+        * real, ``I = x cos``, ``Q = -x sin``: ``|I|, |Q| <= 2**(a-1) A < 2**(a+b-2)``, so
+          ``out_width = a + b - 1``;
+        * complex, ``I = xi cos + xq sin``, ``Q = xq cos - xi sin`` (a sum of two
+          products): ``|I|, |Q| <= 2**(a-1) (|cos| + |sin|) <= 2**a A < 2**(a+b-1)``, so
+          ``out_width = a + b`` (one bit more; ``headroom_bits = 1`` keeps
+          ``drop_bits = 0``: the output is the exact sum).
+
+        Either way ``|I|, |Q| < 2**(iq_width - 1)`` per sample, which :attr:`acc_width`
+        builds on.
+        """
         a, b = self.mixer_in_width, self.lo_bits
+        if self.complex_input:
+            return MixerParams(in_width=a, complex_input=True, lo_width=b, out_width=a + b,
+                               rounding="floor", overflow="wrap", headroom_bits=1)
         return MixerParams(in_width=a, complex_input=False, lo_width=b, out_width=a + b - 1,
                            rounding="floor", overflow="wrap")
 
     @property
     def iq_width(self) -> int:
+        """Signed width of the wiped-off ``I``, ``Q`` of one sample (:attr:`mixer`)."""
         return self.mixer.out_width
+
+    @property
+    def input_width(self) -> int:
+        """Bits of the input payload: ``adc_bits`` (real) or ``2 * adc_bits`` (I, Q)."""
+        return self.adc_bits * (2 if self.complex_input else 1)
+
+    def check_samples(self, samples) -> np.ndarray:
+        """``samples`` as int64 ADC words, checked: real, a 1-D array; complex, an ``(n, 2)``
+        array of ``(I, Q)`` pairs; every word signed ``adc_bits``. ``ValueError`` naming
+        what is wrong otherwise."""
+        x = np.asarray(samples)
+        if x.dtype.kind not in "iu" and not (x.size == 0 and x.dtype.kind == "f"):
+            raise ValueError(f"GNSS samples must be integers, not dtype {x.dtype}")
+        x = x.astype(np.int64)
+        if self.complex_input:
+            if x.ndim != 2 or x.shape[1] != 2:
+                if x.size == 0 and x.ndim == 1:
+                    x = x.reshape(0, 2)
+                else:
+                    raise ValueError(f"GNSS samples of a complex-input channel must be an "
+                                     f"(n, 2) array of (I, Q) pairs, not shape {x.shape}")
+        elif x.ndim != 1:
+            raise ValueError(f"GNSS samples of a real-input channel must be a 1-D array, not "
+                             f"shape {x.shape} (input='complex' takes (n, 2) I/Q pairs)")
+        lo, hi = -(1 << (self.adc_bits - 1)), (1 << (self.adc_bits - 1)) - 1
+        if x.size and (x.min() < lo or x.max() > hi):
+            raise ValueError(f"GNSS samples must be signed {self.adc_bits}-bit in [{lo}, {hi}]")
+        return x
+
+    def pack_samples(self, samples) -> np.ndarray:
+        """The input port's payload words of ``samples`` (checked as by
+        :meth:`check_samples`): real, the ADC words; complex, ``I`` in the low ``adc_bits``
+        and ``Q`` above (two's complement each), as ``int64``."""
+        x = self.check_samples(samples)
+        if not self.complex_input:
+            return x
+        m = (1 << self.adc_bits) - 1
+        return (x[:, 0] & m) | ((x[:, 1] & m) << self.adc_bits)
+
+    def unpack_samples(self, words) -> np.ndarray:
+        """Inverse of :meth:`pack_samples`: payload words to ADC samples (real: 1-D;
+        complex: ``(n, 2)``)."""
+        w = np.asarray(words)
+        if w.dtype.kind not in "iu" and not (w.size == 0 and w.dtype.kind == "f"):
+            raise ValueError(f"GNSS input words must be integers, not dtype {w.dtype}")
+        w = w.astype(np.int64).ravel()
+        b = self.adc_bits
+        if not self.complex_input:
+            return self.check_samples(w)
+        if w.size and (w.min() < 0 or w.max() >= 1 << (2 * b)):
+            raise ValueError(f"GNSS I/Q input words are unsigned {2 * b}-bit (I, Q packed), "
+                             f"found {int(w[(w < 0) | (w >= 1 << (2 * b))][0])}")
+        s = np.int64(1 << (b - 1))
+        m = np.int64((1 << b) - 1)
+        i, q = w & m, (w >> np.int64(b)) & m
+        return np.stack([(i ^ s) - s, (q ^ s) - s], axis=-1)
 
     @property
     def max_dump_samples(self) -> int:

@@ -26,7 +26,7 @@ def _stimulus(p, n, seed):
 
 
 def _run_blocks(session, x, writes, n_blocks, n_extra=80):
-    edges = np.linspace(0, x.size, n_blocks + 1).astype(int)
+    edges = np.linspace(0, len(x), n_blocks + 1).astype(int)
     words, cycles = [], []
     pending = list(writes)
     for a, b in zip(edges[:-1], edges[1:]):
@@ -75,6 +75,35 @@ def test_model_session_matches_pysim_with_register_writes():
     np.testing.assert_array_equal(s[0], m[0])
     np.testing.assert_array_equal(s[1], m[1])
     assert ps.read("overflow_count") == 0
+
+
+def test_complex_input_session_blocks_match_pysim():
+    """The complex-input channel: the sessions take the packed I/Q payload words; the model
+    session in 1 or 7 blocks == the pysim session in 3."""
+    from dataclasses import replace
+    from hdl.gnss.channel import GnssChannel
+    p = replace(SMALL, input="complex", if_hz=-0.3e6)
+    n = 2 * 2046 + 300
+    _, writes = _stimulus(p, n, seed=3)
+    iq = np.random.default_rng(4).integers(-2, 2, (n, 2))
+    x = p.pack_samples(iq)
+    np.testing.assert_array_equal(p.unpack_samples(x), iq)
+    m1 = _run_blocks(GnssRegisterSession(GnssModelSession(p), p), x, writes, 1)
+    m7 = _run_blocks(GnssRegisterSession(GnssModelSession(p), p), x, writes, 7)
+    ps = GnssRegisterSession(open_stream_session("pysim", GnssChannel(p)), p)
+    s = _run_blocks(ps, x, writes, 3)
+    assert m1[0].size >= 2 * p.fifo.record_words
+    for got in (m7, s):
+        np.testing.assert_array_equal(got[0], m1[0])
+        np.testing.assert_array_equal(got[1], m1[1])
+    with pytest.raises(ValueError, match=r"I/Q input words are unsigned 4-bit"):
+        GnssModelSession(p).step(np.array([16]))
+    # The register session takes the (n, 2) pairs as well and packs them.
+    pairs = _run_blocks(GnssRegisterSession(GnssModelSession(p), p), iq, writes, 1)
+    np.testing.assert_array_equal(pairs[0], m1[0])
+    with pytest.raises(ValueError, match=r"\(n, 2\) array of \(I, Q\) pairs, not shape "
+                                         r"\(4, 3\)"):
+        GnssRegisterSession(GnssModelSession(p), p).step(np.zeros((4, 3), np.int64))
 
 
 def test_bad_writes_and_ports():

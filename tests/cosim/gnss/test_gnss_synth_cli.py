@@ -24,7 +24,24 @@ def test_registry_builds_the_array_top():
     assert get("tacan").array_top is None
 
 
+def test_registry_builds_the_complex_input_variant():
+    rx = get("gnss")
+    top, one = rx.variants["iq"](12), rx.variants["iq"](1)
+    for c in (top, one, top._fifo, one._fifo):
+        c._MustUse__silence = True
+    assert isinstance(top, GnssChannelArray) and top.channels == 12
+    assert isinstance(one, GnssChannel)
+    assert top.params.input == one.params.input == "complex" and one.params.if_hz == 0.0
+    assert {"gnss_channel_iq", "gnss_channel_array12_iq"} <= set(rx.tops)
+
+
 @pytest.mark.parametrize("argv, msg", [
+    (["--top", "gnss", "--variant", "cplx"],
+     "error: --variant: the gnss top has variants iq, not 'cplx'"),
+    (["--top", "tacan", "--variant", "iq"],
+     "error: --variant: the tacan top has variants none, not 'iq'"),
+    (["--top", "gnss", "--variant", "iq", "--channels", "65"],
+     "error: GNSS channel array needs channels in [1, 64], not 65"),
     (["--top", "tacan", "--channels", "3"],
      "error: --channels: the tacan top has no multi-channel array (only --channels 1), not 3"),
     (["--top", "gnss", "--channels", "0"],
