@@ -374,7 +374,7 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
         pipe.schedule(sorted(init, key=lambda w: w[0]))
         for a in range(0, n, block_samples):
             x = f.words(a, min(block_samples, n - a))
-            pipe.feed(x)
+            pipe.feed(p.pack_samples(x))      # the input port's payloads (I/Q packed)
             if bar is not None:
                 bar.update(x.shape[0])
         if hasattr(fe, "end_input"):

@@ -129,21 +129,21 @@ class GnssArrayModelSession(BusModelSession):
 
     def _step(self, queue, ready, n, writes):
         start, stop = self.cycle, self.cycle + n
-        x = queue[:n]
+        x = self.params.unpack_samples(queue[:n])   # payload words -> samples (I/Q if complex)
         if x.size and self._ended:
             raise ValueError("the array's input was declared ended (end_input): no more "
                              "samples")
         bus = self._bus_cycles(writes, start, stop)
         self.bus_writes += bus
         if x.size or bus:
-            self._add(*self.model.step(x, bus, cycles=np.arange(start, start + x.size,
+            self._add(*self.model.step(x, bus, cycles=np.arange(start, start + len(x),
                                                                  dtype=np.int64)))
         now = self._carry_wc < stop
         wc, w = self._carry_wc[now], self._carry_w[now]
         self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
         words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, self._fifo,
                                                     self._fifo_state)
-        return words, cycles, x.size
+        return words, cycles, len(x)
 
 
 class GnssArrayRegisterSession(RegisterSession):

@@ -258,11 +258,12 @@ class GnssChannelModel:
             Input cycle of each sample (default: one per cycle, continuing from the last
             step).
         """
-        x, scyc = self._prepare(samples, cycles)
-        return self._advance(x, scyc, writes)
+        x, xq, scyc = self._prepare(samples, cycles)
+        return self._advance(x, xq, scyc, writes)
 
     def _prepare(self, samples, cycles):
-        """The checked samples (int64, the 1-bit map applied) and their input cycles."""
+        """The checked samples (int64, the 1-bit map applied) as the kernel's ``I`` and ``Q``
+        streams (real input: the one stream twice) and their input cycles."""
         p = self.params
         x = p.check_samples(samples)
         if p.adc_bits == 1:
@@ -275,9 +276,9 @@ class GnssChannelModel:
             scyc = np.arange(self.next_cycle, self.next_cycle + x.size, dtype=np.int64)
         else:
             scyc = np.ascontiguousarray(cycles, dtype=np.int64)
-        return x, scyc
+        return x, xq, scyc
 
-    def _advance(self, x, scyc, writes) -> ChannelRecords:
+    def _advance(self, x, xq, scyc, writes) -> ChannelRecords:
         """:meth:`step` on prepared samples (:meth:`_prepare`)."""
         p = self.params
         _, _, regs, lat = _layout(p)
@@ -406,8 +407,8 @@ class GnssArrayModel:
             per[ch].append((c, reg, v))
         cyc, vals, chans = [], [], []
         # the samples are checked once for every channel (all at the same cycle)
-        x, scyc = self.models[0]._prepare(samples, cycles)
-        recs = [m._advance(x, scyc, w) for m, w in zip(self.models, per)]
+        x, xq, scyc = self.models[0]._prepare(samples, cycles)
+        recs = [m._advance(x, xq, scyc, w) for m, w in zip(self.models, per)]
         for ch, r in enumerate(recs):
             cyc.append(r.cycles)
             vals += r.values(self.params, ch)
