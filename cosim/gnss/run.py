@@ -1,6 +1,10 @@
 """End-to-end GNSS run: IF signal -> acquisition -> tracking channel (a backend) -> FIFO ->
 tracker -> NCO words back over the control path, closed loop (:func:`run_gnss`).
 
+The acquisition reads the record from its start; tracking starts where it stopped
+(:func:`cosim.gnss.handover.acquired_record`), and ``duration_s`` and the scoring's times
+are the tracking's, from that sample on.
+
 Acquisition, hand-over and the tracking loop are :mod:`cosim.gnss.tracking`; the run's
 configuration is :mod:`cosim.gnss.config`. Backends: ``model`` (bit-exact channel + FIFO),
 ``pysim`` (Amaranth), ``verilator`` give the same bits (the test checks it); ``golden`` is
@@ -25,9 +29,9 @@ import numpy as np
 from dsp.gnss.ca_code import CODE_LENGTH, CODE_PERIOD_S
 
 from .config import GnssRunConfig, check_run_size
-from .signal import GnssSignalConfig, GnssSignalGenerator
-from .tracking import (SKIP_RECORDS, Tracking, acquire_handover, adc_words, closed_loop,
-                       golden_track, record_boundaries)
+from .handover import acquired_record
+from .signal import GnssSignalConfig
+from .tracking import SKIP_RECORDS, Tracking, adc_words, closed_loop, golden_track, record_boundaries
 
 __all__ = ["run_gnss", "tracker_report"]
 
@@ -122,8 +126,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     if sig.duration_s <= run.settle_s:
         raise ValueError(f"duration_s {sig.duration_s:g} s leaves nothing after settle_s "
                          f"{run.settle_s:g} s")
-    gen = GnssSignalGenerator(sig)
-    acq, hand = acquire_handover(gen, run)
+    acq, hand, gen = acquired_record(sig, run)      # gen: the record from tracking's start
     extra = None if tracker_setup is None else tracker_setup(gen, p, hand, run.backend)
     result = {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz, "duration_s": sig.duration_s,
               "tracker": run.tracker, "bn_hz": run.bn_hz, "backend": run.backend,
