@@ -30,7 +30,7 @@ Data bits
 ---------
 The 50 bit/s data flips the sign on a 20 ms grid of code epochs whose phase the receiver
 does not know. A coherent sum of ``T > 1`` ms is tried at ``A`` start offsets
-(bit-edge hypotheses) ``0, s, 2s, .. < T`` ms, ``s = ceil(T / 5)``: one of them puts every
+(bit-edge hypotheses) ``0, s, 2s, .. < T`` ms, ``s = ceil(T / 4)``: one of them puts every
 bit edge within ``s / 2`` ms of a sum's boundary (``T`` divides 20 or not, the edges all sit
 at the same offset modulo ``T`` when ``T`` divides 20; the default dwells' ``T`` do). A
 transition at ``u`` ms from a boundary leaves ``1 - 2u / T`` of the amplitude.
@@ -110,7 +110,7 @@ class Dwell:
 
     @property
     def edge_step_ms(self) -> int:
-        return max(1, math.ceil(self.coherent_ms / 5))
+        return max(1, math.ceil(self.coherent_ms / 4))
 
     def alignments(self, data_bits: bool = True) -> tuple:
         """The bit-edge hypotheses (start offsets, ms)."""
@@ -206,66 +206,70 @@ def _code_fft(prn, fs_d, N):
     return np.conj(sfft.fft(rep)).astype(np.complex64)
 
 
-def _dwell_tests(y, fs_d, prn, dwell, data_bits, max_doppler_hz):
-    """Every test of one dwell on its stretch ``y`` (``span_ms`` ms of zero-IF samples):
-    for each look and offset, (max S, its coarse Doppler + fine offset, code cell, mean S,
-    number of cells)."""
+def _dwell_looks(read_ms, start, fs_d, prn, dwell, data_bits, max_doppler_hz):
+    """The tests of one dwell starting at ms ``start`` of the stream, look by look: each
+    look reads and correlates only the periods it adds. Yields, per look, for each bit-edge
+    offset, (max S, its Doppler, its code cell, sum of S over the cells) and the number of
+    cells."""
     N = int(round(fs_d * CODE_PERIOD_S))
-    T, K, P = dwell.coherent_ms, dwell.noncoherent, dwell.fft_len
+    T, P = dwell.coherent_ms, dwell.fft_len
     al = dwell.alignments(data_bits)
-    W = dwell.span_ms(data_bits)
-    n = np.arange(W * N)
-    y = np.asarray(y[:W * N], np.complex64)
-    X0 = sfft.fft(y.reshape(W, N), axis=1)
-    # the same, 500 Hz lower (exp(-j 2 pi 500 n / fs_d) = exp(-j pi n / N))
-    X5 = sfft.fft((y * np.exp(-1j * np.pi * n / N).astype(np.complex64)).reshape(W, N),
-                  axis=1)
+    amax = max(al)
     C = _code_fft(prn, fs_d, N)
     nq = int(math.floor(max_doppler_hz / COARSE_HZ))
     fine = np.fft.fftfreq(P, CODE_PERIOD_S) if P > 1 else np.zeros(1)
-    keep = np.nonzero((fine >= -COARSE_HZ / 2) & (fine < COARSE_HZ / 2))[0]
-    fine = fine[keep]
-    looks = dwell.looks
-    # per (look, offset): running max, its location, running sum
-    best = np.full((len(looks), len(al)), -1.0)
-    where = np.zeros((len(looks), len(al), 2))
-    tot = np.zeros((len(looks), len(al)))
-    cells = 0
+    fine = np.sort(fine[(fine >= -COARSE_HZ / 2) & (fine < COARSE_HZ / 2)])
+    # the fine bins' DFT across the T periods of a coherent sum (a matrix product: only
+    # the bins kept, no zero padding)
+    dft = np.exp(-2j * np.pi * np.outer(fine, np.arange(T)) * CODE_PERIOD_S) \
+        .astype(np.complex64)
+    cells = (2 * nq + 1) * fine.size * N
     cell_chips = CHIP_RATE_HZ / fs_d
-    for q in range(-nq, nq + 1):
-        fb = q * COARSE_HZ
-        X = X0 if q % 2 == 0 else X5
-        kshift = (q // 2) if q % 2 == 0 else ((q - 1) // 2)
-        Y = np.roll(X, -kshift, axis=1)
-        # sum_n y[n] c_r[n - m]: the correlation at code cell -m, carrier phase kept
-        c = sfft.ifft(Y * C[None, :], axis=1)
-        cells += fine.size * N
-        drift_cells = fb / (L1_HZ / CHIP_RATE_HZ) / cell_chips    # cells per second
-        for ai, a in enumerate(al):
-            blk = c[a:a + K * T].reshape(K, T, N)
-            if P > 1:
-                Z = sfft.fft(blk, n=P, axis=1)[:, keep, :]
-            else:
-                Z = blk
-            pw = Z.real ** 2 + Z.imag ** 2                  # (K, F, N)
-            sh = np.rint(drift_cells * (a + T * np.arange(K)) * CODE_PERIOD_S).astype(np.int64)
-            for v in np.unique(sh):
-                if v:
+    S = np.zeros((2 * nq + 1, len(al), fine.size, N))      # running non-coherent sums
+    k_prev = 0
+    for k in dwell.looks:
+        m0, m1 = k_prev * T, k * T + amax                    # the periods this look adds
+        W = m1 - m0
+        y = np.asarray(read_ms(start + m0, start + m1), np.complex64)
+        if y.size < W * N:
+            raise ValueError(f"the stream ends before the dwell {dwell} "
+                             f"({start + m1} ms needed)")
+        n = np.arange(W * N)
+        X0 = sfft.fft(y.reshape(W, N), axis=1)
+        # the same, 500 Hz lower (exp(-j 2 pi 500 n / fs_d) = exp(-j pi n / N)), the phase
+        # referred to the dwell's start
+        X5 = sfft.fft((y * np.exp(-1j * np.pi * (n + m0 * N) / N).astype(np.complex64))
+                      .reshape(W, N), axis=1)
+        best = np.full(len(al), -1.0)
+        where = np.zeros((len(al), 2))
+        tot = np.zeros(len(al))
+        for iq, q in enumerate(range(-nq, nq + 1)):
+            fb = q * COARSE_HZ
+            X = X0 if q % 2 == 0 else X5
+            kshift = (q // 2) if q % 2 == 0 else ((q - 1) // 2)
+            # sum_n y[n] c_r[n - m]: the correlation at code cell -m, carrier phase kept
+            c = sfft.ifft(np.roll(X, -kshift, axis=1) * C[None, :], axis=1)
+            drift = fb / (L1_HZ / CHIP_RATE_HZ) / cell_chips * CODE_PERIOD_S  # cells / ms
+            for ai, a in enumerate(al):
+                blk = c[a:a + (k - k_prev) * T].reshape(k - k_prev, T, N)
+                # (F, blocks, N); tensordot: one matrix product
+                Z = np.tensordot(dft, blk, axes=([1], [1])) if T > 1 else blk[None, :, 0, :]
+                pw = Z.real ** 2 + Z.imag ** 2
+                # each block shifted by its code drift since the dwell's start
+                sh = np.rint(drift * (a + T * np.arange(k_prev, k))).astype(np.int64)
+                for v in np.unique(sh):
                     j = np.nonzero(sh == v)[0]
-                    pw[j[0]:j[-1] + 1] = np.roll(pw[j[0]:j[-1] + 1], int(v), axis=2)
-            s = np.zeros(pw.shape[1:], np.float64)
-            k0 = 0
-            for li, k in enumerate(looks):
-                s += pw[k0:k].sum(axis=0, dtype=np.float64)
-                k0 = k
-                tot[li, ai] += float(s.sum())
+                    part = pw[:, j[0]:j[-1] + 1].sum(axis=1, dtype=np.float64)
+                    S[iq, ai] += np.roll(part, int(v), axis=1) if v else part
+                s = S[iq, ai]
+                tot[ai] += float(s.sum())
                 j = int(np.argmax(s))
-                v = float(s.flat[j])
-                if v > best[li, ai]:
+                if s.flat[j] > best[ai]:
                     fi, m = np.unravel_index(j, s.shape)
-                    best[li, ai] = v
-                    where[li, ai] = (fb + fine[fi], (N - m) % N)
-    return best, where, tot, cells
+                    best[ai] = float(s.flat[j])
+                    where[ai] = (fb + fine[fi], (N - m) % N)
+        k_prev = k
+        yield best, where, tot, cells
 
 
 def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
@@ -310,14 +314,10 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
     start, out, p_min, looks = 0, None, math.inf, []
     for si, d in enumerate(sched):
         W = d.span_ms(data_bits)
-        y = read_ms(start, start + W)
-        if len(y) < W * N:
-            raise ValueError(f"the stream ends before the dwell {d} ({start + W} ms needed)")
-        best, where, tot, cells = _dwell_tests(y, fs_d, prn, d, data_bits, max_doppler_hz)
-        for li, k in enumerate(d.looks):
+        looks_it = _dwell_looks(read_ms, start, fs_d, prn, d, data_bits, max_doppler_hz)
+        for k, (best, where, tot, cells) in zip(d.looks, looks_it):
             th = threshold(pt, cells, k)
-            var = tot[li] / cells / (2 * k)
-            lam = best[li] / var
+            lam = best / (tot / cells / (2 * k))
             ai = int(np.argmax(lam / th))
             # each offset's p-value: P(max of its cells > the peak seen | noise)
             sf = stats.chi2.sf(lam, 2 * k)
@@ -328,12 +328,14 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
             looks.append({"stage": si, "noncoherent": k, "t_end_ms": t_end,
                           "metric": float(lam[ai] / th), "detected": hit})
             if hit and out is None:
-                f, m = where[li, ai]
+                f, m = where[ai]
                 out = SearchOutcome(prn, True, float(f), float(m * CHIP_RATE_HZ / fs_d), si,
                                     str(d), d.coherent_ms, k,
                                     int(d.alignments(data_bits)[ai]), start, t_end,
                                     float(lam[ai] / th), float(lam[ai]), float(th),
                                     d.bin_width_hz, float(pfa), n_tests, math.inf)
+                if stop:
+                    break
         start += W
         if out is not None and stop:
             break
@@ -353,7 +355,8 @@ class Baseband:
     samples: :func:`dsp.gnss.search.to_baseband` (mixer referred to the recording's first
     sample, ``firwin`` low-pass, decimation by :func:`dsp.gnss.search.decimation`) on the
     requested stretch plus the filter's half length on each side, so a stretch equals the
-    same samples of the whole record converted at once (away from its ends)."""
+    same samples of the whole record converted at once (in complex64 arithmetic: to
+    ~1e-6 of :func:`~dsp.gnss.search.to_baseband`'s complex128)."""
 
     def __init__(self, read, n_samples: int, fs_hz: float, if_hz: float,
                  inverted: bool = False, min_rate_hz: float | None = None):
@@ -367,20 +370,35 @@ class Baseband:
         self.fs_d = self.fs_hz / self.D
 
     def ms(self, k0: int, k1: int) -> np.ndarray:
-        from .search import to_baseband
+        """Zero-IF samples at ``fs_d`` of ms ``k0 .. k1 - 1`` (short at the record's end)."""
+        from scipy import signal as sps
         N, D = self.N, self.D
-        pad = 8 * D * (D > 1)
+        pad = 8 * D if D > 1 else 0
         a = max(0, k0 * N - pad)
         b = min(self.n_samples, k1 * N + pad)
         if b <= k0 * N:
             return np.zeros(0, np.complex128)
-        y = to_baseband(self.read(a, b - a), self.fs_hz, self.if_hz, self.inverted, 1, a)
-        if D > 1:
-            from scipy import signal as sps
-            h = sps.firwin(16 * D + 1, 1.0 / D)
-            y = sps.oaconvolve(y, h, mode="same")
+        x = np.asarray(self.read(a, b - a))
+        x = x.astype(np.complex64 if np.iscomplexobj(x) else np.float32)
+        # the mixer exp(-j 2 pi f_IF n / fs), n from the record's first sample: one 1 ms
+        # table times each period's start phase (no exp per sample)
+        r = math.fmod(self.if_hz / self.fs_hz, 1.0)
+        m0, m1 = a // N, -(-b // N)
+        tab = np.exp(-2j * np.pi * r * np.arange(N))
+        start = np.exp(-2j * np.pi * np.mod(r * N * np.arange(m0, m1, dtype=np.float64), 1.0))
+        ph = (start[:, None] * tab[None, :]).astype(np.complex64).ravel()[a - m0 * N:
+                                                                          b - m0 * N]
+        y = x * ph
+        if self.inverted:
+            y = np.conj(y)
         i0 = k0 * N - a
-        return y[i0:i0 + (min(b, k1 * N) - k0 * N)][::D]
+        n_out = min(b, k1 * N) - k0 * N
+        if D == 1:
+            return y[i0:i0 + n_out]
+        # centred FIR low-pass (search.to_baseband's), only the kept samples computed
+        h = sps.firwin(16 * D + 1, 1.0 / D).astype(np.float32)
+        z = sps.resample_poly(y, 1, D, window=h)      # z[i] at y[i D]; i0 is a multiple of D
+        return z[i0 // D:i0 // D - (-n_out // D)]
 
 
 def refine(x, fs_hz: float, prn: int, if_hz: float, inverted: bool, doppler_hz: float,
