@@ -17,10 +17,10 @@ The input is zero-IF complex samples at ``fs_d`` with a whole number ``N`` of sa
 1 ms FFT by one bin, so only the input and its 500 Hz-shifted copy are transformed).
 
 A dwell of ``T`` ms coherent sums the ``c_b[k]`` of ``T`` consecutive periods with the
-phase ramp of a *fine* Doppler offset ``delta`` (a ``P``-point zero-padded FFT across the
-``T`` periods, ``P`` the smallest power of two >= ``1.5 T``, ``delta`` on the ``1000 / P``
-Hz grid within ``[-250, 250)`` Hz: bins at most ``2 / (3 T)`` wide); for ``T = 1`` the coarse
-bins are the bins. ``K`` coherent sums are added in power, each shifted by the code drift
+phase ramp of a *fine* Doppler offset ``delta`` (a DFT across the ``T`` periods at
+``delta`` on the ``1000 / P`` Hz grid within ``[-250, 250)`` Hz, ``P`` the smallest power
+of two >= ``1.5 T``: bins at most ``2 / (3 T)`` wide); for ``T = 1`` the coarse bins are
+the bins. ``K`` coherent sums are added in power, each shifted by the code drift
 of its coarse Doppler (``f_b / 1540`` chips/s, whole cells), so the cells stay on the code
 phase at the dwell's start::
 
@@ -30,15 +30,15 @@ Data bits
 ---------
 The 50 bit/s data flips the sign on a 20 ms grid of code epochs whose phase the receiver
 does not know. A coherent sum of ``T > 1`` ms is tried at ``A`` start offsets
-(bit-edge hypotheses) ``0, s, 2s, .. < T`` ms, ``s = ceil(T / 4)``: one of them puts every
-bit edge within ``s / 2`` ms of a sum's boundary (``T`` divides 20 or not, the edges all sit
-at the same offset modulo ``T`` when ``T`` divides 20; the default dwells' ``T`` do). A
-transition at ``u`` ms from a boundary leaves ``1 - 2u / T`` of the amplitude.
+(bit-edge hypotheses) ``0, s, 2s, .. < T`` ms, ``s = ceil(T / 4)``. When ``T`` divides 20
+(the default dwells' ``T`` all do) every edge sits at the same offset modulo ``T``, so one
+of the offsets puts every bit edge within ``s / 2`` ms of a sum's boundary. A transition
+at ``u`` ms from a boundary leaves ``1 - 2u / T`` of the amplitude.
 
 Statistic, threshold, false alarms
 ----------------------------------
 Under noise only each ``Z`` is circular complex Gaussian with the same variance ``sigma^2``
-per real component (the fine bins of a zero-padded FFT included), so
+per real component (every fine bin of the DFT included), so
 ``Lambda = S / sigma^2`` is chi-square with ``2K`` degrees of freedom;
 ``sigma^2 = mean(S) / (2K)`` over all cells of the test. A *test* is one (dwell, look
 ``K``, bit-edge offset): the maximum ``Lambda`` over its ``N_cells`` Doppler x code cells
@@ -47,7 +47,7 @@ against the threshold :func:`dsp.gnss.acquisition.threshold` for ``pfa / N_tests
 limit). By the union bound the probability that a search of an absent PRN reports a
 detection is at most ``pfa`` whatever the stage it stops at (the looks of a dwell are
 nested sums, positively correlated, and neighbouring cells are correlated: the true rate is
-below ``pfa``; :data:`SearchOutcome.p_min` lets a Monte Carlo measure it at any ``pfa``).
+below ``pfa``; :attr:`SearchOutcome.p_min` lets a Monte Carlo measure it at any ``pfa``).
 
 Schedule
 --------
