@@ -16,7 +16,8 @@ records; ``cycle_slips`` = changes of its nearest Costas lock point (half cycles
 :func:`cosim.gnss.loopsim.cycle_slips`); ``phase_rmse_deg`` = rms of the error about its lock
 point; ``doppler_rmse_hz`` = the tracker's Doppler minus the true one; ``code_rmse_chips`` =
 true code phase minus the prompt's; ``lock_fraction`` = share of 100-record windows in
-phase lock (narrowband PLI >= 0.8, :class:`dsp.gnss.loops.LockDetector`); ``cn0_est_dbhz``
+phase lock (narrowband PLI >= 0.8, :class:`dsp.gnss.loops.LockDetector`; the windows start
+on a data-bit edge, so its 10-record sums do not straddle one); ``cn0_est_dbhz``
 (M2M4 on the prompts).
 """
 from __future__ import annotations
@@ -69,7 +70,11 @@ def _score(gen, track: Tracking, n_b, settle_s):
     prompt = obs[keep, 2] + 1j * obs[keep, 3]
     ld = LockDetector(CODE_PERIOD_S, window=100, m=10)
     locks = []
-    for pv in prompt:
+    # the windows start on a data-bit edge (the record integrating the bit's first code
+    # period), so the detector's 10-record sums do not straddle one, wherever tracking began
+    epoch = np.rint(tr["code_chips_total"][keep] / CODE_LENGTH).astype(np.int64)
+    first = np.nonzero(epoch % 20 == 1)[0]
+    for pv in prompt[int(first[0]) if first.size else 0:]:
         if ld.update(pv):
             locks.append(bool(ld.phase_lock))
     out["lock_fraction"] = float(np.mean(locks)) if locks else None
