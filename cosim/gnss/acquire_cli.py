@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 
 from ..core.validate import check_float, dumps
+from .acq_options import add_dwell_arguments
 from .files import DEFAULT_ADC_MAP, FORMATS, SampleFile
 
 
@@ -50,9 +51,7 @@ def add_search_options(p) -> None:
     """The search's options (``--prns --pfa --max-doppler-hz``), shared by ``gnss-acquire``
     and ``gnss-track``."""
     p.add_argument("--prns", default="1-32", help="PRNs to search, e.g. 1-32 or 3,7,10-12")
-    p.add_argument("--pfa", type=float, default=1e-3,
-                   help="false-alarm probability of one PRN's first dwells (before "
-                        "verification)")
+    add_dwell_arguments(p)
     p.add_argument("--max-doppler-hz", type=float, default=5000.0, help="search +- Doppler (Hz)")
 
 
@@ -77,25 +76,46 @@ def add_parser(sub, make_parser) -> None:
     add_search_options(p)
     p.add_argument("--stages", default=None,
                    help="dwell schedule, comma-separated TxK[@a/b] (coherent ms x sums @ "
-                        "offsets ms), e.g. 1x10,5x6@0/2,10x4@0/3/6 (default: 1x10,5x6@0/2)")
+                        "offsets ms), e.g. 1x10,5x6@0/2,10x4@0/3/6 (default: 1x10,5x6@0/2; "
+                        "--coherent-ms T --noncoherent K: the one stage TxK at the bit-edge "
+                        "offsets of dsp.gnss.dwell.Dwell)")
     p.add_argument("--min-rate-hz", type=float, default=2.046e6,
                    help="lowest decimated complex rate of the search (S/s)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
 
+def stages_of(a) -> tuple:
+    """The dwell schedule of the parsed options: ``--stages``, or the one stage of
+    ``--coherent-ms`` x ``--noncoherent`` (its bit-edge offsets those of
+    :class:`dsp.gnss.dwell.Dwell`), or the default; ValueError naming the option."""
+    from dsp.gnss.dwell import Dwell
+    from dsp.gnss.search import DEFAULT_STAGES, Stage
+    t, k = a.acq_coherent_ms, a.acq_noncoherent
+    if (t is None) != (k is None):
+        raise ValueError("--coherent-ms and --noncoherent go together (a fixed dwell of "
+                         "T ms x K sums): give both, or neither")
+    if t is not None:
+        if getattr(a, "stages", None) is not None:
+            raise ValueError("give --stages or --coherent-ms / --noncoherent, not both")
+        d = Dwell(t, (k,))
+        return (Stage(t, k, d.alignments()),)
+    stages = getattr(a, "stages", None)      # gnss-acquire's own option
+    return DEFAULT_STAGES if stages is None else \
+        tuple(Stage.parse(v) for v in stages.split(","))
+
+
 def run(a) -> int:
-    from dsp.gnss.search import DEFAULT_STAGES, Stage, search_all
+    from dsp.gnss.search import search_all
     prns = _prns(a.prns)
-    check_float("--pfa", a.pfa, 0, 1, lo_open=True, hi_open=True)
+    check_float("--pfa", a.acq_pfa, 0, 1, lo_open=True, hi_open=True)
     check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
     check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
-    stages = DEFAULT_STAGES if a.stages is None else \
-        tuple(Stage.parse(t) for t in a.stages.split(","))
+    stages = stages_of(a)
     f = open_file(a)
     t0 = time.time()
     rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
-                     a.pfa, a.max_doppler_hz, stages, a.min_rate_hz)
+                     a.acq_pfa, a.max_doppler_hz, stages, a.min_rate_hz)
     out = {"recording": f.describe(), **rep.as_dict(), "wall_s": round(time.time() - t0, 1)}
     if a.json:
         print(dumps(out))

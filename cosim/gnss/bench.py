@@ -27,14 +27,14 @@ REAL_TIME_SPS = 16.368e6
 def gnss_speed(out: Path, quick: bool = False, duration_s: float | None = None) -> dict:
     from ..backends.verilator_harness import verilator_available
     from .config import DynamicsChoice, GnssRunConfig
-    from .tracking import acquire_handover, adc_words, closed_loop
-    from .signal import GnssSignalConfig, GnssSignalGenerator
+    from .handover import acquired_record
+    from .tracking import adc_words, closed_loop
+    from .signal import GnssSignalConfig
     dur = duration_s if duration_s is not None else (0.1 if quick else 1.0)
     sig = DynamicsChoice("aukf-patent").apply(GnssSignalConfig(prn=7, cn0_dbhz=45.0,
                                                            duration_s=dur + 0.05))
     run = GnssRunConfig(dsp="fixed", tracker="pll3", bn_hz=15.0)
-    gen = GnssSignalGenerator(sig)
-    _, hand = acquire_handover(gen, run)
+    _, hand, gen = acquired_record(sig, run)
     p = run.hdl_params(sig)
     n = int(round(dur * sig.fs_hz))
     x = adc_words(gen.samples(0, n)[0])

@@ -40,11 +40,8 @@ SCENARIOS = {
         "help": "the AUKF patent's scenario: the x0 dynamics (1000 m/s, 1 g), "
                 "32 dB-Hz, T = 1 ms",
         "options": {"cn0_dbhz": 32.0, "dynamics": "aukf-patent"},
-        # an acquisition for 32 dB-Hz (the default 1 ms x 5 and 1 ms x 20 miss it):
-        # 2 ms coherent (125 Hz bins) x 20 non-coherent, 40 ms Doppler refinement
-        # and the tracker started on the patent's x0 Doppler rate (w1 / 2 pi)
-        "run": {"acq_coherent_ms": 2, "acq_noncoherent": 20, "acq_bin_hz": 125.0,
-                "refine_ms": 40, "handover_doppler_rate_hz_s": 323.356 / (2 * math.pi)},
+        # the tracker started on the patent's x0 Doppler rate (w1 / 2 pi)
+        "run": {"handover_doppler_rate_hz_s": 323.356 / (2 * math.pi)},
         "tracker": {"x0": [0.0, 32995.519, 323.356, 0.0], "T_s": 1e-3,
                     "P0": "diag(1e-3) (w0 widened to the hand-over Doppler's sigma)",
                     "epsilon": 1.027, "kappa": 0.0, "beta": 2.0, "q0": 5.0,
@@ -125,9 +122,20 @@ class GnssRunConfig:
         The rest of the service (:class:`cosim.core.link.DspServiceConfig`, 4 cycles per word).
     settle_s : float
         Records before this time are not scored.
-    acq_coherent_ms, acq_noncoherent, acq_bin_hz, acq_pfa, refine_ms :
-        Acquisition: coherent ms, non-coherent sums, Doppler bin (Hz, <= 500 for the
-        refinement), false-alarm probability, refinement length (ms).
+    acq_coherent_ms, acq_noncoherent : int or None
+        A fixed acquisition dwell of ``acq_coherent_ms`` ms coherent x ``acq_noncoherent``
+        sums (both or neither); None: the sequential search whose dwell extends
+        (:data:`dsp.gnss.dwell.DEFAULT_SCHEDULE`).
+    acq_pfa : float
+        False-alarm probability of the whole acquisition search.
+    acq_limit_ms : int
+        Signal the search may consume (ms).
+    acq_max_doppler_hz : float
+        Doppler searched (+- Hz).
+    refine_ms : int
+        Shortest Doppler and code-phase refinement after the detection (ms; at least 20
+        coherent lengths of the detecting dwell, up to 200 ms:
+        :func:`cosim.gnss.handover.refine_length_ms`).
     compare : str or None
         ``golden``: also run the golden chain (float) and report the differences.
     hdl_changes : tuple of (name, value)
@@ -161,13 +169,21 @@ class GnssRunConfig:
     settle_s: float = field(default=0.5, metadata={
         "help": "records before this time (s) are not scored (the 3rd-order loop's pull-in "
                 "of the unknown Doppler rate rings for ~0.5-0.8 s at Bn 15 Hz)"})
-    acq_coherent_ms: int = field(default=1, metadata={"help": "acquisition coherent ms"})
-    acq_noncoherent: int = field(default=5, metadata={"help": "acquisition non-coherent sums"})
-    acq_bin_hz: float = field(default=250.0, metadata={
-        "help": "acquisition Doppler bin (Hz, <= 500)"})
-    acq_pfa: float = field(default=1e-3, metadata={"help": "acquisition false-alarm "
-                                                           "probability per search"})
-    refine_ms: int = field(default=20, metadata={"help": "Doppler refinement length (ms)"})
+    acq_coherent_ms: int | None = field(default=None, metadata={
+        "help": "acquisition: coherent integration (whole ms, 1..20; with --noncoherent: a "
+                "fixed dwell; default: the sequential search, 1 to 20 ms as it extends)"})
+    acq_noncoherent: int | None = field(default=None, metadata={
+        "help": "acquisition: non-coherent sums of the fixed dwell (>= 1; with "
+                "--coherent-ms)"})
+    acq_pfa: float = field(default=1e-3, metadata={
+        "help": "acquisition: false-alarm probability of the whole search (an absent "
+                "PRN reported), held over every dwell and look"})
+    acq_limit_ms: int = field(default=500, metadata={
+        "help": "acquisition: signal the search may consume (ms)"})
+    acq_max_doppler_hz: float = field(default=7000.0, metadata={
+        "help": "acquisition: Doppler searched (+- Hz)"})
+    refine_ms: int = field(default=20, metadata={
+        "help": "shortest Doppler / code-phase refinement after the detection (ms)"})
     handover_doppler_sigma_hz: float = field(default=3.0, metadata={
         "help": "1-sigma error of the refined hand-over Doppler told to the tracker (Hz)"})
     r_mode: str = field(default="cn0", metadata={
@@ -210,10 +226,10 @@ class GnssRunConfig:
         check_int("service_latency_cycles", self.service_latency_cycles, 0)
         check_int("service_batch_words", self.service_batch_words, 1)
         check_float("settle_s", self.settle_s, 0.0, unit="s")
-        check_int("acq_coherent_ms", self.acq_coherent_ms, 1, 10)
-        check_int("acq_noncoherent", self.acq_noncoherent, 1, 100)
-        check_float("acq_bin_hz", self.acq_bin_hz, 0.0, 500.0, lo_open=True, unit="Hz")
-        check_float("acq_pfa", self.acq_pfa, 0.0, 1.0, lo_open=True, hi_open=True)
+        self.acq_schedule()
+        check_float("--pfa", self.acq_pfa, 0.0, 1.0, lo_open=True, hi_open=True)
+        check_float("acq_max_doppler_hz", self.acq_max_doppler_hz, 0.0, 50e3, lo_open=True,
+                    unit="Hz")
         check_int("refine_ms", self.refine_ms, 2, 200)
         check_float("handover_doppler_sigma_hz", self.handover_doppler_sigma_hz, 0.0, 250.0,
                     lo_open=True, unit="Hz")
@@ -223,6 +239,24 @@ class GnssRunConfig:
         for kv in self.hdl_changes:
             if not (isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)):
                 raise ValueError(f"hdl_changes are (name, value) pairs, not {kv!r}")
+
+    def acq_schedule(self) -> tuple:
+        """The acquisition's dwells (:mod:`dsp.gnss.dwell`) within ``acq_limit_ms``
+        (ValueError naming the option if refused)."""
+        from dsp.gnss.dwell import DEFAULT_SCHEDULE, fixed_schedule, schedule_within
+        t, k = self.acq_coherent_ms, self.acq_noncoherent
+        if (t is None) != (k is None):
+            raise ValueError("--coherent-ms and --noncoherent go together (a fixed dwell of "
+                             "T ms x K sums): give both, or neither for the search that "
+                             "extends its dwell")
+        if t is None:
+            return schedule_within(DEFAULT_SCHEDULE, self.acq_limit_ms)
+        d = fixed_schedule(t, k)
+        if d[0].span_ms() > self.acq_limit_ms:
+            raise ValueError(f"--coherent-ms {t} x --noncoherent {k} needs "
+                             f"{d[0].span_ms()} ms of signal (bit-edge offsets included): "
+                             f"more than --acq-limit-ms {self.acq_limit_ms}")
+        return schedule_within(d, self.acq_limit_ms)
 
     def service(self, fs_hz: float):
         """The DSP's FIFO service at the channel clock ``fs_hz``."""

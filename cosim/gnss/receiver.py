@@ -9,6 +9,7 @@ from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver
 from ..studies.spec import SweepConfig
 from ..core.validate import check_jobs, check_out_dir, dumps
 from .study import SWEEP_MODEL
+from .acq_options import ACQ_OPTIONS
 from .config import SCENARIOS, DynamicsChoice, GnssRunConfig
 from .run import run_gnss
 from .signal import GnssSignalConfig
@@ -33,6 +34,7 @@ OPTIONS = (
     Option(_RUN, "backend"), Option(_RUN, "dsp"), Option(_RUN, "r_mode"),
     Option(_RUN, "control_latency_cycles", flag="--latency"),
     Option(_RUN, "settle_s"), Option(_RUN, "compare"),
+    *ACQ_OPTIONS,
     Arg("--json", action="store_true", help="print one JSON object"),
 )
 
@@ -116,8 +118,10 @@ def cmd_gnss(a) -> int:
     acq = r["acquired"]
     print(f"PRN {r['prn']}  C/N0 {r['cn0_dbhz']} dB-Hz  {r['duration_s']:g} s  tracker "
           f"{r['tracker']} (Bn {r['bn_hz']:g} Hz)  backend {r['backend']}  dsp {r['dsp']}")
-    print(f"acquired: Doppler {acq['doppler_refined_hz']:.1f} Hz (bin "
-          f"{acq['doppler_found_hz']:.1f}, true {acq['doppler_true_hz']:.1f}), code phase "
+    print(f"acquired by the {acq['search']} search ({acq['dwell']}, at {acq['noncoherent']} "
+          f"sums) after {1e3 * acq['t_detect_s']:.0f} ms of signal, pfa {acq['pfa']:g}; "
+          f"tracking from {1e3 * acq['t_start_s']:.0f} ms: Doppler "
+          f"{acq['doppler_refined_hz']:.1f} Hz (true {acq['doppler_true_hz']:.1f}), code phase "
           f"{acq['code_phase_found_chips']:.3f} chips (true {acq['code_phase_true_chips']:.3f})")
     lf = r["lock_fraction"]
     print(f"carrier phase RMSE {r['phase_rmse_deg']:.2f} deg, Doppler RMSE "
@@ -186,9 +190,15 @@ def _aukf_convergence(out, quick: bool = False, jobs: int | None = None) -> dict
     return bench_convergence(out, quick=quick)
 
 
+def _gnss_acquisition(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .bench_acquisition import gnss_acquisition
+    return gnss_acquisition(out, quick=quick, jobs=jobs)
+
+
 #: ``python -m cosim bench <name>`` of the GNSS receiver (the AUKF's among them).
 BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_gnss_tracking),
               "gnss-throughput": Benchmark(_gnss_throughput),
+              "gnss-acquisition": Benchmark(_gnss_acquisition, jobs=True),
               "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence)}
 
 

@@ -1,6 +1,10 @@
 """End-to-end GNSS run: IF signal -> acquisition -> tracking channel (a backend) -> FIFO ->
 tracker -> NCO words back over the control path, closed loop (:func:`run_gnss`).
 
+The acquisition reads the record from its start; tracking starts where it stopped
+(:func:`cosim.gnss.handover.acquired_record`), and ``duration_s`` and the scoring's times
+are the tracking's, from that sample on.
+
 Acquisition, hand-over and the tracking loop are :mod:`cosim.gnss.tracking`; the run's
 configuration is :mod:`cosim.gnss.config`. Backends: ``model`` (bit-exact channel + FIFO),
 ``pysim`` (Amaranth), ``verilator`` give the same bits (the test checks it); ``golden`` is
@@ -12,7 +16,8 @@ records; ``cycle_slips`` = changes of its nearest Costas lock point (half cycles
 :func:`cosim.gnss.loopsim.cycle_slips`); ``phase_rmse_deg`` = rms of the error about its lock
 point; ``doppler_rmse_hz`` = the tracker's Doppler minus the true one; ``code_rmse_chips`` =
 true code phase minus the prompt's; ``lock_fraction`` = share of 100-record windows in
-phase lock (narrowband PLI >= 0.8, :class:`dsp.gnss.loops.LockDetector`); ``cn0_est_dbhz``
+phase lock (narrowband PLI >= 0.8, :class:`dsp.gnss.loops.LockDetector`; the windows start
+on a data-bit edge, so its 10-record sums do not straddle one); ``cn0_est_dbhz``
 (M2M4 on the prompts).
 """
 from __future__ import annotations
@@ -25,9 +30,9 @@ import numpy as np
 from dsp.gnss.ca_code import CODE_LENGTH, CODE_PERIOD_S
 
 from .config import GnssRunConfig, check_run_size
-from .signal import GnssSignalConfig, GnssSignalGenerator
-from .tracking import (SKIP_RECORDS, Tracking, acquire_handover, adc_words, closed_loop,
-                       golden_track, record_boundaries)
+from .handover import acquired_record
+from .signal import GnssSignalConfig
+from .tracking import SKIP_RECORDS, Tracking, adc_words, closed_loop, golden_track, record_boundaries
 
 __all__ = ["run_gnss", "tracker_report"]
 
@@ -65,7 +70,11 @@ def _score(gen, track: Tracking, n_b, settle_s):
     prompt = obs[keep, 2] + 1j * obs[keep, 3]
     ld = LockDetector(CODE_PERIOD_S, window=100, m=10)
     locks = []
-    for pv in prompt:
+    # the windows start on a data-bit edge (the record integrating the bit's first code
+    # period), so the detector's 10-record sums do not straddle one, wherever tracking began
+    epoch = np.rint(tr["code_chips_total"][keep] / CODE_LENGTH).astype(np.int64)
+    first = np.nonzero(epoch % 20 == 1)[0]
+    for pv in prompt[int(first[0]) if first.size else 0:]:
         if ld.update(pv):
             locks.append(bool(ld.phase_lock))
     out["lock_fraction"] = float(np.mean(locks)) if locks else None
@@ -122,8 +131,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     if sig.duration_s <= run.settle_s:
         raise ValueError(f"duration_s {sig.duration_s:g} s leaves nothing after settle_s "
                          f"{run.settle_s:g} s")
-    gen = GnssSignalGenerator(sig)
-    acq, hand = acquire_handover(gen, run)
+    acq, hand, gen = acquired_record(sig, run)      # gen: the record from tracking's start
     extra = None if tracker_setup is None else tracker_setup(gen, p, hand, run.backend)
     result = {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz, "duration_s": sig.duration_s,
               "tracker": run.tracker, "bn_hz": run.bn_hz, "backend": run.backend,

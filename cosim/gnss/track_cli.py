@@ -16,7 +16,8 @@ against its truth; a recording has no truth, many satellites and its own options
 from __future__ import annotations
 
 from ..core.validate import check_float, check_out_dir, dumps
-from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns
+from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns, \
+    stages_of
 
 __all__ = ["add_parser", "run", "DEFAULT_PLOTS"]
 
@@ -65,12 +66,12 @@ def run(a) -> int:
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from .track_report import summarise, table, write_plots
     prns = parse_prns(a.prns)
-    check_float("--pfa", a.pfa, 0, 1, lo_open=True, hi_open=True)
+    check_float("--pfa", a.acq_pfa, 0, 1, lo_open=True, hi_open=True)
     check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
     if needs_aiding(a.tracker):
         raise ValueError(f"--tracker {a.tracker} needs an INS aiding source; a recording has "
                          f"none")
-    cfg = TrackConfig(channels=a.channels, pull_in_ms=a.pull_in_ms, pfa=a.pfa,
+    cfg = TrackConfig(channels=a.channels, pull_in_ms=a.pull_in_ms, pfa=a.acq_pfa,
                       max_doppler_hz=a.max_doppler_hz)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
     if a.plots is not None:
@@ -88,7 +89,7 @@ def run(a) -> int:
                          f"~{n / 2e3 / 3600:.1f} h; give --duration-s <= "
                          f"{200_000 / f.fs_hz:.4f}")
     rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
-                     a.pfa, a.max_doppler_hz)
+                     a.acq_pfa, a.max_doppler_hz, stages_of(a))
     cands = [Candidate.of(d) for d in rep.detections]
     if not cands:
         out = {"recording": f.describe(), "acquisition": rep.as_dict(), "assignments": [],

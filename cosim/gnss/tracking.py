@@ -1,15 +1,15 @@
 """Acquisition, hand-over and the closed tracking loop of a GNSS run.
 
-1. *Acquisition* (:func:`acquire_handover`: :func:`dsp.gnss.acquisition.acquire`, FFT
-   code-phase search) on a snapshot of the first ``acq_ms`` ms of the record, then
-   :func:`~dsp.gnss.acquisition.refine_doppler` (squared prompt sums over ``refine_ms`` ms)
-   so the PLL starts within a few Hz.
+1. *Acquisition* (:func:`acquire_handover`, :mod:`cosim.gnss.handover`): the sequential
+   search of :mod:`dsp.gnss.dwell` on the record from its first sample, its dwell extending
+   until the PRN is detected, then the Doppler and code phase refined on the following
+   milliseconds and propagated to the sample after them, where tracking starts (the
+   tracking sees the record from there: :class:`cosim.gnss.handover.RecordFrom`).
 2. *Hand-over* (:func:`handover_writes`): the carrier word (IF + Doppler), the code word
    (chip rate + Doppler / 1540) and a code slew (samples of hold that put the prompt on the
    acquired code phase) are written at reset; they are active from the first dump boundary
    (1 ms). The first :data:`SKIP_RECORDS` records (the reset epoch and the epoch holding the
-   slew) are not tracked. The acquisition is thus treated as if its snapshot had been taken
-   just before tracking starts (its own duration is not simulated).
+   slew) are not tracked.
 3. *Tracking* (:func:`closed_loop`) on the streaming pipeline
    (:class:`cosim.core.pipeline.Pipeline`): the channel session
    (:func:`cosim.gnss.session.open_gnss`), the DSP reading the FIFO every
@@ -38,7 +38,7 @@ import numpy as np
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 
 from .config import WORD_BITS, GnssRunConfig
-from .signal import GnssSignalGenerator
+from .handover import acquire_handover
 
 __all__ = ["acquire_handover", "handover_writes", "Tracking", "TrackingSink", "PipelineDsp",
            "record_observables", "make_tracker_for", "ClosedLoop", "closed_loop", "adc_words",
@@ -46,38 +46,6 @@ __all__ = ["acquire_handover", "handover_writes", "Tracking", "TrackingSink", "P
 
 #: Records not tracked after reset: the reset epoch, and the epoch holding the code slew.
 SKIP_RECORDS = 2
-
-
-def acquire_handover(gen: GnssSignalGenerator, run: GnssRunConfig) -> tuple[dict, dict]:
-    """Acquire the signal of ``gen`` on its first milliseconds and refine the Doppler (the
-    search of ``run``); returns the acquisition's record for the JSON and the hand-over
-    (``doppler_hz``, ``code_phase_chips``). ValueError if the record is shorter than the
-    snapshot or the PRN is not detected."""
-    from dsp.gnss.acquisition import acquire, refine_doppler
-    sig = gen.cfg
-    n_ms = max(run.acq_coherent_ms * run.acq_noncoherent, run.refine_ms)
-    N = int(round(sig.fs_hz * CODE_PERIOD_S))
-    if sig.n_samples < n_ms * N:
-        raise ValueError(f"duration_s {sig.duration_s:g} s is shorter than the acquisition "
-                         f"snapshot ({n_ms} ms)")
-    x = gen.samples(0, n_ms * N)[0].astype(np.float64)
-    a = acquire(x, sig.fs_hz, sig.prn, sig.digital_if_hz, sig.spectrum_inverted,
-                n_coherent=run.acq_coherent_ms, n_noncoherent=run.acq_noncoherent,
-                bin_width_hz=run.acq_bin_hz, pfa=run.acq_pfa)
-    truth = gen.truth_at([0.0])
-    out = {"detected": bool(a.detected), "doppler_found_hz": a.doppler_hz,
-           "doppler_true_hz": float(truth["doppler_hz"][0]),
-           "code_phase_found_chips": a.code_phase_chips,
-           "code_phase_true_chips": float(truth["code_phase_chips"][0]),
-           "peak": a.peak, "threshold": a.threshold, "bin_width_hz": a.bin_width_hz}
-    if not a.detected:
-        raise ValueError(f"acquisition did not find PRN {sig.prn} (peak {a.peak:.1f} below the "
-                         f"threshold {a.threshold:.1f} for pfa {run.acq_pfa:g}): C/N0 too low "
-                         f"for a {run.acq_coherent_ms} x {run.acq_noncoherent} ms search")
-    fine = refine_doppler(x, sig.fs_hz, sig.prn, sig.digital_if_hz, a.doppler_hz,
-                          a.code_phase_chips, sig.spectrum_inverted, n_ms=run.refine_ms)
-    out["doppler_refined_hz"] = fine
-    return out, {"doppler_hz": fine, "code_phase_chips": a.code_phase_chips}
 
 
 def handover_writes(p, doppler_hz: float, code_phase_chips: float, inverted: bool = False):

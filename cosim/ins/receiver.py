@@ -5,6 +5,7 @@ unaided Kalman) over the INS paper's trajectory on the GNSS channel
 :class:`~cosim.gnss.config.GnssRunConfig`. The front end is the GNSS channel's (``gnss``)."""
 from __future__ import annotations
 
+from ..gnss.acq_options import ACQ_OPTIONS
 from ..gnss.config import GnssRunConfig
 from ..core.receivers import Arg, Benchmark, Figure, Option, Receiver, config_kwargs, register
 from ..core.validate import dumps
@@ -20,6 +21,7 @@ OPTIONS = (
     Option(_INS, "trajectory_csv"), Option(_INS, "pli_epochs"), Option(_INS, "pli_threshold"),
     Option(_RUN, "backend"), Option(_RUN, "dsp"), Option(_RUN, "dll_bn_hz"),
     Option(_RUN, "control_latency_cycles", flag="--latency"), Option(_RUN, "settle_s"),
+    *ACQ_OPTIONS,
     Arg("--json", action="store_true", help="print one JSON object"),
 )
 

@@ -17,6 +17,11 @@ which the DSP would read from the channel's sample counter; here they are the re
 code's epochs after the first tracked dump (within the code tracking error, < 1 us, of
 the channel's own).
 
+Time: the scenario (trajectory, INS, signal) starts with the acquisition's first sample;
+tracking starts where the acquisition stopped (:mod:`cosim.gnss.handover`, up to
+``--acq-limit-ms`` plus the refinement later), and ``duration_s``, ``settle_s`` and the
+series' times are the tracking's, from there (the aiding is read at scenario time).
+
 Figures (records after ``settle_s``): velocity error along the line of sight (the loop's
 Doppler estimate against the LOS Doppler plus the clock's frequency error, times
 -lambda), range error (code error x 293.05 m), PLI (prompt summed over ``pli_epochs``)
@@ -110,11 +115,12 @@ class InsRunConfig:
                               v_max_mps=self.v_max_mps, csv_path=self.trajectory_csv)
 
 
-def ins_signal(cfg: InsRunConfig, scenario: Scenario):
-    """The GNSS signal of the scenario: its LOS range as the generator's range table."""
+def ins_signal(cfg: InsRunConfig, scenario: Scenario, acq_span_s: float = 0.0):
+    """The GNSS signal of the scenario: its LOS range as the generator's range table, over
+    ``duration_s`` of tracking after ``acq_span_s`` of acquisition at most."""
     from cosim.gnss.dynamics import CsvProfile
     from cosim.gnss.signal import GnssSignalConfig
-    end = cfg.duration_s + 0.05
+    end = cfg.duration_s + acq_span_s + 0.05
     t = np.arange(0.0, end + 1e-3 / 2, 1e-3)
     if cfg.trajectory_csv is None:
         knots = np.array([k for seg in scenario.traj.jerk_segments() for k in seg])
@@ -154,6 +160,7 @@ def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:
 def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     """One closed-loop run (module doc); the JSON-safe result (``_series`` for plots)."""
     from cosim.gnss.config import GnssRunConfig, check_run_size
+    from cosim.gnss.handover import acquisition_span_ms
     from cosim.gnss.run import run_gnss
     from .ins_error import EpochAiding, InsAiding, InsErrors
     if not isinstance(cfg, InsRunConfig):
@@ -161,21 +168,31 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     run = replace(run_cfg or GnssRunConfig(), tracker=cfg.loop)
     traj = cfg.trajectory()
     sc = Scenario(traj, Geometry(), None, seed=cfg.seed)
-    sig = ins_signal(cfg, sc)
+    # the scenario's time runs from the acquisition's first sample; the tracking (and its
+    # scoring) from where the acquisition stopped, t_acq later (gen.t0_s below)
+    span_ms = acquisition_span_ms(run)
+    if cfg.trajectory_csv is not None:
+        a = traj._table()
+        if a[-1, 0] < cfg.duration_s + span_ms * 1e-3 + 0.05:
+            raise ValueError(f"trajectory_csv {cfg.trajectory_csv!r} ends at {a[-1, 0]:g} s: "
+                             f"it must cover the acquisition (up to {span_ms} ms with "
+                             f"--acq-limit-ms {run.acq_limit_ms}) + duration_s + 0.05 s")
+    sig = ins_signal(cfg, sc, span_ms * 1e-3)
     check_run_size(sig, run)        # before the INS solution and the record
-    ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + 20, seed=cfg.seed)
+    ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + span_ms + 20,
+                    seed=cfg.seed)
     held = {}
 
     def setup(gen, p, hand, backend):
         t0 = first_tracked_boundary_s(backend, p, hand, sig.spectrum_inverted)
         n = int(cfg.duration_s / CODE_PERIOD_S) + 2
-        b = received_epoch_boundaries(gen, t0, n)
-        b = b[b <= ins.t[-1]]
+        b = received_epoch_boundaries(gen, t0, n)       # tracking time
+        b = b[b + gen.t0_s <= ins.t[-1]]
         held.update(gen=gen, boundaries=b)
         opts = {"pli_epochs": cfg.pli_epochs}
         if cfg.loop != "aided-pll":
             opts["oscillator"] = cfg.oscillator
-        return {"aiding": EpochAiding(ins, b)}, opts
+        return {"aiding": EpochAiding(ins, b + gen.t0_s)}, opts
 
     r = run_gnss(sig, run, tracker_setup=setup, keep_track=True)
     track, n_b = r.pop("_track")
@@ -202,11 +219,12 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     ps = int(math.ceil(s0 / cfg.pli_epochs))
     jerk = np.zeros(k, bool)       # the profile's jerk segments (a CSV has none named)
     for a, b in (traj.jerk_segments() if cfg.trajectory_csv is None else ()):
-        jerk |= (t >= a) & (t < b)
+        jerk |= (t >= a - gen.t0_s) & (t < b - gen.t0_s)
     disc = np.asarray(h["disc_cycles"]).ravel()[:k]
     out = {"loop": cfg.loop, "cn0_dbhz": cfg.cn0_dbhz, "oscillator": cfg.oscillator,
            "duration_s": cfg.duration_s, "backend": run.backend, "dsp": run.dsp,
-           "seed": cfg.seed, "acquired": r["acquired"], "n_records": int(k),
+           "seed": cfg.seed, "acquired": r["acquired"], "t_track_start_s": gen.t0_s,
+           "n_records": int(k),
            "n_scored": int(keep.sum()),
            "vel_err_mean_mps": float(verr[keep].mean()), "vel_err_std_mps": float(verr[keep].std()),
            "range_err_mean_m": float(rerr[keep].mean()), "range_err_std_m": float(rerr[keep].std()),

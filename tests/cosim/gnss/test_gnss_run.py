@@ -38,7 +38,7 @@ def _check(out, settle_s):
     for d, r in out.items():
         a = r["acquired"]
         assert a["detected"]
-        assert abs(a["doppler_found_hz"] - a["doppler_true_hz"]) <= a["bin_width_hz"] / 2
+        assert abs(a["doppler_found_hz"] - a["doppler_dwell_true_hz"]) <= a["bin_width_hz"]
         assert abs(a["doppler_refined_hz"] - a["doppler_true_hz"]) < 3.0
         assert abs(a["code_phase_found_chips"] - a["code_phase_true_chips"]) <= 0.5
         assert r["cycle_slips"] == 0, d
