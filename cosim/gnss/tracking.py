@@ -37,7 +37,7 @@ import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 
-from .config import WORD_BITS, GnssRunConfig
+from .config import REPLAY_BLOCK, WORD_BITS, GnssRunConfig
 from .signal import GnssSignalGenerator
 
 __all__ = ["acquire_handover", "handover_writes", "Tracking", "ClosedLoop", "closed_loop",
@@ -229,7 +229,7 @@ def adc_words(codes) -> np.ndarray:
     return (np.asarray(codes).astype(np.int64) - 1) >> 1
 
 
-def record_boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
+def record_boundaries(p, bus_writes, n_records, n_total, block: int = REPLAY_BLOCK):
     """Dump-boundary sample of the records ``1 .. n_records`` of the HDL channel, from the
     code NCO's words in force (replayed exactly: the code generator's epochs only depend on
     the code word, PRN-independent, and the slew)."""
