@@ -159,10 +159,13 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     if not isinstance(cfg, InsRunConfig):
         raise ValueError(f"cfg must be an InsRunConfig, not {type(cfg).__name__}")
     run = replace(run_cfg or GnssRunConfig(), tracker=cfg.loop)
+    # before the range table, the INS solution and the record (all per epoch): the same
+    # duration and rate as the scenario's signal, its dynamics not yet built
+    from cosim.gnss.signal import GnssSignalConfig
+    check_run_size(GnssSignalConfig(duration_s=float(cfg.duration_s), seed=int(cfg.seed)), run)
     traj = cfg.trajectory()
     sc = Scenario(traj, Geometry(), None, seed=cfg.seed)
     sig = ins_signal(cfg, sc)
-    check_run_size(sig, run)        # before the INS solution and the record
     ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + 20, seed=cfg.seed)
     held = {}
 
