@@ -151,6 +151,17 @@ def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:
     return np.interp(c0 + CODE_LENGTH * np.arange(n + 1), chips, tg)
 
 
+def record_epoch_boundaries(gen, t0_s: float) -> np.ndarray:
+    """The received code epochs' boundaries (s) from ``t0_s`` to two epochs past the
+    record's end: every epoch the channel can dump in the record and the next one (a loop
+    asks for the next epoch's rate). Their count is the received code's, not the record's
+    milliseconds: the code Doppler makes them a few more or fewer (27 ppm at the paper's
+    8300 m/s: 4 over 150 s)."""
+    chips = gen.truth_at([t0_s, gen.cfg.duration_s])["code_chips_total"]
+    n = int(math.ceil((chips[1] - chips[0]) / CODE_LENGTH)) + 2
+    return received_epoch_boundaries(gen, t0_s, n)
+
+
 def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     """One closed-loop run (module doc); the JSON-safe result (``_series`` for plots)."""
     from cosim.gnss.config import GnssRunConfig, check_run_size
@@ -171,8 +182,7 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
 
     def setup(gen, p, hand, backend):
         t0 = first_tracked_boundary_s(backend, p, hand, sig.spectrum_inverted)
-        n = int(cfg.duration_s / CODE_PERIOD_S) + 2
-        b = received_epoch_boundaries(gen, t0, n)
+        b = record_epoch_boundaries(gen, t0)
         b = b[b <= ins.t[-1]]
         held.update(gen=gen, boundaries=b)
         opts = {"pli_epochs": cfg.pli_epochs}
