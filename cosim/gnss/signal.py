@@ -438,6 +438,11 @@ class SampleStream:
         self._w0, self._buf = 0, np.zeros(0)
         self._counted_to = 0
 
+    @property
+    def held_samples(self) -> int:
+        """Samples the stream holds now (its window)."""
+        return int(self._buf.size)
+
     def _make(self, a: int, b: int) -> np.ndarray:
         """Samples ``a .. b - 1``, their clips counted once (those past ``_counted_to``)."""
         x = self.gen.analog(a, b - a)
