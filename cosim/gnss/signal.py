@@ -423,10 +423,10 @@ class SampleStream:
     the samples after ``w1``, up to the next multiple of ``block_samples`` at or after
     ``n0 + n`` (so with ``block_samples`` a multiple of :data:`NOISE_CHUNK` every noise
     chunk is drawn once); any other read (backwards, or a jump) is generated afresh from
-    ``n0``. The window never holds more than ``block_samples`` plus two reads' samples,
-    whatever the record's length: memory is bounded by the block, not the duration. The
-    samples served do not depend on ``block_samples`` (the generator's samples are a
-    function of their index only).
+    ``n0``. The window ``[n0, end)`` never holds more than ``block_samples`` plus the
+    read's samples, whatever the record's length: memory is bounded by the block, not the
+    duration. The samples served do not depend on ``block_samples`` (the generator's
+    samples are a function of their index only).
     """
 
     def __init__(self, gen: GnssSignalGenerator, adc: bool = True, block_samples: int = 1 << 18):
