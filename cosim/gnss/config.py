@@ -253,8 +253,9 @@ class GnssRunConfig:
 #: the tracker's history, the HDL backends' writes and bus writes, the scoring's arrays, the
 #: INS solution). Measured: the tracking alone grows by 0.37 kB an epoch on the golden
 #: chain and 1.4 kB on the model (tracemalloc over two durations,
-#: tests/cosim/gnss/test_streaming.py); the INS paper's 150 s on the golden chain peaks at
-#: 0.49 GB resident, 1.6 kB an epoch above the process (this estimate: 0.69 GiB).
+#: tests/cosim/gnss/test_streaming.py); the INS paper's 150 s peaks at 0.49 GB resident
+#: on the golden chain and 0.66 GB on the model, 1.6 and 2.2 kB an epoch above the process
+#: (these estimates: 0.69 and 0.87 GiB).
 PROCESS_BYTES = 400 * 2 ** 20
 BLOCK_BYTES_PER_SAMPLE = 128
 REPLAY_BLOCK = 1 << 20
