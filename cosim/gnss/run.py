@@ -8,7 +8,11 @@ are the tracking's, from that sample on.
 Acquisition, hand-over and the tracking loop are :mod:`cosim.gnss.tracking`; the run's
 configuration is :mod:`cosim.gnss.config`. Backends: ``model`` (bit-exact channel + FIFO),
 ``pysim`` (Amaranth), ``verilator`` give the same bits (the test checks it); ``golden`` is
-the float64 correlator chain (:func:`cosim.gnss.tracking.golden_track`).
+the float64 correlator chain (:func:`cosim.gnss.tracking.golden_track`). Every backend
+streams the record (:func:`track_record`): the samples are generated and consumed a block at
+a time, so a run holds one block and its per-record outputs whatever its duration
+(:func:`cosim.gnss.config.run_memory_bytes` estimates that, :func:`check_run_size` refuses
+what would not fit).
 
 Scoring (per record, against the generator's truth at the record's dump boundary, after
 ``settle_s``): carrier phase error = signal minus NCO phase (cycles), unwrapped over the
@@ -23,7 +27,7 @@ on a data-bit edge, so its 10-record sums do not straddle one); ``cn0_est_dbhz``
 from __future__ import annotations
 
 import hashlib
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,7 +38,7 @@ from .handover import acquired_record
 from .signal import GnssSignalConfig
 from .tracking import SKIP_RECORDS, Tracking, adc_words, closed_loop, golden_track, record_boundaries
 
-__all__ = ["run_gnss", "tracker_report"]
+__all__ = ["run_gnss", "track_record", "TrackedRecord", "tracker_report"]
 
 
 # -- scoring ---------------------------------------------------------------------------------
@@ -105,6 +109,48 @@ def tracker_report(tracker) -> dict:
     return out
 
 
+@dataclass
+class TrackedRecord:
+    """The tracking of a whole record on one backend (:func:`track_record`): the DSP's
+    per-record observables (``track``), the dump-boundary sample of every tracked record,
+    the FIFO counters, the digests and (HDL backends) the pipeline's result."""
+
+    track: Tracking
+    boundaries: np.ndarray
+    counters: dict
+    digest: dict
+    pipeline: object = None
+
+
+def track_record(gen, run: GnssRunConfig, hand: dict, tracker_extra=None, *,
+                 keep_words: bool = False) -> TrackedRecord:
+    """Track the record of ``gen`` on ``run.backend`` from the hand-over ``hand``, streamed:
+    the golden chain reads it through a :class:`~cosim.gnss.signal.SampleStream`, the HDL
+    backends are fed it ``run.block_samples`` at a time and their dump boundaries are
+    replayed in blocks (:func:`~cosim.gnss.tracking.record_boundaries`), so what is held
+    is one block and the per-record outputs, whatever the duration."""
+    sig = gen.cfg
+    if run.backend == "golden":
+        track, n_b = golden_track(gen, run, hand, run.dsp, tracker_extra)
+        return TrackedRecord(track, n_b, {"fifo_dropped": 0, "dropped_reported": 0},
+                             {"dsp": track.digest()})
+    p = run.hdl_params(sig)
+    n = sig.n_samples
+    blocks = (adc_words(gen.samples(k, min(run.block_samples, n - k))[0])
+              for k in range(0, n, run.block_samples))
+    cl = closed_loop(run.backend, p, run, blocks, hand["doppler_hz"], hand["code_phase_chips"],
+                     inverted=sig.spectrum_inverted, cn0_dbhz=sig.cn0_dbhz,
+                     keep_words=keep_words, tracker_extra=tracker_extra)
+    track, pres, rx = cl.track, cl.pipeline, cl.rx_stats
+    n_b = record_boundaries(p, cl.bus_writes, track.n_seen, n)[SKIP_RECORDS:]
+    counters = {"fifo_dropped": int(pres.overflow_count),
+                "dropped_reported": int(rx["dropped_reported"]),
+                "broken_records": int(rx["broken_records"])}
+    digest = dict(pres.digest)
+    digest["dsp"] = track.digest()
+    return TrackedRecord(track, n_b, counters, digest, pres)
+
+
 def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
              keep_words: bool = False, tracker_setup=None, keep_track: bool = False) -> dict:
     """One GNSS run end to end (module doc); returns the JSON-safe result. With
@@ -136,25 +182,11 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     result = {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz, "duration_s": sig.duration_s,
               "tracker": run.tracker, "bn_hz": run.bn_hz, "backend": run.backend,
               "dsp": run.dsp, "acquired": acq}
-    if run.backend == "golden":
-        track, n_b = golden_track(gen, run, hand, run.dsp, extra)
-        result.update(fifo_dropped=0, dropped_reported=0)
-        digest = {"dsp": track.digest()}
-        pres = None
-    else:
-        n = sig.n_samples
-        blocks = (adc_words(gen.samples(k, min(run.block_samples, n - k))[0])
-                  for k in range(0, n, run.block_samples))
-        cl = closed_loop(run.backend, p, run, blocks, hand["doppler_hz"],
-                         hand["code_phase_chips"], inverted=sig.spectrum_inverted,
-                         cn0_dbhz=sig.cn0_dbhz, keep_words=keep_words, tracker_extra=extra)
-        track, pres, bus, rx = cl.track, cl.pipeline, cl.bus_writes, cl.rx_stats
-        n_b = record_boundaries(p, bus, track.n_seen, sig.n_samples)[SKIP_RECORDS:]
-        result.update(fifo_dropped=int(pres.overflow_count),
-                      dropped_reported=int(rx["dropped_reported"]),
-                      broken_records=int(rx["broken_records"]))
-        digest = dict(pres.digest)
-        digest["dsp"] = track.digest()
+    tr = track_record(gen, run, hand, extra, keep_words=keep_words)
+    track, n_b, pres = tr.track, tr.boundaries, tr.pipeline
+    result.update(tr.counters)
+    digest = dict(tr.digest)
+    if pres is not None:
         result["writes"] = len(pres.writes)
     score = _score(gen, track, n_b, run.settle_s)
     series = score.pop("_series")

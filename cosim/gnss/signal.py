@@ -414,29 +414,64 @@ class GnssSignalGenerator:
 
 
 class SampleStream:
-    """Sequential reads ``stream(n0, n)`` of a generator's samples (analog or ADC codes),
-    generated ``block_samples`` at a time: what a correlator consuming epoch after epoch
-    uses, without regenerating a noise chunk per epoch. Reads stop at the record's end
-    (a short or empty array)."""
+    """Reads ``stream(n0, n)`` of a generator's samples (analog or ADC codes), generated
+    in blocks: what a correlator consuming epoch after epoch uses. Reads stop at the
+    record's end (a short or empty array).
+
+    The stream holds a window of the record, ``[w0, w1)``. A read inside it is a slice; a
+    read that runs past its end keeps the window's tail from ``n0`` on and generates only
+    the samples after ``w1``, up to the next multiple of ``block_samples`` at or after
+    ``n0 + n`` (so with ``block_samples`` a multiple of :data:`NOISE_CHUNK` every noise
+    chunk is drawn once); any other read (backwards, or a jump) is generated afresh from
+    ``n0``. The window ``[n0, end)`` never holds more than ``block_samples`` plus the
+    read's samples, whatever the record's length: memory is bounded by the block, not the
+    duration. The samples served do not depend on ``block_samples`` (the generator's
+    samples are a function of their index only).
+    """
 
     def __init__(self, gen: GnssSignalGenerator, adc: bool = True, block_samples: int = 1 << 18):
+        if isinstance(block_samples, bool) or not isinstance(block_samples, (int, np.integer)) \
+                or block_samples < 1:
+            raise ValueError(f"block_samples must be an integer >= 1, not {block_samples!r}")
         self.gen, self.adc, self.block = gen, bool(adc), int(block_samples)
         self.n_clipped = 0      # clipped samples among those generated, each counted once
-        self._n0, self._buf = 0, np.zeros(0)
+        self._w0, self._buf = 0, np.zeros(0)
         self._counted_to = 0
 
+    @property
+    def held_samples(self) -> int:
+        """Samples the stream holds now (its window)."""
+        return int(self._buf.size)
+
+    def _make(self, a: int, b: int) -> np.ndarray:
+        """Samples ``a .. b - 1``, their clips counted once (those past ``_counted_to``)."""
+        x = self.gen.analog(a, b - a)
+        if not self.adc:
+            return x
+        new = min(b - a, max(0, self._counted_to - a))      # already counted before
+        if new == 0:
+            codes, clip = self.gen.quantise(x)
+        else:
+            old, _ = self.gen.quantise(x[:new])
+            codes, clip = self.gen.quantise(x[new:])
+            codes = np.concatenate([old, codes])
+        self.n_clipped += clip
+        self._counted_to = max(self._counted_to, b)
+        return codes
+
     def __call__(self, n0: int, n: int) -> np.ndarray:
-        n = max(0, min(n, self.gen.cfg.n_samples - n0))   # the record ends where it ends
-        if not (self._n0 <= n0 and n0 + n <= self._n0 + self._buf.size):
-            m = max(n, min(self.block, self.gen.cfg.n_samples - n0))
-            x = self.gen.analog(n0, m)
-            if self.adc:
-                new = min(m, max(0, self._counted_to - n0))   # already counted before
-                self.n_clipped += self.gen.quantise(x[new:])[1]
-                self._counted_to = max(self._counted_to, n0 + m)
-                x = self.gen.quantise(x)[0]
-            self._n0, self._buf = n0, x
-        return self._buf[n0 - self._n0:n0 - self._n0 + n]
+        total = self.gen.cfg.n_samples
+        n = max(0, min(n, total - n0))   # the record ends where it ends
+        w0, w1 = self._w0, self._w0 + self._buf.size
+        if not (w0 <= n0 and n0 + n <= w1):
+            end = min(total, -(-(n0 + n) // self.block) * self.block)
+            if w0 <= n0 <= w1:          # sequential: keep the tail, generate what follows
+                tail = self._buf[n0 - w0:]
+                self._buf = np.concatenate([tail, self._make(w1, end)])
+            else:
+                self._buf = self._make(n0, end)
+            self._w0 = n0
+        return self._buf[n0 - self._w0:n0 - self._w0 + n]
 
 
 def generate(cfg: GnssSignalConfig, block_samples: int = 1 << 18) -> GnssSignal:

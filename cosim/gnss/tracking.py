@@ -37,8 +37,9 @@ import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 
-from .config import WORD_BITS, GnssRunConfig
+from .config import REPLAY_BLOCK, WORD_BITS, GnssRunConfig
 from .handover import acquire_handover
+from .signal import GnssSignalGenerator
 
 __all__ = ["acquire_handover", "handover_writes", "Tracking", "TrackingSink", "PipelineDsp",
            "record_observables", "make_tracker_for", "ClosedLoop", "closed_loop", "adc_words",
@@ -229,14 +230,15 @@ def adc_words(codes) -> np.ndarray:
     return (np.asarray(codes).astype(np.int64) - 1) >> 1
 
 
-def record_boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
+def record_boundaries(p, bus_writes, n_records, n_total, block: int = REPLAY_BLOCK):
     """Dump-boundary sample of the records ``1 .. n_records`` of the HDL channel, from the
     code NCO's words in force (replayed exactly: the code generator's epochs only depend on
     the code word, PRN-independent, and the slew)."""
     from hdl.gnss.model import GnssChannelModel
     # Run the bit-exact channel on zero samples with the same bus writes: its records come
-    # at the same cycles (the code NCO does not see the samples). In blocks (a 150 s record
-    # is 2.5e9 samples: one array of them would not fit), until n_records are out.
+    # at the same cycles (the code NCO does not see the samples). In blocks of ``block``
+    # samples (REPLAY_BLOCK: ~25 B a sample of the model's temporaries; a 150 s record is
+    # 2.5e9 samples), until n_records are out.
     m = GnssChannelModel(p)
     out, got, k = [], 0, 0
     while got < n_records and k < n_total:
@@ -252,7 +254,10 @@ def record_boundaries(p, bus_writes, n_records, n_total, block: int = 1 << 22):
 def golden_track(gen, run, hand, arith_name, tracker_extra=None):
     """Track the record of ``gen`` on the float64 correlator chain from the hand-over ``hand``,
     the tracker of ``run`` in ``arith_name`` arithmetic, one epoch of loop latency; returns
-    the :class:`Tracking` and the dump-boundary sample of every tracked record."""
+    the :class:`Tracking` and the dump-boundary sample of every tracked record. The record
+    is streamed (:class:`~cosim.gnss.signal.SampleStream`, ``run.block_samples`` at a
+    time, one epoch correlated per read): what is held is one block and the per-record
+    outputs, whatever the duration; the bits do not depend on ``run.block_samples``."""
     from dsp.gnss.correlator import GoldenCorrelator
     sig = gen.cfg
     p = run.hdl_params(sig)

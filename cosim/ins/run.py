@@ -157,6 +157,17 @@ def received_epoch_boundaries(gen, t0_s: float, n: int) -> np.ndarray:
     return np.interp(c0 + CODE_LENGTH * np.arange(n + 1), chips, tg)
 
 
+def record_epoch_boundaries(gen, t0_s: float) -> np.ndarray:
+    """The received code epochs' boundaries (s) from ``t0_s`` to two epochs past the
+    record's end: every epoch the channel can dump in the record and the next one (a loop
+    asks for the next epoch's rate). Their count is the received code's, not the record's
+    milliseconds: the code Doppler makes them a few more or fewer (27 ppm at the paper's
+    8300 m/s: 4 over 150 s)."""
+    chips = gen.truth_at([t0_s, gen.cfg.duration_s])["code_chips_total"]
+    n = int(math.ceil((chips[1] - chips[0]) / CODE_LENGTH)) + 2
+    return received_epoch_boundaries(gen, t0_s, n)
+
+
 def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     """One closed-loop run (module doc); the JSON-safe result (``_series`` for plots)."""
     from cosim.gnss.config import GnssRunConfig, check_run_size
@@ -166,11 +177,16 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     if not isinstance(cfg, InsRunConfig):
         raise ValueError(f"cfg must be an InsRunConfig, not {type(cfg).__name__}")
     run = replace(run_cfg or GnssRunConfig(), tracker=cfg.loop)
+    # before the range table, the INS solution and the record (all per epoch): the same
+    # duration and rate as the scenario's signal, its dynamics not yet built
+    # (the scenario's time runs from the acquisition's first sample; the tracking and its
+    # scoring from where the acquisition stopped, t_acq later: gen.t0_s below)
+    from cosim.gnss.signal import GnssSignalConfig
+    span_ms = acquisition_span_ms(run)
+    check_run_size(GnssSignalConfig(duration_s=float(cfg.duration_s) + span_ms * 1e-3,
+                                    seed=int(cfg.seed)), run)
     traj = cfg.trajectory()
     sc = Scenario(traj, Geometry(), None, seed=cfg.seed)
-    # the scenario's time runs from the acquisition's first sample; the tracking (and its
-    # scoring) from where the acquisition stopped, t_acq later (gen.t0_s below)
-    span_ms = acquisition_span_ms(run)
     if cfg.trajectory_csv is not None:
         a = traj._table()
         if a[-1, 0] < cfg.duration_s + span_ms * 1e-3 + 0.05:
@@ -178,15 +194,13 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
                              f"it must cover the acquisition (up to {span_ms} ms with "
                              f"--acq-limit-ms {run.acq_limit_ms}) + duration_s + 0.05 s")
     sig = ins_signal(cfg, sc, span_ms * 1e-3)
-    check_run_size(sig, run)        # before the INS solution and the record
     ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + span_ms + 20,
                     seed=cfg.seed)
     held = {}
 
     def setup(gen, p, hand, backend):
         t0 = first_tracked_boundary_s(backend, p, hand, sig.spectrum_inverted)
-        n = int(cfg.duration_s / CODE_PERIOD_S) + 2
-        b = received_epoch_boundaries(gen, t0, n)       # tracking time
+        b = record_epoch_boundaries(gen, t0)            # tracking time
         b = b[b + gen.t0_s <= ins.t[-1]]
         held.update(gen=gen, boundaries=b)
         opts = {"pli_epochs": cfg.pli_epochs}

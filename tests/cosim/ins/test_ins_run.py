@@ -204,3 +204,27 @@ def test_boundary_replay_in_blocks_equals_one_pass():
     assert one.size == 30
     for block in (999, 2046, 7000):
         np.testing.assert_array_equal(record_boundaries(SMALL, w, 30, 31 * 2046, block=block), one)
+
+
+def test_the_aiding_table_covers_every_received_code_epoch_of_the_paper_record():
+    # the paper's 150 s, closing on the satellite at up to 8300 m/s: the received code has
+    # more epochs than the record's milliseconds (its Doppler, 27 ppm), and the loop asks
+    # for the next epoch's rate; the table holds them all (truth only, no samples)
+    from cosim.gnss.signal import GnssSignalGenerator
+    from cosim.ins.ins_error import EpochAiding, InsAiding, InsErrors
+    from cosim.ins.run import (first_tracked_boundary_s, ins_signal, record_epoch_boundaries)
+    from cosim.ins.trajectory import Geometry, Scenario
+    cfg = InsRunConfig()
+    sc = Scenario(cfg.trajectory(), Geometry(), None, seed=cfg.seed)
+    gen = GnssSignalGenerator(ins_signal(cfg, sc))
+    tr = gen.truth_at([0.0])
+    hand = {"doppler_hz": float(tr["doppler_hz"][0]),
+            "code_phase_chips": float(tr["code_phase_chips"][0])}
+    t0 = first_tracked_boundary_s("golden", None, hand, False)
+    b = record_epoch_boundaries(gen, t0)
+    assert np.all(np.diff(b) > 0)
+    assert b[-4] < cfg.duration_s <= b[-3]      # the last epoch that starts in the record
+    assert b.size - 1 > int(cfg.duration_s / 1e-3) + 2      # more than the record's ms
+    ins = InsAiding(sc, InsErrors(), 1e-3, int(round(cfg.duration_s / 1e-3)) + 20, seed=cfg.seed)
+    aid = EpochAiding(ins, b[b <= ins.t[-1]])
+    assert aid.rate.size == b.size - 1
