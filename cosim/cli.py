@@ -298,6 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_hdl(sub)
     from .gnss.acquire_cli import add_parser as _add_gnss_acquire
     _add_gnss_acquire(sub, _parser)
+    from .gnss.track_cli import add_parser as _add_gnss_track
+    _add_gnss_track(sub, _parser)
     return p
 
 

@@ -29,13 +29,9 @@ def _prns(text: str) -> list[int]:
     return sorted(set(out))
 
 
-def add_parser(sub, make_parser) -> None:
-    """Register ``gnss-acquire`` on the subparsers ``sub`` (``make_parser(sub, name, **kw)``
-    adds the common options, as in :mod:`cosim.cli`)."""
-    p = make_parser(sub, "gnss-acquire",
-                    help="acquire every GPS L1 C/A PRN in a sample file (int8, int8-iq, "
-                         "int16-iq, cf32): the satellites found with Doppler, code phase, "
-                         "C/N0")
+def add_file_options(p) -> None:
+    """The recording's options (``--file --format --fs-hz --if-hz --invert-spectrum
+    --adc-map``), shared by ``gnss-acquire`` and ``gnss-track``; :func:`open_file` opens it."""
     p.add_argument("--file", required=True, help="the recording (raw samples, no header)")
     p.add_argument("--format", required=True, choices=list(FORMATS),
                    help="int8 real; int8-iq / int16-iq interleaved I, Q; cf32 complex float32")
@@ -48,11 +44,37 @@ def add_parser(sub, make_parser) -> None:
     p.add_argument("--adc-map", default=None,
                    help="odd:B, int:B, float or float:B (default by format: " +
                         ", ".join(f"{k} {v}" for k, v in DEFAULT_ADC_MAP.items()) + ")")
+
+
+def add_search_options(p) -> None:
+    """The search's options (``--prns --pfa --max-doppler-hz``), shared by ``gnss-acquire``
+    and ``gnss-track``."""
     p.add_argument("--prns", default="1-32", help="PRNs to search, e.g. 1-32 or 3,7,10-12")
     p.add_argument("--pfa", type=float, default=1e-3,
                    help="false-alarm probability of one PRN's first dwells (before "
                         "verification)")
     p.add_argument("--max-doppler-hz", type=float, default=5000.0, help="search +- Doppler (Hz)")
+
+
+def open_file(a) -> SampleFile:
+    """The recording of parsed :func:`add_file_options` (every check before any work)."""
+    return SampleFile(a.file, a.format, a.fs_hz, a.if_hz, a.invert_spectrum, a.adc_map)
+
+
+def parse_prns(text: str) -> list[int]:
+    """``--prns`` text (``1-32``, ``3,7,10-12``) -> sorted PRNs."""
+    return _prns(text)
+
+
+def add_parser(sub, make_parser) -> None:
+    """Register ``gnss-acquire`` on the subparsers ``sub`` (``make_parser(sub, name, **kw)``
+    adds the common options, as in :mod:`cosim.cli`)."""
+    p = make_parser(sub, "gnss-acquire",
+                    help="acquire every GPS L1 C/A PRN in a sample file (int8, int8-iq, "
+                         "int16-iq, cf32): the satellites found with Doppler, code phase, "
+                         "C/N0")
+    add_file_options(p)
+    add_search_options(p)
     p.add_argument("--stages", default=None,
                    help="dwell schedule, comma-separated TxK[@a/b] (coherent ms x sums @ "
                         "offsets ms), e.g. 1x10,5x6@0/2,10x4@0/3/6 (default: 1x10,5x6@0/2)")
@@ -70,7 +92,7 @@ def run(a) -> int:
     check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
     stages = DEFAULT_STAGES if a.stages is None else \
         tuple(Stage.parse(t) for t in a.stages.split(","))
-    f = SampleFile(a.file, a.format, a.fs_hz, a.if_hz, a.invert_spectrum, a.adc_map)
+    f = open_file(a)
     t0 = time.time()
     rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
                      a.pfa, a.max_doppler_hz, stages, a.min_rate_hz)

@@ -166,6 +166,11 @@ def _gnss_tracking(out, quick: bool = False, jobs: int | None = None) -> dict:
     return gnss_tracking(out, quick=quick)
 
 
+def _gnss_throughput(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .track_bench import gnss_throughput
+    return gnss_throughput(out, quick=quick)
+
+
 def _aukf(out, quick: bool = False, jobs: int | None = None) -> dict:
     from .study_aukf import bench as aukf_bench
     return aukf_bench(out, quick=quick)
@@ -178,6 +183,7 @@ def _aukf_convergence(out, quick: bool = False, jobs: int | None = None) -> dict
 
 #: ``python -m cosim bench <name>`` of the GNSS receiver (the AUKF's among them).
 BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_gnss_tracking),
+              "gnss-throughput": Benchmark(_gnss_throughput),
               "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence)}
 
 

@@ -40,8 +40,9 @@ from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 from .config import WORD_BITS, GnssRunConfig
 from .signal import GnssSignalGenerator
 
-__all__ = ["acquire_handover", "handover_writes", "Tracking", "ClosedLoop", "closed_loop",
-           "adc_words", "record_boundaries", "golden_track", "SKIP_RECORDS"]
+__all__ = ["acquire_handover", "handover_writes", "Tracking", "TrackingSink", "PipelineDsp",
+           "record_observables", "make_tracker_for", "ClosedLoop", "closed_loop", "adc_words",
+           "record_boundaries", "golden_track", "SKIP_RECORDS"]
 
 #: Records not tracked after reset: the reset epoch, and the epoch holding the code slew.
 SKIP_RECORDS = 2
@@ -114,6 +115,10 @@ def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_
     return make_tracker(run.tracker, ctx, arith, **opts), arith
 
 
+#: The tracker of a run for a channel (public name of the factory closed_loop uses).
+make_tracker_for = _make_tracker
+
+
 class Tracking:
     """The DSP's side of the loop: records in, tracker, NCO words out; keeps the
     observables of every record (dump boundary sample, NCO phases, prompt, Doppler)."""
@@ -149,39 +154,66 @@ class Tracking:
         return h.hexdigest()[:16]
 
 
-class _PipelineDsp:
-    """The pipeline's DSP callback: reassemble the FIFO records, track each."""
+def record_observables(p, d: dict):
+    """A record's observables for :meth:`Tracking.record`: the carrier NCO phase (cycles),
+    the prompt's code phase at its boundary (chips) and the six correlations."""
+    from hdl.gnss.params import ACC_FIELDS
+    return (d["carr_phase"] / 2.0 ** p.carr_phase_bits,
+            d["code_phase"] / 2.0 ** p.code_phase_bits, [d[k] for k in ACC_FIELDS])
 
-    def __init__(self, p, track: Tracking):
+
+class TrackingSink:
+    """One channel's DSP: a record (its fields) in, the tracker's carrier and code words out
+    as register writes ``[(carr_reg, word), (code_reg, word)]`` (None for a skipped
+    record)."""
+
+    def __init__(self, p, track: Tracking, regs=("carr_freq", "code_freq")):
+        self.p, self.track, self.regs = p, track, regs
+
+    def __call__(self, d: dict):
+        # (the boundary sample is not in the record: record_boundaries recomputes it)
+        r = self.track.record(None, *record_observables(self.p, d))
+        if r is None:
+            return None
+        return [(self.regs[0], r[0]), (self.regs[1], r[1])]
+
+
+class PipelineDsp:
+    """The pipeline's DSP callback: reassemble the FIFO records and hand each to the sink of
+    its channel (``sinks[channel]``, the record's ``channel`` field; 0 without one), a
+    callable ``sink(fields) -> writes or None``. The writes of a sink's last record of the
+    call go back, channel by channel in channel order (a sink's earlier outputs in the same
+    call are superseded, as the registers would be). ``before(call)``, if given, is called
+    first on every call (e.g. to see the bus writes made so far)."""
+
+    def __init__(self, p, sinks: dict, before=None):
         from dsp.records import RecordRxState
-        self.p, self.track = p, track
+        self.p, self.sinks, self.before = p, sinks, before
         self.fifo = p.fifo
         self.rx = RecordRxState()
-        self.fields = p.record.fields
+        self.layout = p.record          # (derived on every access of the property)
+        self.fields = self.layout.fields
 
     def __call__(self, call):
         from dsp.records import receive_records
-        from hdl.gnss.params import ACC_FIELDS
         p, fp = self.p, self.fifo
+        if self.before is not None:
+            self.before(call)
         if not call.words.size:
             return ()
         b = receive_records(call.words, width=fp.width, record_words=fp.record_words,
                             parity=fp.parity, state=self.rx)
-        out = None
+        out = {}
         for row in b.records:
             v = 0
             for j, w in enumerate(row):
                 v |= int(w) << (j * fp.width)
-            d = p.record.unpack(v)
-            # (the boundary sample is not in the record: record_boundaries recomputes it)
-            r = self.track.record(None, d["carr_phase"] / 2.0 ** p.carr_phase_bits,
-                                  d["code_phase"] / 2.0 ** p.code_phase_bits,
-                                  [d[k] for k in ACC_FIELDS])
+            d = self.layout.unpack(v)
+            ch = d.get("channel", 0)
+            r = self.sinks[ch](d)
             if r is not None:
-                out = r
-        if out is None:
-            return ()
-        return [("carr_freq", out[0]), ("code_freq", out[1])]
+                out[ch] = r
+        return [w for ch in sorted(out) for w in out[ch]]
 
 
 @dataclass
@@ -209,7 +241,7 @@ def closed_loop(backend: str, p, run: GnssRunConfig, blocks, doppler_hz: float,
     tracker, arith = _make_tracker(run, p.fs_hz, p.if_hz, inverted, cn0_dbhz, doppler_hz,
                                    spacing, run.dsp, tracker_extra)
     track = Tracking(tracker, arith, p, SKIP_RECORDS)
-    dsp = _PipelineDsp(p, track)
+    dsp = PipelineDsp(p, {0: TrackingSink(p, track)})
     svc = run.service(p.fs_hz)
     with open_gnss(backend, p) as fe:
         pipe = Pipeline(fe, svc, dsp, compute_cycles=run.compute_cycles,

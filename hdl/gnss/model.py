@@ -49,6 +49,7 @@ Record layout (LSB first): ``ie, qe, ip, qp, il, ql`` (signed ``acc_width`` each
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -171,6 +172,13 @@ def _channel_kernel(x, scyc, wc, wa, wv, wi, st, ring, table, cos_t, sin_t, K, d
     return nrec, wi
 
 
+@functools.lru_cache(maxsize=64)
+def _layout(params: GnssChannelParams):
+    """(acc_width, record layout, register map, latency) of ``params``, derived once (the
+    properties rebuild them on every access)."""
+    return params.acc_width, params.record, params.registers, params.latency
+
+
 @dataclass
 class ChannelRecords:
     """Records a model step produced (before the FIFO)."""
@@ -180,7 +188,7 @@ class ChannelRecords:
 
     def values(self, params: GnssChannelParams, channel: int | None = None) -> list[int]:
         out = []
-        w = params.acc_width
+        w, layout, _, _ = _layout(params)
         for row in self.fields:
             d = {n: int(v) for n, v in zip(ACC_FIELDS, row[:6])}
             for n in ACC_FIELDS:   # the hardware's accumulators wrap
@@ -188,7 +196,7 @@ class ChannelRecords:
             d.update(epoch=int(row[6]), carr_phase=int(row[7]), code_phase=int(row[8]))
             if params.channel_bits:
                 d["channel"] = 0 if channel is None else int(channel)
-            out.append(params.record.pack(d))
+            out.append(layout.pack(d))
         return out
 
 
@@ -212,6 +220,7 @@ class GnssChannelModel:
             GnssChannelModel._table = ca_code_table().astype(np.int64)
         cos_t, sin_t = nco_full_tables(p.nco)
         self._cos, self._sin = cos_t.astype(np.int64), sin_t.astype(np.int64)
+        self._trunc = p.nco.trunc_bits
         st = np.zeros(_NSTATE, np.int64)
         cw, kw = p.carr_word(p.if_hz), p.code_word()
         st[_CF] = st[_SH_CODE] = kw
@@ -238,6 +247,11 @@ class GnssChannelModel:
             Input cycle of each sample (default: one per cycle, continuing from the last
             step).
         """
+        x, scyc = self._prepare(samples, cycles)
+        return self._advance(x, scyc, writes)
+
+    def _prepare(self, samples, cycles):
+        """The checked samples (int64, the 1-bit map applied) and their input cycles."""
         p = self.params
         x = np.asarray(samples)
         if x.dtype.kind not in "iu":
@@ -252,7 +266,12 @@ class GnssChannelModel:
             scyc = np.arange(self.next_cycle, self.next_cycle + x.size, dtype=np.int64)
         else:
             scyc = np.ascontiguousarray(cycles, dtype=np.int64)
-        regs = p.registers
+        return x, scyc
+
+    def _advance(self, x, scyc, writes) -> ChannelRecords:
+        """:meth:`step` on prepared samples (:meth:`_prepare`)."""
+        p = self.params
+        _, _, regs, lat = _layout(p)
         w = [(int(c), int(a), regs.check_write(int(a), v)) for c, a, v in writes]
         if w:
             new = np.array(w, np.int64)
@@ -266,7 +285,7 @@ class GnssChannelModel:
             x, scyc, np.ascontiguousarray(wv[:, 0]), np.ascontiguousarray(wv[:, 1]),
             np.ascontiguousarray(wv[:, 2]), 0, self.state, self.ring, self._table, self._cos,
             self._sin, p.dump_epochs, p.half_spacing, p.code_phase_bits, p.carr_phase_bits,
-            p.nco.trunc_bits, (1 << p.epoch_bits) - 1, p.latency, rec_cyc, rec_f)
+            self._trunc, (1 << p.epoch_bits) - 1, lat, rec_cyc, rec_f)
         self._writes = wv[wi:]
         self.n_samples += x.size
         if x.size:
@@ -374,8 +393,10 @@ class GnssArrayModel:
                                  f"channels")
             per[ch].append((c, reg, v))
         cyc, vals, chans = [], [], []
-        for ch, m in enumerate(self.models):
-            r = m.step(samples, per[ch], cycles=cycles)
+        # the samples are checked once for every channel (all at the same cycle)
+        x, scyc = self.models[0]._prepare(samples, cycles)
+        recs = [m._advance(x, scyc, w) for m, w in zip(self.models, per)]
+        for ch, r in enumerate(recs):
             cyc.append(r.cycles)
             vals += r.values(self.params, ch)
             chans.append(np.full(r.cycles.size, ch))
@@ -384,7 +405,7 @@ class GnssArrayModel:
         if self.arbiter:
             # A later sample (cycle >= next_cycle) makes a record pending from
             # next_cycle + latency + 1 at the earliest.
-            horizon = self.models[0].next_cycle + self.params.latency + 1
+            horizon = self.models[0].next_cycle + _layout(self.params)[3] + 1
             return self._arb.feed(cyc + 1, chans, vals, horizon)
         order = np.argsort(cyc, kind="stable")
         return cyc[order], [vals[j] for j in order]

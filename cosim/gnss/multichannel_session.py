@@ -1,0 +1,181 @@
+"""The 12-channel GNSS array as a persistent session: one ADC stream, one record FIFO.
+
+:class:`GnssArrayModelSession` is the bit-exact array (:class:`hdl.gnss.model.GnssArrayModel`:
+``channels`` channels on one input, the arbiter, one FIFO, its state carried) with the ports
+of :class:`hdl.gnss.channel.GnssChannelArray` (``reg_we``, ``reg_addr`` = ``4 * channel +
+reg``, ``reg_data``, ``overflow_count``), so the same port writes drive it, the Amaranth
+simulation and Verilator. :func:`open_gnss_array` opens the array on a backend behind a
+register session whose registers are named per channel (:func:`register_name`:
+``ch3.carr_freq``); a single channel (``channels == 1``) is the plain channel of
+:func:`cosim.gnss.session.open_gnss` (registers ``carr_freq``, ...).
+
+The arbiter grants a record only once no lower channel's record can still be pending before
+it (:class:`hdl.gnss.model.Arbiter`): records of the last samples wait until the input is
+declared ended (:meth:`GnssArrayModelSession.end_input`), after which only idle cycles may
+be stepped.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.session import BusModelSession, RegisterSession, fifo_step
+
+__all__ = ["GnssArrayModelSession", "array_registers", "register_name", "open_gnss_array",
+           "array_channel_params"]
+
+
+def register_name(channels: int, channel: int, reg: str) -> str:
+    """The register session's name of register ``reg`` of ``channel`` (plain ``reg`` for a
+    single channel, ``ch<channel>.<reg>`` in an array)."""
+    return reg if channels == 1 else f"ch{channel}.{reg}"
+
+
+def array_channel_params(params, channels: int):
+    """``params`` of one channel, as the array numbers its records (``channel_bits`` set for
+    ``channels > 1``; :func:`hdl.gnss.channel.array_params`)."""
+    from hdl.gnss.channel import array_params
+    if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) \
+            or not 1 <= channels <= 64:
+        raise ValueError(f"--channels must be an integer in [1, 64], not {channels!r}")
+    if channels == 1:
+        return params
+    return array_params(params, int(channels))
+
+
+def array_registers(params, channels: int):
+    """The register map of an array of ``channels`` (:attr:`GnssChannelParams.registers` of
+    every channel at ``4 * channel + reg``, names by :func:`register_name`)."""
+    from dsp.register_map import Register, RegisterMap
+    regs = []
+    for ch in range(channels):
+        for r in params.registers.registers:
+            regs.append(Register(register_name(channels, ch, r.name), 4 * ch + r.address,
+                                 r.width, r.signed, r.minimum, r.maximum, r.parts))
+    return RegisterMap(f"GNSS array of {channels}", tuple(regs))
+
+
+class GnssArrayModelSession(BusModelSession):
+    """The bit-exact :class:`hdl.gnss.channel.GnssChannelArray` as a session (module doc).
+
+    Parameters
+    ----------
+    params : GnssChannelParams
+        With the array's ``channel_bits`` (:func:`array_channel_params`).
+    channels : int
+        2..64.
+    """
+
+    backend = "model"
+    what = "GNSS channel array model"
+
+    def __init__(self, params, channels: int):
+        from hdl.gnss.model import GnssArrayModel
+        from hdl.gnss.params import GnssChannelParams
+        if not isinstance(params, GnssChannelParams):
+            raise ValueError(f"params must be a GnssChannelParams, not {type(params).__name__}")
+        if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) \
+                or not 2 <= channels <= 64 or (1 << params.channel_bits) < channels:
+            raise ValueError(f"an array session needs 2..64 channels that its channel_bits "
+                             f"({params.channel_bits}) can number, not {channels!r}")
+        super().__init__()
+        self.params, self.channels = params, int(channels)
+        self.model = GnssArrayModel(params, self.channels)
+        addr_bits = 2 + max(1, (self.channels - 1).bit_length())
+        self._widths = {"reg_we": 1, "reg_addr": addr_bits, "reg_data": params.reg_data_width}
+        self._fifo = params.fifo
+        rw = self._fifo.record_words
+        self._carry_wc = np.zeros(0, np.int64)
+        self._carry_w = np.zeros((0, rw), np.int64)
+        self._ended = False
+        self.bus_writes: list[tuple[int, int, int]] = []
+        self.n_records = 0
+
+    def end_input(self) -> None:
+        """No sample follows: the records still waiting for the arbiter are granted (their
+        cycles are final, as no later record can compete), so the next idle steps read
+        them out of the FIFO."""
+        if not self._ended:
+            self._ended = True
+            self._add(*self.model.flush())
+
+    def _add(self, rc, vals) -> None:
+        fp = self._fifo
+        rw, m = fp.record_words, (1 << fp.width) - 1
+        self.n_records += len(vals)
+        new = np.array([[(v >> (j * fp.width)) & m for j in range(rw)] for v in vals],
+                       np.int64).reshape(-1, rw)
+        wc = np.r_[self._carry_wc, np.asarray(rc, np.int64)]
+        w = np.concatenate([self._carry_w, new])
+        order = np.argsort(wc, kind="stable")
+        self._carry_wc, self._carry_w = wc[order], w[order]
+
+    def _bus_cycles(self, writes, start, stop):
+        out = []
+        c, k = start, 0
+        while c < stop:
+            while k < len(writes) and writes[k][0] <= c:
+                _, port, v = writes[k]
+                if not 0 <= v < 1 << self._widths[port]:
+                    raise ValueError(f"{port} takes unsigned {self._widths[port]}-bit values, "
+                                     f"not {v}")
+                self._bus[port] = v
+                k += 1
+            nxt = writes[k][0] if k < len(writes) else stop
+            if self._bus["reg_we"]:
+                out += [(cc, self._bus["reg_addr"], self._bus["reg_data"])
+                        for cc in range(c, nxt)]
+            c = nxt
+        return out
+
+    def _step(self, queue, ready, n, writes):
+        start, stop = self.cycle, self.cycle + n
+        x = queue[:n]
+        if x.size and self._ended:
+            raise ValueError("the array's input was declared ended (end_input): no more "
+                             "samples")
+        bus = self._bus_cycles(writes, start, stop)
+        self.bus_writes += bus
+        if x.size or bus:
+            self._add(*self.model.step(x, bus, cycles=np.arange(start, start + x.size,
+                                                                 dtype=np.int64)))
+        now = self._carry_wc < stop
+        wc, w = self._carry_wc[now], self._carry_w[now]
+        self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
+        words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, self._fifo,
+                                                    self._fifo_state)
+        return words, cycles, x.size
+
+
+class GnssArrayRegisterSession(RegisterSession):
+    """Per-channel register writes (:func:`array_registers`) on an array session of any
+    backend, as bus pulses (:class:`cosim.core.session.RegisterSession`)."""
+
+    def __init__(self, inner, params, channels: int):
+        super().__init__(inner, array_registers(params, channels))
+        self.channels = channels
+
+    def end_input(self) -> None:
+        """The input has ended (:meth:`GnssArrayModelSession.end_input`; the HDL backends
+        need nothing)."""
+        if hasattr(self.inner, "end_input"):
+            self.inner.end_input()
+
+
+def open_gnss_array(backend: str, params, channels: int):
+    """``channels`` GNSS channels on one input stream on ``backend`` (``model``, ``pysim``,
+    ``verilator``) with per-channel register writes (module doc). ``params``: the array's
+    (:func:`array_channel_params`)."""
+    from ..backends.factory import BACKENDS, open_stream_session
+    from .session import open_gnss
+    if backend not in BACKENDS:
+        raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    if channels == 1:
+        return open_gnss(backend, params)
+    if backend == "model":
+        inner = GnssArrayModelSession(params, channels)
+    else:
+        from hdl.gnss.channel import GnssChannelArray
+        inner = open_stream_session(backend, GnssChannelArray(params, channels),
+                                    name=f"gnss_channel_array{channels}",
+                                    inputs={"reg_we": 0, "reg_addr": 0, "reg_data": 0})
+    return GnssArrayRegisterSession(inner, params, channels)
