@@ -44,6 +44,33 @@ from .files import BLOCK_SAMPLES, FORMATS, AdcMap, check_format, check_if, sampl
 from .signal import CHIPS_PER_BIT, NOISE_CHUNK, if_kernel, agc_step_sigma
 
 
+def noise_block(seed: int, n0: int, n: int, stream: int) -> np.ndarray:
+    """Unit-variance white Gaussian noise, samples ``n0 .. n0 + n - 1`` of component
+    ``stream`` (0: real or I, 1: Q): chunk ``c`` of :data:`cosim.gnss.signal.NOISE_CHUNK`
+    samples from ``SeedSequence(seed, spawn_key=(0, c, stream))``, so any block is the same
+    whatever the blocks around it."""
+    out = np.empty(n)
+    pos = 0
+    for c in range(n0 // NOISE_CHUNK, (n0 + n - 1) // NOISE_CHUNK + 1):
+        z = np.random.default_rng(np.random.SeedSequence(
+            int(seed), spawn_key=(0, c, stream))).standard_normal(NOISE_CHUNK)
+        a, b = max(n0 - c * NOISE_CHUNK, 0), min(n0 + n - c * NOISE_CHUNK, NOISE_CHUNK)
+        out[pos:pos + b - a] = z[a:b]
+        pos += b - a
+    return out
+
+
+def adc_levels(x: np.ndarray, amap: AdcMap, step: float | None) -> np.ndarray:
+    """The ADC map's values of real samples ``x`` with the AGC step ``step`` (module notes;
+    ``step`` None: no quantiser, the floats as they are)."""
+    if step is None:
+        return x
+    b = amap.bits
+    if amap.kind == "odd":
+        return amap.quantise(x, step)
+    return np.clip(np.round(x / step), -2.0 ** (b - 1), 2.0 ** (b - 1) - 1)
+
+
 @dataclass(frozen=True)
 class SatelliteSpec:
     """One satellite of a synthetic recording: PRN, Doppler (Hz), code phase at sample 0
@@ -126,15 +153,7 @@ class SyntheticRecording:
             self._bits.append((bit0, bits))
 
     def _noise(self, n0: int, n: int, stream: int) -> np.ndarray:
-        out = np.empty(n)
-        pos = 0
-        for c in range(n0 // NOISE_CHUNK, (n0 + n - 1) // NOISE_CHUNK + 1):
-            z = np.random.default_rng(np.random.SeedSequence(
-                self.seed, spawn_key=(0, c, stream))).standard_normal(NOISE_CHUNK)
-            a, b = max(n0 - c * NOISE_CHUNK, 0), min(n0 + n - c * NOISE_CHUNK, NOISE_CHUNK)
-            out[pos:pos + b - a] = z[a:b]
-            pos += b - a
-        return out
+        return noise_block(self.seed, n0, n, stream)
 
     def _carrier(self, i: int, n0: int, n: int, quarter: bool) -> np.ndarray:
         s = self.satellites[i]
@@ -163,13 +182,7 @@ class SyntheticRecording:
         return x + 1j * y
 
     def _adc(self, x: np.ndarray) -> np.ndarray:
-        amap = self.adc_map
-        if self.step is None:
-            return x
-        b = amap.bits
-        if amap.kind == "odd":
-            return amap.quantise(x, self.step)
-        return np.clip(np.round(x / self.step), -2.0 ** (b - 1), 2.0 ** (b - 1) - 1)
+        return adc_levels(x, self.adc_map, self.step)
 
     def samples(self, n0: int, n: int) -> np.ndarray:
         """Samples as stored (the ADC map's values; complex: ``I - jQ`` if inverted)."""
