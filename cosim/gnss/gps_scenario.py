@@ -20,7 +20,7 @@ import numpy as np
 
 from dsp.gnss.atmosphere import saastamoinen_delay_m
 
-__all__ = ["ScenarioSpec", "write_scenario", "NOMINAL_WEEK", "NOMINAL_TOE"]
+__all__ = ["ScenarioSpec", "scenario_config", "write_scenario", "NOMINAL_WEEK", "NOMINAL_TOE"]
 
 NOMINAL_WEEK = 2300
 NOMINAL_TOE = 345_600.0
@@ -54,17 +54,13 @@ def _start_tow(spec: ScenarioSpec, first_tow: float) -> float:
     return float(edge - spec.edge_after_s + _TRAVEL_S + spec.clock_bias_s)
 
 
-def write_scenario(spec: ScenarioSpec, out_dir) -> dict:
-    """Write the recording ``scenario.int8`` and ``truth.json`` to ``out_dir``; return the
-    recording's file options, the generator's ephemerides (for a hot start), the truth
-    (receiver ECEF, clock) and the realised signal."""
+def scenario_config(spec: ScenarioSpec):
+    """``(ConstellationConfig, Klobuchar or None)`` of the scenario ``spec`` (module doc)."""
     from dsp.gnss.constellation import nominal_constellation
 
-    from .constellation import ConstellationConfig, write_constellation
+    from .constellation import ConstellationConfig
     from .constellation_geometry import Cn0Model, ReceiverClock, StaticReceiver
     from .rinex_nav import read_rinex_nav
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     iono = None
     if spec.nav_file is not None:
         nav = read_rinex_nav(spec.nav_file)
@@ -84,6 +80,18 @@ def write_scenario(spec: ScenarioSpec, out_dir) -> dict:
         cn0=Cn0Model(spec.cn0_dbhz, 0.0),
         tropo=lambda el, h: saastamoinen_delay_m(lat, height, np.maximum(el, 1.0)),
         seed=spec.seed)
+    return cfg, iono
+
+
+def write_scenario(spec: ScenarioSpec, out_dir) -> dict:
+    """Write the recording ``scenario.int8`` and ``truth.json`` to ``out_dir``; return the
+    recording's file options, the generator's ephemerides (for a hot start), the truth
+    (receiver ECEF, clock) and the realised signal."""
+    from .constellation import write_constellation
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg, iono = scenario_config(spec)
+    week, tow = cfg.week, cfg.tow_s
     path = out / "scenario.int8"
     sig = write_constellation(path, "int8", cfg)
     tr = sig.truth_at(np.array([0.0]))
