@@ -14,7 +14,8 @@ Processing: acquisition of ``--prns`` (:func:`dsp.gnss.search.search_all`), ever
 found tracked on the channel array (:func:`cosim.gnss.multichannel.track_file`, the
 bit-exact model by default), then the back end (:func:`cosim.gnss.gps_receiver.navigate`):
 bit sync, frame sync, LNAV decoding, observables at ``--rate`` Hz, PVT. ``--ephemeris RINEX``
-hot-starts from a navigation file (the scenario's own ephemerides with ``--hot-start``);
+hot-starts from a navigation file (the scenario's own ephemerides and Klobuchar
+coefficients with ``--hot-start``);
 otherwise a cold start waits for each satellite's subframes 1-3. Outputs under ``--out``
 (:func:`cosim.gnss.gps_outputs.write_outputs`); the table or, with ``--json``, one JSON
 object on stdout; stage progress on stderr unless ``--json``.
@@ -139,9 +140,10 @@ def run(a) -> int:
         truth = sc["truth"]
         a.file, a.format, a.fs_hz, a.if_hz = sc["file"], "int8", sc["fs_hz"], sc["if_hz"]
         week = sc["week"]
-        if a.hot_start:
-            hot = sc["ephemerides"]
-        iono = sc["iono"]
+        # a hot start knows the generator's ephemerides and Klobuchar coefficients; a cold
+        # start only what it decodes
+        hot = sc["ephemerides"] if a.hot_start else hot
+        iono = sc["iono"] if a.hot_start else (rinex.iono if rinex is not None else None)
         n_dur = None
     else:
         if a.hot_start:

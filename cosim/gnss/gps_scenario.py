@@ -18,12 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
-from dsp.gnss.atmosphere import saastamoinen_delay_m
+from dsp.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from dsp.gnss.ephemeris import KlobucharParameters
 
-__all__ = ["ScenarioSpec", "scenario_config", "write_scenario", "NOMINAL_WEEK", "NOMINAL_TOE"]
+__all__ = ["ScenarioSpec", "scenario_config", "write_scenario", "NOMINAL_WEEK", "NOMINAL_TOE",
+           "NOMINAL_KLOBUCHAR"]
 
 NOMINAL_WEEK = 2300
 NOMINAL_TOE = 345_600.0
+#: The Klobuchar coefficients broadcast with the nominal constellation (typical values).
+NOMINAL_KLOBUCHAR = KlobucharParameters((1.118e-8, 7.451e-9, -5.96e-8, -5.96e-8),
+                                        (90112.0, 0.0, -196608.0, -65536.0))
 #: Nominal travel time (s) used to place the first subframe edge.
 _TRAVEL_S = 0.075
 
@@ -54,32 +59,46 @@ def _start_tow(spec: ScenarioSpec, first_tow: float) -> float:
     return float(edge - spec.edge_after_s + _TRAVEL_S + spec.clock_bias_s)
 
 
+def _klobuchar(lat, lon, az, el, t, k):
+    """The Klobuchar delay (m) at the rows of times ``t`` (T, S) (the model takes one time
+    per call)."""
+    el = np.maximum(np.asarray(el, dtype=np.float64), 0.0)
+    out = np.empty(el.shape)
+    for i in range(el.shape[0]):
+        out[i] = klobuchar_delay_m(lat, lon, el[i], az[i], float(np.mod(t[i, 0], 604800.0)),
+                                   k.alpha, k.beta)
+    return out
+
+
 def scenario_config(spec: ScenarioSpec):
-    """``(ConstellationConfig, Klobuchar or None)`` of the scenario ``spec`` (module doc)."""
+    """``(ConstellationConfig, KlobucharParameters)`` of the scenario ``spec`` (module doc);
+    the coefficients are those broadcast and in the signal."""
     from dsp.gnss.constellation import nominal_constellation
 
     from .constellation import ConstellationConfig
     from .constellation_geometry import Cn0Model, ReceiverClock, StaticReceiver
     from .rinex_nav import read_rinex_nav
-    iono = None
+    iono = NOMINAL_KLOBUCHAR
     if spec.nav_file is not None:
         nav = read_rinex_nav(spec.nav_file)
         ephs = nav.ephemerides
         e0 = min(ephs, key=lambda e: (e.week, e.toe))
         week, tow0 = int(e0.week), float(e0.toe)
-        iono = nav.iono
+        iono = nav.iono or NOMINAL_KLOBUCHAR
     else:
         ephs = nominal_constellation(spec.week, NOMINAL_TOE)
         week, tow0 = spec.week, NOMINAL_TOE + 60.0
     tow = _start_tow(spec, tow0 if spec.tow_s is None else spec.tow_s)
-    lat, height = spec.lat_deg, spec.height_m
+    lat, lon, height = spec.lat_deg, spec.lon_deg, spec.height_m
+    iono = iono.quantised()
     cfg = ConstellationConfig(
         ephs, week, tow, StaticReceiver.geodetic(spec.lat_deg, spec.lon_deg, spec.height_m),
         fs_hz=spec.fs_hz, if_hz=spec.if_hz, complex_output=False, duration_s=spec.duration_s,
         clock=ReceiverClock(spec.clock_bias_s, spec.clock_drift),
         cn0=Cn0Model(spec.cn0_dbhz, 0.0),
         tropo=lambda el, h: saastamoinen_delay_m(lat, height, np.maximum(el, 1.0)),
-        seed=spec.seed)
+        iono=lambda la, lo, az, el, t: _klobuchar(lat, lon, az, el, t, iono),
+        klobuchar=iono, seed=spec.seed)
     return cfg, iono
 
 
