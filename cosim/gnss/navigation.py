@@ -25,7 +25,9 @@ Per channel (:func:`channel_navigation`)
 * When the counts become known to a causal receiver: the TOW at the end of the first
   decoded subframe plus the next TLM and HOW (60 bits: the decoder's confirmation),
   ``tow_sample``; the decoded ephemeris at the end of the first clean subframe by which
-  subframes 1, 2 and 3 have all been clean, ``eph_sample``.
+  subframes 1, 2 and 3 have all been clean, ``eph_sample``. (The decoder returns the latest
+  complete data set; on a record whose data set changes after that point the new one is
+  used from ``eph_sample`` on, a little early: a cutover is not modelled.)
 
 Counts at a receiver sample (:meth:`ChannelNav.counts`)
 -------------------------------------------------------
