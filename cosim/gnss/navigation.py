@@ -178,12 +178,10 @@ def _carrier_words(bus_writes, ch: int, n_w: np.ndarray, p):
     addr = ch * 4 + REG_CARR_FREQ
     writes = sorted((int(b), int(v)) for b, a, v in bus_writes if int(a) == addr)
     cyc = np.array([b for b, _ in writes], dtype=np.int64)
-    out = []
-    for nw in n_w:
-        i = np.searchsorted(cyc, nw, side="left") - 1        # last write before the boundary
-        w = writes[i][1] if i >= 0 else p.carr_word(p.if_hz)
-        if not out or out[-1][1] != w:
-            out.append((int(nw) + 1, w))
+    val = np.array([p.carr_word(p.if_hz)] + [v for _, v in writes], dtype=np.int64)
+    w = val[np.searchsorted(cyc, n_w, side="left")]     # the last write before each boundary
+    keep = np.concatenate(([True], w[1:] != w[:-1]))
+    out = [(int(n) + 1, int(v)) for n, v in zip(n_w[keep], w[keep])]
     out.append((int(n_w[-1]) + 1 + 2 * int(np.median(np.diff(n_w))), out[-1][1]))
     return out
 
