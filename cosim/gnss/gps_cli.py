@@ -71,7 +71,8 @@ def add_parser(sub, make_parser) -> None:
     p.add_argument("--channels", type=int, default=12, help="channels of the array (1..12)")
     p.add_argument("--tracker", type=str.lower, default="pll3", choices=tracker_names(),
                    help="the DSP tracker of every channel")
-    p.add_argument("--dsp", type=str.lower, default="fixed", choices=("fixed", "float"))
+    p.add_argument("--dsp", type=str.lower, default="fixed", choices=("fixed", "float"),
+                   help="arithmetic of the trackers")
     p.add_argument("--bn-hz", type=float, default=15.0, help="carrier loop noise bandwidth")
     p.add_argument("--backend", type=str.lower, default="model",
                    choices=("model", "pysim", "verilator"), help="the channel array")
