@@ -1,7 +1,8 @@
 """What a GPS receiver run (:func:`cosim.gnss.gps_receiver.navigate`) gives the user.
 
 * :func:`fix_rows`: one row per measurement epoch (recording time, receiver time, status,
-  satellites used, latitude, longitude, height, ECEF, clock bias and drift, DOPs, and with a
+  satellites used, latitude, longitude, height, ECEF, clock bias and drift, east/north/up
+  velocity, DOPs, and with a
   truth the east/north/up and 3-D errors);
 * :func:`summarise`: the JSON summary (start mode, time to first fix, channels with their
   bit sync / frame sync / decoding, fix counts, error statistics against the truth);
@@ -49,7 +50,9 @@ def fix_rows(run, truth: dict | None = None) -> list[dict]:
              "lat_deg": s.lat_deg, "lon_deg": s.lon_deg, "height_m": s.height_m,
              "x_m": float(s.position_ecef_m[0]), "y_m": float(s.position_ecef_m[1]),
              "z_m": float(s.position_ecef_m[2]), "clock_bias_m": s.clock_bias_m,
-             "clock_drift_mps": s.clock_drift_mps, "pdop": s.dop.pdop, "hdop": s.dop.hdop,
+             "clock_drift_mps": s.clock_drift_mps,
+             "vel_e_mps": float(s.velocity_enu_mps[0]), "vel_n_mps": float(s.velocity_enu_mps[1]),
+             "vel_u_mps": float(s.velocity_enu_mps[2]), "pdop": s.dop.pdop, "hdop": s.dop.hdop,
              "vdop": s.dop.vdop}
         if ref is not None:
             enu = _enu(s, ref) if s.valid else np.full(3, np.nan)

@@ -132,6 +132,9 @@ def test_generated_scenario_hot_start_fixes_within_metres(capsys, tmp_path):
     full = [r for r in rows if int(r["n_used"]) == len(s["truth"]["prns"])]
     assert len(full) >= 10
     assert max(float(r["err_3d_m"]) for r in full) < 5.0
+    # a static receiver: the Doppler velocity within 0.1 m/s of zero
+    assert max(math.hypot(float(r["vel_e_mps"]), float(r["vel_n_mps"]), float(r["vel_u_mps"]))
+               for r in full) < 0.1
     # steered: from the third fix on, the bias left is the drift over one epoch (0.1 s)
     drift = 5e-8 * 299792458.0
     assert all(abs(float(r["clock_drift_mps"]) - drift) < 0.2 for r in full)
