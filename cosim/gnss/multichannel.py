@@ -174,9 +174,8 @@ class ChannelSlot:
         self.det = None
         self.misses = self.hits = 0
         self.release = ""              # reason, while a re-hand-over waits for its boundary
-        self.first_record = 0
 
-    def assign(self, cand: Candidate, first_record: int, start_sample: int) -> None:
+    def assign(self, cand: Candidate, start_sample: int) -> None:
         from dsp.gnss.loops import LockDetector
         o = self.owner
         tracker, arith = make_tracker_for(o.run, o.p.fs_hz, o.p.if_hz, o.inverted,
@@ -261,14 +260,14 @@ class ChannelSlot:
                               cand.n_ref, o.inverted)
         # the new PRN's records: the one closing at n_next is the old PRN's, the next holds
         # the slew (SKIP_RECORDS)
-        self.assign(cand, 0, n_next + 1 + o.p.half_spacing)
+        self.assign(cand, n_next + 1 + o.p.half_spacing)
         return [(o.name(self.ch, "prn"), cand.prn)] + [(o.name(self.ch, r), v) for r, v in w]
 
 
 class _Allocator:
     """The channels' shared state: the candidate queue, re-acquisition, the assignments."""
 
-    def __init__(self, f, p, run, cfg, queue, progress_log=None):
+    def __init__(self, f, p, run, cfg, queue):
         self.f, self.p, self.run, self.cfg = f, p, run, cfg
         self.inverted = f.doppler_sign_inverted
         self.n_ms = f.samples_per_ms
@@ -279,7 +278,6 @@ class _Allocator:
         self.call = None
         self.slots: list[ChannelSlot] = []
         self._nbus = 0
-        self.log = progress_log
 
     def name(self, ch: int, reg: str) -> str:
         return register_name(self.cfg.channels, ch, reg)
@@ -372,7 +370,7 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
             init.append((0, alloc.name(ch, "prn"), c.prn))
             init += [(cyc, alloc.name(ch, r), v) for cyc, r, v in
                      handover_writes(p, c.doppler_hz, c.code_phase_chips, alloc.inverted)]
-            alloc.slots[ch].assign(c, 0, 0)
+            alloc.slots[ch].assign(c, 0)
         pipe.schedule(sorted(init, key=lambda w: w[0]))
         for a in range(0, n, block_samples):
             x = f.words(a, min(block_samples, n - a))

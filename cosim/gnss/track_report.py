@@ -6,15 +6,18 @@ Per assignment (a PRN on a channel, :class:`cosim.gnss.multichannel.Assignment`)
 
 * ``doppler_hz``: the tracker's Doppler averaged over the last lock window;
   ``doppler_rate_hz_s``: the slope of a straight line through the tracker's Doppler over the
-  records since lock (all tracked records if it never locked);
+  records of the windows in lock (all records up to the last window if none was);
 * ``code_phase_chips``: the prompt's code phase at the recording's last 1 ms grid sample
   before the last record (the acquisition's convention: the code phase at a whole ms of the
   recording's clock), that sample's time ``code_phase_at_s``;
-* ``cn0_dbhz``: M2M4 (:func:`dsp.gnss.cn0.cn0_m2m4`, data-insensitive) on the prompts since
-  lock, at most the last :data:`CN0_RECORDS`; ``windows``: per lock window its time, PLI,
-  C/N0 and the phase and C/N0 locks; ``locked_at_end``: both locks in the last window;
+* ``cn0_dbhz``: M2M4 (:func:`dsp.gnss.cn0.cn0_m2m4`, data-insensitive) on the prompts of
+  the windows in lock, at most the last :data:`CN0_RECORDS`; ``windows``: per lock window
+  its time, PLI, C/N0 and the phase and C/N0 locks; ``locked_at_end``: both locks in the
+  last window; ``tail_cn0_dbhz``: M2M4 on the records after the last window (the end of
+  the recording; None if fewer than :data:`MIN_TAIL`), which shows a loss too recent for a
+  window to have judged it;
 * ``lock_time_s``: from the hand-over to the window that confirmed lock;
-* ``nav_bits``: the navigation-bit transitions seen after lock: bit synchronisation by the
+* ``nav_bits``: the navigation-bit transitions seen in the windows in lock: bit synchronisation by the
   histogram of prompt sign changes over the record index mod 20 (the bit edge is where most
   changes fall), then the sign of each whole 20-record bit; a transition is a sign change
   between consecutive bits (its time: the boundary between them). Too few sign changes to
@@ -28,10 +31,13 @@ import numpy as np
 
 from dsp.gnss.ca_code import CODE_PERIOD_S
 
-__all__ = ["summarise", "table", "write_plots", "nav_bits", "CN0_RECORDS", "MIN_EDGE_CHANGES"]
+__all__ = ["summarise", "table", "write_plots", "nav_bits", "CN0_RECORDS", "MIN_EDGE_CHANGES",
+           "MIN_TAIL"]
 
-#: Prompts the final C/N0 is estimated on (at most; the last ones since lock).
+#: Prompts the final C/N0 is estimated on (at most; the last ones of the windows in lock).
 CN0_RECORDS = 1000
+#: Records after the last lock window needed to report their C/N0 (``tail_cn0_dbhz``).
+MIN_TAIL = 10
 #: Sign changes needed at the winning position mod 20 to declare bit synchronisation.
 MIN_EDGE_CHANGES = 2
 
@@ -65,14 +71,17 @@ def _one(a, fs_hz: float) -> dict:
     t = np.asarray(a.t)
     dop = np.asarray(a.doppler)
     prompt = np.asarray(a.ip) + 1j * np.asarray(a.qp)
-    since = t >= (a.lock_sample / fs_hz if a.lock_sample is not None else np.inf)
-    use = since if since.sum() >= 2 else np.ones(t.size, bool)
+    # the records of the lock windows that had both locks, and those after the last window
+    edges = [-np.inf] + list(a.win_t)
+    good = np.zeros(t.size, bool)
+    for k, ok in enumerate(np.logical_and(a.win_phase_lock, a.win_cn0_lock)):
+        if ok:
+            good |= (t > edges[k]) & (t <= edges[k + 1])
+    tail = t > edges[-1]
+    use = good if good.sum() >= 2 else ~tail
     rate = float(np.polyfit(t[use], dop[use], 1)[0]) if use.sum() >= 2 else None
-    w = 1
-    if a.win_t:
-        last_w = t > (a.win_t[-2] if len(a.win_t) > 1 else -np.inf)
-        w = max(1, int(last_w.sum()))
-    p_cn0 = prompt[since][-CN0_RECORDS:] if since.any() else prompt[-CN0_RECORDS:]
+    last_w = (t > edges[-2]) & (t <= edges[-1]) if a.win_t else np.ones(t.size, bool)
+    p_cn0 = prompt[use][-CN0_RECORDS:]
     c = a.candidate
     out = {
         "prn": a.prn, "channel": a.channel, "status": a.status, "end_reason": a.end_reason,
@@ -85,12 +94,15 @@ def _one(a, fs_hz: float) -> dict:
                      "code_phase_chips": c.code_phase_chips, "cn0_dbhz": c.cn0_dbhz,
                      "ref_sample": c.n_ref},
         "n_records": int(t.size),
-        "doppler_hz": float(dop[-w:].mean()) if dop.size else None,
+        "doppler_hz": float(dop[last_w].mean()) if last_w.any() else None,
         "doppler_rate_hz_s": rate,
         "code_phase_chips": float(a.code_phase[-1]) if a.code_phase else None,
         "code_phase_at_s": (int(round(t[-1] * fs_hz)) // n_ms) * n_ms / fs_hz
         if t.size else None,
         "cn0_dbhz": float(cn0_m2m4(p_cn0, CODE_PERIOD_S)) if p_cn0.size >= 2 else None,
+        "tail_records": int(tail.sum()),
+        "tail_cn0_dbhz": float(cn0_m2m4(prompt[tail], CODE_PERIOD_S))
+        if tail.sum() >= MIN_TAIL else None,
         "pli": a.win_pli[-1] if a.win_pli else None,
         "phase_lock": a.win_phase_lock[-1] if a.win_phase_lock else False,
         "cn0_lock": a.win_cn0_lock[-1] if a.win_cn0_lock else False,
@@ -98,7 +110,7 @@ def _one(a, fs_hz: float) -> dict:
                     "phase_lock": a.win_phase_lock, "cn0_lock": a.win_cn0_lock,
                     "doppler_hz": [float(dop[(t > t0) & (t <= t1)].mean())
                                    for t0, t1 in zip([-np.inf] + a.win_t[:-1], a.win_t)]},
-        "nav_bits": nav_bits(t[since], np.asarray(a.ip)[since]),
+        "nav_bits": nav_bits(t[good], np.asarray(a.ip)[good]),
     }
     out["locked_at_end"] = bool(out["phase_lock"] and out["cn0_lock"])
     return out
@@ -144,7 +156,9 @@ def table(s: dict) -> str:
                      f"{f(a['code_phase_chips'], '.3f'):>11} {f(a['cn0_dbhz'], '.1f'):>6} "
                      f"{f(a['pli'], '.2f'):>6} {lk:>5} {f(a['lock_time_s'], '.3f'):>7} "
                      f"{(str(nb['count']) if nb['synchronised'] else '-'):>5}"
-                     + (f"  {a['end_reason']}" if a["end_reason"] else ""))
+                     + (f"  {a['end_reason']}" if a["end_reason"] else "")
+                     + (f"  (last {a['tail_records']} records, after the last window: C/N0 "
+                        f"{a['tail_cn0_dbhz']:.1f})" if a["tail_cn0_dbhz"] is not None else ""))
     lines.append(f"tracked {len(s['tracked'])}: {s['tracked']}; dropped {s['dropped']}; "
                  f"lost {s['lost']}; re-acquisitions {len(s['reacquisitions'])}; FIFO dropped "
                  f"{s['fifo_dropped']}; digest {s['digest']['all']}")

@@ -138,3 +138,15 @@ def test_refusals_name_the_option(tmp_path):
         pytest.skip("the channel has its complex input")
     with pytest.raises(ValueError, match="--format int8-iq"):
         channel_params_for(f)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not verilator_available(), reason="Verilator not installed")
+def test_the_closed_loop_on_verilator_is_the_models_bit_for_bit():
+    f = SampleFile(REAL, "int8", 12e6, 3e6)
+    cands = [Candidate(20, -1347.8, 326.363, 47.8), Candidate(13, -242.4, 511.156, 49.3)]
+    runs = [track_file(f, cands, GnssRunConfig(backend=b), TrackConfig(channels=2),
+                       n_samples=12 * 12_000) for b in ("model", "verilator")]
+    assert runs[0].pipeline.digest == runs[1].pipeline.digest
+    assert [a.doppler for a in runs[0].assignments] == [a.doppler for a in runs[1].assignments]
+    assert len(runs[0].assignments[0].t) >= 9
