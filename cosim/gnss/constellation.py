@@ -32,8 +32,8 @@ phase))`` (stored as ``I - jQ`` when inverted). Doppler is ``-Phi' / lambda``.
 
 Noise, C/N0 and the ADC follow :mod:`cosim.gnss.synthetic_file`: unit-variance white noise
 per real component (``N0 = 2 / fs``), ``C = (C/N0) N0``, ``A = sqrt(2 C)`` (real),
-``a = sqrt(C)`` (complex); C/N0 by elevation (:class:`~cosim.gnss.constellation_geometry.
-Cn0Model`). The AGC step is set once from the satellites' C/N0 at the start.
+``a = sqrt(C)`` (complex); C/N0 by elevation
+(:class:`cosim.gnss.constellation_geometry.Cn0Model`). The AGC step is set once from the satellites' C/N0 at the start.
 
 Interpolation
 -------------
@@ -75,6 +75,8 @@ CHIP_M = C_LIGHT / CHIP_RATE_HZ
 PAGE_POINTS = 1000
 #: Longest record (s): one ephemeris per satellite serves the whole record.
 MAX_DURATION_S = 3600.0
+#: How far outside the record the truth may be asked for (s).
+TRUTH_MARGIN_S = 0.5
 #: Interval of the visibility scan (s).
 SCAN_S = 10.0
 STREAM_OSC = 3
@@ -447,6 +449,11 @@ class ConstellationSignal:
     def truth_at(self, s) -> ConstellationTruth:
         """The exact (not interpolated) truth at receiver times ``s`` (s since sample 0)."""
         cfg = self.cfg
+        s = np.atleast_1d(np.asarray(s, dtype=np.float64))
+        if s.size == 0 or not np.all(np.isfinite(s)) or s.min() < -TRUTH_MARGIN_S \
+                or s.max() > cfg.duration_s + TRUTH_MARGIN_S:
+            raise ValueError(f"truth times must be finite, within the record (0 .. "
+                             f"{cfg.duration_s:g} s) +- {TRUTH_MARGIN_S:g} s")
         g, iono, tropo, base, dbase = self._ranges(s)
         cdt = (C_LIGHT * g.clock_bias_s)[:, None]
         P = base + iono + tropo + cdt

@@ -9,7 +9,7 @@ import numpy as np
 import pymap3d
 import pytest
 
-from cosim.gnss.constellation import CHIP_M, L1_WAVELENGTH_M, ConstellationConfig, \
+from cosim.gnss.constellation import L1_WAVELENGTH_M, ConstellationConfig, \
     ConstellationSignal, write_constellation
 from cosim.gnss.constellation_geometry import Cn0Model, ReceiverClock, StaticReceiver, \
     TrajectoryReceiver, along_track_receiver
@@ -135,7 +135,8 @@ def test_interpolation_error(nav, case):
                      tropo=lambda el, h: 2.4 / np.sin(np.radians(el)))
         s = np.linspace(0.0, 2.2, 4001) + 0.3e-3 / 7
     else:   # the jerk ramps: 5..15 s and 21.9..31.9 s
-        cfg = config(nav, receiver=_ins_receiver(), duration_s=40.0, tow_s=TOW - 2 * 3600)
+        cfg = config(nav, receiver=_ins_receiver(), duration_s=40.0, tow_s=TOW - 2 * 3600,
+                     clock=ReceiverClock(oscillator="ocxo"), seed=3)
         s = np.concatenate([np.linspace(a, a + 1, 2003) for a in (4.5, 14.6, 21.5, 31.5)])
     sig = ConstellationSignal(cfg)
     got = sig.interpolated_ranges(s)
@@ -242,6 +243,32 @@ def test_stream_follows_the_ins_trajectory(nav):
         a = float(np.sqrt(10 ** (t0.cn0_dbhz[0, j] / 10) * 2 / cfg.fs_hz))
         p = np.vdot(_replica(sig, j, t0, n), sig.analog(n0, n)) / n / (a * t0.nav_bit[0, j])
         assert abs(p - 1.0) < 0.01, (s, p)
+
+
+@pytest.mark.parametrize("inverted", [False, True])
+def test_real_if_stream_matches_the_truth(nav, inverted):
+    # real samples A d c cos(2 pi (f_IF n / fs + sgn phase)): the complex replica at the
+    # truth's code, carrier phase and Doppler (sign turned with an inverted spectrum)
+    # picks up A / 2 (each satellite alone: no cross-correlation residue)
+    sgn = -1.0 if inverted else 1.0
+    for prn in (8, 14):
+        cfg = config(nav, noise=False, complex_output=False, fs_hz=8.184e6, if_hz=2.046e6,
+                     inverted=inverted, duration_s=0.3, prns=(prn,))
+        sig = ConstellationSignal(cfg)
+        fs = cfg.fs_hz
+        n0, n, j, t0 = _epoch_window(sig, prn, 0.12)
+        x = sig.analog(n0, n)
+        t = np.arange(n) / fs
+        fd = t0.doppler_hz[0, j]
+        chips = t0.code_phase_chips[0, j] + CHIP_RATE_HZ * (1 + fd / L1_HZ) * t
+        rep = ca_code_levels(prn)[np.floor(chips).astype(np.int64) % 1023] * np.exp(
+            2j * np.pi * (cfg.if_hz * (t + t0.s[0]) + sgn * (t0.carrier_phase_cycles[0, j]
+                                                              + fd * t)))
+        a = float(np.sqrt(2 * 10 ** (t0.cn0_dbhz[0, j] / 10) * 2 / fs))
+        p = np.vdot(rep, x) / n / (a / 2 * t0.nav_bit[0, j])
+        assert abs(p - 1.0) < 0.01, (prn, p)
+    with pytest.raises(ValueError, match="truth times must be finite, within the record"):
+        sig.truth_at([1.0])
 
 
 def test_bit_edges_fall_on_code_epochs_and_bits_match_truth(nav):
@@ -381,3 +408,25 @@ def test_bad_inputs_are_refused_before_work(nav):
                                    tow_s=259200.0 + 5400.0, duration_s=3000.0))
     with pytest.raises(ValueError, match="clock drift_s_s"):
         ReceiverClock(drift_s_s=1e-3)
+
+
+def test_a_satellite_sounds_only_above_the_mask(nav):
+    # over 20 minutes a satellite crosses the mask set at its elevation half-way: it is in
+    # the record, with amplitude on the grid exactly where the truth has it above the mask
+    probe = ConstellationSignal(config(nav, mask_deg=0.0, duration_s=1200.0))
+    tr = probe.truth_at([0.0, 1200.0])
+    j = int(np.argmax(np.abs(tr.elevation_deg[1] - tr.elevation_deg[0])))
+    prn = probe.prns[j]
+    mask = float(probe.truth_at([600.0]).elevation_deg[0, j])
+    sig = ConstellationSignal(config(nav, mask_deg=mask, duration_s=1200.0))
+    assert prn in sig.prns
+    k = sig.prns.index(prn)
+    for page in (0, 1199):
+        amp = sig.page(page)["amp"][k]
+        s = page * 1.0 + np.arange(amp.size) * 1e-3
+        up = sig.truth_at(s).sounding[:, k]
+        assert np.array_equal(amp > 0, up)
+    assert sig.page(0)["amp"][k].any() != sig.page(1199)["amp"][k].any()
+    # a satellite below the mask throughout is not in the record
+    low = [p for i, p in enumerate(probe.prns) if tr.elevation_deg[:, i].max() < mask]
+    assert low and not set(low) & set(sig.prns)
