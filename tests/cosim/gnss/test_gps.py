@@ -118,8 +118,8 @@ def test_generated_scenario_hot_start_fixes_within_metres(capsys, tmp_path):
     receiver clock 0.3 ms + 5e-8), acquired and tracked on the bit-exact array (fixed pll3),
     hot-started from the generator's ephemerides, 10 Hz: the first fix once the TOW is
     decoded (7.7 s in), every fix with all 8 satellites within 5 m of the truth, the receiver
-    time steered to GPS time; the observables against the generator's truth. About 5 minutes
-    on one shared core."""
+    time steered to GPS time; the observables against the generator's truth. 2-6 minutes on
+    the shared cores."""
     out = tmp_path / "gps"
     rc = main(["gps", "--duration-s", "9", "--hot-start", "--rate", "10", "--out", str(out),
                "--json"])
