@@ -22,8 +22,8 @@ rule for many changes, a weak signal over a long stream). Otherwise the status s
 is below ``min_changes``, e.g. a satellite with a long run of equal bits; ``ambiguous``: no
 dominant bin, e.g. noise only or a channel not in phase lock) and no edge is given. With
 random data half the bit edges are transitions, so at high C/N0 ``min_changes = 8`` needs
-about 16 bits (0.3 s); pure noise spreads its changes evenly over the 20 bins and fails both tests; at 27 dB-Hz
-a minute of prompts passes the significance test.
+about 16 bits (0.3 s); pure noise spreads its changes evenly over the 20 bins and fails
+both tests; at 27 dB-Hz a minute of prompts passes the significance test.
 
 Bits (:func:`nav_bits`)
 -----------------------
