@@ -316,6 +316,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_gnss_acquire(sub, _parser)
     from .gnss.track_cli import add_parser as _add_gnss_track
     _add_gnss_track(sub, _parser)
+    from .gnss.gps_cli import add_parser as _add_gps
+    _add_gps(sub, _parser)
     return p
 
 

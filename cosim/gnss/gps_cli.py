@@ -1,0 +1,195 @@
+"""``python -m cosim gps``: a GPS L1 C/A position fix from a recording or a generated scenario.
+
+Input, one of:
+
+* ``--file PATH`` with the file options of ``gnss-acquire`` / ``gnss-track``
+  (:func:`cosim.gnss.acquire_cli.add_file_options`; ``--format`` and ``--fs-hz`` required
+  with a file);
+* no ``--file``: a generated static scenario (:mod:`cosim.gnss.gps_scenario`: ``--duration-s``,
+  ``--seed``, ``--cn0-dbhz``, ``--lat/--lon/--height``, the constellation of ``--nav RINEX``
+  or the nominal one; ``--fs-hz``/``--if-hz`` default 5 MS/s, 1.25 MHz) written to
+  ``OUT/scenario.int8`` with ``truth.json``, then processed through exactly the file path.
+
+Processing: acquisition of ``--prns`` (:func:`dsp.gnss.search.search_all`), every satellite
+found tracked on the channel array (:func:`cosim.gnss.multichannel.track_file`, the
+bit-exact model by default), then the back end (:func:`cosim.gnss.gps_receiver.navigate`):
+bit sync, frame sync, LNAV decoding, observables at ``--rate`` Hz, PVT. ``--ephemeris RINEX``
+hot-starts from a navigation file (the scenario's own ephemerides and Klobuchar
+coefficients with ``--hot-start``);
+otherwise a cold start waits for each satellite's subframes 1-3. Outputs under ``--out``
+(:func:`cosim.gnss.gps_outputs.write_outputs`); the table or, with ``--json``, one JSON
+object on stdout; stage progress on stderr unless ``--json``.
+
+Every option is checked, and a ``--ephemeris`` / ``--nav`` file read, before any work.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+from ..core.validate import check_float, check_out_dir, dumps
+from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns
+
+__all__ = ["add_parser", "run", "DEFAULT_OUT"]
+
+#: Where the outputs (and a generated scenario) go.
+DEFAULT_OUT = "build/gps"
+#: The file options that are required only with ``--file``.
+_FILE_ONLY = ("format", "fs_hz")
+
+
+def add_parser(sub, make_parser) -> None:
+    """Register ``gps`` on the subparsers ``sub`` (as :mod:`cosim.cli` does)."""
+    from dsp.gnss.trackers import tracker_names
+    p = make_parser(sub, "gps", help="GPS L1 C/A position fixes from a recording or a "
+                                     "generated scenario: acquisition, tracking on the FPGA "
+                                     "array, LNAV decoding, observables, PVT; RINEX, NMEA, "
+                                     "CSV, JSON, plots")
+    add_file_options(p)
+    for act in p._actions:                       # --file, --format, --fs-hz: file mode only
+        if act.dest in ("file",) + _FILE_ONLY:
+            act.required = False
+    add_search_options(p)
+    g = p.add_argument_group("generated scenario (without --file)")
+    g.add_argument("--seed", type=int, default=1, help="noise and clock seed")
+    g.add_argument("--cn0-dbhz", type=float, default=45.0, help="C/N0 of every satellite")
+    g.add_argument("--nav", default=None, metavar="RINEX",
+                   help="constellation from a RINEX navigation file (default: nominal)")
+    g.add_argument("--lat", type=float, default=52.0, help="receiver latitude (deg)")
+    g.add_argument("--lon", type=float, default=4.4, help="receiver longitude (deg)")
+    g.add_argument("--height", type=float, default=30.0, help="receiver height (m)")
+    g.add_argument("--hot-start", action="store_true",
+                   help="hot start from the generator's ephemerides")
+    p.add_argument("--duration-s", type=float, default=None,
+                   help="scenario length (default 8 s) or the first seconds of --file")
+    p.add_argument("--ephemeris", default=None, metavar="RINEX",
+                   help="hot start: ephemerides (and Klobuchar) from a RINEX navigation file")
+    p.add_argument("--week", type=int, default=None,
+                   help="GPS week of the recording (cold start on --file without --ephemeris)")
+    p.add_argument("--rate", type=float, default=1.0, choices=(1.0, 10.0),
+                   help="measurement epochs per second")
+    p.add_argument("--channels", type=int, default=12, help="channels of the array (1..12)")
+    p.add_argument("--tracker", type=str.lower, default="pll3", choices=tracker_names(),
+                   help="the DSP tracker of every channel")
+    p.add_argument("--dsp", type=str.lower, default="fixed", choices=("fixed", "float"),
+                   help="arithmetic of the trackers")
+    p.add_argument("--bn-hz", type=float, default=15.0, help="carrier loop noise bandwidth")
+    p.add_argument("--backend", type=str.lower, default="model",
+                   choices=("model", "pysim", "verilator"), help="the channel array")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output directory")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def _say(a, msg: str) -> None:
+    if not a.json:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def run(a) -> int:
+    from dsp.gnss.search import search_all
+    from dsp.gnss.trackers import needs_aiding
+    from .config import GnssRunConfig
+    from .gps_outputs import table, write_outputs
+    from .gps_receiver import GpsConfig, navigate
+    from .gps_scenario import ScenarioSpec
+    from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
+    from .multichannel_session import array_channel_params
+    from .rinex_nav import read_rinex_nav
+    t_wall = time.time()
+    prns = parse_prns(a.prns)
+    check_float("--pfa", a.pfa, 0, 1, lo_open=True, hi_open=True)
+    check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
+    if needs_aiding(a.tracker):
+        raise ValueError(f"--tracker {a.tracker} needs an INS aiding source; a recording has "
+                         f"none")
+    out = check_out_dir(a.out, "--out")
+    gcfg = GpsConfig(rate_hz=a.rate)
+    tcfg = TrackConfig(channels=a.channels, pfa=a.pfa, max_doppler_hz=a.max_doppler_hz)
+    run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
+    hot = rinex = None
+    if a.ephemeris is not None:
+        rinex = read_rinex_nav(a.ephemeris)
+        if not rinex.ephemerides:
+            raise ValueError(f"--ephemeris {a.ephemeris}: no GPS ephemeris in the file")
+        hot = rinex.ephemerides
+    truth = None
+    if a.file is None:
+        for opt in ("format", "adc_map"):
+            if getattr(a, opt) is not None:
+                raise ValueError(f"--{opt.replace('_', '-')} needs --file (a generated "
+                                 f"scenario is written as int8)")
+        if a.hot_start and hot is not None:
+            raise ValueError("give --hot-start or --ephemeris, not both")
+        dur = 8.0 if a.duration_s is None else a.duration_s
+        check_float("--duration-s", dur, 0.1, 3600.0, unit="s")
+        check_float("--cn0-dbhz", a.cn0_dbhz, 20.0, 70.0, unit="dB-Hz")
+        spec = ScenarioSpec(lat_deg=a.lat, lon_deg=a.lon, height_m=a.height, duration_s=dur,
+                            cn0_dbhz=a.cn0_dbhz, seed=a.seed,
+                            fs_hz=5e6 if a.fs_hz is None else a.fs_hz,
+                            if_hz=1.25e6 if a.if_hz == 0.0 else a.if_hz, nav_file=a.nav)
+        if a.seed < 0:
+            raise ValueError(f"--seed must be >= 0, not {a.seed}")
+        check_float("--lat", a.lat, -90, 90, unit="deg")
+        check_float("--lon", a.lon, -180, 180, unit="deg")
+        if a.nav is not None:
+            read_rinex_nav(a.nav)                   # a bad file refused before work
+        from .gps_scenario import write_scenario
+        _say(a, f"generating {dur:g} s of the scenario under {out} ...")
+        sc = write_scenario(spec, out)
+        truth = sc["truth"]
+        a.file, a.format, a.fs_hz, a.if_hz = sc["file"], "int8", sc["fs_hz"], sc["if_hz"]
+        week = sc["week"]
+        # a hot start knows the generator's ephemerides and Klobuchar coefficients; a cold
+        # start only what it decodes
+        hot = sc["ephemerides"] if a.hot_start else hot
+        iono = sc["iono"] if a.hot_start else (rinex.iono if rinex is not None else None)
+        n_dur = None
+    else:
+        if a.hot_start:
+            raise ValueError("--hot-start is for a generated scenario: give --ephemeris")
+        for opt in _FILE_ONLY:
+            if getattr(a, opt) is None:
+                raise ValueError(f"--file needs --{opt.replace('_', '-')}")
+        week = a.week
+        if week is None and hot is not None:
+            week = int(min(e.week for e in hot))
+        if week is None:
+            raise ValueError("a cold start on --file needs --week (the GPS week, to resolve "
+                             "the broadcast 10-bit week and date the epochs)")
+        if week < 0:
+            raise ValueError(f"--week must be >= 0, not {week}")
+        iono = None if rinex is None else rinex.iono
+        n_dur = a.duration_s
+    f = open_file(a)
+    p = array_channel_params(channel_params_for(f), a.channels)
+    n = f.n_samples
+    if n_dur is not None:
+        check_float("--duration-s", n_dur, 0, f.duration_s, lo_open=True, unit="s")
+        n = int(round(n_dur * f.fs_hz))
+    _say(a, f"acquiring PRNs {a.prns} on {f.path} ...")
+    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
+                     a.pfa, a.max_doppler_hz)
+    cands = [Candidate.of(d) for d in rep.detections]
+    _say(a, f"found {[c.prn for c in cands]}; tracking {n / f.fs_hz:g} s on the "
+            f"{a.backend} array ...")
+    if cands:
+        m = track_file(f, cands, run_cfg, tcfg, n_samples=n,
+                       progress=not a.json and sys.stderr.isatty())
+        _say(a, f"tracked in {m.wall_s:.1f} s; navigating ...")
+        g = navigate(m, p, reference_week=week, inverted=f.doppler_sign_inverted,
+                     if_hz=f.if_hz, ephemerides=hot, iono=iono, config=gcfg)
+    else:
+        from .gps_receiver import GpsRun
+        g = GpsRun([], [], f.fs_hz, "hot" if hot is not None else "cold", None, None)
+    s = write_outputs(g, out, truth, plots=not a.no_plots)
+    s["recording"] = f.describe()
+    s["acquired"] = [c.prn for c in cands]
+    s["wall_s"] = round(time.time() - t_wall, 2)
+    if a.json:
+        print(dumps(s))
+        return 0
+    print(table(s))
+    print("files: " + ", ".join(s["files"]))
+    return 0

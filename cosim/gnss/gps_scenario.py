@@ -1,0 +1,125 @@
+"""The generated scenario of ``python -m cosim gps``: a static receiver under a GPS
+constellation (:mod:`cosim.gnss.constellation`), written as a real-IF ``int8`` recording
+under ``build/`` with its truth, to be processed through exactly the recording path.
+
+Defaults: the nominal 24-satellite constellation (:func:`dsp.gnss.constellation.
+nominal_constellation`, toe at the start of day 4 of ``week``) or a RINEX navigation file's
+ephemerides; C/N0 the same for every satellite (``Cn0Model(cn0, 0)``); Saastamoinen's
+troposphere in the signal (the receiver applies the same model); no ionosphere; a receiver
+clock with a bias and a drift. The start time is chosen so that a subframe edge reaches the
+receiver ``edge_after_s`` (0.5 s) into the record: the first subframe is then whole and its
+TOW known 7.7 s in, so an 8 s record gives a hot-start fix.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dsp.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
+from dsp.gnss.ephemeris import KlobucharParameters
+
+__all__ = ["ScenarioSpec", "scenario_config", "write_scenario", "NOMINAL_WEEK", "NOMINAL_TOE",
+           "NOMINAL_KLOBUCHAR"]
+
+NOMINAL_WEEK = 2300
+NOMINAL_TOE = 345_600.0
+#: The Klobuchar coefficients broadcast with the nominal constellation (typical values).
+NOMINAL_KLOBUCHAR = KlobucharParameters((1.118e-8, 7.451e-9, -5.96e-8, -5.96e-8),
+                                        (90112.0, 0.0, -196608.0, -65536.0))
+#: Nominal travel time (s) used to place the first subframe edge.
+_TRAVEL_S = 0.075
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """A generated static scenario (module doc)."""
+
+    lat_deg: float = 52.0
+    lon_deg: float = 4.4
+    height_m: float = 30.0
+    duration_s: float = 8.0
+    cn0_dbhz: float = 45.0
+    seed: int = 1
+    fs_hz: float = 5e6
+    if_hz: float = 1.25e6
+    week: int = NOMINAL_WEEK
+    tow_s: float | None = None           #: None: NOMINAL_TOE + 60 s, moved to put an edge
+    edge_after_s: float = 0.5
+    clock_bias_s: float = 3e-4
+    clock_drift: float = 5e-8
+    nav_file: str | None = None           #: a RINEX navigation file (None: nominal)
+
+
+def _start_tow(spec: ScenarioSpec, first_tow: float) -> float:
+    """The receiver's reading at sample 0: a subframe edge arrives ``edge_after_s`` in."""
+    edge = 6.0 * np.ceil((first_tow + spec.edge_after_s) / 6.0)
+    return float(edge - spec.edge_after_s + _TRAVEL_S + spec.clock_bias_s)
+
+
+def _klobuchar(lat, lon, az, el, t, k):
+    """The Klobuchar delay (m) at the rows of times ``t`` (T, S) (the model takes one time
+    per call)."""
+    el = np.maximum(np.asarray(el, dtype=np.float64), 0.0)
+    out = np.empty(el.shape)
+    for i in range(el.shape[0]):
+        out[i] = klobuchar_delay_m(lat, lon, el[i], az[i], float(np.mod(t[i, 0], 604800.0)),
+                                   k.alpha, k.beta)
+    return out
+
+
+def scenario_config(spec: ScenarioSpec):
+    """``(ConstellationConfig, KlobucharParameters)`` of the scenario ``spec`` (module doc);
+    the coefficients are those broadcast and in the signal."""
+    from dsp.gnss.constellation import nominal_constellation
+
+    from .constellation import ConstellationConfig
+    from .constellation_geometry import Cn0Model, ReceiverClock, StaticReceiver
+    from .rinex_nav import read_rinex_nav
+    iono = NOMINAL_KLOBUCHAR
+    if spec.nav_file is not None:
+        nav = read_rinex_nav(spec.nav_file)
+        ephs = nav.ephemerides
+        e0 = min(ephs, key=lambda e: (e.week, e.toe))
+        week, tow0 = int(e0.week), float(e0.toe)
+        iono = nav.iono or NOMINAL_KLOBUCHAR
+    else:
+        ephs = nominal_constellation(spec.week, NOMINAL_TOE)
+        week, tow0 = spec.week, NOMINAL_TOE + 60.0
+    tow = _start_tow(spec, tow0 if spec.tow_s is None else spec.tow_s)
+    lat, lon, height = spec.lat_deg, spec.lon_deg, spec.height_m
+    iono = iono.quantised()
+    cfg = ConstellationConfig(
+        ephs, week, tow, StaticReceiver.geodetic(spec.lat_deg, spec.lon_deg, spec.height_m),
+        fs_hz=spec.fs_hz, if_hz=spec.if_hz, complex_output=False, duration_s=spec.duration_s,
+        clock=ReceiverClock(spec.clock_bias_s, spec.clock_drift),
+        cn0=Cn0Model(spec.cn0_dbhz, 0.0),
+        tropo=lambda el, h: saastamoinen_delay_m(lat, height, np.maximum(el, 1.0)),
+        iono=lambda la, lo, az, el, t: _klobuchar(lat, lon, az, el, t, iono),
+        klobuchar=iono, seed=spec.seed)
+    return cfg, iono
+
+
+def write_scenario(spec: ScenarioSpec, out_dir) -> dict:
+    """Write the recording ``scenario.int8`` and ``truth.json`` to ``out_dir``; return the
+    recording's file options, the generator's ephemerides (for a hot start), the truth
+    (receiver ECEF, clock) and the realised signal."""
+    from .constellation import write_constellation
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg, iono = scenario_config(spec)
+    week, tow = cfg.week, cfg.tow_s
+    path = out / "scenario.int8"
+    sig = write_constellation(path, "int8", cfg)
+    tr = sig.truth_at(np.array([0.0]))
+    truth = {"receiver_ecef_m": [float(x) for x in tr.rx_position_m[0]],
+             "lat_deg": spec.lat_deg, "lon_deg": spec.lon_deg, "height_m": spec.height_m,
+             "week": week, "tow_at_sample0_s": tow, "clock_bias_s": spec.clock_bias_s,
+             "clock_drift": spec.clock_drift, "prns": list(sig.prns),
+             "cn0_dbhz": spec.cn0_dbhz, "seed": spec.seed, "duration_s": spec.duration_s}
+    (out / "truth.json").write_text(json.dumps(truth, indent=1))
+    return {"file": str(path), "format": "int8", "fs_hz": spec.fs_hz, "if_hz": spec.if_hz,
+            "week": week, "ephemerides": tuple(sig.ephemerides),
+            "iono": iono, "truth": truth, "signal": sig}
