@@ -28,7 +28,8 @@ import sys
 import time
 
 from ..core.validate import check_float, check_out_dir, dumps
-from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns
+from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns, \
+    stages_of
 
 __all__ = ["add_parser", "run", "DEFAULT_OUT"]
 
@@ -99,14 +100,14 @@ def run(a) -> int:
     from .rinex_nav import read_rinex_nav
     t_wall = time.time()
     prns = parse_prns(a.prns)
-    check_float("--pfa", a.pfa, 0, 1, lo_open=True, hi_open=True)
+    check_float("--pfa", a.acq_pfa, 0, 1, lo_open=True, hi_open=True)
     check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
     if needs_aiding(a.tracker):
         raise ValueError(f"--tracker {a.tracker} needs an INS aiding source; a recording has "
                          f"none")
     out = check_out_dir(a.out, "--out")
     gcfg = GpsConfig(rate_hz=a.rate)
-    tcfg = TrackConfig(channels=a.channels, pfa=a.pfa, max_doppler_hz=a.max_doppler_hz)
+    tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
     hot = rinex = None
     if a.ephemeris is not None:
@@ -170,7 +171,7 @@ def run(a) -> int:
         n = int(round(n_dur * f.fs_hz))
     _say(a, f"acquiring PRNs {a.prns} on {f.path} ...")
     rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
-                     a.pfa, a.max_doppler_hz)
+                     a.acq_pfa, a.max_doppler_hz, stages_of(a))
     cands = [Candidate.of(d) for d in rep.detections]
     _say(a, f"found {[c.prn for c in cands]}; tracking {n / f.fs_hz:g} s on the "
             f"{a.backend} array ...")
