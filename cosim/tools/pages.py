@@ -218,6 +218,23 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
                 "LOS velocity std aided KF / aided PLL / unaided KF",
                 " / ".join(f"{r[k]['vel_err_std_mps']:.4f}"
                            for k in ("aided-kf", "aided-pll", "unaided-kf")) + " m/s", "ins")
+    d = _get(results, "gnss_acquisition")
+    if d:
+        r = _row(d.get("pd"), cn0_dbhz=30.0, search="default")
+        if r:
+            add(f"GNSS acquisition, 30 dB-Hz, 2-bit ADC, data bits (default search, "
+                f"limit {fmt(d['limit_ms'])} ms)",
+                f"detection probability at pfa {fmt(d['pfa_per_search'])}, mean time",
+                f"{r['pd']:.2f} ({r['trials']} trials), {r['mean_t_detect_s']:.3f} s",
+                "gnss_acquisition")
+    d = _get(results, "gnss_throughput")
+    if d:
+        r = _row(d.get("rows"), channels=12)
+        if r:
+            add("GNSS 12-channel closed loop on the bit-exact array model",
+                "channel x samples/s, x real time",
+                f"{r['channel_samples_per_s']:.2g}, {r['x_real_time']:.3f}x",
+                "gnss_throughput")
     d = _get(results, "monopulse")
     if d and d.get("monte_carlo"):
         m = d["monte_carlo"][0]
@@ -230,6 +247,7 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
             f"{d['ratios']['verilator_over_pysim']:.0f}x, "
             f"{d['real_time']['model_samples_per_s']:.1f}x", "sim_speed")
     for name, label in (("synth_tacan", "TACAN front end"), ("synth_gnss", "GNSS channel"),
+                        ("synth_gnss_iq", "GNSS channel, complex (I/Q) input"),
                         ("synth_gnss_12ch", "GNSS, 12 channels"),
                         ("synth_monopulse", "monopulse front end")):
         d = _get(results, name)
