@@ -53,20 +53,13 @@ from .tracking import (SKIP_RECORDS, PipelineDsp, Tracking, handover_writes, mak
                        record_observables)
 
 __all__ = ["TrackConfig", "Candidate", "Assignment", "ChannelSlot", "MultiTrack",
-           "track_file", "channel_params_for", "complex_input_supported"]
-
-
-def complex_input_supported() -> bool:
-    """True once :class:`hdl.gnss.params.GnssChannelParams` takes complex baseband input
-    (an ``input`` parameter)."""
-    from hdl.gnss.params import GnssChannelParams
-    return "input" in {f.name for f in dataclasses.fields(GnssChannelParams)}
+           "track_file", "channel_params_for"]
 
 
 def channel_params_for(f, hdl_changes: tuple = ()):
     """The channel for recording ``f`` (its rate, IF, ADC word length, an early-minus-late
-    spacing of about half a chip; ``hdl_changes`` override); a complex recording
-    needs the channel's complex input (:func:`complex_input_supported`), refused otherwise."""
+    spacing of about half a chip; ``hdl_changes`` override); a complex recording takes the
+    channel's complex (I/Q) input."""
     from hdl.gnss.params import GnssChannelParams
     from .config import WORD_BITS
     bits = f.adc_map.bits
@@ -78,10 +71,6 @@ def channel_params_for(f, hdl_changes: tuple = ()):
     kw = dict(fs_hz=f.fs_hz, if_hz=f.if_hz, adc_bits=int(bits), el_spacing_samples=el)
     kw.update(dict(hdl_changes))
     if f.is_complex:
-        if not complex_input_supported():
-            raise ValueError(f"--format {f.fmt}: the HDL channel has no complex (I/Q) input "
-                             f"yet (GnssChannelParams has no 'input' parameter); track a real "
-                             f"IF recording (--format int8)")
         kw["input"] = "complex"
     p = GnssChannelParams(**kw)
     if p.carr_phase_bits != WORD_BITS or p.code_phase_bits != WORD_BITS:

@@ -8,8 +8,7 @@ import pytest
 from cosim.backends.verilator_harness import verilator_available
 from cosim.gnss.config import GnssRunConfig
 from cosim.gnss.files import SampleFile
-from cosim.gnss.multichannel import (Candidate, TrackConfig, channel_params_for,
-                                     complex_input_supported, track_file)
+from cosim.gnss.multichannel import Candidate, TrackConfig, channel_params_for, track_file
 from cosim.gnss.multichannel_session import array_channel_params, open_gnss_array
 from cosim.gnss.synthetic_file import SatelliteSpec, write_synthetic
 from cosim.gnss.tracking import SKIP_RECORDS, record_boundaries
@@ -134,9 +133,9 @@ def test_refusals_name_the_option(tmp_path):
     path = tmp_path / "iq.bin"
     write_synthetic(path, "int8-iq", 4e6, 0.0, 0.005, [], seed=1)
     f = SampleFile(path, "int8-iq", 4e6, 0.0)
-    if complex_input_supported():
-        pytest.skip("the channel has its complex input")
-    with pytest.raises(ValueError, match="--format int8-iq"):
+    assert channel_params_for(f).complex_input        # a complex recording, the I/Q input
+    f = SampleFile(path, "int8-iq", 4e6, 0.0, adc_map="float")
+    with pytest.raises(ValueError, match="--adc-map float"):
         channel_params_for(f)
 
 

@@ -10,14 +10,14 @@ import pytest
 
 from cosim.cli import main
 from cosim.gnss.files import SampleFile
-from cosim.gnss.multichannel import complex_input_supported
 from cosim.gnss.synthetic_file import SatelliteSpec, write_synthetic
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, L1_HZ, ca_code_levels
 from dsp.gnss.cn0 import cn0_m2m4
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "gnss"
 REAL = DATA / "L1_20211125_004000_12MHz_I_70ms.bin"
-FULL = Path("/work/shared/data/gnss/L1_20211125_004000_12MHz_I.bin")
+FULL = DATA / "L1_20211125_004000_12MHz_I.bin"
+FULL_IQ = DATA / "L1_20211202_084700_4MHz_IQ.bin"
 REAL_OPTS = ["--format", "int8", "--fs-hz", "12e6", "--if-hz", "3e6"]
 #: What gnss-acquire finds on the 70 ms window (tests/cosim/gnss/test_files.py pins it).
 REAL_PRNS = {2, 5, 11, 13, 15, 18, 20, 24, 28, 29, 30}
@@ -94,14 +94,6 @@ def test_a_missing_file_and_a_plots_file_are_refused(capsys, tmp_path):
     assert "--plots" in capsys.readouterr().err
 
 
-@pytest.mark.skipif(complex_input_supported(), reason="the channel has its complex input")
-def test_a_complex_recording_waits_for_the_complex_input(capsys):
-    iq = DATA / "L1_20211202_084700_4MHz_IQ_70ms.bin"
-    assert main(["gnss-track", "--file", str(iq), "--format", "int8-iq", "--fs-hz", "4e6",
-                 "--invert-spectrum"]) == 2
-    assert "--format int8-iq" in capsys.readouterr().err
-
-
 @pytest.mark.slow
 def test_every_satellite_of_the_real_window_tracked_to_its_end(capsys):
     """All 32 PRNs searched: the 11 verified satellites, each tracked to the end of the
@@ -119,7 +111,6 @@ def test_every_satellite_of_the_real_window_tracked_to_its_end(capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not FULL.exists(), reason=f"{FULL} not present")
 def test_every_satellite_of_the_full_recording_locked_until_its_sample_slip(capsys):
     """The full 100 ms: the same 11 satellites, each in lock in its last window (62-82 ms,
     ten confirmed); the recording skips about 965 samples near 88 ms (every code phase
@@ -178,9 +169,6 @@ def test_eight_synthetic_satellites_found_and_tracked_to_the_truth(capsys, tmp_p
     five windows out of lock in a row), its Doppler within 5 Hz of the
     truth, its code phase within 0.1 chip, its C/N0 within 1 dB of the C/N0 the recording
     holds (:func:`recording_cn0`, reported against the nominal one)."""
-    if FORMATS.index((fmt, f_if, amap)) and not complex_input_supported():
-        pytest.skip("complex (I/Q) input of the HDL channel not there yet "
-                    "(GnssChannelParams has no 'input' parameter)")
     path = tmp_path / f"eight.{fmt}"
     write_synthetic(path, fmt, 4e6, f_if, 0.6, SATS, adc_map=amap, seed=5)
     opts = ["--file", path, "--format", fmt, "--fs-hz", "4e6", "--if-hz", f_if]
