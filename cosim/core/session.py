@@ -349,6 +349,30 @@ class BusModelSession(FrontendSession):
         super().__init__()
         self._fifo_state = FifoState()
         self._bus = {port: 0 for port in BUS_PORTS}
+        #: The bus ports' widths (bits), set by a subclass that uses :meth:`_bus_cycles`.
+        self._widths: dict[str, int] = {}
+
+    def _bus_cycles(self, writes, start, stop):
+        """The register writes ``(cycle, reg, value)`` the bus ports make in the cycles
+        ``start .. stop - 1`` (a write on every cycle ``reg_we`` is high), from the port writes
+        ``(cycle, port, value)`` of a step (sorted by cycle); a value wider than its port is
+        refused."""
+        out = []
+        c, k = start, 0
+        while c < stop:
+            while k < len(writes) and writes[k][0] <= c:
+                _, port, v = writes[k]
+                if not 0 <= v < 1 << self._widths[port]:
+                    raise ValueError(f"{port} takes unsigned {self._widths[port]}-bit values, "
+                                     f"not {v}")
+                self._bus[port] = v
+                k += 1
+            nxt = writes[k][0] if k < len(writes) else stop
+            if self._bus["reg_we"]:
+                out += [(cc, self._bus["reg_addr"], self._bus["reg_data"])
+                        for cc in range(c, nxt)]
+            c = nxt
+        return out
 
     @property
     def fifo_state(self):

@@ -105,11 +105,24 @@ def stages_of(a) -> tuple:
         tuple(Stage.parse(v) for v in stages.split(","))
 
 
-def run(a) -> int:
-    from dsp.gnss.search import search_all
+def check_search_options(a, *, tracker: str | None = None) -> list[int]:
+    """The PRNs of parsed :func:`add_search_options`, their ``--pfa`` and
+    ``--max-doppler-hz`` checked (ValueError naming the option); with ``tracker``, also that
+    the tracker runs on a recording (no INS aiding source there)."""
     prns = _prns(a.prns)
     check_float("--pfa", a.acq_pfa, 0, 1, lo_open=True, hi_open=True)
     check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
+    if tracker is not None:
+        from dsp.gnss.trackers import needs_aiding
+        if needs_aiding(tracker):
+            raise ValueError(f"--tracker {tracker} needs an INS aiding source; a recording "
+                             f"has none")
+    return prns
+
+
+def run(a) -> int:
+    from dsp.gnss.search import search_all
+    prns = check_search_options(a)
     check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
     stages = stages_of(a)
     f = open_file(a)

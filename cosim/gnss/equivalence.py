@@ -54,7 +54,8 @@ def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int
     """``(adc_words, writes)``: the record's ADC words (complex input: ``(n, 2)`` I/Q
     pairs) and its register writes ``(cycle, register name, value)``, in cycle order."""
     from .dynamics import PolynomialProfile
-    from .tracking import adc_words, handover_writes
+    from .handover import handover_writes
+    from .tracking import adc_words
     from .signal import GnssSignalConfig, generate
     rng = np.random.default_rng(seed)
     code0 = float(rng.uniform(0, 1023))

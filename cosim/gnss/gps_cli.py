@@ -28,8 +28,8 @@ import sys
 import time
 
 from ..core.validate import check_float, check_out_dir, dumps
-from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns, \
-    stages_of
+from .acquire_cli import add_file_options, add_search_options, check_search_options, \
+    open_file, stages_of
 
 __all__ = ["add_parser", "run", "DEFAULT_OUT"]
 
@@ -90,7 +90,6 @@ def _say(a, msg: str) -> None:
 
 def run(a) -> int:
     from dsp.gnss.search import search_all
-    from dsp.gnss.trackers import needs_aiding
     from .config import GnssRunConfig
     from .gps_outputs import table, write_outputs
     from .gps_receiver import GpsConfig, navigate
@@ -99,12 +98,7 @@ def run(a) -> int:
     from .multichannel_session import array_channel_params
     from .rinex_nav import read_rinex_nav
     t_wall = time.time()
-    prns = parse_prns(a.prns)
-    check_float("--pfa", a.acq_pfa, 0, 1, lo_open=True, hi_open=True)
-    check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
-    if needs_aiding(a.tracker):
-        raise ValueError(f"--tracker {a.tracker} needs an INS aiding source; a recording has "
-                         f"none")
+    prns = check_search_options(a, tracker=a.tracker)
     out = check_out_dir(a.out, "--out")
     gcfg = GpsConfig(rate_hz=a.rate)
     tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz)

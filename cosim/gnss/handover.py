@@ -23,7 +23,7 @@ tracking's ``duration_s``.
 :func:`array_handover_writes` starts channel ``k`` of a
 :class:`hdl.gnss.channel.GnssChannelArray` on satellite ``k`` of a list (PRN, Doppler, code
 phase, e.g. from ``python -m cosim gnss-acquire``): for every channel its PRN, then the
-writes of :func:`cosim.gnss.tracking.handover_writes` (carrier word of IF + Doppler, code
+writes of :func:`handover_writes` (carrier word of IF + Doppler, code
 word of the chip rate + code Doppler, the slew that puts the prompt on the code phase).
 The bus takes one write per cycle, so the channels' writes go out on consecutive cycles
 from ``start_cycle``: ``4 * channels`` cycles, all before the first dump boundary (a code
@@ -41,7 +41,7 @@ from dsp.gnss.ca_code import CODE_LENGTH, CODE_PERIOD_S, L1_HZ, CHIP_RATE_HZ, ch
 from .config import GnssRunConfig
 from .signal import GnssSignalConfig, GnssSignalGenerator
 
-__all__ = ["Satellite", "array_handover_writes", "RecordFrom", "acquire_handover",
+__all__ = ["handover_writes", "Satellite", "array_handover_writes", "RecordFrom", "acquire_handover",
            "acquired_record", "acquisition_span_ms",
            "refine_length_ms", "REFINE_COHERENT", "REFINE_MAX_MS"]
 
@@ -164,6 +164,24 @@ def acquired_record(sig: GnssSignalConfig, run: GnssRunConfig):
     return acq, hand, view
 
 
+def handover_writes(p, doppler_hz: float, code_phase_chips: float, inverted: bool = False):
+    """Register writes at reset (effect cycles 0, 1, 2) that start channel ``p`` on an
+    acquisition: carrier word (IF + Doppler), code word (chip rate + Doppler / 1540) and
+    the slew (samples of code hold) that puts the prompt on ``code_phase_chips`` (the
+    received code phase at sample 0)."""
+    s = -1.0 if inverted else 1.0
+    cw = p.carr_word(p.if_hz + s * doppler_hz)
+    kw = p.code_word(CHIP_RATE_HZ * (1 + doppler_hz / L1_HZ))
+    n_code = CODE_LENGTH * p.fs_hz / CHIP_RATE_HZ
+    slew = int(round((-code_phase_chips * p.fs_hz / CHIP_RATE_HZ - p.half_spacing)
+                     % n_code)) % int(round(n_code))
+    if slew >= 1 << p.slew_bits:
+        raise ValueError(f"the code slew of {slew} samples does not fit slew_bits "
+                         f"{p.slew_bits}: use slew_bits >= {slew.bit_length()}")
+    return [(0, "carr_freq", cw), (1, "code_freq", kw), (2, "slew", slew)]
+
+
+
 class Satellite(NamedTuple):
     """An acquired satellite: what a channel is handed over to."""
 
@@ -192,7 +210,6 @@ def array_handover_writes(p, sats, *, inverted: bool = False,
         Cycle of the first write (>= 0).
     """
     from hdl.gnss.params import GnssChannelParams
-    from .tracking import handover_writes
     if not isinstance(p, GnssChannelParams):
         raise ValueError(f"array hand-over needs a GnssChannelParams, not {p!r}")
     sats = [Satellite(*s) for s in sats]

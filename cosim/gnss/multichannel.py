@@ -16,7 +16,7 @@ code words back.
 Allocation
 ----------
 The candidates are the acquisition's verified detections, strongest (C/N0) first; the first
-``channels`` are started at reset (:func:`cosim.gnss.tracking.handover_writes`, plus the PRN
+``channels`` are started at reset (:func:`cosim.gnss.handover.handover_writes`, plus the PRN
 register). A slot watches its lock indicators over windows of ``lock_window_ms`` prompts
 (:class:`dsp.gnss.loops.LockDetector`: narrowband PLI >= ``pli_min`` and M2M4 C/N0 >=
 ``cn0_min_dbhz``). A slot *locks* when ``confirm_windows`` windows in a row have both; one that has not locked within
@@ -49,7 +49,8 @@ from ..core.validate import check_float, check_int
 from .config import GnssRunConfig
 from .multichannel_epochs import CodeEpochs, rehandover_writes
 from .multichannel_session import array_channel_params, open_gnss_array, register_name
-from .tracking import (SKIP_RECORDS, PipelineDsp, Tracking, handover_writes, make_tracker_for,
+from .handover import handover_writes
+from .tracking import (SKIP_RECORDS, PipelineDsp, Tracking, make_tracker_for,
                        record_observables)
 
 __all__ = ["TrackConfig", "Candidate", "Assignment", "ChannelSlot", "MultiTrack",

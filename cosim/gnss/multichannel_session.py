@@ -109,24 +109,6 @@ class GnssArrayModelSession(BusModelSession):
         order = np.argsort(wc, kind="stable")
         self._carry_wc, self._carry_w = wc[order], w[order]
 
-    def _bus_cycles(self, writes, start, stop):
-        out = []
-        c, k = start, 0
-        while c < stop:
-            while k < len(writes) and writes[k][0] <= c:
-                _, port, v = writes[k]
-                if not 0 <= v < 1 << self._widths[port]:
-                    raise ValueError(f"{port} takes unsigned {self._widths[port]}-bit values, "
-                                     f"not {v}")
-                self._bus[port] = v
-                k += 1
-            nxt = writes[k][0] if k < len(writes) else stop
-            if self._bus["reg_we"]:
-                out += [(cc, self._bus["reg_addr"], self._bus["reg_data"])
-                        for cc in range(c, nxt)]
-            c = nxt
-        return out
-
     def _step(self, queue, ready, n, writes):
         start, stop = self.cycle, self.cycle + n
         x = self.params.unpack_samples(queue[:n])   # payload words -> samples (I/Q if complex)

@@ -74,26 +74,6 @@ class GnssModelSession(BusModelSession):
         self.bus_writes: list[tuple[int, int, int]] = []
         self.n_records = 0
 
-    def _bus_cycles(self, writes, start, stop):
-        """Bus writes ``(cycle, reg, value)`` of the cycles ``start .. stop - 1``."""
-        out = []
-        c = start
-        k = 0
-        while c < stop:
-            while k < len(writes) and writes[k][0] <= c:
-                _, port, v = writes[k]
-                if not 0 <= v < 1 << self._widths[port]:
-                    raise ValueError(f"{port} takes unsigned {self._widths[port]}-bit values, "
-                                     f"not {v}")
-                self._bus[port] = v
-                k += 1
-            nxt = writes[k][0] if k < len(writes) else stop
-            if self._bus["reg_we"]:
-                out += [(cc, self._bus["reg_addr"], self._bus["reg_data"])
-                        for cc in range(c, nxt)]
-            c = nxt
-        return out
-
     def _step(self, queue, ready, n, writes):
         p, fp = self.params, self._fifo
         start, stop = self.cycle, self.cycle + n

@@ -16,8 +16,8 @@ against its truth; a recording has no truth, many satellites and its own options
 from __future__ import annotations
 
 from ..core.validate import check_float, check_out_dir, dumps
-from .acquire_cli import add_file_options, add_search_options, open_file, parse_prns, \
-    stages_of
+from .acquire_cli import add_file_options, add_search_options, check_search_options, \
+    open_file, stages_of
 
 __all__ = ["add_parser", "run", "DEFAULT_PLOTS"]
 
@@ -61,16 +61,10 @@ def run(a) -> int:
     import sys
 
     from dsp.gnss.search import search_all
-    from dsp.gnss.trackers import needs_aiding
     from .config import GnssRunConfig
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from .track_report import summarise, table, write_plots
-    prns = parse_prns(a.prns)
-    check_float("--pfa", a.acq_pfa, 0, 1, lo_open=True, hi_open=True)
-    check_float("--max-doppler-hz", a.max_doppler_hz, 0, 50e3, lo_open=True, unit="Hz")
-    if needs_aiding(a.tracker):
-        raise ValueError(f"--tracker {a.tracker} needs an INS aiding source; a recording has "
-                         f"none")
+    prns = check_search_options(a, tracker=a.tracker)
     cfg = TrackConfig(channels=a.channels, pull_in_ms=a.pull_in_ms, pfa=a.acq_pfa,
                       max_doppler_hz=a.max_doppler_hz)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)

@@ -5,7 +5,7 @@
    until the PRN is detected, then the Doppler and code phase refined on the following
    milliseconds and propagated to the sample after them, where tracking starts (the
    tracking sees the record from there: :class:`cosim.gnss.handover.RecordFrom`).
-2. *Hand-over* (:func:`handover_writes`): the carrier word (IF + Doppler), the code word
+2. *Hand-over* (:func:`cosim.gnss.handover.handover_writes`): the carrier word (IF + Doppler), the code word
    (chip rate + Doppler / 1540) and a code slew (samples of hold that put the prompt on the
    acquired code phase) are written at reset; they are active from the first dump boundary
    (1 ms). The first :data:`SKIP_RECORDS` records (the reset epoch and the epoch holding the
@@ -38,32 +38,15 @@ import numpy as np
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 
 from .config import REPLAY_BLOCK, WORD_BITS, GnssRunConfig
-from .handover import acquire_handover
+from .handover import acquire_handover, handover_writes
 from .signal import GnssSignalGenerator
 
-__all__ = ["acquire_handover", "handover_writes", "Tracking", "TrackingSink", "PipelineDsp",
+__all__ = ["Tracking", "TrackingSink", "PipelineDsp",
            "record_observables", "make_tracker_for", "ClosedLoop", "closed_loop", "adc_words",
            "record_boundaries", "golden_track", "SKIP_RECORDS"]
 
 #: Records not tracked after reset: the reset epoch, and the epoch holding the code slew.
 SKIP_RECORDS = 2
-
-
-def handover_writes(p, doppler_hz: float, code_phase_chips: float, inverted: bool = False):
-    """Register writes at reset (effect cycles 0, 1, 2) that start channel ``p`` on an
-    acquisition: carrier word (IF + Doppler), code word (chip rate + Doppler / 1540) and
-    the slew (samples of code hold) that puts the prompt on ``code_phase_chips`` (the
-    received code phase at sample 0)."""
-    s = -1.0 if inverted else 1.0
-    cw = p.carr_word(p.if_hz + s * doppler_hz)
-    kw = p.code_word(CHIP_RATE_HZ * (1 + doppler_hz / L1_HZ))
-    n_code = CODE_LENGTH * p.fs_hz / CHIP_RATE_HZ
-    slew = int(round((-code_phase_chips * p.fs_hz / CHIP_RATE_HZ - p.half_spacing)
-                     % n_code)) % int(round(n_code))
-    if slew >= 1 << p.slew_bits:
-        raise ValueError(f"the code slew of {slew} samples does not fit slew_bits "
-                         f"{p.slew_bits}: use slew_bits >= {slew.bit_length()}")
-    return [(0, "carr_freq", cw), (1, "code_freq", kw), (2, "slew", slew)]
 
 
 def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_hz: float,
@@ -202,7 +185,7 @@ def closed_loop(backend: str, p, run: GnssRunConfig, blocks, doppler_hz: float,
                 cn0_dbhz: float | None = None, keep_words: bool = False,
                 tracker_extra: tuple | None = None) -> ClosedLoop:
     """Track on channel ``p`` (a session on ``backend``) fed ``blocks`` (iterable of ADC
-    word arrays, one word per cycle), started by :func:`handover_writes`, the DSP service
+    word arrays, one word per cycle), started by :func:`~cosim.gnss.handover.handover_writes`, the DSP service
     and tracker of ``run``, its writes decided on the fly."""
     from ..core.pipeline import Pipeline
     from .session import open_gnss

@@ -138,7 +138,8 @@ def first_tracked_boundary_s(backend: str, p, hand: dict, inverted: bool) -> flo
     channel the end of record ``SKIP_RECORDS`` (the channel model replayed on the
     hand-over writes), on the golden chain the end of its first record (its local code
     starts at the acquired code phase)."""
-    from cosim.gnss.tracking import SKIP_RECORDS, handover_writes, record_boundaries
+    from cosim.gnss.handover import handover_writes
+    from cosim.gnss.tracking import SKIP_RECORDS, record_boundaries
     if backend == "golden":
         kf = CHIP_RATE_HZ * (1 + hand["doppler_hz"] / 1575.42e6)
         return (CODE_LENGTH - hand["code_phase_chips"]) / kf

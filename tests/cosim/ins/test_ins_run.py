@@ -195,7 +195,8 @@ def test_aided_kf_closed_loop_model_equals_verilator():
 
 def test_boundary_replay_in_blocks_equals_one_pass():
     # the dump-boundary replay runs in blocks (a 150 s record would not fit in one array)
-    from cosim.gnss.tracking import handover_writes, record_boundaries
+    from cosim.gnss.handover import handover_writes
+    from cosim.gnss.tracking import record_boundaries
     regs = SMALL.registers
     w = [(c, regs.address(r), v) for c, r, v in handover_writes(SMALL, 1500.0, 600.0)]
     w += [(5000 + 2046 * j, regs.address("code_freq"), SMALL.code_word(1.023e6 + 40.0 * j))
