@@ -134,7 +134,9 @@ def test_refusals_name_the_option(tmp_path):
     write_synthetic(path, "int8-iq", 4e6, 0.0, 0.005, [], seed=1)
     f = SampleFile(path, "int8-iq", 4e6, 0.0)
     assert channel_params_for(f).complex_input        # a complex recording, the I/Q input
-    f = SampleFile(path, "int8-iq", 4e6, 0.0, adc_map="float")
+    path = tmp_path / "iq.cf32"
+    write_synthetic(path, "cf32", 4e6, 0.0, 0.005, [], adc_map="float", seed=1)
+    f = SampleFile(path, "cf32", 4e6, 0.0, adc_map="float")
     with pytest.raises(ValueError, match="--adc-map float"):
         channel_params_for(f)
 
