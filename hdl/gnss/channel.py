@@ -255,8 +255,8 @@ class GnssCorrelator(wiring.Component):
         comps = {"i": pay.i, "q": pay.q} if p.complex_input else {"": pay}
         delayed = {}
         for comp, x in comps.items():
-            if p.adc_bits == 1:
-                x = Cat(Const(1, 1), x).as_signed()   # s in {0, -1} -> 2 s + 1
+            if p.odd_levels:
+                x = Cat(Const(1, 1), x).as_signed()   # q -> 2 q + 1 (odd levels)
             for k in range(p.nco.latency):
                 r = Signal(signed(mp.in_width), name=f"x{comp}_d{k + 1}")
                 m.d.sync += r.eq(x)

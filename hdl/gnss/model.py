@@ -266,7 +266,7 @@ class GnssChannelModel:
         streams (real input: the one stream twice) and their input cycles."""
         p = self.params
         x = p.check_samples(samples)
-        if p.adc_bits == 1:
+        if p.odd_levels:
             x = 2 * x + 1
         if p.complex_input:
             x, xq = np.ascontiguousarray(x[:, 0]), np.ascontiguousarray(x[:, 1])

@@ -26,6 +26,8 @@ REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW = range(4)
 CA_BANDWIDTH_HZ = 2 * CHIP_RATE_HZ
 #: The channel's input kinds (:attr:`GnssChannelParams.input`).
 INPUTS = ("real", "complex")
+#: What an ADC word stands for (:class:`GnssChannelParams` ``adc_levels``).
+ADC_LEVELS = ("twos", "odd")
 #: Record fields before ``channel``.
 ACC_FIELDS = ("ie", "qe", "ip", "qp", "il", "ql")
 
@@ -84,6 +86,12 @@ class GnssChannelParams:
     adc_bits : int
         Signed ADC word (1..16), per component for a complex input; 1 bit means sign
         samples +-1.
+    adc_levels : {"twos", "odd"}
+        What an ADC word ``q`` stands for: ``"twos"``, the two's-complement value ``q``;
+        ``"odd"``, the odd level ``2 q + 1`` (a sign/magnitude front end's +-1, +-3, ...:
+        symmetric, no DC), one bit wider into the mixer. A 1-bit word is always odd
+        (+-1). A two's-complement reading of odd levels carries a DC of -1/2 LSB, which a
+        complex low IF puts next to the carrier.
     input : {"real", "complex"}
         ``"real"``: one real ADC stream at ``if_hz``, real carrier wipe-off. ``"complex"``:
         two ADC streams I and Q (the input payload ``{"i", "q"}``, I at the LSB: see
@@ -139,8 +147,12 @@ class GnssChannelParams:
     record_words: int | None = None
     channel_bits: int = 0
     input: str = "real"
+    adc_levels: str = "twos"
 
     def __post_init__(self):
+        if not isinstance(self.adc_levels, str) or self.adc_levels not in ADC_LEVELS:
+            raise ValueError(f"GNSS adc_levels must be one of {', '.join(ADC_LEVELS)} (the "
+                             f"word q as q, or as the odd level 2q+1), not {self.adc_levels!r}")
         if not isinstance(self.input, str) or self.input not in INPUTS:
             raise ValueError(f"GNSS channel input must be one of {', '.join(INPUTS)} (one real "
                              f"ADC stream, or I and Q), not {self.input!r}")
@@ -214,7 +226,15 @@ class GnssChannelParams:
 
     @property
     def mixer_in_width(self) -> int:
-        return max(2, self.adc_bits)
+        """Signed width of an ADC component into the mixer: ``adc_bits``, one more for odd
+        levels (:attr:`odd_levels`)."""
+        return self.adc_bits + 1 if self.odd_levels else self.adc_bits
+
+    @property
+    def odd_levels(self) -> bool:
+        """True when a word ``q`` enters the mixer as ``2 q + 1`` (``adc_levels="odd"`` or
+        a 1-bit ADC)."""
+        return self.adc_levels == "odd" or self.adc_bits == 1
 
     @property
     def mixer(self) -> MixerParams:

@@ -156,20 +156,8 @@ def recording_cn0(f, sat, n0, n1):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("fmt,f_if,amap", [
-    pytest.param(*FORMATS[0], marks=pytest.mark.xfail(strict=True, reason=(
-        "measured: PRN 26 (47.5 dB-Hz nominal, 46.49 in the recording) is tracked at 45.42 "
-        "dB-Hz, 1.07 dB below what the recording holds; the seven others within 0.5 dB; "
-        "all found, none invented, Doppler and code phase within their bounds")))]
-    + [pytest.param(*FORMATS[1], marks=pytest.mark.xfail(strict=True, reason=(
-        "measured: PRN 7 (37 dB-Hz nominal, 36.6 in the recording) loses lock and is "
-        "re-acquired; the others tracked 0-4 dB below what the recording holds (PRN 22 38.0 "
-        "against 42.0 on the real-IF int8 file). Suspected cause: the odd 2-bit levels "
-        "+-1, +-3 reach the channel as the two's-complement words -2..1, a DC of -1/2 LSB on "
-        "I and Q that a complex low IF puts next to the carrier; the 4-bit I/Q formats "
-        "below do not show it")))]
-    + [FORMATS[2]]
-    + [pytest.param(*FORMATS[3], marks=pytest.mark.xfail(strict=True, reason=(
+@pytest.mark.parametrize("fmt,f_if,amap", FORMATS[:3] + [
+    pytest.param(*FORMATS[3], marks=pytest.mark.xfail(strict=True, reason=(
         "measured: all 8 found and tracked with lock, Doppler and code phase within bounds; "
         "PRN 22 (45 dB-Hz nominal, 43.82 in the recording) tracked at 42.74 dB-Hz, 1.08 dB "
         "below; the seven others within 1 dB")))])

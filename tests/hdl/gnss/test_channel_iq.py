@@ -85,7 +85,8 @@ def test_widths_grow_one_bit_for_the_sum_of_two_products():
 
 
 @pytest.mark.parametrize("p", [SMALL_IQ, ZIF, replace(ZIF, adc_bits=1),
-                               replace(ZIF, adc_bits=8, lo_bits=9)])
+                               replace(ZIF, adc_bits=8, lo_bits=9),
+                               replace(ZIF, adc_levels="odd")])
 def test_per_sample_bound_over_the_whole_carrier_table(p):
     """``|xi cos + xq sin| <= 2**(a-1) (|cos| + |sin|) < 2**(iq_width-1)`` for every table
     entry, and the real path's width (one bit less) would not hold it: the extra bit is
@@ -255,6 +256,34 @@ def test_pysim_matches_model_with_writes_and_backpressure():
     _assert_same(got, want)
 
 
+@pytest.mark.parametrize("p", [replace(SMALL_IQ, adc_levels="odd"),
+                               replace(SMALL_IQ, input="real", if_hz=0.3e6, adc_levels="odd")])
+def test_odd_levels_pysim_matches_model(p):
+    """Odd ADC levels (a word q enters the mixer as 2q+1, one bit wider), complex and real
+    input: the Amaranth simulation gives the model's records, and the model's prompts are
+    those of the odd-level samples (the 2-bit words' two's-complement DC is gone)."""
+    n = 2 * 2046 + 300
+    x, writes, ready = stimulus(p, n, seed=11, n_writes=2)
+    if not p.complex_input:
+        x = x[:, 0]
+    assert p.mixer_in_width == p.adc_bits + 1
+    assert replace(p, adc_levels="twos").mixer_in_width == p.adc_bits
+    n_cycles = n + 60
+    want = _model_run(p, 1, x, writes, ready, n_cycles)
+    assert len(want.records) >= 2
+    got = _sim_run(GnssChannel(p), p, x, writes, ready, n_cycles)
+    _assert_same(got, want)
+    # a constant word 0 is the level +1 when odd, nothing when two's complement
+    z = np.zeros((4 * 2046,) + ((2,) if p.complex_input else ()), np.int64)
+    acc = ("ie", "qe", "ip", "qp", "il", "ql")
+    pt = replace(p, adc_levels="twos")
+    odd = [p.record.unpack(v) for v in GnssChannelModel(p).step(z).values(p)]
+    twos = [pt.record.unpack(v) for v in GnssChannelModel(pt).step(z).values(pt)]
+    assert len(odd) >= 3 and len(twos) == len(odd)
+    assert any(r[k] != 0 for r in odd for k in acc)
+    assert all(r[k] == 0 for r in twos for k in acc)
+
+
 def test_model_chunks_give_the_same_records():
     p = SMALL_IQ
     n = 4 * 2046
@@ -299,9 +328,11 @@ def test_verilator_small_with_adc_gaps_matches_model():
 
 @needs_verilator
 @pytest.mark.parametrize("kw", [dict(adc_bits=1, dump_epochs=2),
-                                dict(adc_bits=4, lo_bits=5, el_spacing_samples=4)])
+                                dict(adc_bits=4, lo_bits=5, el_spacing_samples=4),
+                                dict(adc_levels="odd")])
 def test_verilator_variants_match_model(kw):
-    """1-bit I and Q with 2-epoch dumps; 4-bit I and Q, wider LO, wider spacing."""
+    """1-bit I and Q with 2-epoch dumps; 4-bit I and Q, wider LO, wider spacing; 2-bit
+    words as odd levels."""
     p = replace(SMALL_IQ, **kw)
     n = 5 * 2046
     x, writes, ready = stimulus(p, n, seed=7, n_writes=3)
