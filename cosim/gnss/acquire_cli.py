@@ -120,15 +120,22 @@ def check_search_options(a, *, tracker: str | None = None) -> list[int]:
     return prns
 
 
-def run(a) -> int:
+def search_file(f: SampleFile, a, prns, **kw):
+    """:func:`dsp.gnss.search.search_all` over the recording ``f`` with the parsed search
+    options (``--pfa``, ``--max-doppler-hz``, the dwell schedule of :func:`stages_of`);
+    ``kw`` passes further search arguments (``min_rate_hz``)."""
     from dsp.gnss.search import search_all
+    return search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
+                      a.acq_pfa, a.max_doppler_hz, stages_of(a), **kw)
+
+
+def run(a) -> int:
     prns = check_search_options(a)
     check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
-    stages = stages_of(a)
+    stages_of(a)                        # the dwell options checked before the file opens
     f = open_file(a)
     t0 = time.time()
-    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
-                     a.acq_pfa, a.max_doppler_hz, stages, a.min_rate_hz)
+    rep = search_file(f, a, prns, min_rate_hz=a.min_rate_hz)
     out = {"recording": f.describe(), **rep.as_dict(), "wall_s": round(time.time() - t0, 1)}
     if a.json:
         print(dumps(out))

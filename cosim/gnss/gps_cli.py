@@ -29,7 +29,7 @@ import time
 
 from ..core.validate import check_float, check_out_dir, dumps
 from .acquire_cli import add_file_options, add_search_options, check_search_options, \
-    open_file, stages_of
+    open_file, search_file
 
 __all__ = ["add_parser", "run", "DEFAULT_OUT"]
 
@@ -89,7 +89,6 @@ def _say(a, msg: str) -> None:
 
 
 def run(a) -> int:
-    from dsp.gnss.search import search_all
     from .config import GnssRunConfig
     from .gps_outputs import table, write_outputs
     from .gps_receiver import GpsConfig, navigate
@@ -164,8 +163,7 @@ def run(a) -> int:
         check_float("--duration-s", n_dur, 0, f.duration_s, lo_open=True, unit="s")
         n = int(round(n_dur * f.fs_hz))
     _say(a, f"acquiring PRNs {a.prns} on {f.path} ...")
-    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
-                     a.acq_pfa, a.max_doppler_hz, stages_of(a))
+    rep = search_file(f, a, prns)
     cands = [Candidate.of(d) for d in rep.detections]
     _say(a, f"found {[c.prn for c in cands]}; tracking {n / f.fs_hz:g} s on the "
             f"{a.backend} array ...")

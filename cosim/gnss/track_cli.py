@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from ..core.validate import check_float, check_out_dir, dumps
 from .acquire_cli import add_file_options, add_search_options, check_search_options, \
-    open_file, stages_of
+    open_file, search_file
 
 __all__ = ["add_parser", "run", "DEFAULT_PLOTS"]
 
@@ -60,7 +60,6 @@ def add_parser(sub, make_parser) -> None:
 def run(a) -> int:
     import sys
 
-    from dsp.gnss.search import search_all
     from .config import GnssRunConfig
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from .track_report import summarise, table, write_plots
@@ -82,8 +81,7 @@ def run(a) -> int:
         raise ValueError(f"--backend pysim simulates ~2e3 cycles/s: {n} samples would take "
                          f"~{n / 2e3 / 3600:.1f} h; give --duration-s <= "
                          f"{200_000 / f.fs_hz:.4f}")
-    rep = search_all(f.read, f.n_samples, f.fs_hz, f.if_hz, f.doppler_sign_inverted, prns,
-                     a.acq_pfa, a.max_doppler_hz, stages_of(a))
+    rep = search_file(f, a, prns)
     cands = [Candidate.of(d) for d in rep.detections]
     if not cands:
         out = {"recording": f.describe(), "acquisition": rep.as_dict(), "assignments": [],

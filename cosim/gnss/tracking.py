@@ -35,11 +35,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
+from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_PERIOD_S, L1_HZ
 
 from .config import REPLAY_BLOCK, WORD_BITS, GnssRunConfig
 from .handover import acquire_handover, handover_writes
-from .signal import GnssSignalGenerator
 
 __all__ = ["Tracking", "TrackingSink", "PipelineDsp",
            "record_observables", "make_tracker_for", "ClosedLoop", "closed_loop", "adc_words",
