@@ -101,6 +101,41 @@ def _note(ev, j, v):
         ev[j + 1] = v
 
 
+@njit(inline="always")
+def _shift(v, s, half):
+    """``v / 2**s`` rounded ``floor`` (``half`` false) or ``half_up``; ``s <= 0`` shifts
+    left (the integer form of :func:`rs`)."""
+    if s <= 0:
+        return v << (-s)
+    if half:
+        return (v + (np.int64(1) << (s - 1))) >> s
+    return v >> s
+
+
+@njit(inline="always")
+def _log_clamp(v, lo, hi, ev, i, j):
+    """Log ``v`` in range slot ``j`` (:func:`_note`), then clamp it to ``[lo, hi]``, a clamp
+    counted in ``ev[i]``: the store step of every saturating operator."""
+    _note(ev, j, v)
+    if v < lo:
+        ev[i] += 1
+        return lo
+    if v > hi:
+        ev[i] += 1
+        return hi
+    return v
+
+
+@njit(inline="always")
+def _log_cap(v, hi, ev, i, j):
+    """:func:`_log_clamp` for a result that cannot be negative (only ``hi`` applies)."""
+    _note(ev, j, v)
+    if v > hi:
+        ev[i] += 1
+        return hi
+    return v
+
+
 def jit_only(*_):
     """The Python body of an operator: operators exist only inside numba kernels."""
     raise RuntimeError("dsp.qops operators are for numba kernels (call them inside @njit)")
@@ -139,13 +174,7 @@ def rs(v, s, half):
 @overload(rs, jit_options=OVERLOAD_OPTS)
 def _ol_rs(v, s, half):
     if is_int(v):
-        def impl(v, s, half):
-            if s <= 0:
-                return v << (-s)
-            if half:
-                return (v + (np.int64(1) << (s - 1))) >> s
-            return v >> s
-        return impl
+        return lambda v, s, half: _shift(v, s, half)
     if is_float(v):
         return lambda v, s, half: v
 
@@ -187,16 +216,7 @@ def sat(v, lo, hi, ev, i):
 @overload(sat, jit_options=OVERLOAD_OPTS)
 def _ol_sat(v, lo, hi, ev, i):
     if is_int(v):
-        def impl(v, lo, hi, ev, i):
-            _note(ev, RANGE_BASE + 2 * i, v)
-            if v < lo:
-                ev[i] += 1
-                return lo
-            if v > hi:
-                ev[i] += 1
-                return hi
-            return v
-        return impl
+        return lambda v, lo, hi, ev, i: _log_clamp(v, lo, hi, ev, i, RANGE_BASE + 2 * i)
     if is_float(v):
         return lambda v, lo, hi, ev, i: v
 
@@ -229,21 +249,7 @@ def store(acc, s, half, lo, hi, ev, i, base):
 def _ol_store(acc, s, half, lo, hi, ev, i, base):
     if is_int(acc):
         def impl(acc, s, half, lo, hi, ev, i, base):
-            if s > 0:
-                if half:
-                    v = (acc + (np.int64(1) << (s - 1))) >> s
-                else:
-                    v = acc >> s
-            else:
-                v = acc << (-s)
-            _note(ev, base + 2 * i, v)
-            if v < lo:
-                ev[i] += 1
-                return lo
-            if v > hi:
-                ev[i] += 1
-                return hi
-            return v
+            return _log_clamp(_shift(acc, s, half), lo, hi, ev, i, base + 2 * i)
         return impl
     if is_float(acc):
         return lambda acc, s, half, lo, hi, ev, i, base: acc
@@ -277,11 +283,7 @@ def _ol_sqrt_q(v, s, half, hi, ev, i, ineg, base):
             # round to nearest: (r + 1/2)^2 = r^2 + r + 1/4 < w  <=>  w - r^2 > r (no ties)
             if half and w - r * r > r:
                 r += 1
-            _note(ev, base + 2 * i, r)
-            if r > hi:
-                ev[i] += 1
-                return hi
-            return r
+            return _log_cap(r, hi, ev, i, base + 2 * i)
         return impl
     if is_float(v):
         zero = _zero(v)
@@ -312,14 +314,7 @@ def _ol_div_q(n, d, s, half, lo, hi, ev, i, izero, base):
                 rem = w - q * d
                 if 2 * rem >= d:
                     q += 1
-            _note(ev, base + 2 * i, q)
-            if q < lo:
-                ev[i] += 1
-                return lo
-            if q > hi:
-                ev[i] += 1
-                return hi
-            return q
+            return _log_clamp(q, lo, hi, ev, i, base + 2 * i)
         return impl
     if is_float(n):
         zero = _zero(n)
@@ -443,9 +438,7 @@ def _ol_snorm(S):
     if is_int(S):
         def impl(S):
             nb = _bitlen(S) - S_BITS
-            if nb > 0:
-                return (S + (np.int64(1) << (nb - 1))) >> nb, nb
-            return S << (-nb), nb
+            return _shift(S, nb, True), nb
         return impl
     if is_float(S):
         return lambda S: (S, 0)
@@ -460,10 +453,7 @@ def div_norm(num, Sn, nb, f, half, lo, hi, ev, i):
 def _ol_div_norm(num, Sn, nb, f, half, lo, hi, ev, i):
     if is_int(num):
         def impl(num, Sn, nb, f, half, lo, hi, ev, i):
-            if nb > 0:
-                n = (num + (np.int64(1) << (nb - 1))) >> nb
-            else:
-                n = num << (-nb)
+            n = _shift(num, nb, True)
             q1 = fdiv(n, Sn)
             rem = n - q1 * Sn
             if q1 >= (np.int64(1) << (61 - f)) or q1 < -(np.int64(1) << (61 - f)):
@@ -473,14 +463,7 @@ def _ol_div_norm(num, Sn, nb, f, half, lo, hi, ev, i):
                 if half:
                     nn += Sn >> 1
                 q = (q1 << f) + fdiv(nn, Sn)
-            _note(ev, RANGE_BASE + 2 * i, q)
-            if q < lo:
-                ev[i] += 1
-                return lo
-            if q > hi:
-                ev[i] += 1
-                return hi
-            return q
+            return _log_clamp(q, lo, hi, ev, i, RANGE_BASE + 2 * i)
         return impl
     if is_float(num):
         return lambda num, Sn, nb, f, half, lo, hi, ev, i: num / Sn
@@ -511,11 +494,7 @@ def _ol_div_square(v, Sn, nb, t, half, hi, ev, i):
             else:
                 den = Sn << (-tt)
                 e = fdiv(v2 + ((den >> 1) if half else 0), den)
-            _note(ev, RANGE_BASE + 2 * i, e)
-            if e > hi:
-                ev[i] += 1
-                return hi
-            return e
+            return _log_cap(e, hi, ev, i, RANGE_BASE + 2 * i)
         return impl
     if is_float(v):
         return lambda v, Sn, nb, t, half, hi, ev, i: v * v / Sn
@@ -534,14 +513,7 @@ def _ol_ewma(r, acc, m, half, lo, hi, ev, i):
             if half:
                 d += m // 2
             v = r + fdiv(d, m)
-            _note(ev, RANGE_BASE + 2 * i, v)
-            if v < lo:
-                ev[i] += 1
-                return lo
-            if v > hi:
-                ev[i] += 1
-                return hi
-            return v
+            return _log_clamp(v, lo, hi, ev, i, RANGE_BASE + 2 * i)
         return impl
     if is_float(r):
         return lambda r, acc, m, half, lo, hi, ev, i: r + (acc - r) / m
