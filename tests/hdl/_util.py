@@ -128,3 +128,34 @@ def random_samples(rng, width: int, n: int, sample_shape) -> np.ndarray:
     """Uniform random signed ``width``-bit samples of shape (n, *sample_shape)."""
     lo, hi = -(1 << (width - 1)), 1 << (width - 1)
     return rng.integers(lo, hi, size=(n, *sample_shape), dtype=np.int64)
+
+
+def gnss_stimulus(p, n, seed, writes_at=(), n_writes=0, ready_p=0.7, ch=1, pairs=None):
+    """A GNSS channel/array test's stimulus on ``p`` (:class:`hdl.gnss.params.
+    GnssChannelParams`): ``n`` random ADC words (``(n, 2)`` I/Q pairs with complex input),
+    register writes -- ``n_writes`` per channel at random cycles, every register in turn on
+    a random one of ``ch`` channels, or one per cycle of ``writes_at`` -- and a random DSP
+    ``ready`` (probability ``ready_p``). ``pairs=True`` draws ``(n, 2)`` words whatever the
+    input (a real-input test then takes a column)."""
+    from hdl.gnss.params import REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN
+    rng = np.random.default_rng(seed)
+    lo = -(1 << (p.adc_bits - 1))
+    pairs = p.complex_input if pairs is None else pairs
+    x = rng.integers(lo, -lo, (n, 2) if pairs else n)
+    writes = []
+    cyc = sorted(rng.choice(np.arange(10, n - 10), n_writes * ch, replace=False)) \
+        if n_writes else list(writes_at)
+    for k, c in enumerate(cyc):
+        reg = k % 4
+        chn = int(rng.integers(0, ch))
+        if reg == REG_CARR_FREQ:
+            v = p.carr_word(p.if_hz + float(rng.uniform(-5e3, 5e3)))
+        elif reg == REG_CODE_FREQ:
+            v = p.code_word(1.023e6 + float(rng.uniform(-50, 50)))
+        elif reg == REG_PRN:
+            v = int(rng.integers(1, 33))
+        else:
+            v = int(rng.integers(0, 1 << p.slew_bits))
+        writes.append((int(c), 4 * chn + reg, v))
+    ready = rng.random(n + 400) < ready_p
+    return x, writes, ready

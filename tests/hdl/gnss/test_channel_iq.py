@@ -5,7 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from _util import assert_lints_clean, needs_verilator, verilator_sim  # tests/hdl/conftest.py
+from _util import assert_lints_clean, gnss_stimulus as stimulus, needs_verilator, \
+    verilator_sim  # tests/hdl/conftest.py
 from cosim.backends.pysim import run_stream
 from dsp.gnss.ca_code import ca_code_levels, ca_code_table
 from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
@@ -20,31 +21,6 @@ SMALL_IQ = GnssChannelParams(fs_hz=2.046e6, if_hz=-0.3e6, el_spacing_samples=2, 
                              carr_table_bits=6, lo_bits=3, fifo_depth=64, input="complex")
 #: PocketSDR-like zero-IF front end: 4 MS/s, 2-bit I and Q.
 ZIF = GnssChannelParams(fs_hz=4e6, if_hz=0.0, el_spacing_samples=2, input="complex")
-
-
-def stimulus(p, n, seed, n_writes=0, ready_p=0.7, ch=1):
-    """Random I/Q samples ``(n, 2)``, ``n_writes`` writes per channel (every register in
-    turn, random channel), a random DSP ``ready``."""
-    rng = np.random.default_rng(seed)
-    lo = -(1 << (p.adc_bits - 1))
-    x = rng.integers(lo, -lo, (n, 2))
-    writes = []
-    cyc = sorted(rng.choice(np.arange(10, n - 10), n_writes * ch, replace=False)) \
-        if n_writes else []
-    for k, c in enumerate(cyc):
-        reg = k % 4
-        chn = int(rng.integers(0, ch))
-        if reg == REG_CARR_FREQ:
-            v = p.carr_word(p.if_hz + float(rng.uniform(-5e3, 5e3)))
-        elif reg == REG_CODE_FREQ:
-            v = p.code_word(1.023e6 + float(rng.uniform(-50, 50)))
-        elif reg == REG_PRN:
-            v = int(rng.integers(1, 33))
-        else:
-            v = int(rng.integers(0, 1 << p.slew_bits))
-        writes.append((int(c), 4 * chn + reg, v))
-    ready = rng.random(n + 400) < ready_p
-    return x, writes, ready
 
 
 def _model_run(p, channels, x, writes, ready, n_cycles, valid=None):
@@ -263,7 +239,7 @@ def test_odd_levels_pysim_matches_model(p):
     input: the Amaranth simulation gives the model's records, and the model's prompts are
     those of the odd-level samples (the 2-bit words' two's-complement DC is gone)."""
     n = 2 * 2046 + 300
-    x, writes, ready = stimulus(p, n, seed=11, n_writes=2)
+    x, writes, ready = stimulus(p, n, seed=11, n_writes=2, pairs=True)
     if not p.complex_input:
         x = x[:, 0]
     assert p.mixer_in_width == p.adc_bits + 1
