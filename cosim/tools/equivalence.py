@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_record_size", "compare_backends", "count_differences", "stall_pattern", "skip_reason",
-           "simulators_line", "PYSIM_MAX_SAMPLES", "ICARUS_MAX_SAMPLES", "BACKENDS"]
+__all__ = ["check_record_size", "compare_backends", "count_differences", "stall_pattern",
+           "skip_reason", "simulators_line", "PYSIM_MAX_SAMPLES", "ICARUS_MAX_SAMPLES",
+           "BACKENDS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
@@ -106,11 +107,11 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
     cycle and the overflow counter are compared. ``run`` may return a fifth element, a dict
     of further outputs by name (a sequence of rows, e.g. the bus writes ``(cycle, address,
     value)``, or one value such as a digest), each compared with the model's row by row
-    (:func:`count_differences`) and counted in the mismatches. A backend that cannot run is skipped with
-    a note (:func:`skip_reason`). ``empty_hint`` ends the verdict when the model gave no
-    word; ``n_cycles``, the cycles each backend ran, goes into ``simulators``. Returns the
-    keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's
-    records, ``markers``: 0, ``dropped``: the model's overflow count)."""
+    (:func:`count_differences`) and counted in the mismatches. A backend that cannot run is
+    skipped with a note (:func:`skip_reason`). ``empty_hint`` ends the verdict when the model
+    gave no word; ``n_cycles``, the cycles each backend ran, goes into ``simulators``.
+    Returns the keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the
+    model's records, ``markers``: 0, ``dropped``: the model's overflow count)."""
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")

@@ -18,8 +18,9 @@ from cosim.gnss.array_equivalence import (check_array_equivalence, compare_windo
                                           prepare_window)
 from cosim.tools.equivalence import count_differences
 
-needs_verilator = pytest.mark.skipif(not verilator_available(),
-                                     reason="Verilator, make or a C++ compiler not on PATH")
+def needs_verilator(f):
+    return pytest.mark.verilator(pytest.mark.skipif(
+        not verilator_available(), reason="Verilator, make or a C++ compiler not on PATH")(f))
 
 #: The shortest window (20 ms at 5 MS/s), on all 8 satellites: one Verilator build of the
 #: 8-channel array serves this file.
