@@ -115,14 +115,24 @@ def _add_hdl(sub):
                      "one record and count mismatching FIFO words (exit 1 on any, or when "
                      "fewer than two backends compared a non-empty record)")
     tops = [r.name for r in receivers() if r.equivalence is not None]
-    p.add_argument("--top", type=str.lower, default=tops[0], choices=tops, help="design")
-    p.add_argument("--samples", type=parse_int, default=20_000,
-                   help="ADC samples (20 MS/s; pysim and icarus run up to 40000)")
+    p.add_argument("--top", type=str.lower, default=None, choices=tops,
+                   help=f"design (default {tops[0]}; with --scenario the first top that has "
+                        f"it)")
+    p.add_argument("--samples", type=parse_int, default=None,
+                   help="ADC samples (default 20000; pysim and icarus run up to 40000); with "
+                        "--scenario the window (default 500000: 100 ms at 5 MS/s)")
     p.add_argument("--backends", default="model,pysim,verilator,icarus",
                    help="comma-separated subset of model,pysim,verilator,icarus (at least two)")
     p.add_argument("--seed", type=int, default=1, help="signal seed (>= 0)")
     p.add_argument("--stall", action="store_true",
                    help="DSP ready pattern with long stalls and a 4-word FIFO (drops, markers)")
+    p.add_argument("--scenario", type=str.lower, default=None,
+                   help="instead of the top's record: a window of a generated scenario, "
+                        "acquired once and tracked closed loop on the top's channel array by "
+                        "every backend; FIFO words, bus writes and tracker outputs compared "
+                        "(gnss: gps, the 8-satellite scenario of the gps command)")
+    p.add_argument("--channels", type=parse_int, default=None,
+                   help="with --scenario: channels of the array (default 8)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_check_equivalence)
 
@@ -169,9 +179,26 @@ def _cmd_check_equivalence(a) -> int:
                          f"{a.backends!r}")
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
-    check_record_size(a.samples)
-    r = get(a.top).equivalence(samples=a.samples, backends=backends, seed=a.seed,
-                               stall=a.stall, progress=not a.json)
+    kw = {}
+    if a.samples is not None:
+        kw["samples"] = check_record_size(a.samples)
+    if a.top is None:
+        have = [r.name for r in receivers() if r.equivalence is not None
+                and (a.scenario is None or a.scenario in r.equivalence_scenarios)]
+        if not have:
+            raise ValueError(f"--scenario: no top has the scenario {a.scenario!r}")
+        a.top = have[0]
+    rx = get(a.top)
+    if a.scenario is not None:
+        if a.scenario not in rx.equivalence_scenarios:
+            have = ", ".join(rx.equivalence_scenarios) or "none"
+            raise ValueError(f"--scenario: the {a.top} top has scenarios {have}, not "
+                             f"{a.scenario!r}")
+        kw.update(scenario=a.scenario, channels=a.channels)
+    elif a.channels is not None:
+        raise ValueError("--channels needs --scenario (the channel array's closed loop)")
+    r = rx.equivalence(backends=backends, seed=a.seed, stall=a.stall, progress=not a.json,
+                       **kw)
     if a.json:
         print(dumps(r))
     else:
@@ -183,6 +210,12 @@ def _cmd_check_equivalence(a) -> int:
         for name, why in r["skipped"].items():
             print(f"  skipped {name}: {why}")
         print(f"  simulators: {r['simulators']}")
+        sc = r.get("scenario")
+        if sc is not None:
+            print(f"  scenario {sc['name']}: {sc['window_ms']:g} ms window, PRNs {sc['prns']}; "
+                  f"acquired {[c['prn'] for c in sc['acquired']]}; on {sc['channels']} "
+                  f"channels: " + ", ".join(f"PRN {x['prn']} {x['status']} ({x['records']} "
+                                            f"records)" for x in sc["assignments"]))
     if not r["equivalent"] or r["mismatches"]:
         print(f"error: {r['verdict'] if not r['equivalent'] else str(r['mismatches']) + ' mismatches'}",
               file=sys.stderr)

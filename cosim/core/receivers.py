@@ -371,6 +371,10 @@ class Receiver:
         ``equivalence(samples=, backends=, seed=, stall=, progress=) -> dict`` for
         ``check-equivalence --top <name>`` (the keys of
         :func:`cosim.tools.equivalence.compare_backends`).
+    equivalence_scenarios : tuple of str
+        Scenarios ``equivalence`` also takes as ``scenario=`` (with ``channels=``):
+        ``check-equivalence --top <name> --scenario S [--channels N]``, a closed-loop run
+        on a window of a generated scenario (GNSS ``gps``: the channel array).
     metrics : tuple of str
         Keys of the run's JSON result that score it.
     primary : Figure
@@ -393,6 +397,7 @@ class Receiver:
     array_top: Callable[[int], Any] | None = None
     variants: dict = field(default_factory=dict)
     equivalence: Callable[..., dict] | None = None
+    equivalence_scenarios: tuple = ()
     sweep: Study | None = None
     faults: Study | None = None
     benchmarks: dict = field(default_factory=dict)

@@ -327,11 +327,14 @@ class MultiTrack:
 
 def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig(), *,
                n_samples: int | None = None, block_samples: int = 1 << 17,
-               progress: bool = False, hdl_changes: tuple = ()) -> MultiTrack:
+               progress: bool = False, hdl_changes: tuple = (),
+               keep_words: bool = False) -> MultiTrack:
     """Track the ``candidates`` (acquired on ``f``, a :class:`cosim.gnss.files.SampleFile`;
     code phases at sample 0) on ``cfg.channels`` channels of the array on ``run.backend``
     (``model`` or ``verilator``/``pysim``) with ``run``'s tracker, arithmetic and DSP service,
-    over the first ``n_samples`` samples (default all), streamed in blocks."""
+    over the first ``n_samples`` samples (default all), streamed in blocks. ``keep_words``:
+    the result's pipeline keeps every FIFO word read and its read cycle (else only their
+    digest)."""
     from ..core.pipeline import Pipeline
     if run.backend == "golden":
         raise ValueError("--backend golden has no channel array: use model or verilator")
@@ -356,7 +359,8 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
         bar = tqdm(total=n, unit="S", unit_scale=True, desc="gnss-track", leave=False)
     with open_gnss_array(run.backend, p, cfg.channels) as fe:
         pipe = Pipeline(fe, svc, dsp, compute_cycles=run.compute_cycles,
-                        control_latency_cycles=run.control_latency_cycles, keep_words=False)
+                        control_latency_cycles=run.control_latency_cycles,
+                        keep_words=keep_words)
         init = []
         for ch, c in enumerate(cands[:cfg.channels]):
             init.append((0, alloc.name(ch, "prn"), c.prn))

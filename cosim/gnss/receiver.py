@@ -160,9 +160,18 @@ def _top_iq(channels: int = 1):
     return gnss_top(channels, input="complex")
 
 
-def _equivalence(**kw) -> dict:
-    from .equivalence import check_gnss_equivalence
-    return check_gnss_equivalence(**kw)
+def _equivalence(scenario: str | None = None, channels: int | None = None, **kw) -> dict:
+    """The channel's check (:func:`cosim.gnss.equivalence.check_gnss_equivalence`), or with
+    ``scenario`` the array's closed loop on a window of it
+    (:func:`cosim.gnss.array_equivalence.check_array_equivalence`, ``channels`` default 8)."""
+    if scenario is None:
+        if channels is not None:
+            raise ValueError("--channels is for --scenario (the channel array's closed loop)")
+        from .equivalence import check_gnss_equivalence
+        return check_gnss_equivalence(**kw)
+    from .array_equivalence import check_array_equivalence
+    return check_array_equivalence(scenario=scenario, channels=8 if channels is None else
+                                   channels, **kw)
 
 
 def _gnss_speed(out, quick: bool = False, jobs: int | None = None) -> dict:
@@ -224,4 +233,5 @@ GNSS = register(Receiver(
     array_top=_top,
     variants={"iq": _top_iq},
     equivalence=_equivalence,
+    equivalence_scenarios=("gps",),
     benchmarks=BENCHMARKS))

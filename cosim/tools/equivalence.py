@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_record_size", "compare_backends", "stall_pattern", "skip_reason",
-           "simulators_line", "PYSIM_MAX_SAMPLES", "ICARUS_MAX_SAMPLES", "BACKENDS"]
+__all__ = ["check_record_size", "compare_backends", "count_differences", "stall_pattern",
+           "skip_reason", "simulators_line", "PYSIM_MAX_SAMPLES", "ICARUS_MAX_SAMPLES",
+           "BACKENDS"]
 
 #: Longest record the Amaranth simulator is run on (~1e3 cycles/s for the whole top).
 PYSIM_MAX_SAMPLES = 40_000
@@ -103,16 +104,22 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
     """The comparison and verdict of a session-based check (a receiver's
     ``Receiver.equivalence``): ``run(backend) -> (words, cycles, overflow_count, seconds)``
     for the same stimulus on each backend; the model is the reference, every FIFO word, its
-    cycle and the overflow counter are compared. A backend that cannot run is skipped with
-    a note (:func:`skip_reason`). ``empty_hint`` ends the verdict when the model gave no
-    word; ``n_cycles``, the cycles each backend ran, goes into ``simulators``. Returns the
-    keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's
-    records, ``markers``: 0, ``dropped``: the model's overflow count)."""
+    cycle and the overflow counter are compared. ``run`` may return a fifth element, a dict
+    of further outputs by name (a sequence of rows, e.g. the bus writes ``(cycle, address,
+    value)``, or one value such as a digest), each compared with the model's row by row
+    (:func:`count_differences`) and counted in the mismatches. A backend that cannot run is
+    skipped with a note (:func:`skip_reason`). ``empty_hint`` ends the verdict when the model
+    gave no word; ``n_cycles``, the cycles each backend ran, goes into ``simulators``.
+    Returns the keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the
+    model's records, ``markers``: 0, ``dropped``: the model's overflow count)."""
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
-    ref_w, ref_c, ref_ovf, secs = run("model")
+    ref_w, ref_c, ref_ovf, secs, ref_x = _outputs(run("model"))
     per = {"model": {"mismatches": 0, "words": int(len(ref_w)), "seconds": secs}}
+    if ref_x:
+        per["model"]["outputs"] = {k: {"n": _length(v), "mismatches": 0}
+                                   for k, v in ref_x.items()}
     ran, skipped = ["model"], {}
     for name in [b for b in BACKENDS if b in backends and b != "model"]:
         why = skip_reason(name, samples, pysim_max_samples=pysim_max_samples,
@@ -120,14 +127,21 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
         if why is not None:
             skipped[name] = why
             continue
-        w, c, ovf, secs = run(name)
+        w, c, ovf, secs, x = _outputs(run(name))
         n = min(len(w), len(ref_w))
         bad = int(np.count_nonzero(w[:n] != ref_w[:n]) + np.count_nonzero(c[:n] != ref_c[:n]))
         bad += abs(len(w) - len(ref_w)) + int(ovf != ref_ovf)
         per[name] = {"mismatches": bad, "words": int(len(w)), "seconds": secs}
+        if ref_x:
+            outs = {k: {"n": _length(x.get(k)), "mismatches": count_differences(x.get(k), v)}
+                    for k, v in ref_x.items()}
+            per[name]["outputs"] = outs
+            per[name]["mismatches"] += sum(o["mismatches"] for o in outs.values())
         ran.append(name)
-    compared = [f"{k} vs model: {v['words']} vs {per['model']['words']} FIFO words, "
-                f"{v['mismatches']} mismatches" for k, v in per.items() if k != "model"]
+    compared = [f"{k} vs model: {v['words']} vs {per['model']['words']} FIFO words"
+                + "".join(f", {o['n']} vs {per['model']['outputs'][key]['n']} {key}"
+                          for key, o in v.get("outputs", {}).items())
+                + f", {v['mismatches']} mismatches" for k, v in per.items() if k != "model"]
     total = int(sum(v["mismatches"] for v in per.values()))
     if len(ran) < 2:
         verdict = (f"nothing was compared: only {', '.join(ran)} ran"
@@ -146,3 +160,38 @@ def compare_backends(top: str, samples: int, backends, run, *, seed: int, stall:
             "markers": 0, "dropped": int(ref_ovf), "per_backend": per,
             "n_cycles": None if n_cycles is None else int(n_cycles),
             "simulators": simulators_line(per, n_cycles)}
+
+
+def count_differences(got, want) -> int:
+    """Differences of an output from the model's (:func:`compare_backends`): rows of two
+    sequences (lists or arrays, compared row by row, plus the difference of their lengths),
+    or two single values (0 or 1). A missing output (``got`` None) differs in every row."""
+    if want is None or isinstance(want, (str, bytes, int, float, np.generic)):
+        return int(got != want)
+    w = _rows(want)
+    if got is None:
+        return max(1, len(w))
+    g = _rows(got)
+    return sum(a != b for a, b in zip(g, w)) + abs(len(g) - len(w))
+
+
+def _rows(v) -> list:
+    """A sequence output as a list of rows, each row a tuple (an array's, a list's, a
+    tuple's alike) or a single value."""
+    v = v.tolist() if isinstance(v, np.ndarray) else list(v)
+    return [tuple(r) if isinstance(r, (list, tuple)) else r for r in v]
+
+
+def _length(v) -> int:
+    """Rows of an output (1 for a single value, 0 for a missing one)."""
+    if v is None:
+        return 0
+    return 1 if isinstance(v, (str, bytes, int, float, np.generic)) else len(v)
+
+
+def _outputs(out) -> tuple:
+    """``run``'s result as ``(words, cycles, overflow, seconds, further outputs)``."""
+    if len(out) not in (4, 5):
+        raise ValueError(f"an equivalence run returns (words, cycles, overflow, seconds[, "
+                         f"outputs]), not {len(out)} values")
+    return (*out[:4], dict(out[4]) if len(out) == 5 else {})
