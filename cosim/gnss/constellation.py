@@ -322,9 +322,8 @@ class ConstellationTruth:
 
 @dataclass(frozen=True)
 class NavStream:
-    """One satellite's LNAV bits (uint8 0/1) as modulated, from GPS time (``week``, ``tow``)
-    on (bit ``i`` sent at ``tow + 0.02 i``); ``flipped``: the indices of the bits flipped by
-    the bit errors (``bits`` XOR their indicator is the encoded message)."""
+    """One satellite's LNAV bits (uint8 0/1) as modulated, bit ``i`` sent at GPS time
+    (``week``, ``tow + 0.02 i``); ``flipped``: the indices of the bits the errors flipped."""
 
     prn: int
     week: int
@@ -426,8 +425,7 @@ class ConstellationSignal:
         return self._nav[self.prns.index(prn)]
 
     def flipped_bits(self) -> dict:
-        """PRN -> transmit times (s of the config's week) of the flipped bits received in
-        the record."""
+        """PRN -> transmit times (s of the week) of the flipped bits the record receives."""
         t = self.truth_at(np.array([0.0, self.cfg.duration_s])).t_sv
         out = {}
         for j, ns in enumerate(self._nav):
