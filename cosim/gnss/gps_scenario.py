@@ -12,13 +12,16 @@ any sample is written, a motion :func:`~cosim.gnss.constellation_geometry.check_
 refuses, no satellite above ``mask_deg``, or fewer than four (no position fix is possible).
 The elevation mask is at least the troposphere model's lowest elevation,
 :data:`dsp.gnss.atmosphere.TROPO_MIN_ELEVATION_DEG` (3 deg; below it a satellite is silent
-and its delay is the 3 deg value). ``bit_error_rate`` flips LNAV bits in the generator (:class:`cosim.gnss.constellation.
-ConstellationConfig`); the truth lists the flipped bits' transmit times per PRN.
+and its delay is the 3 deg value). ``bit_error_rate`` flips LNAV bits in the generator
+(:class:`cosim.gnss.constellation.ConstellationConfig`); the truth lists the flipped bits'
+transmit times per PRN.
 
 Defaults: the nominal 24-satellite constellation (:func:`dsp.gnss.constellation.
 nominal_constellation`, toe at the start of day 4 of ``week``) or a RINEX navigation file's
 ephemerides; C/N0 the same for every satellite (``Cn0Model(cn0, 0)``); Saastamoinen's
-troposphere in the signal (the receiver applies the same model); no ionosphere; a receiver
+troposphere at the receiver's height in the signal (the receiver applies the same model;
+heights within :data:`dsp.gnss.atmosphere.TROPO_HEIGHT_RANGE_M`) and Klobuchar's ionosphere
+at its place; a receiver
 clock with a bias and a drift. The start time is chosen so that a subframe edge reaches the
 receiver ``edge_after_s`` (0.5 s) into the record: the first subframe is then whole and its
 TOW known 7.7 s in, so an 8 s record gives a hot-start fix.
@@ -81,13 +84,25 @@ def _start_tow(spec: ScenarioSpec, first_tow: float) -> float:
 
 
 def _klobuchar(lat, lon, az, el, t, k):
-    """The Klobuchar delay (m) at the rows of times ``t`` (T, S) (the model takes one time
-    per call)."""
+    """The Klobuchar delay (m) at the rows of times ``t`` (T, S), the receiver at ``lat``,
+    ``lon`` (T, S) (the model takes one time and place per call)."""
     el = np.maximum(np.asarray(el, dtype=np.float64), 0.0)
     out = np.empty(el.shape)
     for i in range(el.shape[0]):
-        out[i] = klobuchar_delay_m(lat, lon, el[i], az[i], float(np.mod(t[i, 0], 604800.0)),
-                                   k.alpha, k.beta)
+        out[i] = klobuchar_delay_m(float(lat[i, 0]), float(lon[i, 0]), el[i], az[i],
+                                   float(np.mod(t[i, 0], 604800.0)), k.alpha, k.beta)
+    return out
+
+
+def _saastamoinen(lat, el, h):
+    """Saastamoinen's delay (m) at the rows of elevations ``el`` (T, S), the receiver at
+    heights ``h`` (T, S) and latitude ``lat`` (the start's: the model's latitude term moves
+    the zenith delay by millimetres over a flight), elevations below the model's lowest
+    taken at it (module doc)."""
+    el = np.maximum(np.asarray(el, dtype=np.float64), TROPO_MIN_ELEVATION_DEG)
+    out = np.empty(el.shape)
+    for i in range(el.shape[0]):
+        out[i] = saastamoinen_delay_m(lat, float(h[i, 0]), el[i])
     return out
 
 
@@ -126,15 +141,15 @@ def scenario_config(spec: ScenarioSpec):
         ephs = nominal_constellation(spec.week, NOMINAL_TOE)
         week, tow0 = spec.week, NOMINAL_TOE + 60.0
     tow = _start_tow(spec, tow0 if spec.tow_s is None else spec.tow_s)
-    lat, lon, height = spec.lat_deg, spec.lon_deg, spec.height_m
+    lat = spec.lat_deg
     iono = iono.quantised()
     cfg = ConstellationConfig(
-        ephs, week, tow, _receiver(spec), fs_hz=spec.fs_hz, if_hz=spec.if_hz, complex_output=False, duration_s=spec.duration_s,
+        ephs, week, tow, _receiver(spec), fs_hz=spec.fs_hz, if_hz=spec.if_hz,
+        complex_output=False, duration_s=spec.duration_s,
         clock=ReceiverClock(spec.clock_bias_s, spec.clock_drift),
         cn0=Cn0Model(spec.cn0_dbhz, 0.0),
-        tropo=lambda el, h: saastamoinen_delay_m(lat, height,
-                                                 np.maximum(el, TROPO_MIN_ELEVATION_DEG)),
-        iono=lambda la, lo, az, el, t: _klobuchar(lat, lon, az, el, t, iono),
+        tropo=lambda el, h: _saastamoinen(lat, el, h),
+        iono=lambda la, lo, az, el, t: _klobuchar(la, lo, az, el, t, iono),
         klobuchar=iono, seed=spec.seed, mask_deg=spec.mask_deg,
         bit_error_rate=spec.bit_error_rate)
     return cfg, iono
@@ -152,6 +167,13 @@ def scenario_signal(spec: ScenarioSpec, prns=None):
         if "elevation mask" in str(e):
             raise ValueError(f"--elevation-mask-deg {spec.mask_deg:g}: {e}") from None
         raise
+    grid = np.append(np.arange(0.0, spec.duration_s, 1.0), spec.duration_s)
+    try:
+        sig.truth_at(grid)              # the atmosphere models along the receiver's path
+    except ValueError as e:
+        if spec.trajectory is None:
+            raise
+        raise ValueError(f"--trajectory {spec.trajectory}: {e}") from None
     seen = [p for p in sig.prns if prns is None or p in prns]
     if len(seen) < MIN_SATELLITES:
         raise ValueError(f"only {len(seen)} satellite(s) above the {spec.mask_deg:g} deg "

@@ -1,7 +1,7 @@
 """``python -m cosim gps``'s generated scenario refuses bad input before any sample is
 written (exit 2, one line naming the option): no satellite above ``--elevation-mask-deg``,
 fewer than four (of ``--prns``) above it, a ``--trajectory`` that leaves the Earth's
-neighbourhood, moves faster than the escape speed, accelerates beyond 100 g (a position
+neighbourhood or the troposphere model's heights, moves faster than the escape speed, accelerates beyond 100 g (a position
 step that does not fit its velocities), does not cover the record or does not parse, bad
 ``--bit-error-rate`` / ``--jump-bound-m``, scenario options with ``--file``. A trajectory
 CSV is the motion it lists; ``--trajectory ins`` is the INS paper's profile; a moving
@@ -79,6 +79,7 @@ def test_fewer_than_four_satellites_above_the_mask_are_refused(capsys, tmp_path)
     ("escape speed", lambda t: _line(t, v_east=12e3), "exceeds 11200 m/s"),
     ("into space", lambda t: _line(t, dh=2e5), "leaves the band"),
     ("underground", lambda t: _line(t, dh=-5e3), "leaves the band"),
+    ("stratosphere", lambda t: _line(t, dh=5e4), "outside the troposphere model's range"),
     # the position jumps 50 m between rows 0.1 s apart while the velocities say rest
     ("teleport", lambda t: [r if r[0] < 4.0 else [r[0], *(np.array(r[1:4]) + 50 * EAST),
                                                   0, 0, 0] for r in _line(t)],
@@ -188,7 +189,8 @@ def test_a_receiver_on_the_ins_trajectory_is_fixed_at_every_epoch(capsys, tmp_pa
     with open(out / "fixes.csv") as fh:
         rows = [r for r in csv.DictReader(fh) if r["status"].startswith("fix")]
     assert len(rows) >= 10 and s["fixes"] == len(rows)
-    sig = ConstellationSignal(scenario_config(ScenarioSpec(duration_s=9.0, trajectory="ins"))[0])
+    spec = ScenarioSpec(duration_s=9.0, trajectory="ins")
+    sig = ConstellationSignal(scenario_config(spec)[0])
     t = np.array([float(r["t_s"]) for r in rows])
     tr = sig.truth_at(t)
     got = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows])
