@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pymap3d
 
 from dsp.gnss.atmosphere import TROPO_MIN_ELEVATION_DEG, klobuchar_delay_m, \
     saastamoinen_delay_m
@@ -56,7 +57,7 @@ MIN_SATELLITES = 4
 
 @dataclass(frozen=True)
 class ScenarioSpec:
-    """A generated static scenario (module doc)."""
+    """A generated scenario (module doc)."""
 
     lat_deg: float = 52.0
     lon_deg: float = 4.4
@@ -187,8 +188,8 @@ def scenario_signal(spec: ScenarioSpec, prns=None):
 def write_scenario(spec: ScenarioSpec, out_dir, signal=None) -> dict:
     """Write the recording ``scenario.int8`` and ``truth.json`` to ``out_dir``; return the
     recording's file options, the generator's ephemerides (for a hot start), the truth
-    (receiver ECEF at sample 0, the trajectory, clock, flipped bits) and the realised
-    signal. ``signal``: the ``(ConstellationSignal, KlobucharParameters)`` of
+    (receiver ECEF and geodetic position at sample 0, the trajectory, clock, flipped bits)
+    and the realised signal. ``signal``: the ``(ConstellationSignal, KlobucharParameters)`` of
     :func:`scenario_signal` when already made."""
     from .constellation import write_constellation
     sig, iono = scenario_signal(spec) if signal is None else signal
@@ -200,8 +201,9 @@ def write_scenario(spec: ScenarioSpec, out_dir, signal=None) -> dict:
     write_constellation(path, "int8", sig)
     tr = sig.truth_at(np.array([0.0]))
     flips = sig.flipped_bits()
+    lat, lon, h = (float(x) for x in pymap3d.ecef2geodetic(*tr.rx_position_m[0]))
     truth = {"receiver_ecef_m": [float(x) for x in tr.rx_position_m[0]],
-             "lat_deg": spec.lat_deg, "lon_deg": spec.lon_deg, "height_m": spec.height_m,
+             "lat_deg": lat, "lon_deg": lon, "height_m": h,
              "trajectory": spec.trajectory,
              "week": week, "tow_at_sample0_s": tow, "clock_bias_s": spec.clock_bias_s,
              "clock_drift": spec.clock_drift, "prns": list(sig.prns),

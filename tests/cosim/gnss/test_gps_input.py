@@ -21,7 +21,7 @@ from cosim.gnss.constellation import ConstellationSignal
 from cosim.gnss.constellation_geometry import MAX_ACCEL_MPS2, StaticReceiver, check_motion, \
     csv_receiver
 from cosim.gnss.gps_outputs import fix_rows
-from cosim.gnss.gps_scenario import ScenarioSpec, scenario_config
+from cosim.gnss.gps_scenario import ScenarioSpec, scenario_config, scenario_signal
 from cosim.ins.trajectory import PaperTrajectory
 
 HOME = StaticReceiver.geodetic(52.0, 4.4, 30.0).position_m
@@ -141,6 +141,12 @@ def test_a_csv_trajectory_is_the_motion_it_lists(tmp_path):
     p4, v4 = rx4.state(u)
     assert np.allclose(p4, p, atol=1e-4) and np.allclose(v4, v, atol=1e-4)
     assert rx.span_s == (-0.5, 9.0) and MAX_ACCEL_MPS2 == pytest.approx(100 * a)
+    # the scenario's receiver: the truth at receiver time s is the row motion at GPS time
+    # u = s - dt_r(s)
+    sig, _ = scenario_signal(ScenarioSpec(trajectory=str(tmp_path / "traj.csv")))
+    tr = sig.truth_at(np.array([0.0, 4.0, 8.0]))
+    u = tr.t_gps - sig.cfg.tow_s
+    assert np.allclose(tr.rx_position_m, HOME + 0.5 * a * u[:, None] ** 2 * EAST, atol=1e-4)
 
 
 def test_the_ins_trajectory_moves_the_scenario_receiver():
