@@ -115,12 +115,12 @@ def _say(a, msg: str) -> None:
 
 
 def run(a) -> int:
-    from .config import GnssRunConfig
-    from .gps_outputs import table, write_outputs
-    from .gps_receiver import GpsConfig, navigate
     from dsp.gnss.atmosphere import TROPO_MIN_ELEVATION_DEG
 
+    from .config import GnssRunConfig
     from .fix_integrity import JUMP_BOUND_M
+    from .gps_outputs import table, write_outputs
+    from .gps_receiver import GpsConfig, navigate
     from .gps_scenario import ScenarioSpec, scenario_signal
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from .multichannel_session import array_channel_params
@@ -218,7 +218,7 @@ def run(a) -> int:
     else:
         from .gps_receiver import GpsRun
         g = GpsRun([], [], f.fs_hz, "hot" if hot is not None else "cold", None, None)
-    if sig is not None:                   # the truth at every epoch: a moving receiver
+    if sig is not None:                   # the truth at every epoch (a moving receiver)
         ep = np.array([e.sample for e in g.epochs if e.solution is not None], dtype=np.int64)
         if ep.size:
             pos = sig.truth_at(ep / f.fs_hz).rx_position_m
