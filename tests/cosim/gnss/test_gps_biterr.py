@@ -159,8 +159,8 @@ def test_navigation_counts_sum_the_channels():
 @pytest.mark.slow
 def test_the_receiver_with_bit_errors_uses_no_corrupted_word_and_its_fix_never_jumps(
         capsys, tmp_path):
-    """(module doc) 9 s, hot start, BER 2e-3 from seed 4, on the bit-exact array: 2-7
-    minutes on the shared cores (~85 s of CPU)."""
+    """(module doc) 9 s, hot start, BER 2e-3 from seed 4, on the bit-exact array: ~85 s of
+    CPU (2-10 minutes on the shared cores)."""
     from cosim.cli import main
     out = tmp_path / "gps"
     rc = main(["gps", "--duration-s", "9", "--hot-start", "--rate", "10", "--seed", "4",

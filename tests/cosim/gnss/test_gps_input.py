@@ -1,8 +1,9 @@
 """``python -m cosim gps``'s generated scenario refuses bad input before any sample is
 written (exit 2, one line naming the option): no satellite above ``--elevation-mask-deg``,
 fewer than four (of ``--prns``) above it, a ``--trajectory`` that leaves the Earth's
-neighbourhood or the troposphere model's heights, moves faster than the escape speed, accelerates beyond 100 g (a position
-step that does not fit its velocities), does not cover the record or does not parse, bad
+neighbourhood or the troposphere model's heights, moves faster than the escape speed,
+accelerates beyond 100 g (a position step that does not fit its velocities), does not
+cover the record or does not parse, bad
 ``--bit-error-rate`` / ``--jump-bound-m``, scenario options with ``--file``. A trajectory
 CSV is the motion it lists; ``--trajectory ins`` is the INS paper's profile; a moving
 receiver's fixes are compared with the truth at their own epochs, and (slow) a receiver on
@@ -165,7 +166,8 @@ def test_the_ins_trajectory_moves_the_scenario_receiver():
 def test_a_moving_receivers_fix_is_compared_with_the_truth_at_its_epoch():
     from dsp.gnss.pvt import PvtStatus
     sol = lambda pos: SimpleNamespace(                                         # noqa: E731
-        status=PvtStatus.FIX, valid=True, used_prns=(1, 2, 3, 4), lat_deg=52.0, lon_deg=4.4, height_m=30.0,
+        status=PvtStatus.FIX, valid=True, used_prns=(1, 2, 3, 4), lat_deg=52.0, lon_deg=4.4,
+        height_m=30.0,
         position_ecef_m=np.asarray(pos), clock_bias_m=0.0, clock_drift_mps=0.0,
         velocity_enu_mps=np.zeros(3), dop=SimpleNamespace(pdop=1.0, hdop=1.0, vdop=1.0))
     p1 = HOME + 100.0 * EAST
@@ -183,8 +185,8 @@ def test_a_receiver_on_the_ins_trajectory_is_fixed_at_every_epoch(capsys, tmp_pa
     """9 s of the INS paper's profile (at rest, from 5 s 5 g/s: 20 g and 370 m/s at the end)
     under 8 satellites at 45 dB-Hz, hot start, 10 Hz, on the bit-exact array: every fix
     within 5 m of the trajectory at its own epoch (hundreds of metres from the start point),
-    the Doppler velocity within 0.2 m/s of the truth, no fix jump. 2-7 minutes on the shared
-    cores (~80 s of CPU)."""
+    the Doppler velocity within 0.2 m/s of the truth, no fix jump. ~80 s of CPU (2-10
+    minutes on the shared cores)."""
     import csv
     out = tmp_path / "gps"
     rc = main(["gps", "--duration-s", "9", "--hot-start", "--rate", "10", "--trajectory", "ins",
