@@ -44,9 +44,17 @@ values and rates (light-time rate, satellite clock rate; the atmosphere's rate b
 differences), ``c dt_r`` linearly on the clock's own grid (the oscillator model is linear
 between its points), the amplitude linearly.
 
+Bit errors
+----------
+``bit_error_rate`` p > 0 flips each encoded LNAV bit (one 20 ms data bit of one satellite)
+independently with probability p before it is modulated: a channel error the receiver must
+catch by parity. :attr:`NavStream.flipped` lists the flipped bits (indices from the frame
+start) and :meth:`ConstellationSignal.flipped_bits` their transmit times inside the record.
+
 Random streams: noise as :func:`cosim.gnss.synthetic_file.noise_block` (``spawn_key (0, c,
-component)``), the oscillator from ``spawn_key (3,)``. Same seed, same samples, for any
-block length.
+component)``), the oscillator from ``spawn_key (3,)``, the bit errors of PRN ``k`` from
+``spawn_key (4, k)`` (the same flips for a PRN whatever the other satellites). Same seed,
+same samples, for any block length.
 """
 from __future__ import annotations
 
@@ -80,6 +88,7 @@ TRUTH_MARGIN_S = 0.5
 #: Interval of the visibility scan (s).
 SCAN_S = 10.0
 STREAM_OSC = 3
+STREAM_BIT_ERRORS = 4
 
 
 @njit_cached(nogil=True)
@@ -181,6 +190,8 @@ class ConstellationConfig:
         Only these PRNs (None: all).
     nav_data, noise, inverted : bool
         LNAV data modulated (else every bit +1); white noise added; spectrum inverted.
+    bit_error_rate : float
+        Probability in [0, 0.5] that an LNAV bit is flipped before modulation (module notes).
     grid_s : float
         Geometry grid step (s).
     seed : int
@@ -207,6 +218,7 @@ class ConstellationConfig:
     inverted: bool = False
     grid_s: float = 1e-3
     seed: int = 1
+    bit_error_rate: float = 0.0
 
     def __post_init__(self):
         eph = tuple(self.ephemerides)
@@ -253,6 +265,10 @@ class ConstellationConfig:
                 raise ValueError(f"prns must be GPS PRNs 1..32, not {self.prns!r}")
             object.__setattr__(self, "prns", tuple(sorted(set(int(x) for x in p))))
         _check_number("grid_s", self.grid_s, 1e-5, 0.01)
+        _check_number("bit_error_rate", self.bit_error_rate, 0.0, 0.5)
+        if self.bit_error_rate > 0 and not self.nav_data:
+            raise ValueError("bit_error_rate needs nav_data: without data there are no bits "
+                             "to flip")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
                 or self.seed < 0:
             raise ValueError(f"seed must be an integer >= 0, not {self.seed!r}")
@@ -306,12 +322,21 @@ class ConstellationTruth:
 
 @dataclass(frozen=True)
 class NavStream:
-    """One satellite's encoded LNAV bits (uint8 0/1) from GPS time (``week``, ``tow``) on."""
+    """One satellite's LNAV bits (uint8 0/1) as modulated, bit ``i`` sent at GPS time
+    (``week``, ``tow + 0.02 i``); ``flipped``: the indices of the bits the errors flipped."""
 
     prn: int
     week: int
     tow: float
     bits: np.ndarray
+    flipped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def encoded(self) -> np.ndarray:
+        """The bits before the bit errors."""
+        b = self.bits.copy()
+        b[self.flipped] ^= 1
+        return b
 
 
 class ConstellationSignal:
@@ -384,7 +409,13 @@ class ConstellationSignal:
         out = []
         for e in self.ephemerides:
             b = encode_frames(e, kl, wk, tow, n_frames, utc=cfg.utc)
-            out.append(NavStream(e.prn, wk, tow, b))
+            flip = np.zeros(0, np.int64)
+            if cfg.bit_error_rate > 0:
+                rng = np.random.default_rng(np.random.SeedSequence(
+                    int(cfg.seed), spawn_key=(STREAM_BIT_ERRORS, int(e.prn))))
+                flip = np.flatnonzero(rng.random(b.size) < cfg.bit_error_rate)
+                b[flip] ^= 1
+            out.append(NavStream(e.prn, wk, tow, b, flip))
         self._levels = [1.0 - 2.0 * ns.bits.astype(np.float64) if cfg.nav_data
                         else np.ones(ns.bits.size) for ns in out]
         return out
@@ -392,6 +423,16 @@ class ConstellationSignal:
     def nav_stream(self, prn: int) -> NavStream:
         """The LNAV bits the generator modulates on ``prn`` (from the frame start on)."""
         return self._nav[self.prns.index(prn)]
+
+    def flipped_bits(self) -> dict:
+        """PRN -> transmit times (s of the week) of the flipped bits the record receives."""
+        t = self.truth_at(np.array([0.0, self.cfg.duration_s])).t_sv
+        out = {}
+        for j, ns in enumerate(self._nav):
+            t0 = ns.tow + (ns.week - self.cfg.week) * WEEK_S + 0.02 * ns.flipped
+            keep = (t0 + 0.02 > t[0, j]) & (t0 < t[1, j])
+            out[ns.prn] = [float(x) for x in t0[keep]]
+        return out
 
     # -- geometry pages -----------------------------------------------------------------
     def _ranges(self, s):
@@ -539,12 +580,15 @@ class ConstellationSignal:
             yield self.samples(a, block_samples, adc_map)
 
 
-def write_constellation(path, fmt: str, cfg: ConstellationConfig, adc_map=None,
+def write_constellation(path, fmt: str, cfg, adc_map=None,
                         block_samples: int = BLOCK_SAMPLES) -> ConstellationSignal:
-    """Write the scenario's record to ``path`` in file format ``fmt``
+    """Write the scenario's record (``cfg`` a :class:`ConstellationConfig`, or its realised
+    :class:`ConstellationSignal`) to ``path`` in file format ``fmt``
     (:data:`cosim.gnss.files.FORMATS`; complex formats for ``complex_output``, ``int8`` for
     real) with the ADC map ``adc_map`` (the format's default when None), block by block;
     return the realised signal (its truth is the answer)."""
+    sig = cfg if isinstance(cfg, ConstellationSignal) else None
+    cfg = cfg if sig is None else sig.cfg
     if fmt not in FORMATS:
         raise ValueError(f"fmt must be one of {', '.join(FORMATS)}, not {fmt!r}")
     if FORMATS[fmt][1] != cfg.complex_output:
@@ -552,6 +596,6 @@ def write_constellation(path, fmt: str, cfg: ConstellationConfig, adc_map=None,
                          f"samples but the scenario's output is "
                          f"{'complex' if cfg.complex_output else 'real'}")
     amap = adc_map if isinstance(adc_map, AdcMap) else AdcMap.parse(adc_map, fmt)
-    sig = ConstellationSignal(cfg)
+    sig = sig or ConstellationSignal(cfg)
     write_samples(path, fmt, sig.blocks(block_samples, amap), amap)
     return sig

@@ -15,14 +15,16 @@ Receiver motion
 ---------------
 An object with ``state(u) -> (position (T, 3), velocity (T, 3))`` in ECEF (WGS-84, m and
 m/s, the Earth-fixed frame of time ``u``): :class:`StaticReceiver` (ECEF, or geodetic through
-pymap3d) or :class:`TrajectoryReceiver` (two callables); :func:`along_track_receiver` flies
+pymap3d) or :class:`TrajectoryReceiver` (two callables; :func:`csv_receiver` reads one from
+a table of ECEF rows); :func:`along_track_receiver` flies
 an along-track profile (the INS paper's :class:`cosim.ins.trajectory.PaperTrajectory`, or any
 object with its ``kinematics(u) -> (4, T)`` of distance, speed, acceleration, jerk) on the
 great circle through a stated origin, at the origin's geocentric radius, in a stated
 azimuth. :func:`check_motion` refuses, before any work, a motion that is not finite, leaves
 the band of heights ``[MIN_HEIGHT_M, MAX_HEIGHT_M]`` above the WGS-84 ellipsoid, moves faster
 than ``MAX_SPEED_MPS`` (the escape speed at the surface: nothing that fast stays near the
-Earth) or whose velocity is not the derivative of its position.
+Earth), accelerates harder than ``MAX_ACCEL_MPS2`` (100 g, twice the INS paper's 50 g
+peak) or whose velocity is not the derivative of its position.
 
 Light time (IS-GPS-200 20.3.3.4.3.3.2)
 --------------------------------------
@@ -38,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -53,6 +56,8 @@ MIN_HEIGHT_M = -1.0e3
 MAX_HEIGHT_M = 1.0e5
 #: Escape speed at the Earth's surface (m/s): the fastest receiver accepted.
 MAX_SPEED_MPS = 11.2e3
+#: The hardest acceleration accepted (m/s^2): 100 g.
+MAX_ACCEL_MPS2 = 100 * 9.80665
 #: Step (s) of the motion check, and the tolerance (m/s) of velocity against the
 #: position's central difference (plus 1e-6 of the speed).
 MOTION_CHECK_STEP_S = 0.01
@@ -95,12 +100,15 @@ class StaticReceiver:
 
 class TrajectoryReceiver:
     """A moving receiver: ``position(u)`` and ``velocity(u)`` map times ``u`` (s of GPS time
-    since the nominal start; an array of shape (T,)) to ECEF arrays of shape (T, 3)."""
+    since the nominal start; an array of shape (T,)) to ECEF arrays of shape (T, 3);
+    ``span_s`` the (first, last) time of the table it comes from (None: any time)."""
 
-    def __init__(self, position: Callable, velocity: Callable, name: str = "trajectory"):
+    def __init__(self, position: Callable, velocity: Callable, name: str = "trajectory",
+                 span_s: tuple | None = None):
         if not callable(position) or not callable(velocity):
             raise ValueError("a trajectory receiver needs callables position(u) and velocity(u)")
         self.position, self.velocity, self.name = position, velocity, str(name)
+        self.span_s = span_s
 
     def state(self, u):
         u = np.atleast_1d(np.asarray(u, dtype=np.float64))
@@ -148,6 +156,54 @@ def along_track_receiver(profile, lat_deg: float, lon_deg: float, h_m: float,
                               f"({lat_deg:g}, {lon_deg:g}, {h_m:g} m) az {azimuth_deg:g} deg")
 
 
+def csv_receiver(path, name: str = "trajectory") -> TrajectoryReceiver:
+    """A :class:`TrajectoryReceiver` from the CSV file ``path``: rows ``t, x, y, z`` or ``t,
+    x, y, z, vx, vy, vz`` (``t`` seconds of GPS time since the record's nominal start,
+    strictly increasing; ECEF metres and m/s), ``#`` comments and one header line allowed,
+    at least 2 rows (4 without velocities). With velocities the motion is the cubic Hermite
+    interpolant of the rows (position and velocity met at every row), without them the
+    cubic spline through the positions (velocity its derivative); beyond the table the end
+    pieces continue. Errors name ``name`` (the option) and the row. A position step that
+    does not fit its rows' velocities shows as an acceleration of the interpolant that
+    :func:`check_motion` refuses."""
+    from scipy.interpolate import CubicHermiteSpline, CubicSpline
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{name} {str(path)!r} is not a file")
+    rows, header = [], False
+    for k, ln in enumerate(p.read_text().splitlines(), 1):
+        if not ln.strip() or ln.lstrip().startswith("#"):
+            continue
+        try:
+            rows.append([float(v) for v in ln.split(",")])
+        except ValueError:
+            if rows or header:
+                raise ValueError(f"{name} {str(path)!r} line {k}: not numbers: "
+                                 f"{ln.strip()[:60]!r}") from None
+            header = True
+    a = np.array(rows, dtype=np.float64) if rows and len({len(r) for r in rows}) == 1 \
+        else None
+    if a is None or a.shape[1] not in (4, 7):
+        raise ValueError(f"{name} {str(path)!r} needs rows of 4 (t, x, y, z) or 7 (t, x, y, "
+                         f"z, vx, vy, vz) comma-separated numbers, all rows alike")
+    if a.shape[0] < (2 if a.shape[1] == 7 else 4):
+        raise ValueError(f"{name} {str(path)!r} needs at least {2 if a.shape[1] == 7 else 4} "
+                         f"rows, not {a.shape[0]}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} {str(path)!r} has values that are not finite")
+    bad = np.flatnonzero(np.diff(a[:, 0]) <= 0)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"{name} {str(path)!r}: time must increase strictly; row {i + 2} "
+                         f"({a[i + 1, 0]:g} s) does not follow row {i + 1} ({a[i, 0]:g} s)")
+    t = a[:, 0]
+    sp = CubicHermiteSpline(t, a[:, 1:4], a[:, 4:7], axis=0) if a.shape[1] == 7 else \
+        CubicSpline(t, a[:, 1:4], axis=0)
+    dsp_ = sp.derivative()
+    return TrajectoryReceiver(lambda u: sp(u), lambda u: dsp_(u), name=f"{name} {p.name}",
+                              span_s=(float(t[0]), float(t[-1])))
+
+
 def check_motion(receiver, u0: float, u1: float) -> None:
     """Refuse a receiver motion (module notes) over GPS times ``u0 .. u1`` (s), sampled every
     :data:`MOTION_CHECK_STEP_S`; the error names the first time and what is wrong."""
@@ -172,6 +228,11 @@ def check_motion(receiver, u0: float, u1: float) -> None:
         raise ValueError(f"{what}: speed {speed[i]:.0f} m/s at u = {u[i]:.3f} s exceeds "
                          f"{MAX_SPEED_MPS:g} m/s (the escape speed: no receiver that fast "
                          f"stays near the Earth)")
+    acc = np.linalg.norm(np.diff(v, axis=0), axis=1) / MOTION_CHECK_STEP_S
+    if np.any(acc > MAX_ACCEL_MPS2):
+        i = int(np.argmax(acc > MAX_ACCEL_MPS2))
+        raise ValueError(f"{what}: acceleration {acc[i]:.0f} m/s^2 at u = {u[i]:.3f} s "
+                         f"exceeds {MAX_ACCEL_MPS2:g} m/s^2 (100 g)")
     fd = np.diff(p, axis=0) / MOTION_CHECK_STEP_S
     vm = 0.5 * (v[1:] + v[:-1])
     err = np.linalg.norm(fd - vm, axis=1)

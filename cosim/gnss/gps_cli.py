@@ -5,10 +5,16 @@ Input, one of:
 * ``--file PATH`` with the file options of ``gnss-acquire`` / ``gnss-track``
   (:func:`cosim.gnss.acquire_cli.add_file_options`; ``--format`` and ``--fs-hz`` required
   with a file);
-* no ``--file``: a generated static scenario (:mod:`cosim.gnss.gps_scenario`: ``--duration-s``,
+* no ``--file``: a generated scenario (:mod:`cosim.gnss.gps_scenario`: ``--duration-s``,
   ``--seed``, ``--cn0-dbhz``, ``--lat/--lon/--height``, the constellation of ``--nav RINEX``
-  or the nominal one; ``--fs-hz``/``--if-hz`` default 5 MS/s, 1.25 MHz) written to
+  or the nominal one above ``--elevation-mask-deg``; ``--fs-hz``/``--if-hz`` default 5 MS/s,
+  1.25 MHz; a static receiver, or ``--trajectory ins|CSV`` a moving one; ``--bit-error-rate
+  P`` flips LNAV bits in the signal, drawn from ``--seed``) written to
   ``OUT/scenario.int8`` with ``truth.json``, then processed through exactly the file path.
+  The fixes are compared with the truth at each epoch. A scenario with fewer than four
+  satellites (of ``--prns``) above the mask, or whose trajectory leaves the Earth's
+  neighbourhood or moves impossibly (:func:`cosim.gnss.constellation_geometry.check_motion`),
+  is refused before any sample is written.
 
 Processing: acquisition of ``--prns`` (:func:`dsp.gnss.search.search_all`), every satellite
 found tracked on the channel array (:func:`cosim.gnss.multichannel.track_file`, the
@@ -18,14 +24,20 @@ hot-starts from a navigation file (the scenario's own ephemerides and Klobuchar
 coefficients with ``--hot-start``);
 otherwise a cold start waits for each satellite's subframes 1-3. Outputs under ``--out``
 (:func:`cosim.gnss.gps_outputs.write_outputs`); the table or, with ``--json``, one JSON
-object on stdout; stage progress on stderr unless ``--json``.
+object on stdout; stage progress on stderr unless ``--json``. The summary counts the words
+that failed parity and the fix jumps (:mod:`cosim.gnss.fix_integrity`, bound
+``--jump-bound-m``).
 
-Every option is checked, and a ``--ephemeris`` / ``--nav`` file read, before any work.
+Every option is checked, and a ``--ephemeris`` / ``--nav`` file read, before any work: bad
+input exits 2 with one line. A run that gives no fix, or a fix jump, exits 1 with its
+summary (the status says why).
 """
 from __future__ import annotations
 
 import sys
 import time
+
+import numpy as np
 
 from ..core.validate import check_float, check_out_dir, dumps
 from .acquire_cli import add_file_options, add_search_options, check_search_options, \
@@ -61,6 +73,16 @@ def add_parser(sub, make_parser) -> None:
     g.add_argument("--height", type=float, default=30.0, help="receiver height (m)")
     g.add_argument("--hot-start", action="store_true",
                    help="hot start from the generator's ephemerides")
+    g.add_argument("--elevation-mask-deg", type=float, default=None,
+                   help="satellites generated above this elevation (default 10 deg, at least 3: "
+                        "the troposphere model's lowest)")
+    g.add_argument("--trajectory", default=None, metavar="ins|CSV",
+                   help="a moving receiver: 'ins' (the INS paper's profile flown east from "
+                        "--lat/--lon/--height) or a CSV of t,x,y,z[,vx,vy,vz] (ECEF m, m/s; "
+                        "t s from the record's start)")
+    g.add_argument("--bit-error-rate", type=float, default=None, metavar="P",
+                   help="probability that an LNAV bit is flipped in the signal (default 0; "
+                        "the flips drawn from --seed)")
     p.add_argument("--duration-s", type=float, default=None,
                    help="scenario length (default 8 s) or the first seconds of --file")
     p.add_argument("--ephemeris", default=None, metavar="RINEX",
@@ -78,6 +100,10 @@ def add_parser(sub, make_parser) -> None:
     p.add_argument("--backend", type=str.lower, default="model",
                    choices=("model", "pysim", "verilator"), help="the channel array")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output directory")
+    p.add_argument("--jump-bound-m", type=float, default=None,
+                   help="a fix more than this off the truth, or stepping this much more than "
+                        "the truth (or its Doppler velocity) from the previous fix, is a fix "
+                        "jump (default 30 m)")
     p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -89,16 +115,21 @@ def _say(a, msg: str) -> None:
 
 
 def run(a) -> int:
+    from dsp.gnss.atmosphere import TROPO_MIN_ELEVATION_DEG
+
     from .config import GnssRunConfig
+    from .fix_integrity import JUMP_BOUND_M
     from .gps_outputs import table, write_outputs
     from .gps_receiver import GpsConfig, navigate
-    from .gps_scenario import ScenarioSpec
+    from .gps_scenario import ScenarioSpec, scenario_signal
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from .multichannel_session import array_channel_params
     from .rinex_nav import read_rinex_nav
     t_wall = time.time()
     prns = check_search_options(a, tracker=a.tracker)
     out = check_out_dir(a.out, "--out")
+    bound = JUMP_BOUND_M if a.jump_bound_m is None else \
+        check_float("--jump-bound-m", a.jump_bound_m, 0.0, lo_open=True, unit="m")
     gcfg = GpsConfig(rate_hz=a.rate)
     tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
@@ -108,7 +139,7 @@ def run(a) -> int:
         if not rinex.ephemerides:
             raise ValueError(f"--ephemeris {a.ephemeris}: no GPS ephemeris in the file")
         hot = rinex.ephemerides
-    truth = None
+    truth = sig = None
     if a.file is None:
         for opt in ("format", "adc_map"):
             if getattr(a, opt) is not None:
@@ -119,20 +150,27 @@ def run(a) -> int:
         dur = 8.0 if a.duration_s is None else a.duration_s
         check_float("--duration-s", dur, 0.1, 3600.0, unit="s")
         check_float("--cn0-dbhz", a.cn0_dbhz, 20.0, 70.0, unit="dB-Hz")
-        spec = ScenarioSpec(lat_deg=a.lat, lon_deg=a.lon, height_m=a.height, duration_s=dur,
-                            cn0_dbhz=a.cn0_dbhz, seed=a.seed,
-                            fs_hz=5e6 if a.fs_hz is None else a.fs_hz,
-                            if_hz=1.25e6 if a.if_hz == 0.0 else a.if_hz, nav_file=a.nav)
+        mask = 10.0 if a.elevation_mask_deg is None else a.elevation_mask_deg
+        check_float("--elevation-mask-deg", mask, TROPO_MIN_ELEVATION_DEG, 90.0, hi_open=True,
+                    unit="deg")
+        ber = 0.0 if a.bit_error_rate is None else a.bit_error_rate
+        check_float("--bit-error-rate", ber, 0.0, 0.5)
         if a.seed < 0:
             raise ValueError(f"--seed must be >= 0, not {a.seed}")
         check_float("--lat", a.lat, -90, 90, unit="deg")
         check_float("--lon", a.lon, -180, 180, unit="deg")
+        spec = ScenarioSpec(lat_deg=a.lat, lon_deg=a.lon, height_m=a.height, duration_s=dur,
+                            cn0_dbhz=a.cn0_dbhz, seed=a.seed,
+                            fs_hz=5e6 if a.fs_hz is None else a.fs_hz,
+                            if_hz=1.25e6 if a.if_hz == 0.0 else a.if_hz, nav_file=a.nav,
+                            mask_deg=mask, bit_error_rate=ber, trajectory=a.trajectory)
         if a.nav is not None:
             read_rinex_nav(a.nav)                   # a bad file refused before work
+        signal = scenario_signal(spec, prns)        # motion, mask, satellites: before work
         from .gps_scenario import write_scenario
         _say(a, f"generating {dur:g} s of the scenario under {out} ...")
-        sc = write_scenario(spec, out)
-        truth = sc["truth"]
+        sc = write_scenario(spec, out, signal)
+        truth, sig = sc["truth"], sc["signal"]
         a.file, a.format, a.fs_hz, a.if_hz = sc["file"], "int8", sc["fs_hz"], sc["if_hz"]
         week = sc["week"]
         # a hot start knows the generator's ephemerides and Klobuchar coefficients; a cold
@@ -143,6 +181,10 @@ def run(a) -> int:
     else:
         if a.hot_start:
             raise ValueError("--hot-start is for a generated scenario: give --ephemeris")
+        for opt in ("elevation_mask_deg", "trajectory", "bit_error_rate"):
+            if getattr(a, opt) is not None:
+                raise ValueError(f"--{opt.replace('_', '-')} is for a generated scenario, "
+                                 f"not --file")
         for opt in _FILE_ONLY:
             if getattr(a, opt) is None:
                 raise ValueError(f"--file needs --{opt.replace('_', '-')}")
@@ -176,13 +218,20 @@ def run(a) -> int:
     else:
         from .gps_receiver import GpsRun
         g = GpsRun([], [], f.fs_hz, "hot" if hot is not None else "cold", None, None)
-    s = write_outputs(g, out, truth, plots=not a.no_plots)
+    if sig is not None:                   # the truth at every epoch (a moving receiver)
+        ep = np.array([e.sample for e in g.epochs if e.solution is not None], dtype=np.int64)
+        if ep.size:
+            pos = sig.truth_at(ep / f.fs_hz).rx_position_m
+            truth = dict(truth, ecef_at_sample={int(n): [float(x) for x in p_]
+                                                for n, p_ in zip(ep, pos)})
+    s = write_outputs(g, out, truth, plots=not a.no_plots, jump_bound_m=bound)
     s["recording"] = f.describe()
     s["acquired"] = [c.prn for c in cands]
     s["wall_s"] = round(time.time() - t_wall, 2)
+    rc = 0 if s["fixes"] and not s["fix_jumps"]["count"] else 1
     if a.json:
         print(dumps(s))
-        return 0
+        return rc
     print(table(s))
     print("files: " + ", ".join(s["files"]))
-    return 0
+    return rc

@@ -3,17 +3,20 @@
 * :func:`fix_rows`: one row per measurement epoch (recording time, receiver time, status,
   satellites used, latitude, longitude, height, ECEF, clock bias and drift, east/north/up
   velocity, DOPs, and with a
-  truth the east/north/up and 3-D errors);
+  truth the east/north/up and 3-D errors and the truth's ECEF position);
 * :func:`summarise`: the JSON summary (start mode, time to first fix, channels with their
-  bit sync / frame sync / decoding, fix counts, error statistics against the truth);
+  bit sync / frame sync / decoding, fix counts, error statistics against the truth, the
+  fix jumps and navigation counts of :mod:`cosim.gnss.fix_integrity`);
 * :func:`table`: the terminal lines;
 * :func:`write_outputs`: ``obs.rnx`` (RINEX 3 observations, :func:`cosim.gnss.rinex_obs.
   write_rinex_obs`), ``fixes.nmea`` (GGA + RMC per fix, :func:`cosim.gnss.nmea.sentences`),
   ``fixes.csv``, ``gps.json`` and the plots ``position_error.png`` (with a truth),
   ``skyplot.png``, ``cn0.png``.
 
-The truth is a dict with ``receiver_ecef_m`` (a static receiver, as
-:func:`cosim.gnss.gps_scenario.write_scenario` writes it).
+The truth is a dict with ``receiver_ecef_m`` (as :func:`cosim.gnss.gps_scenario.
+write_scenario` writes it) and, for a moving receiver, ``ecef_at_sample``: the receiver's
+ECEF position at each epoch's sample (``{sample: [x, y, z]}``), against which that epoch's
+fix is compared (it is left out of the JSON).
 """
 from __future__ import annotations
 
@@ -22,6 +25,8 @@ import json
 from pathlib import Path
 
 import numpy as np
+
+from .fix_integrity import JUMP_BOUND_M, fix_jumps, navigation_counts
 
 __all__ = ["fix_rows", "summarise", "table", "write_outputs", "DEFAULT_LEAP_SECONDS"]
 
@@ -39,11 +44,12 @@ def _enu(sol, ref_ecef):
 def fix_rows(run, truth: dict | None = None) -> list[dict]:
     """One row per epoch with an attempted solution (module doc)."""
     rows = []
-    ref = None if truth is None else truth["receiver_ecef_m"]
+    at = {} if truth is None else truth.get("ecef_at_sample") or {}
     for e in run.epochs:
         s = e.solution
         if s is None:
             continue
+        ref = None if truth is None else at.get(e.sample, truth["receiver_ecef_m"])
         r = {"t_s": e.sample / run.fs_hz, "week": e.week, "tow_rx_s": e.tow_s,
              "status": s.status.value, "n_used": len(s.used_prns),
              "used_prns": " ".join(str(p) for p in s.used_prns),
@@ -57,7 +63,9 @@ def fix_rows(run, truth: dict | None = None) -> list[dict]:
         if ref is not None:
             enu = _enu(s, ref) if s.valid else np.full(3, np.nan)
             r.update(err_e_m=float(enu[0]), err_n_m=float(enu[1]), err_u_m=float(enu[2]),
-                     err_3d_m=float(np.linalg.norm(enu)))
+                     err_3d_m=float(np.linalg.norm(enu)),
+                     truth_x_m=float(ref[0]), truth_y_m=float(ref[1]),
+                     truth_z_m=float(ref[2]))
         rows.append(r)
     return rows
 
@@ -71,23 +79,26 @@ def _stats(x) -> dict:
             "max": float(np.max(np.abs(x))), "last": float(x[-1])}
 
 
-def summarise(run, truth: dict | None = None) -> dict:
-    """The run as one JSON-ready dict (module doc)."""
+def summarise(run, truth: dict | None = None, jump_bound_m: float = JUMP_BOUND_M) -> dict:
+    """The run as one JSON-ready dict (module doc); ``jump_bound_m`` the fix-jump bound."""
     rows = fix_rows(run, truth)
     valid = [r for r in rows if r["status"].startswith("fix")]
+    chans = [c.as_dict() for c in run.channels]
     statuses: dict = {}
     for r in rows:
         statuses[r["status"]] = statuses.get(r["status"], 0) + 1
     out = {"start": run.start, "ttff_s": run.ttff_s, "time_set_s": run.time_set_s,
            "epochs": len(run.epochs), "solutions": len(rows), "fixes": len(valid),
-           "statuses": statuses, "channels": [c.as_dict() for c in run.channels],
-           "last_fix": valid[-1] if valid else None}
+           "statuses": statuses, "channels": chans,
+           "last_fix": valid[-1] if valid else None,
+           "fix_jumps": fix_jumps(rows, jump_bound_m),
+           "navigation": navigation_counts(chans)}
     if not valid:
         why = "no channel had a TOW and an ephemeris" if not rows else \
             f"no valid solution (statuses: {statuses})"
         out["no_fix"] = why
     if truth is not None:
-        out["truth"] = truth
+        out["truth"] = {k: v for k, v in truth.items() if k != "ecef_at_sample"}
         h = [np.hypot(r["err_e_m"], r["err_n_m"]) for r in valid]
         out["error"] = {"horizontal_m": _stats(h),
                         "vertical_m": _stats([r["err_u_m"] for r in valid]),
@@ -116,6 +127,11 @@ def table(s: dict) -> str:
                      f"{f['clock_bias_m']:.2f} m")
     else:
         lines.append(f"no fix: {s['no_fix']}")
+    n, j = s["navigation"], s["fix_jumps"]
+    lines.append(f"navigation: {n['parity_failures']} words failed parity, {n['subframes']} "
+                 f"subframes decoded, {n['subframes_withheld']} withheld; fix jumps (> "
+                 f"{j['bound_m']:g} m): {j['count']}"
+                 + (f" at {', '.join(f'{t:.1f}' for t in j['t_s'][:5])} s" if j["count"] else ""))
     if "error" in s and s["fixes"]:
         e = s["error"]
         lines.append(f"error vs truth: horizontal RMS {e['horizontal_m']['rms']:.2f} m, "
@@ -181,7 +197,8 @@ def _plots(run, rows, truth, out: Path) -> list[str]:
     return paths
 
 
-def write_outputs(run, out_dir, truth: dict | None = None, *, plots: bool = True) -> dict:
+def write_outputs(run, out_dir, truth: dict | None = None, *, plots: bool = True,
+                  jump_bound_m: float = JUMP_BOUND_M) -> dict:
     """Write the files of the module doc to ``out_dir``; return the summary with their
     paths under ``files``."""
     from ..core.validate import dumps
@@ -189,7 +206,7 @@ def write_outputs(run, out_dir, truth: dict | None = None, *, plots: bool = True
     from .rinex_obs import RinexObsHeader, write_rinex_obs
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    s = summarise(run, truth)
+    s = summarise(run, truth, jump_bound_m)
     rows = fix_rows(run, truth)
     files = []
     obs = [e.obs for e in run.epochs if e.obs is not None]

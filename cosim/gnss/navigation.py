@@ -164,6 +164,7 @@ class ChannelNav:
                     {"bit": s.bit_index, "id": s.subframe_id, "tow_start": s.tow_start}
                     for s in d.subframes],
                 "parity_failures": 0 if d is None else len(d.parity_failures),
+                "subframes_withheld": 0 if d is None else d.rejected_subframes,
                 "ephemeris_decoded": d is not None and d.ephemeris is not None,
                 "ephemeris_withheld": None if d is None else d.withheld,
                 "tow_known_s": None if self.tow_sample is None else

@@ -185,7 +185,7 @@ def csv_rows(path):
 
 def test_the_real_70ms_window_is_tracked_but_gives_no_fix_and_says_why(capsys, tmp_path):
     """70 ms of a real recording: three satellites acquired and tracked, far too short for
-    bit synchronisation or a TOW: no solution, no position, exit 0 with the reason."""
+    bit synchronisation or a TOW: no solution, no position, exit 1 with the reason."""
     from pathlib import Path
     real = Path(__file__).resolve().parents[2] / "data" / "gnss" / \
         "L1_20211125_004000_12MHz_I_70ms.bin"
@@ -193,7 +193,7 @@ def test_the_real_70ms_window_is_tracked_but_gives_no_fix_and_says_why(capsys, t
                "3e6", "--week", "2185", "--prns", "13,15,24", "--rate", "10", "--out",
                str(tmp_path), "--no-plots", "--json"])
     s = json.loads(capsys.readouterr().out)
-    assert rc == 0 and sorted(s["acquired"]) == [13, 15, 24]
+    assert rc == 1 and sorted(s["acquired"]) == [13, 15, 24]
     assert s["fixes"] == 0 and s["solutions"] == 0 and s["ttff_s"] is None
     assert "no channel had a TOW" in s["no_fix"]
     assert {c["status"] for c in s["channels"]} <= {"no-bit-sync", "not-locked"}
