@@ -28,7 +28,6 @@ and one cocotb edge trigger per cycle); short windows only. :func:`icarus_availa
 """
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import logging
 import os
@@ -45,6 +44,7 @@ import numpy as np
 
 from ..core.provenance import REPO_ROOT
 from ..core.session import FrontendSession, ready_window
+from .build_cache import cached_build
 from .pysim import StreamResult, input_items
 from .verilator_harness import as_value
 from .verilog import PortInfo, component_ports, verilog_text
@@ -156,41 +156,22 @@ class IcarusStreamSim:
         return h.hexdigest()
 
     def _ensure_build(self, root: Path) -> Path:
-        out = root / self._cache_key()
-        if (out / "sim.vvp").exists():
-            return out
-        root.mkdir(parents=True, exist_ok=True)
-        # One build per key at a time (pytest-xdist workers): the others wait and reuse it.
-        with open(root / f"{out.name}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            if not (out / "sim.vvp").exists():
-                self._compile(out)
-                self.built = True
+        out, self.built = cached_build(root, self._cache_key(), "sim.vvp", self._compile)
         return out
 
-    def _compile(self, out: Path) -> None:
+    def _compile(self, tmp: Path) -> None:
+        """Compile into the empty directory ``tmp`` (:func:`cached_build` moves it)."""
         from cocotb_tools.runner import get_runner
-        tmp = Path(tempfile.mkdtemp(prefix=out.name[:16] + ".tmp-", dir=out.parent))
+        src = tmp / f"{self.name}.v"
+        src.write_text(self.verilog)
+        runner = get_runner("icarus")
         try:
-            src = tmp / f"{self.name}.v"
-            src.write_text(self.verilog)
-            runner = get_runner("icarus")
-            try:
-                runner.build(sources=[src], hdl_toplevel=self.name, build_dir=tmp,
-                             timescale=("1ns", "1ps"), log_file=tmp / "build.log",
-                             always=True)
-            except (RuntimeError, SystemExit) as e:
-                log = (tmp / "build.log").read_text() if (tmp / "build.log").exists() else ""
-                tail = "\n".join(log.splitlines()[-40:])
-                raise RuntimeError(f"Icarus build of {self.name} failed ({e}):\n{tail}") from None
-            try:
-                tmp.rename(out)
-            except OSError:
-                if not (out / "sim.vvp").exists():   # not a concurrent build of the same key
-                    raise
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp, ignore_errors=True)
+            runner.build(sources=[src], hdl_toplevel=self.name, build_dir=tmp,
+                         timescale=("1ns", "1ps"), log_file=tmp / "build.log", always=True)
+        except (RuntimeError, SystemExit) as e:
+            log = (tmp / "build.log").read_text() if (tmp / "build.log").exists() else ""
+            tail = "\n".join(log.splitlines()[-40:])
+            raise RuntimeError(f"Icarus build of {self.name} failed ({e}):\n{tail}") from None
 
     # -- ports ----------------------------------------------------------------------------
     def port(self, port) -> PortInfo:
