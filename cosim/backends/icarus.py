@@ -18,6 +18,11 @@ text that is linted and synthesised), unmodified, as its top module.
   cocotb coroutine's and nothing else. Per cycle the coroutine does what the Verilator harness
   does (module doc of :mod:`cosim.backends.icarus_tb`); ``rst`` and every input nobody
   writes are held at 0, as Verilator's wrapper ties them and ``amaranth.sim`` leaves them.
+- Four states: Icarus keeps X (unknown) and Z (undriven) bits, which the two-state
+  simulators cannot represent (Verilator makes them 0 or 1). An X or Z on ``o.valid``, on
+  ``i.ready`` when a word is offered, on ``o.payload`` when a word is taken, or on any output
+  at a step's last edge (or a port read) fails the run with :class:`UnknownValueError`
+  naming the port, its bits and the cycle.
 - :class:`IcarusStreamSim` builds once and runs records like
   :func:`cosim.backends.pysim.run_stream` (:meth:`IcarusStreamSim.run`, one session from
   reset) or opens sessions (:meth:`IcarusStreamSim.open`).
@@ -49,8 +54,8 @@ from .pysim import StreamResult, input_items
 from .verilator_harness import as_value
 from .verilog import PortInfo, component_ports, verilog_text
 
-__all__ = ["IcarusStreamSim", "IcarusSession", "icarus_available", "icarus_missing_message",
-           "icarus_version"]
+__all__ = ["IcarusStreamSim", "IcarusSession", "UnknownValueError", "icarus_available",
+           "icarus_missing_message", "icarus_version"]
 
 #: The cocotb test module run inside ``vvp`` (imported there, not here: it needs cocotb).
 TB_MODULE = "cosim.backends.icarus_tb"
@@ -100,6 +105,12 @@ def signed_words(values, width: int, signed: bool) -> np.ndarray:
     if width <= 63 or (not ints and width <= 64):
         return np.array(ints, dtype=np.int64)
     return np.array(ints, dtype=object)
+
+
+class UnknownValueError(AssertionError):
+    """An output of the design was X or Z where a simulator of two-state values would have
+    read 0 or 1 (an :class:`AssertionError`: a check that sees one fails, saying which port,
+    its bits and the cycle)."""
 
 
 class IcarusStreamSim:
@@ -252,6 +263,7 @@ class IcarusSession(FrontendSession):
         self._thread: threading.Thread | None = None
         self._sock_dir: str | None = None
         self._valid = None
+        self._unknown: str | None = None
         self._pin = sim.port("i__payload") if "i__payload" in sim._by_name else None
         self._pout = sim.port("o__payload")
         init = {"rst": 0}   # clk: the testbench's clock
@@ -303,7 +315,7 @@ class IcarusSession(FrontendSession):
             self._conn = Connection(conn.detach())
         finally:
             server.close()
-        self._call(("init", init))
+        self._call(("init", init, [p.name for p in sim.ports if p.direction == "out"]))
 
     # -- the link to vvp ------------------------------------------------------------------
     def _failure(self, what: str) -> str:
@@ -333,7 +345,11 @@ class IcarusSession(FrontendSession):
 
     def _read(self, port):
         p = self.sim.port(port)
-        return int(signed_words([self._call(("read", p.name))], p.width, p.signed)[0])
+        v = self._call(("read", p.name))
+        if isinstance(v, str):
+            raise UnknownValueError(f"Icarus: port {p.name} of {self.sim.name} is {v} (X or Z "
+                                    f"bits) after cycle {self.cycle}")
+        return int(signed_words([v], p.width, p.signed)[0])
 
     def _step(self, queue, ready, n, writes):
         start = self.cycle
@@ -352,7 +368,15 @@ class IcarusSession(FrontendSession):
         for c, port, v in writes:
             p = self.sim.input_port(port)
             wl.append((int(c) - start, p.name, int(v) & ((1 << p.width) - 1)))
-        out_w, out_c, accepted = self._call(("step", words, vld, rdy, int(n), wl))
+        if self._unknown is not None:
+            raise UnknownValueError(self._unknown)
+        out_w, out_c, accepted, unknown = self._call(("step", words, vld, rdy, int(n), wl))
+        if unknown is not None:
+            c, port, bits = unknown
+            self._unknown = (f"Icarus: output {port} of {self.sim.name} is {bits} (X or Z "
+                             f"bits) at the edge of cycle {start + c}, after {len(out_w)} "
+                             f"output words of this step; the session stops there")
+            raise UnknownValueError(self._unknown)
         words_out = signed_words(out_w, self._pout.width, self._pout.signed)
         return words_out, np.asarray(out_c, np.int64) + np.int64(start), int(accepted)
 

@@ -7,17 +7,22 @@ coroutine runs the step's cycles on the design and answers with the output words
 
 Messages (pickled tuples, :class:`multiprocessing.connection.Connection`):
 
-- ``("init", {port: value})``: every input port of the top but ``clk`` set (``rst`` and the
-  inputs nobody writes to 0, the constant inputs to their values) and the clock started (a
-  cocotb :class:`~cocotb.clock.Clock`, period 2 ns, first rising edge at 1 ns); answer
-  ``"ok"``.
+- ``("init", {port: value}, outputs)``: every input port of the top but ``clk`` set (``rst``
+  and the inputs nobody writes to 0, the constant inputs to their values) and the clock
+  started (a cocotb :class:`~cocotb.clock.Clock`, period 2 ns, first rising edge at 1 ns);
+  ``outputs`` names the output ports; answer ``"ok"``.
 - ``("step", words, valid, ready, n, writes)``: run ``n`` cycles. ``words`` are the input
   payloads still queued (ints, already masked to the port width), offered one per cycle in
   order; ``valid`` (list of bool, may be shorter than ``n``: valid after its end) gates the
   offer; ``ready`` (list of bool, shorter: ready after its end) is ``o.ready``; ``writes``
   ``(cycle of the step, port, value)`` in cycle order set a port before that cycle's edge.
-  Answer ``(out_words, out_cycles, accepted)``, the cycles counted from the step's start.
-- ``("read", port)``: the port's value (an unsigned int) after the last edge, settled.
+  Answer ``(out_words, out_cycles, accepted, unknown)``, the cycles counted from the step's
+  start; ``unknown`` is None, or ``(cycle, port, bits)`` for the first output found X or Z
+  (four-state: ``bits`` as Verilog shows them, e.g. ``"0x1z"``), and the step ended at that
+  cycle. Checked are, at every edge, ``o.valid``, ``i.ready`` when a word is offered and
+  ``o.payload`` when it is taken, and at the step's last edge every output port.
+- ``("read", port)``: the port's value after the last edge, settled: an unsigned int, or its
+  bits as a string when some are X or Z.
 - ``("close",)``: end the test (answer ``"ok"``).
 
 The simulator does not advance while the coroutine waits for a message, so the clock stops
@@ -50,8 +55,10 @@ def _connect() -> Connection:
     return Connection(s.detach())
 
 
-def _unsigned(handle) -> int:
-    return handle.value.to_unsigned()
+def _unsigned(handle):
+    """The handle's value as an unsigned int, or its bits (a string) when some are X or Z."""
+    v = handle.value
+    return v.to_unsigned() if v.is_resolvable else str(v)
 
 
 class _Driver:
@@ -59,8 +66,9 @@ class _Driver:
     at 1 ns) and its stream ports. Between steps the coroutine sits right after a rising
     edge (its writes still to come) or, after a read, in the read-only phase of one."""
 
-    def __init__(self, dut):
+    def __init__(self, dut, outputs=()):
         self.dut = dut
+        self.outputs = [(name, getattr(dut, name)) for name in outputs]
         self.clk = dut.clk
         has_in = hasattr(dut, "i__valid")
         self.i_valid = dut.i__valid if has_in else None
@@ -116,19 +124,36 @@ class _Driver:
                 o_ready.value = int(rdy)
                 last_ready = rdy
             await edge
-            if rdy and o_valid.value:
-                out_w.append(_unsigned(o_payload))
+            v = o_valid.value
+            if not v.is_resolvable:
+                return out_w, out_c, accepted, (cyc, "o__valid", str(v))
+            if rdy and v:
+                v = o_payload.value
+                if not v.is_resolvable:
+                    return out_w, out_c, accepted, (cyc, "o__payload", str(v))
+                out_w.append(v.to_unsigned())
                 out_c.append(cyc)
-            if offer and (i_ready is None or i_ready.value):
+            if offer:
+                if i_ready is not None:
+                    v = i_ready.value
+                    if not v.is_resolvable:
+                        return out_w, out_c, accepted, (cyc, "i__ready", str(v))
+                    if not v:
+                        continue
                 accepted += 1
-        return out_w, out_c, accepted
+        if n:   # every output as the step's last edge saw it
+            for name, h in self.outputs:
+                v = h.value
+                if not v.is_resolvable:
+                    return out_w, out_c, accepted, (n - 1, name, str(v))
+        return out_w, out_c, accepted, None
 
 
 @cocotb.test()
 async def serve(dut):
     """Serve the session's steps until it closes (module doc)."""
     conn = _connect()
-    drv = _Driver(dut)
+    drv = None
     try:
         while True:
             msg = conn.recv()
@@ -136,6 +161,7 @@ async def serve(dut):
             if kind == "init":
                 for port, value in msg[1].items():
                     getattr(dut, port).value = value
+                drv = _Driver(dut, msg[2])
                 Clock(dut.clk, 2, unit="ns").start(start_high=False)
                 conn.send("ok")
             elif kind == "step":
