@@ -212,29 +212,63 @@ class IcarusStreamSim:
         ``inputs`` (as in :meth:`run`), kept alive between steps."""
         return IcarusSession(self, inputs=inputs)
 
-    def run(self, in_words=None, *, in_valid=None, out_ready=None, n_cycles: int,
-            inputs: dict | None = None, writes: list | None = None,
+    def run(self, in_words=None, *, in_valid=None, out_ready=None,
+            n_cycles: int | None = None, flush_cycles: int = 64, inputs: dict | None = None,
+            writes: list | None = None, probe: dict | None = None,
             final: dict | None = None) -> StreamResult:
-        """Run ``n_cycles`` cycles from reset; the arguments and the result of
-        :func:`cosim.backends.pysim.run_stream` (``n_cycles`` required; ``final``: ports read
-        after the last edge). ``writes``: ``(cycle, port, value)``, ``port`` a name or an
-        Amaranth value of the component."""
-        if isinstance(n_cycles, bool) or not isinstance(n_cycles, (int, np.integer)) \
-                or n_cycles < 0:
+        """Run from reset; the arguments and the result of
+        :func:`cosim.backends.pysim.run_stream`: ``n_cycles`` cycles, or (None) until every
+        input word is taken and then ``flush_cycles`` more; ``writes``: ``(cycle, port,
+        value)``, ``port`` a name or an Amaranth value of the component; ``probe``: name ->
+        port recorded at every edge; ``final``: ports read after the last edge."""
+        if n_cycles is not None and (isinstance(n_cycles, bool) or
+                                     not isinstance(n_cycles, (int, np.integer)) or n_cycles < 0):
             raise ValueError(f"n_cycles must be an integer >= 0, not {n_cycles!r}")
+        if isinstance(flush_cycles, bool) or not isinstance(flush_cycles, (int, np.integer)) \
+                or flush_cycles < 0:
+            raise ValueError(f"flush_cycles must be an integer >= 0, not {flush_cycles!r}")
         if in_words is not None and "i__valid" not in self._by_name:
             raise ValueError("in_words given but the component has no input stream `i`")
+        probe = {k: self.port(v) for k, v in (probe or {}).items()}
         if out_ready is not None:   # as run_stream: entries past n_cycles are not used
-            out_ready = np.asarray(out_ready, dtype=bool).ravel()[:int(n_cycles)]
+            out_ready = np.asarray(out_ready, dtype=bool).ravel()
         if in_valid is not None:
-            in_valid = np.asarray(in_valid, dtype=bool).ravel()[:int(n_cycles)]
+            in_valid = np.asarray(in_valid, dtype=bool).ravel()
+        n_in = 0 if in_words is None else np.asarray(in_words).size
         with self.open(inputs) as s:
+            s._probes = probe
             for c, p, v in writes or []:
                 s.write(self.input_port(p).name, int(v), cycle=int(c))
-            r = s.step(in_words, out_ready, n_cycles=int(n_cycles), valid=in_valid)
+            if n_cycles is not None:
+                steps = [self._step_from(s, in_words, in_valid, out_ready, int(n_cycles))]
+            else:
+                # Steps of as many cycles as words are left (one word per cycle at most), so
+                # the last word is taken on a step's last cycle; then the flush.
+                steps, left = [], n_in
+                queued = in_words
+                while left:
+                    steps.append(self._step_from(s, queued, in_valid, out_ready, left))
+                    queued, left = None, n_in - sum(r.in_accepted for r in steps)
+                steps.append(self._step_from(s, None, None, out_ready, int(flush_cycles)))
             fin = {k: s.read(self.port(p).name) for k, p in (final or {}).items()}
-        return StreamResult(words=r.words, cycles=r.cycles, n_cycles=r.n_cycles,
-                            in_accepted=r.in_accepted, final=fin)
+            probes = {k: np.concatenate(s.probes[k]) if s.probes.get(k) else
+                      np.zeros(0, np.int64) for k in probe}
+        words = [r.words for r in steps]
+        return StreamResult(words=np.concatenate(words) if len(words) > 1 else words[0],
+                            cycles=np.concatenate([r.cycles for r in steps]),
+                            n_cycles=sum(r.n_cycles for r in steps),
+                            in_accepted=sum(r.in_accepted for r in steps),
+                            probes=probes, final=fin)
+
+
+    @staticmethod
+    def _step_from(s, words, in_valid, out_ready, n):
+        """``s.step`` of ``n`` cycles from the session's cycle, ``in_valid``/``out_ready``
+        (per cycle from reset) cut to them."""
+        a = s.cycle
+        v = None if in_valid is None else in_valid[a:a + n]
+        r = None if out_ready is None else out_ready[a:a + n]
+        return s.step(words, r, n_cycles=n, valid=v)
 
 
 class _QuietSkip(logging.Filter):
@@ -264,6 +298,9 @@ class IcarusSession(FrontendSession):
         self._sock_dir: str | None = None
         self._valid = None
         self._unknown: str | None = None
+        #: Per probe name, the values of each step (:meth:`probe`).
+        self.probes: dict[str, list] = {}
+        self._probes: dict[str, PortInfo] = {}   # name -> port recorded at every edge
         self._pin = sim.port("i__payload") if "i__payload" in sim._by_name else None
         self._pout = sim.port("o__payload")
         init = {"rst": 0}   # clk: the testbench's clock
@@ -370,7 +407,9 @@ class IcarusSession(FrontendSession):
             wl.append((int(c) - start, p.name, int(v) & ((1 << p.width) - 1)))
         if self._unknown is not None:
             raise UnknownValueError(self._unknown)
-        out_w, out_c, accepted, unknown = self._call(("step", words, vld, rdy, int(n), wl))
+        probes = [q.name for q in self._probes.values()]
+        out_w, out_c, accepted, unknown, pv = self._call(("step", words, vld, rdy, int(n), wl,
+                                                          probes))
         if unknown is not None:
             c, port, bits = unknown
             self._unknown = (f"Icarus: output {port} of {self.sim.name} is {bits} (X or Z "
@@ -378,6 +417,8 @@ class IcarusSession(FrontendSession):
                              f"output words of this step; the session stops there")
             raise UnknownValueError(self._unknown)
         words_out = signed_words(out_w, self._pout.width, self._pout.signed)
+        for (k, q), vals in zip(self._probes.items(), pv):
+            self.probes.setdefault(k, []).append(signed_words(vals, q.width, q.signed))
         return words_out, np.asarray(out_c, np.int64) + np.int64(start), int(accepted)
 
     def _close(self):

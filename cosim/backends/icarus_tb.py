@@ -11,16 +11,18 @@ Messages (pickled tuples, :class:`multiprocessing.connection.Connection`):
   and the inputs nobody writes to 0, the constant inputs to their values) and the clock
   started (a cocotb :class:`~cocotb.clock.Clock`, period 2 ns, first rising edge at 1 ns);
   ``outputs`` names the output ports; answer ``"ok"``.
-- ``("step", words, valid, ready, n, writes)``: run ``n`` cycles. ``words`` are the input
+- ``("step", words, valid, ready, n, writes, probes)``: run ``n`` cycles. ``words`` are the input
   payloads still queued (ints, already masked to the port width), offered one per cycle in
   order; ``valid`` (list of bool, may be shorter than ``n``: valid after its end) gates the
   offer; ``ready`` (list of bool, shorter: ready after its end) is ``o.ready``; ``writes``
   ``(cycle of the step, port, value)`` in cycle order set a port before that cycle's edge.
-  Answer ``(out_words, out_cycles, accepted, unknown)``, the cycles counted from the step's
-  start; ``unknown`` is None, or ``(cycle, port, bits)`` for the first output found X or Z
+  ``probes`` names ports whose values are recorded at every edge (unsigned ints).
+  Answer ``(out_words, out_cycles, accepted, unknown, probe_values)``, the cycles counted
+  from the step's start, ``probe_values`` one list per probe; ``unknown`` is None, or ``(cycle, port, bits)`` for the first output found X or Z
   (four-state: ``bits`` as Verilog shows them, e.g. ``"0x1z"``), and the step ended at that
   cycle. Checked are, at every edge, ``o.valid``, ``i.ready`` when a word is offered and
-  ``o.payload`` when it is taken, and at the step's last edge every output port.
+  ``o.payload`` when it is taken, the probes at every edge, and at the step's last edge
+  every output port.
 - ``("read", port)``: the port's value after the last edge, settled: an unsigned int, or its
   bits as a string when some are X or Z.
 - ``("close",)``: end the test (answer ``"ok"``).
@@ -55,10 +57,16 @@ def _connect() -> Connection:
     return Connection(s.detach())
 
 
+def _uint(v) -> int:
+    """A resolvable value as an unsigned int (a ``LogicArray``, or a ``Logic`` of a 1-bit
+    port)."""
+    return v.to_unsigned() if hasattr(v, "to_unsigned") else int(v)
+
+
 def _unsigned(handle):
     """The handle's value as an unsigned int, or its bits (a string) when some are X or Z."""
     v = handle.value
-    return v.to_unsigned() if v.is_resolvable else str(v)
+    return _uint(v) if v.is_resolvable else str(v)
 
 
 class _Driver:
@@ -96,13 +104,15 @@ class _Driver:
         """One step (module doc): the inputs of cycle ``k`` are written before its edge
         (applied after the previous edge's register updates, as cocotb defers writes to the
         read-write phase), and at the edge the outputs are the values the edge sees."""
-        _, words, valid, ready, n, writes = msg
+        _, words, valid, ready, n, writes, probes = msg
         await self.writable()
         dut, edge = self.dut, self.edge
         i_valid, i_payload, i_ready = self.i_valid, self.i_payload, self.i_ready
         o_valid, o_payload, o_ready = self.o_valid, self.o_payload, self.o_ready
         has_in = i_valid is not None
         handles = {p: getattr(dut, p) for _, p, _ in writes}
+        probed = [(name, getattr(dut, name), []) for name in probes]
+        pv = [vals for _, _, vals in probed]
         n_words, n_valid, n_ready, n_writes = len(words), len(valid), len(ready), len(writes)
         out_w, out_c = [], []
         accepted, w = 0, 0
@@ -126,18 +136,23 @@ class _Driver:
             await edge
             v = o_valid.value
             if not v.is_resolvable:
-                return out_w, out_c, accepted, (cyc, "o__valid", str(v))
+                return out_w, out_c, accepted, (cyc, "o__valid", str(v)), pv
+            for name, h, vals in probed:
+                p = h.value
+                if not p.is_resolvable:
+                    return out_w, out_c, accepted, (cyc, name, str(p)), pv
+                vals.append(_uint(p))
             if rdy and v:
                 v = o_payload.value
                 if not v.is_resolvable:
-                    return out_w, out_c, accepted, (cyc, "o__payload", str(v))
-                out_w.append(v.to_unsigned())
+                    return out_w, out_c, accepted, (cyc, "o__payload", str(v)), pv
+                out_w.append(_uint(v))
                 out_c.append(cyc)
             if offer:
                 if i_ready is not None:
                     v = i_ready.value
                     if not v.is_resolvable:
-                        return out_w, out_c, accepted, (cyc, "i__ready", str(v))
+                        return out_w, out_c, accepted, (cyc, "i__ready", str(v)), pv
                     if not v:
                         continue
                 accepted += 1
@@ -145,8 +160,8 @@ class _Driver:
             for name, h in self.outputs:
                 v = h.value
                 if not v.is_resolvable:
-                    return out_w, out_c, accepted, (n - 1, name, str(v))
-        return out_w, out_c, accepted, None
+                    return out_w, out_c, accepted, (n - 1, name, str(v)), pv
+        return out_w, out_c, accepted, None, pv
 
 
 @cocotb.test()
