@@ -172,7 +172,7 @@ def _verilog_name(component, name: str | None) -> str:
 
 def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
                  n_cycles: int | None = None, flush_cycles: int = 64,
-                 inputs: dict | None = None, probe: dict | None = None,
+                 inputs: dict | None = None, writes=None, probe: dict | None = None,
                  backends=BACKENDS, check_cycles: bool = True, name: str | None = None,
                  vcd: str = "on_failure", build_dir: str | Path | None = None) -> StreamCheck:
     """Run ``component`` on each backend and assert its output equals ``model``.
@@ -198,6 +198,9 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
         Cycles to run (default: until every input is taken, then ``flush_cycles``).
     inputs : dict of port name -> int, optional
         Constant values of other input ports (Verilog names, e.g. ``"gain"``).
+    writes : list of (cycle, port name, value), optional
+        Input ports set before the edge of a cycle (run-time register writes), in cycle
+        order.
     probe : dict of name -> port name, optional
         Ports recorded every cycle; compared between backends and with the model's
         ``probes`` of the same names.
@@ -248,6 +251,10 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     vname = _verilog_name(component, name)
     out_dir = Path(build_dir) if build_dir is not None else \
         REPO_ROOT / "build" / "check_stream" / _test_dir()
+    writes = [(int(c), p, int(v)) for c, p, v in writes or ()]
+    if any(not isinstance(p, str) for _, p, _ in writes) or \
+            [c for c, _, _ in writes] != sorted(c for c, _, _ in writes):
+        reject("writes must be (cycle, port name, value) in cycle order")
     kw = dict(in_valid=valid, out_ready=ready, n_cycles=n_cycles, flush_cycles=flush_cycles,
               inputs=inputs, probe=probe)
     check = StreamCheck(expected_words=np.asarray(want_words),
@@ -257,7 +264,8 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     def run(backend, wave: Path | None):
         if backend == "pysim":
             # run_stream samples Values; names are resolved as the Verilog export spells them
-            pkw = dict(kw, probe={k: resolve_port(component, v) for k, v in (probe or {}).items()})
+            pkw = dict(kw, probe={k: resolve_port(component, v) for k, v in (probe or {}).items()},
+                       writes=[(c, resolve_port(component, p), v) for c, p, v in writes])
             return run_stream(component, stimulus, vcd=wave, **pkw)
         if backend not in sims:
             if backend == "verilator":
@@ -267,11 +275,11 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
                 from .backends.icarus import IcarusStreamSim
                 sims[backend] = IcarusStreamSim(component, vname)
         if backend == "verilator":
-            return sims[backend].run(stimulus, trace=wave, **kw)
+            return sims[backend].run(stimulus, trace=wave, writes=writes, **kw)
         if wave is not None:
             raise NotImplementedError("Icarus runs write no waveform (pysim's and "
                                       "Verilator's do)")
-        return sims[backend].run(stimulus, **kw)
+        return sims[backend].run(stimulus, writes=writes, **kw)
 
     def wave_path(backend):
         return out_dir / f"{vname}.{backend}.vcd"
