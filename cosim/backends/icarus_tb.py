@@ -35,7 +35,9 @@ value otherwise, ``o.ready``, the writes) are written after the previous rising 
 applies writes in the read-write phase, after the edge's register updates) and settle before
 the next; at that edge, before its updates, ``o.valid``/``o.payload`` and ``i.ready`` are
 sampled (the values the edge sees). Only values that change are written. This module imports
-nothing of the project: it runs in the simulator's embedded Python.
+nothing of the project: it runs in the simulator's embedded Python, and
+``python -m cosim verilog --cocotb`` copies it beside an exported design as the driver
+(:class:`StreamDriver`) of the standalone cocotb test (:mod:`cosim.tools.cocotb_export`).
 """
 from __future__ import annotations
 
@@ -69,10 +71,12 @@ def _unsigned(handle):
     return _uint(v) if v.is_resolvable else str(v)
 
 
-class _Driver:
-    """The design's clock (a cocotb :class:`~cocotb.clock.Clock`, 2 ns, first rising edge
-    at 1 ns) and its stream ports. Between steps the coroutine sits right after a rising
-    edge (its writes still to come) or, after a read, in the read-only phase of one."""
+class StreamDriver:
+    """The design's stream ports driven cycle by cycle (:meth:`step`), on the clock ``clk``
+    the caller starts (here a cocotb :class:`~cocotb.clock.Clock`, 2 ns, first rising edge
+    at 1 ns). ``outputs``: the output ports checked for X/Z at a step's last edge. Between
+    steps the coroutine sits right after a rising edge (its writes still to come) or, after
+    a read, in the read-only phase of one."""
 
     def __init__(self, dut, outputs=()):
         self.dut = dut
@@ -176,7 +180,7 @@ async def serve(dut):
             if kind == "init":
                 for port, value in msg[1].items():
                     getattr(dut, port).value = value
-                drv = _Driver(dut, msg[2])
+                drv = StreamDriver(dut, msg[2])
                 Clock(dut.clk, 2, unit="ns").start(start_high=False)
                 conn.send("ok")
             elif kind == "step":

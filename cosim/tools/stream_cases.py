@@ -17,7 +17,8 @@ and writes with a stall long enough to overflow it (records dropped and counted)
 expected cycles follow each block's timing rule (a fixed latency after the input that
 completes an output; the FIFO's cycle model gives its own).
 
-Top stimulus: seeded random ADC codes and a seeded random ``ready`` with long stalls
+Top stimulus: seeded ADC codes (:func:`_bursts`: noise bursts over a noise floor) and a
+seeded random ``ready`` with long stalls
 (:func:`cosim.tools.equivalence.stall_pattern`), run on the receiver's bit-exact model
 session (:class:`cosim.core.receivers.Frontend`) from reset. Tops whose model is not a
 registered front-end session (the 12-channel GNSS arrays, the I/Q builds) have no case here;
@@ -293,6 +294,19 @@ def top_case_names() -> tuple:
     return tuple(_top_entries())
 
 
+def _bursts(rng, width: int, n: int) -> np.ndarray:
+    """Signed ``width``-bit ADC codes: a noise floor (2 % of full scale rms) with bursts of
+    strong noise (30 % rms, clipped at full scale), 70 samples long, 100..400 samples apart:
+    broadband energy in any pass band, switched on and off."""
+    x = rng.normal(0.0, 0.02, n)
+    t = int(rng.integers(0, 100))
+    while t < n:
+        x[t:t + 70] += rng.normal(0.0, 0.3, len(x[t:t + 70]))
+        t += int(rng.integers(100, 400))
+    full = 1 << (width - 1)
+    return np.clip(np.round(x * full), -full, full - 1).astype(np.int64)
+
+
 def _top(name, rng, samples):
     from .equivalence import stall_pattern
     fe = _top_entries()[name]
@@ -301,7 +315,7 @@ def _top(name, rng, samples):
     width = next(len(v) for path, _, v in comp.signature.flatten(comp)
                  if "__".join(map(str, path)) == "i__payload")
     comp._MustUse__silence = True      # only asked for its input width
-    x = _signed(rng, width, samples, 0.02)
+    x = _bursts(rng, width, samples)
     n_cycles = samples + 400
     ready = stall_pattern(n_cycles, int(rng.integers(1 << 30)), burst=max(n_cycles // 8, 1))
     with fe.model(params) as s:
@@ -311,15 +325,19 @@ def _top(name, rng, samples):
                 inputs=fe.reset_inputs(params))
 
 
-#: Default record length of a top's case (ADC samples).
+#: Default record length of a top's case (ADC samples), doubled (up to
+#: :data:`TOP_MAX_SAMPLES`) until the model gives an output word: a top whose first output
+#: comes late (a GNSS dump per code period, a monopulse record per snapshot set) gets a
+#: record long enough to give one.
 TOP_SAMPLES = 6000
+TOP_MAX_SAMPLES = 400_000
 
 
 def stream_case(name: str, *, seed: int = 1, size: int | None = None) -> StreamCase:
     """The case of design ``name`` (a key of :data:`BLOCK_CASES` or :func:`top_case_names`):
     seeded stimulus and the bit-exact model's words and cycles. ``size``: input words (the
-    FIFO: cycles; a top: ADC samples); default the block's own, :data:`TOP_SAMPLES` for a
-    top."""
+    FIFO: cycles; a top: ADC samples); default the block's own, for a top
+    :data:`TOP_SAMPLES` or more (see there)."""
     designs = exported_designs()
     tops = top_case_names()
     if name not in BLOCK_CASES and name not in tops:
@@ -331,12 +349,17 @@ def stream_case(name: str, *, seed: int = 1, size: int | None = None) -> StreamC
     if size is not None and (isinstance(size, bool) or not isinstance(size, (int, np.integer))
                              or size < 1):
         raise ValueError(f"size must be an integer >= 1, not {size!r}")
-    rng = np.random.default_rng([int(seed), sum(map(ord, name))])
+    def rng():
+        return np.random.default_rng([int(seed), sum(map(ord, name))])
     if name in BLOCK_CASES:
         make_case, default = BLOCK_CASES[name]
-        d = make_case(rng, int(size or default))
+        d = make_case(rng(), int(size or default))
     else:
-        d = _top(name, rng, int(size or TOP_SAMPLES))
+        n = int(size or TOP_SAMPLES)
+        d = _top(name, rng(), n)
+        while size is None and not len(d["words"]) and n < TOP_MAX_SAMPLES:
+            n = min(2 * n, TOP_MAX_SAMPLES)
+            d = _top(name, rng(), n)
     return StreamCase(name=name, make=designs[name], in_words=d["in_words"],
                       in_valid=d.get("in_valid"), out_ready=d.get("out_ready"),
                       n_cycles=int(d["n_cycles"]), words=np.asarray(d["words"]),
