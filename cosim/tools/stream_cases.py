@@ -18,11 +18,12 @@ expected cycles follow each block's timing rule (a fixed latency after the input
 completes an output; the FIFO's cycle model gives its own).
 
 Top stimulus: seeded ADC codes (:func:`_bursts`: noise bursts over a noise floor) and a
-seeded random ``ready`` with long stalls
-(:func:`cosim.tools.equivalence.stall_pattern`), run on the receiver's bit-exact model
-session (:class:`cosim.core.receivers.Frontend`) from reset. Tops whose model is not a
-registered front-end session (the 12-channel GNSS arrays, the I/Q builds) have no case here;
-their Icarus checks run on their own models in ``tests/cosim/test_icarus.py``.
+seeded random ``ready`` with long stalls (:func:`cosim.tools.equivalence.stall_pattern`),
+run from reset on the receiver's bit-exact model session
+(:class:`cosim.core.receivers.Frontend`) with the parameters the registered top is built
+with. Tops whose model is not a registered front-end session (the 12-channel GNSS arrays,
+the I/Q builds) have no case here; their Icarus checks run on their own models in
+``tests/cosim/test_icarus.py``.
 """
 from __future__ import annotations
 
@@ -307,14 +308,23 @@ def _bursts(rng, width: int, n: int) -> np.ndarray:
     return np.clip(np.round(x * full), -full, full - 1).astype(np.int64)
 
 
-def _top(name, rng, samples):
-    from .equivalence import stall_pattern
+def _top_design(name: str, make):
+    """The front end of top ``name``, the parameters the registered top is built with (its
+    ``params``) and its input payload width."""
+    from amaranth.hdl import Fragment
     fe = _top_entries()[name]
-    params = fe.params()
-    comp = fe.component(params)
+    comp = make()
+    params = getattr(comp, "params", None)
+    if not isinstance(params, fe.params):
+        raise TypeError(f"top {name!r}: its params {params!r} are not a {fe.params.__name__}")
     width = next(len(v) for path, _, v in comp.signature.flatten(comp)
                  if "__".join(map(str, path)) == "i__payload")
-    comp._MustUse__silence = True      # only asked for its input width
+    Fragment.get(comp, None)        # elaborated: only asked for its parameters and width
+    return fe, params, width
+
+
+def _top(fe, params, width, rng, samples):
+    from .equivalence import stall_pattern
     x = _bursts(rng, width, samples)
     n_cycles = samples + 400
     ready = stall_pattern(n_cycles, int(rng.integers(1 << 30)), burst=max(n_cycles // 8, 1))
@@ -355,11 +365,12 @@ def stream_case(name: str, *, seed: int = 1, size: int | None = None) -> StreamC
         make_case, default = BLOCK_CASES[name]
         d = make_case(rng(), int(size or default))
     else:
+        top = _top_design(name, designs[name])
         n = int(size or TOP_SAMPLES)
-        d = _top(name, rng(), n)
+        d = _top(*top, rng(), n)
         while size is None and not len(d["words"]) and n < TOP_MAX_SAMPLES:
             n = min(2 * n, TOP_MAX_SAMPLES)
-            d = _top(name, rng(), n)
+            d = _top(*top, rng(), n)
     return StreamCase(name=name, make=designs[name], in_words=d["in_words"],
                       in_valid=d.get("in_valid"), out_ready=d.get("out_ready"),
                       n_cycles=int(d["n_cycles"]), words=np.asarray(d["words"]),
