@@ -335,7 +335,7 @@ def _top(fe, params, width, rng, samples):
                 inputs=fe.reset_inputs(params))
 
 
-#: Default record length of a top's case (ADC samples), doubled (up to
+#: Default record length of a top's case (ADC samples), grown by half (up to
 #: :data:`TOP_MAX_SAMPLES`) until the model gives an output word: a top whose first output
 #: comes late (a GNSS dump per code period, a monopulse record per snapshot set) gets a
 #: record long enough to give one.
@@ -369,7 +369,7 @@ def stream_case(name: str, *, seed: int = 1, size: int | None = None) -> StreamC
         n = int(size or TOP_SAMPLES)
         d = _top(*top, rng(), n)
         while size is None and not len(d["words"]) and n < TOP_MAX_SAMPLES:
-            n = min(2 * n, TOP_MAX_SAMPLES)
+            n = min(n * 3 // 2, TOP_MAX_SAMPLES)
             d = _top(*top, rng(), n)
     return StreamCase(name=name, make=designs[name], in_words=d["in_words"],
                       in_valid=d.get("in_valid"), out_ready=d.get("out_ready"),

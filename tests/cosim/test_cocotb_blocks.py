@@ -73,7 +73,7 @@ def test_block_on_icarus_equals_model(name):
 @pytest.mark.parametrize("name", top_case_names())
 def test_top_on_icarus_equals_model(name):
     """A registered top on its case (noise bursts, long stalls; as long as its first output
-    word needs: ~6,400 cycles for TACAN, 48,400 for the GNSS channel, 192,400 for
+    word needs: 6,400 cycles for TACAN, 20,650 for the GNSS channel, 102,914 for
     monopulse)."""
     case = stream_case(name)
     assert len(case.words) > 0, "the case must produce output words"
