@@ -1,7 +1,9 @@
 """``python -m cosim verilog --cocotb DIR``: the standalone cocotb testbench of an exported
-design runs outside the toolkit (its own directory, no project on the Python path) with
+design runs outside the toolkit (copied to a directory of its own, started there with
+``python run.py`` without the toolkit's environment variables; it imports only cocotb) with
 cocotb's runner on Icarus Verilog, passes on the model's words and fails on a wrong one; bad
-options are refused before any work.
+options are refused before any work. The slow TACAN test runs the bench with the Python
+named by ``KFNAV_CLEAN_PYTHON`` when set (a virtual environment with only cocotb installed).
 """
 from __future__ import annotations
 
