@@ -140,6 +140,16 @@ def _add_hdl(sub):
                                      "Verilog and lint them with Verilator")
     p.add_argument("--out", default="build/verilog", help="output directory")
     p.add_argument("--no-lint", action="store_true", help="do not lint")
+    p.add_argument("--designs", default=None,
+                   help="comma-separated Verilog module names to export (default: all)")
+    p.add_argument("--cocotb", default=None, metavar="DIR",
+                   help="also write a standalone cocotb testbench per design with a stimulus "
+                        "case into DIR/<name>/ (Verilog, stimulus and the model's words, "
+                        "the test, run.py; see docs/howto/cocotb_testbench.md)")
+    p.add_argument("--cocotb-seed", type=int, default=1, help="stimulus seed of --cocotb")
+    p.add_argument("--cocotb-size", type=parse_int, default=None,
+                   help="input words (FIFO: cycles; tops: ADC samples) of each --cocotb "
+                        "case (default: each design's own)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_verilog)
 
@@ -224,46 +234,57 @@ def _cmd_check_equivalence(a) -> int:
 
 
 def hdl_blocks() -> dict:
-    """Every HDL block (default-ish parameters) and every receiver's top (its registry
-    entry's ``tops``), by Verilog module name."""
-    from hdl.cic import Cic
-    from hdl.ddc import Ddc
-    from hdl.envelope import Envelope
-    from hdl.fifo import DspFifo
-    from hdl.fir import Fir
-    from hdl.mixer import Mixer
-    from hdl.tacan.params import TacanFrontendParams
-    from hdl.nco import Nco
-    from hdl.tacan.peak import PeakSearch
-    p = TacanFrontendParams()
-    blocks = {
-        "nco": lambda: Nco(p.ddc.nco),
-        "mixer": lambda: Mixer(p.ddc.mixer),
-        "ddc": lambda: Ddc(p.ddc),
-        "cic": lambda: Cic(p.cic),
-        "fir": lambda: Fir(p.fir),
-        "envelope": lambda: Envelope(p.envelope),
-        "peak": lambda: PeakSearch(p.peak),
-        "fifo": lambda: DspFifo(p.fifo),
-    }
-    for r in receivers():
-        blocks.update(r.tops)
-    return blocks
+    """Every HDL block (the TACAN front end's parameters) and every receiver's top (its
+    registry entry's ``tops``), by Verilog module name
+    (:func:`cosim.tools.stream_cases.exported_designs`)."""
+    from .tools.stream_cases import exported_designs
+    return exported_designs()
 
 
 def _cmd_verilog(a) -> int:
     import shutil
     from .tools.verilog import export_verilog, lint
     check_out_dir(a.out, "--out")
+    designs = hdl_blocks()
+    names = list(designs)
+    if a.designs is not None:
+        names = [n.strip() for n in a.designs.split(",") if n.strip()]
+        unknown = [n for n in names if n not in designs]
+        if unknown or not names:
+            raise ValueError(f"--designs takes names among {', '.join(designs)}, not "
+                             f"{a.designs!r}")
+    cased = []
+    if a.cocotb is not None:
+        from .tools.stream_cases import BLOCK_CASES, top_case_names
+        check_out_dir(a.cocotb, "--cocotb")
+        have = [*BLOCK_CASES, *top_case_names()]
+        cased = [n for n in names if n in have]
+        if a.designs is not None and len(cased) < len(names):
+            raise ValueError(f"--cocotb: no stimulus case for {sorted(set(names) - set(cased))} "
+                             f"(cases: {', '.join(have)})")
+        if a.cocotb_seed < 0:
+            raise ValueError(f"--cocotb-seed must be >= 0, not {a.cocotb_seed}")
+        if a.cocotb_size is not None and a.cocotb_size < 1:
+            raise ValueError(f"--cocotb-size must be >= 1, not {a.cocotb_size}")
+    elif a.cocotb_size is not None or a.cocotb_seed != 1:
+        raise ValueError("--cocotb-seed and --cocotb-size need --cocotb DIR")
     out, bad = [], 0
     do_lint = not a.no_lint and shutil.which("verilator") is not None
-    for name, make in hdl_blocks().items():
-        path = export_verilog(make(), name=name, out_dir=a.out)
+    for name in names:
+        path = export_verilog(designs[name](), name=name, out_dir=a.out)
         findings = lint(path) if do_lint else None
         bad += len(findings or [])
         out.append({"name": name, "path": str(path), "lint": findings})
+    benches = []
+    if cased:
+        from .tools.cocotb_export import export_cocotb
+        from .tools.stream_cases import stream_case
+        for name in cased:
+            case = stream_case(name, seed=a.cocotb_seed, size=a.cocotb_size)
+            benches.append({"name": name, "path": str(export_cocotb(case, a.cocotb)),
+                            "cycles": case.n_cycles, "words": int(len(case.words))})
     if a.json:
-        print(dumps({"files": out, "linted": do_lint, "findings": bad}))
+        print(dumps({"files": out, "linted": do_lint, "findings": bad, "cocotb": benches}))
     else:
         for f in out:
             state = "not linted" if f["lint"] is None else \
@@ -273,6 +294,12 @@ def _cmd_verilog(a) -> int:
                 print(f"    {line}")
         if not do_lint and not a.no_lint:
             print("verilator not on PATH: files written, not linted")
+        for b in benches:
+            print(f"{b['path']}/  (cocotb testbench: {b['cycles']:,} cycles, {b['words']:,} "
+                  f"expected words; run: python {b['path']}/run.py)")
+        if a.cocotb is not None and len(cased) < len(names):
+            print(f"no cocotb case (checked in the test suite instead): "
+                  f"{', '.join(n for n in names if n not in cased)}")
     return 0 if bad == 0 else 1
 
 

@@ -1,9 +1,12 @@
 """Check your own Amaranth stream block against your numpy model, on every simulator.
 
 One call from a pytest test runs a component on the Amaranth simulator
-(:func:`cosim.backends.pysim.run_stream`) and on Verilator
-(:class:`cosim.backends.verilator.VerilatorStreamSim`) with the same stimulus and the same back-pressure, and asserts that both give the words
-your model predicts -- and the same words on the same cycles as each other::
+(:func:`cosim.backends.pysim.run_stream`), on Verilator
+(:class:`cosim.backends.verilator.VerilatorStreamSim`) and on Icarus Verilog under cocotb
+(:class:`cosim.backends.icarus.IcarusStreamSim`, four-state and event-driven: an X or Z on
+an output fails the check) with the same stimulus and the same back-pressure, and asserts
+that each gives the words your model predicts -- and the same words on the same cycles as
+the others::
 
     from cosim.testing import check_stream
 
@@ -23,8 +26,9 @@ On a mismatch it raises :class:`StreamMismatch` (an ``AssertionError``, so pytes
 as a failure) saying which backend, the first differing output index, the cycle it came
 out on, the expected and actual values and the words around it; and it re-runs the
 failing backends with waveforms written under ``build/check_stream/<test>/`` (named in the
-message). Verilator missing: the Amaranth simulation is still checked, then the test is
-skipped with the reason (pass ``backends=("pysim",)`` to not ask for it).
+message; pysim and Verilator write them, Icarus does not). Verilator or Icarus/cocotb
+missing: the backends that can run are still checked, then the test is skipped with the
+reason (pass ``backends=("pysim",)`` to not ask for the others).
 """
 from __future__ import annotations
 
@@ -41,7 +45,7 @@ from .core.provenance import REPO_ROOT
 __all__ = ["check_stream", "StreamCheck", "StreamMismatch", "BACKENDS"]
 
 #: Backends :func:`check_stream` knows.
-BACKENDS = ("pysim", "verilator")
+BACKENDS = ("pysim", "verilator", "icarus")
 
 
 class StreamMismatch(AssertionError):
@@ -168,7 +172,7 @@ def _verilog_name(component, name: str | None) -> str:
 
 def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
                  n_cycles: int | None = None, flush_cycles: int = 64,
-                 inputs: dict | None = None, probe: dict | None = None,
+                 inputs: dict | None = None, writes=None, probe: dict | None = None,
                  backends=BACKENDS, check_cycles: bool = True, name: str | None = None,
                  vcd: str = "on_failure", build_dir: str | Path | None = None) -> StreamCheck:
     """Run ``component`` on each backend and assert its output equals ``model``.
@@ -194,12 +198,16 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
         Cycles to run (default: until every input is taken, then ``flush_cycles``).
     inputs : dict of port name -> int, optional
         Constant values of other input ports (Verilog names, e.g. ``"gain"``).
+    writes : list of (cycle, port name, value), optional
+        Input ports set before the edge of a cycle (run-time register writes), in cycle
+        order.
     probe : dict of name -> port name, optional
         Ports recorded every cycle; compared between backends and with the model's
         ``probes`` of the same names.
     backends : tuple of str
-        Any of ``"pysim"``, ``"verilator"`` (the first one's result is the reference the
-        others are compared with, after each is compared with the model).
+        Any of ``"pysim"``, ``"verilator"``, ``"icarus"`` (default all three; the first
+        one's result is the reference the others are compared with, after each is compared
+        with the model).
     check_cycles : bool
         Compare output cycles between backends (default True).
     name : str, optional
@@ -243,6 +251,10 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     vname = _verilog_name(component, name)
     out_dir = Path(build_dir) if build_dir is not None else \
         REPO_ROOT / "build" / "check_stream" / _test_dir()
+    writes = [(int(c), p, int(v)) for c, p, v in writes or ()]
+    if any(not isinstance(p, str) for _, p, _ in writes) or \
+            [c for c, _, _ in writes] != sorted(c for c, _, _ in writes):
+        reject("writes must be (cycle, port name, value) in cycle order")
     kw = dict(in_valid=valid, out_ready=ready, n_cycles=n_cycles, flush_cycles=flush_cycles,
               inputs=inputs, probe=probe)
     check = StreamCheck(expected_words=np.asarray(want_words),
@@ -252,12 +264,22 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
     def run(backend, wave: Path | None):
         if backend == "pysim":
             # run_stream samples Values; names are resolved as the Verilog export spells them
-            pkw = dict(kw, probe={k: resolve_port(component, v) for k, v in (probe or {}).items()})
+            pkw = dict(kw, probe={k: resolve_port(component, v) for k, v in (probe or {}).items()},
+                       writes=[(c, resolve_port(component, p), v) for c, p, v in writes])
             return run_stream(component, stimulus, vcd=wave, **pkw)
         if backend not in sims:
-            from .backends.verilator import VerilatorStreamSim
-            sims[backend] = VerilatorStreamSim(component, vname)
-        return sims[backend].run(stimulus, trace=wave, **kw)
+            if backend == "verilator":
+                from .backends.verilator import VerilatorStreamSim
+                sims[backend] = VerilatorStreamSim(component, vname)
+            else:
+                from .backends.icarus import IcarusStreamSim
+                sims[backend] = IcarusStreamSim(component, vname)
+        if backend == "verilator":
+            return sims[backend].run(stimulus, trace=wave, writes=writes, **kw)
+        if wave is not None:
+            raise NotImplementedError("Icarus runs write no waveform (pysim's and "
+                                      "Verilator's do)")
+        return sims[backend].run(stimulus, writes=writes, **kw)
 
     def wave_path(backend):
         return out_dir / f"{vname}.{backend}.vcd"
@@ -270,7 +292,17 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
             if not verilator_available():
                 check.skipped[b] = "Verilator, make or a C++ compiler not found on PATH"
                 continue
-        res = run(b, wave_path(b) if vcd == "always" else None)
+        if b == "icarus":
+            from .backends.icarus import icarus_available, icarus_missing_message
+            if not icarus_available():
+                check.skipped[b] = icarus_missing_message()
+                continue
+        try:
+            res = run(b, wave_path(b) if vcd == "always" and b != "icarus" else None)
+        except AssertionError as e:   # an X or Z on an output (icarus)
+            failures.append(f"{b}: {e}")
+            failed.append(b)
+            continue
         check.results[b] = res
         report = _compare(f"{b} vs model", res, want_words, want_cycles, want_probes)
         if report is None and len(check.results) > 1:
@@ -294,7 +326,8 @@ def check_stream(component, model, stimulus=None, *, valid=None, ready=None,
                     paths.append(f"({b}: no waveform: {e})")
             msg += "\nwaveforms: " + ", ".join(paths)
         elif vcd == "always":
-            msg += "\nwaveforms: " + ", ".join(str(wave_path(b)) for b in check.results)
+            msg += "\nwaveforms: " + ", ".join(str(wave_path(b)) for b in check.results
+                                               if b != "icarus")
         raise StreamMismatch(msg)
     if check.skipped:
         try:

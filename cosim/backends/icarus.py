@@ -18,6 +18,11 @@ text that is linted and synthesised), unmodified, as its top module.
   cocotb coroutine's and nothing else. Per cycle the coroutine does what the Verilator harness
   does (module doc of :mod:`cosim.backends.icarus_tb`); ``rst`` and every input nobody
   writes are held at 0, as Verilator's wrapper ties them and ``amaranth.sim`` leaves them.
+- Four states: Icarus keeps X (unknown) and Z (undriven) bits, which the two-state
+  simulators cannot represent (Verilator makes them 0 or 1). An X or Z on ``o.valid``, on
+  ``i.ready`` when a word is offered, on ``o.payload`` when a word is taken, or on any output
+  at a step's last edge (or a port read) fails the run with :class:`UnknownValueError`
+  naming the port, its bits and the cycle.
 - :class:`IcarusStreamSim` builds once and runs records like
   :func:`cosim.backends.pysim.run_stream` (:meth:`IcarusStreamSim.run`, one session from
   reset) or opens sessions (:meth:`IcarusStreamSim.open`).
@@ -28,7 +33,6 @@ and one cocotb edge trigger per cycle); short windows only. :func:`icarus_availa
 """
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import logging
 import os
@@ -45,12 +49,13 @@ import numpy as np
 
 from ..core.provenance import REPO_ROOT
 from ..core.session import FrontendSession, ready_window
+from .build_cache import cached_build
 from .pysim import StreamResult, input_items
 from .verilator_harness import as_value
 from .verilog import PortInfo, component_ports, verilog_text
 
-__all__ = ["IcarusStreamSim", "IcarusSession", "icarus_available", "icarus_missing_message",
-           "icarus_version"]
+__all__ = ["IcarusStreamSim", "IcarusSession", "UnknownValueError", "icarus_available",
+           "icarus_missing_message", "icarus_version"]
 
 #: The cocotb test module run inside ``vvp`` (imported there, not here: it needs cocotb).
 TB_MODULE = "cosim.backends.icarus_tb"
@@ -100,6 +105,12 @@ def signed_words(values, width: int, signed: bool) -> np.ndarray:
     if width <= 63 or (not ints and width <= 64):
         return np.array(ints, dtype=np.int64)
     return np.array(ints, dtype=object)
+
+
+class UnknownValueError(AssertionError):
+    """An output of the design was X or Z where a simulator of two-state values would have
+    read 0 or 1 (an :class:`AssertionError`: a check that sees one fails, saying which port,
+    its bits and the cycle)."""
 
 
 class IcarusStreamSim:
@@ -156,41 +167,22 @@ class IcarusStreamSim:
         return h.hexdigest()
 
     def _ensure_build(self, root: Path) -> Path:
-        out = root / self._cache_key()
-        if (out / "sim.vvp").exists():
-            return out
-        root.mkdir(parents=True, exist_ok=True)
-        # One build per key at a time (pytest-xdist workers): the others wait and reuse it.
-        with open(root / f"{out.name}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            if not (out / "sim.vvp").exists():
-                self._compile(out)
-                self.built = True
+        out, self.built = cached_build(root, self._cache_key(), "sim.vvp", self._compile)
         return out
 
-    def _compile(self, out: Path) -> None:
+    def _compile(self, tmp: Path) -> None:
+        """Compile into the empty directory ``tmp`` (:func:`cached_build` moves it)."""
         from cocotb_tools.runner import get_runner
-        tmp = Path(tempfile.mkdtemp(prefix=out.name[:16] + ".tmp-", dir=out.parent))
+        src = tmp / f"{self.name}.v"
+        src.write_text(self.verilog)
+        runner = get_runner("icarus")
         try:
-            src = tmp / f"{self.name}.v"
-            src.write_text(self.verilog)
-            runner = get_runner("icarus")
-            try:
-                runner.build(sources=[src], hdl_toplevel=self.name, build_dir=tmp,
-                             timescale=("1ns", "1ps"), log_file=tmp / "build.log",
-                             always=True)
-            except (RuntimeError, SystemExit) as e:
-                log = (tmp / "build.log").read_text() if (tmp / "build.log").exists() else ""
-                tail = "\n".join(log.splitlines()[-40:])
-                raise RuntimeError(f"Icarus build of {self.name} failed ({e}):\n{tail}") from None
-            try:
-                tmp.rename(out)
-            except OSError:
-                if not (out / "sim.vvp").exists():   # not a concurrent build of the same key
-                    raise
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp, ignore_errors=True)
+            runner.build(sources=[src], hdl_toplevel=self.name, build_dir=tmp,
+                         timescale=("1ns", "1ps"), log_file=tmp / "build.log", always=True)
+        except (RuntimeError, SystemExit) as e:
+            log = (tmp / "build.log").read_text() if (tmp / "build.log").exists() else ""
+            tail = "\n".join(log.splitlines()[-40:])
+            raise RuntimeError(f"Icarus build of {self.name} failed ({e}):\n{tail}") from None
 
     # -- ports ----------------------------------------------------------------------------
     def port(self, port) -> PortInfo:
@@ -220,29 +212,63 @@ class IcarusStreamSim:
         ``inputs`` (as in :meth:`run`), kept alive between steps."""
         return IcarusSession(self, inputs=inputs)
 
-    def run(self, in_words=None, *, in_valid=None, out_ready=None, n_cycles: int,
-            inputs: dict | None = None, writes: list | None = None,
+    def run(self, in_words=None, *, in_valid=None, out_ready=None,
+            n_cycles: int | None = None, flush_cycles: int = 64, inputs: dict | None = None,
+            writes: list | None = None, probe: dict | None = None,
             final: dict | None = None) -> StreamResult:
-        """Run ``n_cycles`` cycles from reset; the arguments and the result of
-        :func:`cosim.backends.pysim.run_stream` (``n_cycles`` required; ``final``: ports read
-        after the last edge). ``writes``: ``(cycle, port, value)``, ``port`` a name or an
-        Amaranth value of the component."""
-        if isinstance(n_cycles, bool) or not isinstance(n_cycles, (int, np.integer)) \
-                or n_cycles < 0:
+        """Run from reset; the arguments and the result of
+        :func:`cosim.backends.pysim.run_stream`: ``n_cycles`` cycles, or (None) until every
+        input word is taken and then ``flush_cycles`` more; ``writes``: ``(cycle, port,
+        value)``, ``port`` a name or an Amaranth value of the component; ``probe``: name ->
+        port recorded at every edge; ``final``: ports read after the last edge."""
+        if n_cycles is not None and (isinstance(n_cycles, bool) or
+                                     not isinstance(n_cycles, (int, np.integer)) or n_cycles < 0):
             raise ValueError(f"n_cycles must be an integer >= 0, not {n_cycles!r}")
+        if isinstance(flush_cycles, bool) or not isinstance(flush_cycles, (int, np.integer)) \
+                or flush_cycles < 0:
+            raise ValueError(f"flush_cycles must be an integer >= 0, not {flush_cycles!r}")
         if in_words is not None and "i__valid" not in self._by_name:
             raise ValueError("in_words given but the component has no input stream `i`")
+        probe = {k: self.port(v) for k, v in (probe or {}).items()}
         if out_ready is not None:   # as run_stream: entries past n_cycles are not used
-            out_ready = np.asarray(out_ready, dtype=bool).ravel()[:int(n_cycles)]
+            out_ready = np.asarray(out_ready, dtype=bool).ravel()
         if in_valid is not None:
-            in_valid = np.asarray(in_valid, dtype=bool).ravel()[:int(n_cycles)]
+            in_valid = np.asarray(in_valid, dtype=bool).ravel()
+        n_in = 0 if in_words is None else np.asarray(in_words).size
         with self.open(inputs) as s:
+            s._probes = probe
             for c, p, v in writes or []:
                 s.write(self.input_port(p).name, int(v), cycle=int(c))
-            r = s.step(in_words, out_ready, n_cycles=int(n_cycles), valid=in_valid)
+            if n_cycles is not None:
+                steps = [self._step_from(s, in_words, in_valid, out_ready, int(n_cycles))]
+            else:
+                # Steps of as many cycles as words are left (one word per cycle at most), so
+                # the last word is taken on a step's last cycle; then the flush.
+                steps, left = [], n_in
+                queued = in_words
+                while left:
+                    steps.append(self._step_from(s, queued, in_valid, out_ready, left))
+                    queued, left = None, n_in - sum(r.in_accepted for r in steps)
+                steps.append(self._step_from(s, None, None, out_ready, int(flush_cycles)))
             fin = {k: s.read(self.port(p).name) for k, p in (final or {}).items()}
-        return StreamResult(words=r.words, cycles=r.cycles, n_cycles=r.n_cycles,
-                            in_accepted=r.in_accepted, final=fin)
+            probes = {k: np.concatenate(s.probes[k]) if s.probes.get(k) else
+                      np.zeros(0, np.int64) for k in probe}
+        words = [r.words for r in steps]
+        return StreamResult(words=np.concatenate(words) if len(words) > 1 else words[0],
+                            cycles=np.concatenate([r.cycles for r in steps]),
+                            n_cycles=sum(r.n_cycles for r in steps),
+                            in_accepted=sum(r.in_accepted for r in steps),
+                            probes=probes, final=fin)
+
+
+    @staticmethod
+    def _step_from(s, words, in_valid, out_ready, n):
+        """``s.step`` of ``n`` cycles from the session's cycle, ``in_valid``/``out_ready``
+        (per cycle from reset) cut to them."""
+        a = s.cycle
+        v = None if in_valid is None else in_valid[a:a + n]
+        r = None if out_ready is None else out_ready[a:a + n]
+        return s.step(words, r, n_cycles=n, valid=v)
 
 
 class _QuietSkip(logging.Filter):
@@ -271,6 +297,10 @@ class IcarusSession(FrontendSession):
         self._thread: threading.Thread | None = None
         self._sock_dir: str | None = None
         self._valid = None
+        self._unknown: str | None = None
+        #: Per probe name, the values of each step (:meth:`probe`).
+        self.probes: dict[str, list] = {}
+        self._probes: dict[str, PortInfo] = {}   # name -> port recorded at every edge
         self._pin = sim.port("i__payload") if "i__payload" in sim._by_name else None
         self._pout = sim.port("o__payload")
         init = {"rst": 0}   # clk: the testbench's clock
@@ -322,7 +352,7 @@ class IcarusSession(FrontendSession):
             self._conn = Connection(conn.detach())
         finally:
             server.close()
-        self._call(("init", init))
+        self._call(("init", init, [p.name for p in sim.ports if p.direction == "out"]))
 
     # -- the link to vvp ------------------------------------------------------------------
     def _failure(self, what: str) -> str:
@@ -352,7 +382,11 @@ class IcarusSession(FrontendSession):
 
     def _read(self, port):
         p = self.sim.port(port)
-        return int(signed_words([self._call(("read", p.name))], p.width, p.signed)[0])
+        v = self._call(("read", p.name))
+        if isinstance(v, str):
+            raise UnknownValueError(f"Icarus: port {p.name} of {self.sim.name} is {v} (X or Z "
+                                    f"bits) after cycle {self.cycle}")
+        return int(signed_words([v], p.width, p.signed)[0])
 
     def _step(self, queue, ready, n, writes):
         start = self.cycle
@@ -371,8 +405,20 @@ class IcarusSession(FrontendSession):
         for c, port, v in writes:
             p = self.sim.input_port(port)
             wl.append((int(c) - start, p.name, int(v) & ((1 << p.width) - 1)))
-        out_w, out_c, accepted = self._call(("step", words, vld, rdy, int(n), wl))
+        if self._unknown is not None:
+            raise UnknownValueError(self._unknown)
+        probes = [q.name for q in self._probes.values()]
+        out_w, out_c, accepted, unknown, pv = self._call(("step", words, vld, rdy, int(n), wl,
+                                                          probes))
+        if unknown is not None:
+            c, port, bits = unknown
+            self._unknown = (f"Icarus: output {port} of {self.sim.name} is {bits} (X or Z "
+                             f"bits) at the edge of cycle {start + c}, after {len(out_w)} "
+                             f"output words of this step; the session stops there")
+            raise UnknownValueError(self._unknown)
         words_out = signed_words(out_w, self._pout.width, self._pout.signed)
+        for (k, q), vals in zip(self._probes.items(), pv):
+            self.probes.setdefault(k, []).append(signed_words(vals, q.width, q.signed))
         return words_out, np.asarray(out_c, np.int64) + np.int64(start), int(accepted)
 
     def _close(self):

@@ -7,17 +7,24 @@ coroutine runs the step's cycles on the design and answers with the output words
 
 Messages (pickled tuples, :class:`multiprocessing.connection.Connection`):
 
-- ``("init", {port: value})``: every input port of the top but ``clk`` set (``rst`` and the
-  inputs nobody writes to 0, the constant inputs to their values) and the clock started (a
-  cocotb :class:`~cocotb.clock.Clock`, period 2 ns, first rising edge at 1 ns); answer
-  ``"ok"``.
-- ``("step", words, valid, ready, n, writes)``: run ``n`` cycles. ``words`` are the input
+- ``("init", {port: value}, outputs)``: every input port of the top but ``clk`` set (``rst``
+  and the inputs nobody writes to 0, the constant inputs to their values) and the clock
+  started (a cocotb :class:`~cocotb.clock.Clock`, period 2 ns, first rising edge at 1 ns);
+  ``outputs`` names the output ports; answer ``"ok"``.
+- ``("step", words, valid, ready, n, writes, probes)``: run ``n`` cycles. ``words`` are the input
   payloads still queued (ints, already masked to the port width), offered one per cycle in
   order; ``valid`` (list of bool, may be shorter than ``n``: valid after its end) gates the
   offer; ``ready`` (list of bool, shorter: ready after its end) is ``o.ready``; ``writes``
   ``(cycle of the step, port, value)`` in cycle order set a port before that cycle's edge.
-  Answer ``(out_words, out_cycles, accepted)``, the cycles counted from the step's start.
-- ``("read", port)``: the port's value (an unsigned int) after the last edge, settled.
+  ``probes`` names ports whose values are recorded at every edge (unsigned ints).
+  Answer ``(out_words, out_cycles, accepted, unknown, probe_values)``, the cycles counted
+  from the step's start, ``probe_values`` one list per probe; ``unknown`` is None, or ``(cycle, port, bits)`` for the first output found X or Z
+  (four-state: ``bits`` as Verilog shows them, e.g. ``"0x1z"``), and the step ended at that
+  cycle. Checked are, at every edge, ``o.valid``, ``i.ready`` when a word is offered and
+  ``o.payload`` when it is taken, the probes at every edge, and at the step's last edge
+  every output port.
+- ``("read", port)``: the port's value after the last edge, settled: an unsigned int, or its
+  bits as a string when some are X or Z.
 - ``("close",)``: end the test (answer ``"ok"``).
 
 The simulator does not advance while the coroutine waits for a message, so the clock stops
@@ -28,7 +35,9 @@ value otherwise, ``o.ready``, the writes) are written after the previous rising 
 applies writes in the read-write phase, after the edge's register updates) and settle before
 the next; at that edge, before its updates, ``o.valid``/``o.payload`` and ``i.ready`` are
 sampled (the values the edge sees). Only values that change are written. This module imports
-nothing of the project: it runs in the simulator's embedded Python.
+nothing of the project: it runs in the simulator's embedded Python, and
+``python -m cosim verilog --cocotb`` copies it beside an exported design as the driver
+(:class:`StreamDriver`) of the standalone cocotb test (:mod:`cosim.tools.cocotb_export`).
 """
 from __future__ import annotations
 
@@ -50,17 +59,28 @@ def _connect() -> Connection:
     return Connection(s.detach())
 
 
-def _unsigned(handle) -> int:
-    return handle.value.to_unsigned()
+def _uint(v) -> int:
+    """A resolvable value as an unsigned int (a ``LogicArray``, or a ``Logic`` of a 1-bit
+    port)."""
+    return v.to_unsigned() if hasattr(v, "to_unsigned") else int(v)
 
 
-class _Driver:
-    """The design's clock (a cocotb :class:`~cocotb.clock.Clock`, 2 ns, first rising edge
-    at 1 ns) and its stream ports. Between steps the coroutine sits right after a rising
-    edge (its writes still to come) or, after a read, in the read-only phase of one."""
+def _unsigned(handle):
+    """The handle's value as an unsigned int, or its bits (a string) when some are X or Z."""
+    v = handle.value
+    return _uint(v) if v.is_resolvable else str(v)
 
-    def __init__(self, dut):
+
+class StreamDriver:
+    """The design's stream ports driven cycle by cycle (:meth:`step`), on the clock ``clk``
+    the caller starts (here a cocotb :class:`~cocotb.clock.Clock`, 2 ns, first rising edge
+    at 1 ns). ``outputs``: the output ports checked for X/Z at a step's last edge. Between
+    steps the coroutine sits right after a rising edge (its writes still to come) or, after
+    a read, in the read-only phase of one."""
+
+    def __init__(self, dut, outputs=()):
         self.dut = dut
+        self.outputs = [(name, getattr(dut, name)) for name in outputs]
         self.clk = dut.clk
         has_in = hasattr(dut, "i__valid")
         self.i_valid = dut.i__valid if has_in else None
@@ -88,13 +108,15 @@ class _Driver:
         """One step (module doc): the inputs of cycle ``k`` are written before its edge
         (applied after the previous edge's register updates, as cocotb defers writes to the
         read-write phase), and at the edge the outputs are the values the edge sees."""
-        _, words, valid, ready, n, writes = msg
+        _, words, valid, ready, n, writes, probes = msg
         await self.writable()
         dut, edge = self.dut, self.edge
         i_valid, i_payload, i_ready = self.i_valid, self.i_payload, self.i_ready
         o_valid, o_payload, o_ready = self.o_valid, self.o_payload, self.o_ready
         has_in = i_valid is not None
         handles = {p: getattr(dut, p) for _, p, _ in writes}
+        probed = [(name, getattr(dut, name), []) for name in probes]
+        pv = [vals for _, _, vals in probed]
         n_words, n_valid, n_ready, n_writes = len(words), len(valid), len(ready), len(writes)
         out_w, out_c = [], []
         accepted, w = 0, 0
@@ -116,19 +138,41 @@ class _Driver:
                 o_ready.value = int(rdy)
                 last_ready = rdy
             await edge
-            if rdy and o_valid.value:
-                out_w.append(_unsigned(o_payload))
+            v = o_valid.value
+            if not v.is_resolvable:
+                return out_w, out_c, accepted, (cyc, "o__valid", str(v)), pv
+            for name, h, vals in probed:
+                p = h.value
+                if not p.is_resolvable:
+                    return out_w, out_c, accepted, (cyc, name, str(p)), pv
+                vals.append(_uint(p))
+            if rdy and v:
+                v = o_payload.value
+                if not v.is_resolvable:
+                    return out_w, out_c, accepted, (cyc, "o__payload", str(v)), pv
+                out_w.append(_uint(v))
                 out_c.append(cyc)
-            if offer and (i_ready is None or i_ready.value):
+            if offer:
+                if i_ready is not None:
+                    v = i_ready.value
+                    if not v.is_resolvable:
+                        return out_w, out_c, accepted, (cyc, "i__ready", str(v)), pv
+                    if not v:
+                        continue
                 accepted += 1
-        return out_w, out_c, accepted
+        if n:   # every output as the step's last edge saw it
+            for name, h in self.outputs:
+                v = h.value
+                if not v.is_resolvable:
+                    return out_w, out_c, accepted, (n - 1, name, str(v)), pv
+        return out_w, out_c, accepted, None, pv
 
 
 @cocotb.test()
 async def serve(dut):
     """Serve the session's steps until it closes (module doc)."""
     conn = _connect()
-    drv = _Driver(dut)
+    drv = None
     try:
         while True:
             msg = conn.recv()
@@ -136,6 +180,7 @@ async def serve(dut):
             if kind == "init":
                 for port, value in msg[1].items():
                     getattr(dut, port).value = value
+                drv = StreamDriver(dut, msg[2])
                 Clock(dut.clk, 2, unit="ns").start(start_high=False)
                 conn.send("ok")
             elif kind == "step":

@@ -38,12 +38,10 @@ Speed (what is compiled is equivalent to the exported Verilog, bit for bit; see
 from __future__ import annotations
 
 import ctypes
-import fcntl
 import hashlib
 import os
 import shutil
 import subprocess
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +50,7 @@ from amaranth.hdl import Value
 from ..core.provenance import REPO_ROOT
 from ..core.session import FrontendSession, ready_window
 from . import verilator_harness as _harness
+from .build_cache import cached_build, publish, temp_dir_beside
 from .pysim import StreamResult, input_items
 from .verilog import PortInfo, component_ports, verilator_missing_message, verilog_text
 from .verilator_harness import (CFLAGS, HARNESS_TEMPLATE, MAKE_OPTS, HARNESS_VERSION, as_value,
@@ -142,18 +141,13 @@ class VerilatorStreamSim:
         key = trace_kind or ""
         if key in self._libs:
             return Path(self._libs[key]._name)
-        out = self._build_dir / self._cache_key(trace_kind)
+        # One build per key at a time (pytest-xdist workers, parallel sweeps): the others wait
+        # on the lock and then load the finished library instead of compiling it too.
+        out, built = cached_build(self._build_dir, self._cache_key(trace_kind), "libsim.so",
+                                  lambda tmp: self._compile(tmp, trace_kind))
+        if built and trace_kind is None:
+            self.built = True
         lib_path = out / "libsim.so"
-        if not lib_path.exists():
-            # One build per key at a time (pytest-xdist workers, parallel sweeps): the others
-            # wait on the lock and then load the finished library instead of compiling it too.
-            out.parent.mkdir(parents=True, exist_ok=True)
-            with open(out.parent / f"{out.name}.lock", "w") as lock:
-                fcntl.flock(lock, fcntl.LOCK_EX)
-                if not lib_path.exists():
-                    self._compile(out, trace_kind)
-                    if trace_kind is None:
-                        self.built = True
         lib = ctypes.CDLL(str(lib_path))
         lib.sim_args_size.restype = ctypes.c_int64
         lib.sim_traced.restype = ctypes.c_int64
@@ -170,68 +164,55 @@ class VerilatorStreamSim:
         self._libs[key] = lib
         return lib_path
 
-    def _compile(self, out: Path, trace_kind: str | None) -> None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=out.name[:16] + ".tmp-", dir=out.parent))
-        try:
-            (tmp / f"{self.name}.v").write_text(self.verilog)
-            source, top = verilator_source(self.verilog, self.name, {p.name for p in self.ports})
-            (tmp / "vlsim.v").write_text(source)
-            harness = tmp / "harness.cpp"
-            harness.write_text("// placeholder, written after Verilating\n")
-            trace_args, ldflags = [], []
-            if trace_kind == "vcd":
-                trace_args = ["--trace"]
-            elif trace_kind == "fst":
-                trace_args = ["--trace-fst"]
-                ldflags = ["-lz"]
-            cmd = ["verilator", "--cc", "--exe", str(harness), "-O3", "--x-assign", "fast",
-                   "-Wno-fatal", "-Wno-lint", "-Wno-style", "--top-module", top,
-                   "--prefix", "Vdut", "-Mdir", str(tmp / "obj"), *trace_args,
-                   "-CFLAGS", CFLAGS, "-LDFLAGS", " ".join(["-shared", *ldflags]),
-                   "-o", "libsim.so", str(tmp / "vlsim.v")]
-            log = [" ".join(cmd)]
-            self._run_logged(cmd, log, tmp)
-            header = (tmp / "obj" / "Vdut.h").read_text()
-            direct_eval = any("void Vdut___024root___eval(Vdut___024root* vlSelf)" in f.read_text()
-                              for f in (tmp / "obj").glob("Vdut___024root__DepSet_*.cpp"))
-            harness.write_text(self._harness_source(parse_header_ports(header), trace_kind,
-                                                    direct_eval))
-            # The C++ optimisation level (verilated.mk defaults to -Os) matters for speed.
-            make = ["make", "-C", str(tmp / "obj"), "-f", "Vdut.mk", f"-j{self._jobs}",
-                    *MAKE_OPTS]
-            # The Verilator runtime (verilated.cpp, ...) takes most of the compile time and
-            # does not depend on the design: reuse its objects from an earlier build with the
-            # same Verilator, flags and trace kind (make skips them when they are newer).
-            runtime = self._build_dir / "_runtime" / hashlib.sha256("\0".join(
-                [verilator_version(), CFLAGS, *MAKE_OPTS, trace_kind or "notrace"]
-            ).encode()).hexdigest()[:16]
-            if runtime.is_dir():
-                for f in sorted(runtime.iterdir(), key=lambda f: f.suffix != ".d"):
-                    shutil.copy(f, tmp / "obj" / f.name)  # .d first, then newer .o
-            log.append(" ".join(make))
-            self._run_logged(make, log, tmp)
-            if not runtime.is_dir():
-                rt_tmp = Path(tempfile.mkdtemp(prefix="rt.tmp-", dir=out.parent))
-                for f in (tmp / "obj").glob("verilated*.[od]"):
-                    shutil.copy(f, rt_tmp / f.name)
-                runtime.parent.mkdir(parents=True, exist_ok=True)
-                try:
-                    rt_tmp.rename(runtime)
-                except OSError:
-                    shutil.rmtree(rt_tmp, ignore_errors=True)
-            shutil.copy2(tmp / "obj" / "libsim.so", tmp / "libsim.so")
-            shutil.copy2(tmp / "obj" / "Vdut.h", tmp / "Vdut.h")
-            shutil.rmtree(tmp / "obj")
-            (tmp / "build.log").write_text("\n".join(log))
-            try:
-                tmp.rename(out)
-            except OSError:
-                if not (out / "libsim.so").exists():  # not a concurrent build of the same key
-                    raise
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp, ignore_errors=True)
+    def _compile(self, tmp: Path, trace_kind: str | None) -> None:
+        """Verilate and compile into the empty directory ``tmp`` (:func:`cached_build` moves
+        it into the cache)."""
+        (tmp / f"{self.name}.v").write_text(self.verilog)
+        source, top = verilator_source(self.verilog, self.name, {p.name for p in self.ports})
+        (tmp / "vlsim.v").write_text(source)
+        harness = tmp / "harness.cpp"
+        harness.write_text("// placeholder, written after Verilating\n")
+        trace_args, ldflags = [], []
+        if trace_kind == "vcd":
+            trace_args = ["--trace"]
+        elif trace_kind == "fst":
+            trace_args = ["--trace-fst"]
+            ldflags = ["-lz"]
+        cmd = ["verilator", "--cc", "--exe", str(harness), "-O3", "--x-assign", "fast",
+               "-Wno-fatal", "-Wno-lint", "-Wno-style", "--top-module", top,
+               "--prefix", "Vdut", "-Mdir", str(tmp / "obj"), *trace_args,
+               "-CFLAGS", CFLAGS, "-LDFLAGS", " ".join(["-shared", *ldflags]),
+               "-o", "libsim.so", str(tmp / "vlsim.v")]
+        log = [" ".join(cmd)]
+        self._run_logged(cmd, log, tmp)
+        header = (tmp / "obj" / "Vdut.h").read_text()
+        direct_eval = any("void Vdut___024root___eval(Vdut___024root* vlSelf)" in f.read_text()
+                          for f in (tmp / "obj").glob("Vdut___024root__DepSet_*.cpp"))
+        harness.write_text(self._harness_source(parse_header_ports(header), trace_kind,
+                                                direct_eval))
+        # The C++ optimisation level (verilated.mk defaults to -Os) matters for speed.
+        make = ["make", "-C", str(tmp / "obj"), "-f", "Vdut.mk", f"-j{self._jobs}",
+                *MAKE_OPTS]
+        # The Verilator runtime (verilated.cpp, ...) takes most of the compile time and
+        # does not depend on the design: reuse its objects from an earlier build with the
+        # same Verilator, flags and trace kind (make skips them when they are newer).
+        runtime = self._build_dir / "_runtime" / hashlib.sha256("\0".join(
+            [verilator_version(), CFLAGS, *MAKE_OPTS, trace_kind or "notrace"]
+        ).encode()).hexdigest()[:16]
+        if runtime.is_dir():
+            for f in sorted(runtime.iterdir(), key=lambda f: f.suffix != ".d"):
+                shutil.copy(f, tmp / "obj" / f.name)  # .d first, then newer .o
+        log.append(" ".join(make))
+        self._run_logged(make, log, tmp)
+        if not runtime.is_dir():
+            rt_tmp = temp_dir_beside(runtime, "rt.tmp-")
+            for f in (tmp / "obj").glob("verilated*.[od]"):
+                shutil.copy(f, rt_tmp / f.name)
+            publish(rt_tmp, runtime)
+        shutil.copy2(tmp / "obj" / "libsim.so", tmp / "libsim.so")
+        shutil.copy2(tmp / "obj" / "Vdut.h", tmp / "Vdut.h")
+        shutil.rmtree(tmp / "obj")
+        (tmp / "build.log").write_text("\n".join(log))
 
     @staticmethod
     def _run_logged(cmd, log: list[str], tmp: Path) -> None:

@@ -1,6 +1,7 @@
 """Icarus Verilog driven by cocotb, the third simulator of the exported Verilog: every
-registered top (TACAN, the GNSS channel and its 12-channel array, monopulse) gives the bit-exact
-model's FIFO words on the same cycles, under seeded random stalls; the check fails when the
+registered top (TACAN, the GNSS channel and its 12-channel array, real and I/Q input,
+monopulse) gives the bit-exact model's FIFO words on the same cycles, under seeded random
+stalls; the check fails when the
 expectation is wrong; the session keeps its state across steps.
 
 Short windows here (Icarus runs a whole top at ~0.3-2e3 cycles/s); the registered tops with
@@ -53,12 +54,13 @@ def test_gnss_channel_matches_model_under_stalls():
 
 
 def _array_stimulus(p, channels, n, seed):
-    """ADC codes, register writes ``(cycle, 4 * channel + reg, value)`` to random channels
-    and registers, a seeded random ``ready``."""
+    """ADC codes (``(n, 2)`` I/Q pairs for a complex input), register writes ``(cycle,
+    4 * channel + reg, value)`` to random channels and registers, a seeded random
+    ``ready``."""
     from hdl.gnss.params import REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN
     rng = np.random.default_rng(seed)
     lo = -(1 << (p.adc_bits - 1))
-    x = rng.integers(lo, -lo, n)
+    x = rng.integers(lo, -lo, (n, 2) if p.complex_input else n)
     writes = []
     for c in sorted(rng.choice(np.arange(10, n - 10), 2 * channels, replace=False)):
         reg, ch = int(rng.integers(0, 4)), int(rng.integers(0, channels))
@@ -75,16 +77,20 @@ def _array_stimulus(p, channels, n, seed):
 
 
 def _array_check(p, channels, n, seed, *, name):
-    from hdl.gnss.channel import GnssChannelArray, array_params
+    """``channels`` GNSS channels (one: :class:`GnssChannel`, more: the array) on Icarus
+    against the model, with register writes and random ``ready``."""
+    from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
     from hdl.gnss.model import GnssArrayModel
     from hdl.model.bus import bus_writes
     x, writes, ready = _array_stimulus(p, channels, n, seed)
     n_cycles = n + 200
-    want = GnssArrayModel(array_params(p, channels), channels).run(
-        x, writes, n_cycles=n_cycles, out_ready=ready)
+    model = GnssArrayModel(array_params(p, channels), channels) if channels > 1 \
+        else GnssArrayModel(p)
+    want = model.run(x, writes, n_cycles=n_cycles, out_ready=ready)
     assert len(want.records) >= channels
-    sim = IcarusStreamSim(GnssChannelArray(p, channels), name=name)
-    got = sim.run(x, out_ready=ready, n_cycles=n_cycles,
+    dut = GnssChannelArray(p, channels) if channels > 1 else GnssChannel(p)
+    sim = IcarusStreamSim(dut, name=name)
+    got = sim.run(p.pack_samples(x), out_ready=ready, n_cycles=n_cycles,
                   writes=bus_writes(writes, data_width=p.reg_data_width))
     np.testing.assert_array_equal(np.asarray(got.words, np.int64), want.words)
     np.testing.assert_array_equal(got.cycles, want.cycles)
@@ -97,6 +103,24 @@ def test_gnss_array12_matches_model_with_random_stalls():
     from hdl.gnss.params import GnssChannelParams
     want = _array_check(GnssChannelParams(**GNSS_SMALL), 12, 2046 + 100, seed=12,
                         name="gnss_channel_array12_small")
+    assert len(want.records) == 12
+
+
+def test_gnss_channel_iq_matches_model_under_stalls():
+    """The complex-input channel (gnss_channel_iq's build, reduced rate, complex IF), I/Q
+    pairs packed into one payload, writes and random stalls."""
+    from hdl.gnss.params import GnssChannelParams
+    p = GnssChannelParams(**dict(GNSS_SMALL, if_hz=-0.3e6, input="complex"))
+    _array_check(p, 1, 2 * 2046 + 100, seed=21, name="gnss_channel_iq_small")
+
+
+@pytest.mark.slow
+def test_gnss_array12_iq_matches_model_with_random_stalls():
+    """12 complex-input channels on one stream (gnss_channel_array12_iq's build, reduced
+    rate), one code period (~20 s: the real-input array runs in the fast suite)."""
+    from hdl.gnss.params import GnssChannelParams
+    p = GnssChannelParams(**dict(GNSS_SMALL, if_hz=-0.3e6, input="complex"))
+    want = _array_check(p, 12, 2046 + 100, seed=22, name="gnss_channel_array12_iq_small")
     assert len(want.records) == 12
 
 

@@ -1,0 +1,140 @@
+"""Every exported design under cocotb on Icarus Verilog against its bit-exact model, and a
+four-state defect that only Icarus sees.
+
+- Each HDL block (:data:`cosim.tools.stream_cases.BLOCK_CASES`) runs its seeded case
+  (random words with full-scale values, gaps in ``valid``, run-time writes, a stall that
+  overflows the FIFO) through :func:`cosim.testing.check_stream` on the ``icarus`` backend:
+  every output word and its cycle equal the model's (0 mismatches), no output X or Z. The
+  receivers' tops with a front-end model session run their case too (slow: whole tops run at
+  ~1e3 cycles/s under cocotb); the tops without one are checked on their own models in
+  ``tests/cosim/test_icarus.py`` (:data:`TOPS_IN_TEST_ICARUS`).
+- A new exported design without a case fails :func:`test_every_exported_design_has_a_case`.
+- The four-state defect: a lookup table of 10 entries read by a 4-bit counter that is never
+  wrapped at 9. The Amaranth simulator and Verilator (two-state) read 0 past the end and
+  agree with a model that assumes so; Icarus reads X there and the check fails naming the
+  port, its bits and the cycle.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import memory, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from cosim.backends.icarus import icarus_available, icarus_missing_message
+from cosim.backends.verilator_harness import verilator_available
+from cosim.testing import StreamMismatch, check_stream
+from cosim.tools.stream_cases import BLOCK_CASES, exported_designs, stream_case, top_case_names
+
+pytestmark = [pytest.mark.icarus,
+              pytest.mark.skipif(not icarus_available(), reason=icarus_missing_message())]
+
+#: Exported tops whose model is not a front-end session: the test of test_icarus.py that runs
+#: each on Icarus against its model.
+TOPS_IN_TEST_ICARUS = {
+    "gnss_channel_array12": "test_gnss_array12_matches_model_with_random_stalls",
+    "gnss_channel_iq": "test_gnss_channel_iq_matches_model_under_stalls",
+    "gnss_channel_array12_iq": "test_gnss_array12_iq_matches_model_with_random_stalls",
+}
+
+
+def _check(case):
+    return check_stream(case.make(), (case.words, case.cycles), case.in_words,
+                        valid=case.in_valid, ready=case.out_ready, n_cycles=case.n_cycles,
+                        inputs=case.inputs, writes=case.writes, backends=("icarus",),
+                        name=case.name, vcd="never")
+
+
+def test_every_exported_design_has_a_case():
+    """Every design ``python -m cosim verilog`` exports has a cocotb case here, or a named
+    Icarus test in test_icarus.py that exists."""
+    designs = set(exported_designs())
+    cased = set(BLOCK_CASES) | set(top_case_names()) | set(TOPS_IN_TEST_ICARUS)
+    assert designs - cased == set(), f"exported without a cocotb case: {designs - cased}"
+    assert cased - designs == set(), f"cases of designs not exported: {cased - designs}"
+    src = (Path(__file__).with_name("test_icarus.py")).read_text()
+    for name, test in TOPS_IN_TEST_ICARUS.items():
+        assert re.search(rf"^def {test}\(", src, re.M), f"{name}: {test} not in test_icarus.py"
+
+
+@pytest.mark.parametrize("name", list(BLOCK_CASES))
+def test_block_on_icarus_equals_model(name):
+    case = stream_case(name)
+    assert len(case.words) >= 10, "the case must produce output words"
+    res = _check(case).results["icarus"]
+    assert len(res.words) == len(case.words)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", top_case_names())
+def test_top_on_icarus_equals_model(name):
+    """A registered top on its case (noise bursts, long stalls; as long as its first output
+    word needs: 6,400 cycles for TACAN, 20,650 for the GNSS channel, 102,914 for
+    monopulse)."""
+    case = stream_case(name)
+    assert len(case.words) > 0, "the case must produce output words"
+    _check(case)
+
+
+# -- the four-state defect ------------------------------------------------------------------------
+TABLE = (3, 1, 4, 1, 5, 9, 2, 6, 5, 3)
+
+
+class _Lut(wiring.Component):
+    """Adds ``TABLE[k]`` to the k-th input word. The defect (``wrap=False``): the 4-bit index
+    ``k`` is not wrapped at ``len(TABLE) - 1``, so words 10..15 of every 16 read past the
+    table's end."""
+
+    def __init__(self, wrap: bool = False):
+        self.wrap = wrap
+        super().__init__({"i": In(stream.Signature(8)), "o": Out(stream.Signature(8))})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.mem = mem = memory.Memory(shape=8, depth=len(TABLE), init=TABLE)
+        rd = mem.read_port(domain="comb")
+        k = Signal(4)
+        nxt = Mux(k == len(TABLE) - 1, 0, k + 1) if self.wrap else k + 1
+        m.d.comb += [rd.addr.eq(k), self.i.ready.eq(~self.o.valid | self.o.ready)]
+        with m.If(self.i.valid & self.i.ready):
+            m.d.sync += [k.eq(nxt), self.o.valid.eq(1),
+                         self.o.payload.eq(rd.data + self.i.payload)]
+        with m.Elif(self.o.ready):
+            m.d.sync += self.o.valid.eq(0)
+        return m
+
+
+def _two_state_model(x):
+    """What a two-state simulator makes of the defect: 0 past the table's end."""
+    t = np.r_[TABLE, np.zeros(16 - len(TABLE), np.int64)]
+    return (np.asarray(x) + t[np.arange(len(x)) % 16]) & 0xFF
+
+
+def test_four_state_defect_only_icarus_sees():
+    """Amaranth's simulator and Verilator pass the defective LUT against the two-state
+    model; Icarus fails it: the 11th word (index 10) reads X at the table's end."""
+    rng = np.random.default_rng(45)
+    x = rng.integers(0, 256, 40)
+    ready = rng.random(80) < 0.7
+    two_state = ("pysim", "verilator") if verilator_available() else ("pysim",)
+    ok = check_stream(_Lut(), _two_state_model, x, ready=ready, backends=two_state,
+                      name="lut_defect", vcd="never")
+    assert len(ok.words) == 40
+    with pytest.raises(StreamMismatch) as e:
+        check_stream(_Lut(), _two_state_model, x, ready=ready, backends=("icarus",),
+                     name="lut_defect", vcd="never")
+    msg = str(e.value)
+    assert re.search(r"icarus: Icarus: output o__payload of lut_defect is [01xX]*[xX][01xX]* "
+                     r"\(X or Z bits\) at the edge of cycle \d+, after 10 output words", msg), msg
+    # Wrapped at the table's end, the same LUT passes on Icarus too.
+    fixed = (np.asarray(x) + np.asarray(TABLE)[np.arange(len(x)) % len(TABLE)]) & 0xFF
+    check_stream(_Lut(wrap=True), fixed, x, ready=ready, backends=("icarus",),
+                 name="lut_fixed", vcd="never")
+    fixed[7] ^= 1 << 3      # and the Icarus check fails on a wrong expected word
+    with pytest.raises(StreamMismatch, match=r"icarus vs model: words differ at index 7 "):
+        check_stream(_Lut(wrap=True), fixed, x, ready=ready, backends=("icarus",),
+                     name="lut_fixed", vcd="never")
