@@ -151,7 +151,8 @@ def fix_epoch(sample: int, t_rx: tuple, prns, counts, ephemerides, doppler_hz, c
     ``(whole, fraction)`` pair) -> pseudoranges, the satellites' states from
     ``ephemerides`` (one per row, None: unusable) at their transmit times, the solution
     (:func:`dsp.gnss.pvt.solve`) and the :class:`~dsp.gnss.observables.ObservationEpoch`.
-    ``doppler_hz``, ``cn0_dbhz`` (NaN: unknown, weighted as 45 dB-Hz), ``carrier_cycles``
+    ``doppler_hz``, ``cn0_dbhz`` (NaN or infinite: unknown, reported NaN and weighted as
+    45 dB-Hz), ``carrier_cycles``
     (RINEX sign) and ``lli`` are the rows' other observables."""
     tw, tf = t_rx
     t_rx_s = tw + tf
@@ -168,6 +169,7 @@ def fix_epoch(sample: int, t_rx: tuple, prns, counts, ephemerides, doppler_hz, c
         clk[j], drift[j] = float(st.clock_bias), float(st.clock_drift)
     kw = {} if iono is None else dict(iono_alpha=iono.alpha, iono_beta=iono.beta)
     cn0 = np.asarray(cn0_dbhz, dtype=np.float64)
+    cn0 = np.where(np.isfinite(cn0), cn0, np.nan)    # an estimator's -inf: no reading
     sol = solve(prns, pos, clk, pr, cn0_dbhz=np.where(np.isfinite(cn0), cn0, 45.0),
                 sat_vel_mps=vel, sat_clock_drift=drift, doppler_hz=doppler_hz,
                 gps_week=reference_week, gps_tow_s=t_rx_s, troposphere=config.troposphere,
