@@ -5,6 +5,7 @@ figures on the ``gps`` command's generated scenario, a moving receiver, the aidi
 import math
 
 import numpy as np
+import pymap3d
 import pytest
 from scipy.stats import chi2
 
@@ -111,7 +112,8 @@ def test_same_seed_same_run_and_trials_differ(static):
 def test_a_moving_receiver_and_an_aided_tracker():
     """A receiver flying along track at 300 m/s accelerating at 2 g (the INS profile's
     kinematics), the aided Kalman loop told each satellite's line-of-sight Doppler rate:
-    every fix within 10 m and 0.5 m/s of the truth."""
+    every fix within 10 m and 0.5 m/s of the truth (the truth at the epoch: the receiver
+    moves 30 m in 0.1 s)."""
     from cosim.gnss.constellation_geometry import along_track_receiver
 
     class Profile:
@@ -120,22 +122,26 @@ def test_a_moving_receiver_and_an_aided_tracker():
             a = 2 * 9.80665
             return np.stack([300 * u + a * u * u / 2, 300 + a * u, a + 0 * u, 0 * u])
 
-    cfg, _ = scenario_config(scenario(45.0, 1.2))
+    cfg, _ = scenario_config(scenario(45.0, 0.8))
     cfg = cfg.replace(receiver=along_track_receiver(Profile(), 52.0, 4.4, 30.0, 45.0))
     sig = ConstellationSignal(cfg)
     cols = select_channels(sig, 12)
-    t = np.arange(0, 1400) * 1e-3
+    h = 5e-3
+    t = np.arange(0, 200) * h
     ph = sig.truth_at(t).carrier_phase_cycles[:, cols]
-    rate = np.gradient(np.gradient(ph, 1e-3, axis=0), 1e-3, axis=0)   # Hz/s, per satellite
+    rate = np.gradient(np.gradient(ph, h, axis=0), h, axis=0)   # Hz/s, per satellite
+
+    def aiding(k):                            # epoch k of ~1 ms: the rate at its time
+        return rate[min(int(round(k * 1e-3 / h)), rate.shape[0] - 1)]
+
     r = run_fast(cfg, signal=sig, run=GnssRunConfig(tracker="aided-kf", dsp="float"),
-                 gps=GpsConfig(rate_hz=10.0), trials=2, seed=5,
-                 aiding=lambda k: rate[min(k, rate.shape[0] - 1)])
+                 gps=GpsConfig(rate_hz=10.0), trials=2, seed=5, aiding=aiding)
+    assert len(r.runs[0].epochs) == 7
     assert np.nanmax(r.position_error_m()) < 10.0
     for g in r.runs:
         for m, e in enumerate(g.epochs):
             v_true = r.truth.rx_velocity_mps[m]
             assert e.solution.valid
-            import pymap3d
             lat, lon, _ = pymap3d.ecef2geodetic(*r.truth.rx_position_m[m])
             v_enu = np.array(pymap3d.ecef2enuv(*v_true, lat, lon))
             assert np.linalg.norm(np.asarray(e.solution.velocity_enu_mps) - v_enu) < 0.5
@@ -153,6 +159,19 @@ def test_fast_path_against_the_if_path(tmp_path, cn0):
     r = compare(scenario(cn0, 3.0), tmp_path, trials=20)
     assert len(r["prns"]) == 8
     assert r["all_pass"], r["tests"]
+
+
+@pytest.mark.slow
+def test_the_bench_writes_its_figures(tmp_path):
+    """``bench gps-fast`` quick form: the speed rows of both scenarios and the comparison."""
+    import json
+    from cosim.gnss.gps_fast_bench import gps_fast
+    r = gps_fast(tmp_path, quick=True)
+    j = json.loads((tmp_path / "gps_fast.json").read_text())
+    assert {x["satellites"] for x in j["speed"]} == {8, 12}
+    assert all(x["signal_s_per_s"] > 0 for x in j["speed"])
+    assert j["comparison"][0]["cn0_dbhz"] == 45.0 and "tests" in j["comparison"][0]
+    assert r["if_model_signal_s_per_s"] > 0 and (tmp_path / "gps_fast.md").is_file()
 
 
 @pytest.mark.slow
