@@ -272,10 +272,11 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
     ``seed`` (module doc). ``run``: the tracker, its arithmetic and bandwidths (its
     backend is not used); ``gps``: measurement rate and PVT; ``track``: channels and lock
     windows; ``adc_bits``: the IF path's ADC (the generated recording's 2 bits; None: no
-    ADC loss); ``mai``: the other satellites' signals as noise (module doc); ``aiding``: per-channel Doppler rate (module doc); ``hot_ephemerides``: the
-    ephemerides the receiver uses (default the generator's); ``iono``: Klobuchar parameters
-    for the PVT (``"broadcast"``: the scenario's, None: none); ``progress(done, total)``
-    per 1000 epochs. Every input is checked before any work."""
+    ADC loss); ``mai``: the other satellites' signals as noise (module doc); ``aiding``:
+    per-channel Doppler rate (module doc); ``hot_ephemerides``: the ephemerides the
+    receiver uses (default the generator's); ``iono``: Klobuchar parameters for the PVT
+    (``"broadcast"``: the scenario's, None: none); ``progress(done, total)`` every 1000
+    epochs. Bad input is refused (``ValueError`` naming it) before the tracking starts."""
     t_wall = time.perf_counter()
     trials = check_int("trials", trials, 1, 100_000)
     seed = check_int("seed", seed, 0)
@@ -316,7 +317,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
     shape = (trials, S)
     ones = np.ones(shape)
     # start on each satellite's first code epoch after s = 0 (two Newton steps)
-    P0, Phi0, _ = tr.ranges(np.zeros(S))
+    P0, _, _ = tr.ranges(np.zeros(S))
     chi_0 = tr.chips(0.0, P0)
     target = CODE_LENGTH * np.ceil(chi_0 / CODE_LENGTH)
     s_start = (target - chi_0) / CHIP_RATE_HZ
@@ -324,7 +325,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
         P, _, _ = tr.ranges(s_start)
         s_start = s_start + (target - tr.chips(s_start, P)) / CHIP_RATE_HZ
     e = 5e-3
-    Pa, Pha, _ = tr.ranges(np.stack([s_start - e, s_start, s_start + e]))
+    _, Pha, _ = tr.ranges(np.stack([s_start - e, s_start, s_start + e]))
     th = -Pha / L1_WAVELENGTH_M
     dop0 = (th[2] - th[0]) / (2 * e)
     rate0 = (th[2] - 2 * th[1] + th[0]) / e ** 2

@@ -19,9 +19,9 @@ channels (:func:`~cosim.gnss.gps_fast.select_channels`), the same tracker and ar
 
 Figures after ``settle_s`` (per path, pooled over channels, trials and epochs): the RMS of
 the pseudorange error (the replica's code phase against the truth's: the receiver clock is
-in both), of the Doppler error, the mean C/N0 and the 3-D position RMS. Each fast/IF comparison is a test
-at two-sided level ``alpha``: a ratio of mean squares against the F distribution with the
-two paths' *effective* degrees of freedom (:func:`effective_dof`: the epochs of a series are
+in both), of the Doppler error, the mean C/N0 and the 3-D position RMS. Each fast/IF
+comparison is a test at two-sided level ``alpha``: a ratio of mean squares against the F
+distribution with the two paths' *effective* degrees of freedom (:func:`effective_dof`: the epochs of a series are
 correlated through the loops, ``nu = N / (1 + 2 sum_k rho_k^2)``, Bartlett's variance of a
 sample variance, ``rho`` from the fast path's own series, the better sampled, for both); the C/N0
 means by Welch's t. ``python -m cosim bench gps-fast`` records them
