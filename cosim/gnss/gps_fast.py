@@ -121,7 +121,13 @@ class _Truth:
     def __init__(self, sig: ConstellationSignal, cols):
         self.sig, self.cols = sig, np.asarray(cols, np.int64)
         self.h = sig.cfg.grid_s
-        self.levels = [sig._levels[j] for j in self.cols]
+        # the levels the generator modulates: LNAV bit 0 is +1, 1 is -1 (all +1 without data)
+        lv = [1.0 - 2.0 * sig.nav_stream(sig.prns[j]).bits.astype(np.float64)
+              if sig.cfg.nav_data else np.ones(sig.nav_stream(sig.prns[j]).bits.size)
+              for j in self.cols]
+        self.levels = np.concatenate(lv)       # every channel's bits, one after the other
+        self.offset = np.cumsum([0] + [x.size for x in lv[:-1]]).astype(np.int64)
+        self.n_bits = np.array([x.size for x in lv], np.int64)
 
     def ranges(self, s):
         """``(P, Phi, amplitude)``, each of the shape of ``s`` (..., S)."""
@@ -142,11 +148,11 @@ class _Truth:
         return self.sig.chi0 + CHIP_RATE_HZ * np.asarray(s) - P / CHIP_M
 
     def bits(self, chi):
+        """The LNAV bit (+1/-1) of the code phases ``chi`` (..., S)."""
         b = np.floor(chi / CHIPS_PER_BIT).astype(np.int64)
-        out = np.empty(b.shape)
-        for j, lv in enumerate(self.levels):
-            out[..., j] = lv[b[..., j]]
-        return out
+        if np.any(b < 0) or np.any(b >= self.n_bits):
+            raise ValueError("internal: a code phase outside the encoded LNAV bits")
+        return self.levels[self.offset + b]
 
     def cn0(self, amp):
         a = np.maximum(amp / self.sig.amp_per_sqrt_cn0, 10 ** (NO_SIGNAL_DBHZ / 20))
