@@ -161,6 +161,11 @@ def test_fast_path_against_the_if_path(tmp_path, cn0):
     assert r["all_pass"], r["tests"]
 
 
+def test_gps_fast_is_a_benchmark():
+    from cosim.tools.bench import benchmarks
+    assert "gps-fast" in benchmarks()
+
+
 @pytest.mark.slow
 def test_the_bench_writes_its_figures(tmp_path):
     """``bench gps-fast`` quick form: the speed rows of both scenarios and the comparison."""
