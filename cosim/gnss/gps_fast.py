@@ -88,8 +88,7 @@ from .multichannel import TrackConfig
 from .signal import CHIPS_PER_BIT
 
 __all__ = ["FastGpsRun", "run_fast", "fixes_from_series", "select_channels", "counts_from_chips",
-           "mai_cn0_dbhz", "spacing_for",
-           "NO_SIGNAL_DBHZ"]
+           "mai_cn0_dbhz", "spacing_for", "NO_SIGNAL_DBHZ"]
 
 #: C/N0 drawn for a satellite below the mask (its amplitude is 0 in the IF path): an
 #: amplitude ~1e-7 of a 45 dB-Hz signal.
@@ -343,15 +342,14 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
     cr = CHIP_RATE_HZ + f / (L1_HZ / CHIP_RATE_HZ)
     # trackers: one per nominal C/N0 (1 dB groups), as the IF path tells each channel's
     from .tracking import make_tracker_for
-    arith_name = run.dsp
     nominal = np.round(t0.cn0_dbhz[0, cols])
     groups = []
     for c in np.unique(nominal):
         idx = np.flatnonzero(nominal == c)
         ctx = {"doppler0_hz": f[:, idx], "doppler_rate0_hz_s": rate0[idx] * ones[:, idx],
                "aiding": _aiding_for(aiding, shape, idx)}
-        trk, arith = make_tracker_for(run, fs, 0.0, False, float(c), 0.0, spacing_for(fs),
-                                      arith_name, (ctx, {}))
+        trk, _ = make_tracker_for(run, fs, 0.0, False, float(c), 0.0, spacing, run.dsp,
+                                  (ctx, {}))
         groups.append((idx, trk))
     from dsp.gnss.loops import LockDetector
     det = LockDetector(T, window=track.lock_window_ms, m=track.pli_block_ms,
@@ -364,7 +362,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
     cn0_now = np.full(shape, np.nan)
     lock_now = np.zeros(shape, bool)
     pending = [(f, cr)]                            # the one-epoch latency
-    th_start = phi.copy()
+    th_start = phi.copy()                          # the truth's phase at the epoch start
     n_epochs = int(math.ceil((dur - s_start.min()) / T)) + 2
     t_track = time.perf_counter()
     rows = np.arange(trials)[:, None] * np.ones((1, S), np.int64)
@@ -407,8 +405,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
         # the loop
         iq = [x.early.real, x.early.imag, x.prompt.real, x.prompt.imag, x.late.real,
               x.late.imag]
-        fc, kc = np.empty(shape), np.empty(shape)
-        dop = np.empty(shape)
+        fc, kc, dop = np.empty(shape), np.empty(shape), np.empty(shape)
         for idx, trk in groups:
             out = trk.frequencies_hz(trk.step(*(v[:, idx] for v in iq)))
             fc[:, idx], kc[:, idx] = out
@@ -438,7 +435,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
                       time.perf_counter() - t_wall, track_wall,
                       {"chi0": sig.chi0, "frame_tow": sig.frame_tow, "tracker": run.tracker,
                        "dsp": run.dsp, "bn_hz": run.bn_hz, "dll_bn_hz": run.dll_bn_hz,
-                       "adc_bits": adc_bits, "eta": eta, "spacing_chips": spacing_for(fs),
+                       "adc_bits": adc_bits, "eta": eta, "spacing_chips": spacing,
                        "seed": seed, "rate_hz": gps.rate_hz, "mai": mai})
 
 
