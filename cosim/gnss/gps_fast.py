@@ -70,7 +70,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -218,7 +218,9 @@ class FastGpsRun:
     unwrapped, at the epoch), ``doppler_hz``, ``cn0_dbhz``, ``carrier_cycles`` (RINEX
     sign), ``locked`` (last lock window: phase and C/N0 lock); ``truth``: the
     :class:`~cosim.gnss.constellation.ConstellationTruth` at ``t_s`` (columns ``prns``);
-    ``runs``: one :class:`~cosim.gnss.gps_receiver.GpsRun` per trial."""
+    ``runs``: one :class:`~cosim.gnss.gps_receiver.GpsRun` per trial; ``trackers``: the
+    ``(channel indices, tracker)`` groups (batch ``(trials, len(indices))``: their own
+    figures, e.g. the INS loops' ``history``)."""
 
     prns: tuple
     t_s: np.ndarray
@@ -230,6 +232,7 @@ class FastGpsRun:
     wall_s: float
     track_wall_s: float
     config: dict = field(default_factory=dict)
+    trackers: list = field(default_factory=list)
 
     def truth_chips(self) -> np.ndarray:
         """(M, S): the received code phase (chips, unwrapped) at the epochs."""
@@ -270,7 +273,8 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
              track: TrackConfig = TrackConfig(), trials: int = 1, seed: int = 0,
              duration_s: float | None = None, adc_bits: int | None = 2, aiding=None,
              hot_ephemerides=None, iono="broadcast", signal: ConstellationSignal | None = None,
-             mai: bool = True, progress=None) -> FastGpsRun:
+             mai: bool = True, tracker_options: dict | None = None,
+             progress=None) -> FastGpsRun:
     """Run the receiver on the fast path over the scenario ``cfg``
     (:class:`~cosim.gnss.constellation.ConstellationConfig`; or its realised ``signal``)
     for ``duration_s`` (default the scenario's), ``trials`` Monte Carlo trials from
@@ -280,8 +284,9 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
     ADC loss); ``mai``: the other satellites' signals as noise (module doc); ``aiding``:
     per-channel Doppler rate (module doc); ``hot_ephemerides``: the ephemerides the
     receiver uses (default the generator's); ``iono``: Klobuchar parameters for the PVT
-    (``"broadcast"``: the scenario's, None: none); ``progress(done, total)`` every 1000
-    epochs. Bad input is refused (``ValueError`` naming it) before the tracking starts."""
+    (``"broadcast"``: the scenario's, None: none); ``tracker_options``: keyword options of
+    the tracker's factory (e.g. ``oscillator``, ``pli_epochs`` of the INS paper's loops);
+    ``progress(done, total)`` every 1000 epochs. Bad input is refused (``ValueError`` naming it) before the tracking starts."""
     t_wall = time.perf_counter()
     trials = check_int("trials", trials, 1, 100_000)
     seed = check_int("seed", seed, 0)
@@ -290,6 +295,8 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
         raise ValueError("run, gps and track must be GnssRunConfig, GpsConfig and TrackConfig")
     if not isinstance(mai, bool):
         raise ValueError(f"mai must be True or False, not {mai!r}")
+    if tracker_options is not None and not isinstance(tracker_options, dict):
+        raise ValueError(f"tracker_options must be a dict or None, not {tracker_options!r}")
     if aiding is not None and not callable(aiding):
         raise ValueError("aiding must be a callable aiding(k) -> Doppler rate (Hz/s) or None")
     from dsp.gnss.trackers import needs_aiding
@@ -349,7 +356,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
         ctx = {"doppler0_hz": f[:, idx], "doppler_rate0_hz_s": rate0[idx] * ones[:, idx],
                "aiding": _aiding_for(aiding, shape, idx)}
         trk, _ = make_tracker_for(run, fs, 0.0, False, float(c), 0.0, spacing, run.dsp,
-                                  (ctx, {}))
+                                  (ctx, dict(tracker_options or {})))
         groups.append((idx, trk))
     from dsp.gnss.loops import LockDetector
     det = LockDetector(T, window=track.lock_window_ms, m=track.pli_block_ms,
@@ -436,20 +443,16 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
                       {"chi0": sig.chi0, "frame_tow": sig.frame_tow, "tracker": run.tracker,
                        "dsp": run.dsp, "bn_hz": run.bn_hz, "dll_bn_hz": run.dll_bn_hz,
                        "adc_bits": adc_bits, "eta": eta, "spacing_chips": spacing,
-                       "seed": seed, "rate_hz": gps.rate_hz, "mai": mai})
+                       "seed": seed, "rate_hz": gps.rate_hz, "mai": mai}, groups)
 
 
 def _columns(truth, cols):
     """The truth restricted to the channels' satellites."""
-    import dataclasses
-    d = {}
-    for fld in dataclasses.fields(truth):
-        v = getattr(truth, fld.name)
-        if fld.name == "prns":
-            v = tuple(v[j] for j in cols)
-        elif isinstance(v, np.ndarray) and v.ndim == 2 and v.shape[1] == len(truth.prns):
-            v = v[:, cols]
-        d[fld.name] = v
+    n = len(truth.prns)
+    d = {f.name: getattr(truth, f.name) for f in fields(truth)}
+    d = {k: v[:, cols] if isinstance(v, np.ndarray) and v.ndim == 2 and v.shape[1] == n else v
+         for k, v in d.items()}
+    d["prns"] = tuple(truth.prns[j] for j in cols)
     return type(truth)(**d)
 
 

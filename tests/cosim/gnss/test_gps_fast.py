@@ -48,7 +48,7 @@ def test_bad_input_is_refused_before_work():
     for kw, match in (({"trials": 0}, "trials"), ({"seed": -1}, "seed"),
                       ({"duration_s": 0.05}, "no measurement epoch"),
                       ({"duration_s": 2.0}, "duration_s"), ({"mai": 1}, "mai"),
-                      ({"aiding": 3.0}, "aiding"),
+                      ({"aiding": 3.0}, "aiding"), ({"tracker_options": 1}, "tracker_options"),
                       ({"run": GnssRunConfig(tracker="aided-kf")}, "needs an aiding"),
                       ({"adc_bits": 0}, "adc_bits")):
         with pytest.raises(ValueError, match=match):
@@ -135,8 +135,13 @@ def test_a_moving_receiver_and_an_aided_tracker():
         return rate[min(int(round(k * 1e-3 / h)), rate.shape[0] - 1)]
 
     r = run_fast(cfg, signal=sig, run=GnssRunConfig(tracker="aided-kf", dsp="float"),
-                 gps=GpsConfig(rate_hz=10.0), trials=2, seed=5, aiding=aiding)
+                 gps=GpsConfig(rate_hz=10.0), trials=2, seed=5, aiding=aiding,
+                 tracker_options={"oscillator": None, "pli_epochs": 20})
     assert len(r.runs[0].epochs) == 7
+    (idx, trk), = r.trackers                  # one nominal C/N0: one tracker of (2, S)
+    assert idx.size == len(r.prns) and trk.history.pli_epochs == 20
+    # in phase lock (a 20-prompt block across a data-bit edge reads lower: the mean)
+    assert np.mean(np.array(trk.history.pli)[5:]) > 0.95
     assert np.nanmax(r.position_error_m()) < 10.0
     for g in r.runs:
         for m, e in enumerate(g.epochs):
