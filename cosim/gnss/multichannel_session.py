@@ -96,14 +96,10 @@ class GnssArrayModelSession(BusModelSession):
         them out of the FIFO."""
         if not self._ended:
             self._ended = True
-            self._add(*self.model.flush())
+            self._add(*self.model.flush_words())
 
-    def _add(self, rc, vals) -> None:
-        fp = self._fifo
-        rw, m = fp.record_words, (1 << fp.width) - 1
-        self.n_records += len(vals)
-        new = np.array([[(v >> (j * fp.width)) & m for j in range(rw)] for v in vals],
-                       np.int64).reshape(-1, rw)
+    def _add(self, rc, new) -> None:
+        self.n_records += new.shape[0]
         wc = np.r_[self._carry_wc, np.asarray(rc, np.int64)]
         w = np.concatenate([self._carry_w, new])
         order = np.argsort(wc, kind="stable")
@@ -118,8 +114,8 @@ class GnssArrayModelSession(BusModelSession):
         bus = self._bus_cycles(writes, start, stop)
         self.bus_writes += bus
         if x.size or bus:
-            self._add(*self.model.step(x, bus, cycles=np.arange(start, start + len(x),
-                                                                 dtype=np.int64)))
+            cyc = np.arange(start, start + len(x), dtype=np.int64)
+            self._add(*self.model.step_words(x, bus, cycles=cyc))
         now = self._carry_wc < stop
         wc, w = self._carry_wc[now], self._carry_w[now]
         self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
