@@ -100,7 +100,7 @@ class GnssArrayModelSession(BusModelSession):
 
     def _add(self, rc, new) -> None:
         self.n_records += new.shape[0]
-        wc = np.r_[self._carry_wc, np.asarray(rc, np.int64)]
+        wc = np.concatenate([self._carry_wc, np.asarray(rc, np.int64)])
         w = np.concatenate([self._carry_w, new])
         order = np.argsort(wc, kind="stable")
         self._carry_wc, self._carry_w = wc[order], w[order]

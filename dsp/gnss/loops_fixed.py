@@ -94,8 +94,10 @@ class FixedArith:
     def rs(v, s):
         if type(v) is int:
             if s <= 0:
-                return _wrap64(v << -s)
-            return _wrap64(v + (1 << (s - 1))) >> s
+                v <<= -s
+                return v if -_I63 <= v < _I63 else _wrap64(v)
+            v += 1 << (s - 1)
+            return (v if -_I63 <= v < _I63 else _wrap64(v)) >> s
         v = np.asarray(v, dtype=np.int64)
         if s <= 0:
             return v << -s
@@ -128,12 +130,15 @@ class FixedArith:
 
     def mul(self, a, k, shift):
         if type(a) is int and type(k) is int:
-            return self.rs(_wrap64(a * k), shift)
+            v = a * k
+            return self.rs(v if -_I63 <= v < _I63 else _wrap64(v), shift)
         return self.rs(np.asarray(a, np.int64) * k, shift)
 
     def add(self, a, b, fmt=None):
         if type(a) is int and type(b) is int:
-            s = _wrap64(a + b)
+            s = a + b
+            if not -_I63 <= s < _I63:
+                s = _wrap64(s)
         else:
             s = np.asarray(a, np.int64) + b
         return s if fmt is None else self._sat(s, fmt)
@@ -192,7 +197,7 @@ class ChannelCore:
 
     def step(self, ie, qe, ip, qp, il, ql):
         o = self.o
-        qs = self.s * np.asarray(qp, float)
+        qs = self.s * (float(qp) if type(qp) is int else np.asarray(qp, float))
         e = o.q(costas_atan(ip, qs) if self.costas else pll_atan2(ip, qs), DISC_PHASE)
         tau = o.q(dll_nelp(ie, qe, il, ql, self.d), DISC_CODE)
         ef = DISC_PHASE.frac + COEF_FRAC

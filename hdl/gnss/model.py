@@ -62,7 +62,7 @@ from dsp.gnss.ca_code import ca_code_table
 from hdl.model.fifo import FifoState, fifo_model_events
 from hdl.model.nco import nco_full_tables
 from .kernel import (CARR_F, CF, NSTATE, PEND_CARR, PRN, SH_CARR, SH_CODE, SH_PRN,
-                     array_kernel, channel_kernel, empty_records)
+                     array_kernel, array_kernel_parallel, empty_records)
 from .params import GnssChannelParams
 
 
@@ -120,9 +120,10 @@ def record_words(params: GnssChannelParams, fields, channel=None) -> np.ndarray:
     fp = _fifo(params)
     f = np.asarray(fields, np.int64).reshape(-1, 9)
     if params.channel_bits:
-        ch = np.broadcast_to(np.asarray(0 if channel is None else channel, np.int64),
-                             (f.shape[0],))
-        f = np.concatenate([f, ch[:, None]], axis=1)
+        g = np.empty((f.shape[0], 10), np.int64)
+        g[:, :9] = f
+        g[:, 9] = 0 if channel is None else channel
+        f = g
     return layout.to_word_array(f, fp.width, fp.record_words)
 
 
@@ -141,11 +142,15 @@ class ChannelBank:
     ----------
     params : GnssChannelParams
     channels : int
+    parallel : bool
+        Share the channels out among numba's threads
+        (:func:`hdl.gnss.kernel.array_kernel_parallel`; the same bits).
     """
 
-    def __init__(self, params: GnssChannelParams, channels: int = 1):
+    def __init__(self, params: GnssChannelParams, channels: int = 1, parallel: bool = False):
         self.params = p = params
         self.channels = int(channels)
+        self.parallel = bool(parallel)
         self._table, self._cos, self._sin = _tables(p.nco)
         self.state = np.tile(_initial_state(p), (self.channels, 1))
         self.ring = np.zeros((self.channels, p.el_spacing_samples), np.int64)
@@ -198,7 +203,8 @@ class ChannelBank:
         wstart = np.searchsorted(wv[:, 0], chans, "left")
         wend = np.searchsorted(wv[:, 0], chans, "right")
         rec_cyc, rec_f, nrec = empty_records(self.channels, x.shape[0])
-        array_kernel(x, xq, cplx, scyc, np.ascontiguousarray(wv[:, 1]),
+        kern = array_kernel_parallel if self.parallel else array_kernel
+        kern(x, xq, cplx, scyc, np.ascontiguousarray(wv[:, 1]),
                      np.ascontiguousarray(wv[:, 2]), np.ascontiguousarray(wv[:, 3]), wstart,
                      wend, self.state, self.ring, self._table, self._cos, self._sin, K, d, cb,
                      pb, trunc, emask, lat, rec_cyc, rec_f, nrec)
@@ -338,14 +344,17 @@ class GnssArrayModel:
 
     ``step(samples, writes, cycles=...)`` returns the records of the chunk with their FIFO
     input cycles (state carried, chunks give the same bits); :meth:`run` is a whole run from
-    reset including the FIFO (:func:`hdl.model.fifo.fifo_model_events`).
+    reset including the FIFO (:func:`hdl.model.fifo.fifo_model_events`). The channels run in
+    one compiled call per step (:class:`ChannelBank`), on numba's threads with
+    ``parallel=True`` (the same bits; it pays on otherwise idle cores).
     """
 
-    def __init__(self, params: GnssChannelParams, channels: int = 1, *, arbiter=None):
+    def __init__(self, params: GnssChannelParams, channels: int = 1, *, arbiter=None,
+                 parallel: bool = False):
         self.params = params
         self.channels = channels
         self.arbiter = channels > 1 if arbiter is None else arbiter
-        self.bank = ChannelBank(params, channels)
+        self.bank = ChannelBank(params, channels, parallel)
         self._arb = Arbiter(_fifo(params).record_words)
         self._held_ids = np.zeros(0, np.int64)          # records waiting for the arbiter
         self._held = np.zeros((0, _fifo(params).record_words), np.int64)
