@@ -77,6 +77,8 @@ def add_parser(sub, make_parser) -> None:
     p.add_argument("--bn-hz", type=float, default=15.0, help="carrier loop noise bandwidth")
     p.add_argument("--backend", type=str.lower, default="model",
                    choices=("model", "pysim", "verilator"), help="the channel array")
+    p.add_argument("--parallel", action="store_true",
+                   help="the model's channels on numba's threads (same bits)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output directory")
     p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -94,13 +96,15 @@ def run(a) -> int:
     from .gps_receiver import GpsConfig, navigate
     from .gps_scenario import ScenarioSpec
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
-    from .multichannel_session import array_channel_params
+    from .multichannel_session import array_channel_params, check_parallel
     from .rinex_nav import read_rinex_nav
     t_wall = time.time()
     prns = check_search_options(a, tracker=a.tracker)
     out = check_out_dir(a.out, "--out")
     gcfg = GpsConfig(rate_hz=a.rate)
-    tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz)
+    tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz,
+                       parallel=a.parallel)
+    check_parallel(a.parallel, a.backend)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
     hot = rinex = None
     if a.ephemeris is not None:

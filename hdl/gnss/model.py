@@ -54,6 +54,7 @@ Record layout (LSB first): ``ie, qe, ip, qp, il, ql`` (signed ``acc_width`` each
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,13 +145,20 @@ class ChannelBank:
     channels : int
     parallel : bool
         Share the channels out among numba's threads
-        (:func:`hdl.gnss.kernel.array_kernel_parallel`; the same bits).
+        (:func:`hdl.gnss.kernel.array_kernel_parallel`; the same bits). Sets
+        ``OMP_WAIT_POLICY=passive`` unless it is set (idle threads must not spin between
+        the calls, one per DSP service).
     """
 
     def __init__(self, params: GnssChannelParams, channels: int = 1, parallel: bool = False):
         self.params = p = params
         self.channels = int(channels)
         self.parallel = bool(parallel)
+        if self.parallel:
+            # OpenMP threads that spin between the (sub-millisecond) calls burn the cores a
+            # shared machine needs: they wait passively unless the user chose otherwise
+            # (read when numba first starts its threads).
+            os.environ.setdefault("OMP_WAIT_POLICY", "passive")
         self._table, self._cos, self._sin = _tables(p.nco)
         self.state = np.tile(_initial_state(p), (self.channels, 1))
         self.ring = np.zeros((self.channels, p.el_spacing_samples), np.int64)
