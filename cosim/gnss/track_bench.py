@@ -8,11 +8,13 @@ of 12 satellites (40-48 dB-Hz, seed 1; :mod:`cosim.gnss.synthetic_file`) is writ
 acquisition is not timed), after an untimed warm-up. Per channel count (best of
 :data:`REPEATS` runs, the machine being shared): channel x samples per second and the
 multiple of real time, per wall second and per CPU second of the process
-(:func:`time.process_time`: what the run costs whatever else the cores carry). The
-12-channel run is profiled (:mod:`cProfile`) once more to say where the time goes: the
-array's numba kernel (:mod:`hdl.gnss.kernel`), the trackers, the rest (pipeline, FIFO model,
-record packing and reassembly in Python). Written with :func:`cosim.core.provenance.write_result` to
-``results/gnss_throughput.json`` / ``.md``.
+(:func:`time.process_time`: what the run costs whatever else the cores carry), and the
+pipeline's digest. The 12 channels run once more with ``parallel=True``
+(:class:`~cosim.gnss.multichannel.TrackConfig`: the channels on numba's threads; the same
+digest). The 12-channel run is profiled (:mod:`cProfile`) once more to say where the time
+goes: the array's numba kernel (:mod:`hdl.gnss.kernel`), the trackers, the rest (pipeline,
+FIFO model, record packing and reassembly in Python). Written with
+:func:`cosim.core.provenance.write_result` to ``results/gnss_throughput.json`` / ``.md``.
 """
 from __future__ import annotations
 
@@ -77,6 +79,13 @@ def gnss_throughput(out: Path, quick: bool = False) -> dict:
                      "x_real_time_cpu": m.n_samples / FS_HZ / cpu, "tracked": locked,
                      "fifo_dropped": int(m.pipeline.overflow_count or 0),
                      "digest": m.pipeline.digest["all"]})
+    # the 12 channels on numba's threads (--parallel): the same bits, its wall time
+    track_file(f, cands[:2], run, TrackConfig(channels=2, parallel=True), n_samples=24_000)
+    t0, c0 = time.perf_counter(), time.process_time()
+    m = track_file(f, cands, run, TrackConfig(channels=12, parallel=True))
+    par = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+           "digest": m.pipeline.digest["all"]}
+    par["x_real_time"] = m.n_samples / FS_HZ / par["wall_s"]
     prof = cProfile.Profile()
     prof.enable()
     track_file(f, cands, run, TrackConfig(channels=12))
@@ -86,7 +95,8 @@ def gnss_throughput(out: Path, quick: bool = False) -> dict:
            "scenario": f"synthetic int8 2-bit real IF {IF_HZ / 1e6:g} MHz at "
                        f"{FS_HZ / 1e6:g} MS/s, 12 satellites 40-48 dB-Hz, bit-exact array "
                        f"model, pll3 fixed per channel, DSP service 0.5 ms",
-           "load_average_1min": load, "rows": rows, "profile_12_channels": split}
+           "load_average_1min": load, "rows": rows, "parallel_12_channels": par,
+           "profile_12_channels": split}
     write_result(Path(out), "gnss_throughput", res, _markdown(res))
     return res
 
@@ -107,6 +117,11 @@ def _markdown(r: dict) -> str:
         lines.append(f"| {x['channels']} | {x['wall_s']:.2f} | {x['cpu_s']:.2f} | "
                      f"{x['channel_samples_per_s']:.3g} | {x['x_real_time']:.3g} | "
                      f"{x['x_real_time_cpu']:.3g} | {x['tracked']} | `{x['digest']}` |")
+    q = r["parallel_12_channels"]
+    lines += ["", f"12 channels with `--parallel` (the channels on numba's threads): wall "
+              f"{q['wall_s']:.2f} s ({q['x_real_time']:.3g} x real time), CPU {q['cpu_s']:.2f} s, "
+              f"digest `{q['digest']}` (the serial run's: the same bits). It gains only where "
+              f"a core is idle."]
     lines += ["", f"Where the 12-channel run's {p['total_s']:.2f} s go (cProfile, so slower "
               f"than the timed run): array kernel (numba) {p['array_kernel_s']:.2f} s, "
               f"fixed-point trackers (Python) {p['trackers_s']:.2f} s, the rest (pipeline, "

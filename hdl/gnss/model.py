@@ -50,6 +50,10 @@ Record layout (LSB first): ``ie, qe, ip, qp, il, ql`` (signed ``acc_width`` each
 ``epoch`` (``epoch_bits``), ``carr_phase`` (``carr_phase_bits``), ``code_phase``
 (``code_phase_bits``), then in an array ``channel``; split into FIFO words of
 ``fifo_width`` bits (word 0 = the lowest bits).
+
+The per-sample work is the compiled kernel of :mod:`hdl.gnss.kernel`, one call per step for
+all the channels of an array (:class:`ChannelBank`); records become FIFO words with numpy
+(:meth:`dsp.record_layout.RecordLayout.to_word_array`).
 """
 from __future__ import annotations
 
