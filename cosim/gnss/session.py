@@ -83,7 +83,7 @@ class GnssModelSession(BusModelSession):
         r = self.model.step(x, bus, cycles=np.arange(start, start + len(x), dtype=np.int64))
         new = r.words(p)
         self.n_records += new.shape[0]
-        wc = np.r_[self._carry_wc, r.cycles]
+        wc = np.concatenate([self._carry_wc, r.cycles])
         w = np.concatenate([self._carry_w, new])
         now = wc < stop
         self._carry_wc, self._carry_w = wc[~now], w[~now]
