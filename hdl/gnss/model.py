@@ -124,6 +124,8 @@ def record_words(params: GnssChannelParams, fields, channel=None) -> np.ndarray:
     _, layout, _, _ = _layout(params)
     fp = _fifo(params)
     f = np.asarray(fields, np.int64).reshape(-1, 9)
+    if not f.shape[0]:
+        return np.zeros((0, fp.record_words), np.int64)
     if params.channel_bits:
         g = np.empty((f.shape[0], 10), np.int64)
         g[:, :9] = f
