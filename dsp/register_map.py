@@ -96,6 +96,10 @@ class RegisterMap:
             if len(set(vs)) != len(vs):
                 raise ValueError(f"{self.what} register {what} must be unique, not {vs}")
         object.__setattr__(self, "registers", rs)
+        # lookups by name and by address (every write goes through them)
+        object.__setattr__(self, "_by_name", {r.name: r for r in rs})
+        object.__setattr__(self, "_by_addr", {r.address: (r, r.part_width, *r.bounds)
+                                              for r in rs})
 
     @property
     def names(self) -> dict[str, int]:
@@ -107,9 +111,12 @@ class RegisterMap:
         return tuple(r.address for r in self.registers)
 
     def __getitem__(self, name: str) -> Register:
-        for r in self.registers:
-            if r.name == name:
-                return r
+        try:
+            r = self._by_name.get(name)
+        except TypeError:       # unhashable
+            r = None
+        if r is not None:
+            return r
         raise KeyError(f"{self.what} registers are {', '.join(self.names)}, not {name!r}")
 
     def address(self, name: str) -> int:
@@ -118,9 +125,12 @@ class RegisterMap:
 
     def at(self, address: int) -> Register:
         """The register at bus ``address`` (``ValueError`` listing the addresses)."""
-        for r in self.registers:
-            if r.address == address:
-                return r
+        try:
+            e = self._by_addr.get(address)
+        except TypeError:       # unhashable
+            e = None
+        if e is not None:
+            return e[0]
         raise ValueError(f"{self.what} register address must be one of "
                          f"{', '.join(map(str, self.addresses))}, not {address!r}")
 
@@ -132,14 +142,13 @@ class RegisterMap:
         """The bus word of a write of ``value`` to ``address`` (an int), or ``ValueError``
         naming the register and its rule (:meth:`Register.rule`)."""
         r = self.at(address)
+        _, b, lo, hi = self._by_addr[r.address]
         try:
             v = int(value)
             ok = v == value and not isinstance(value, bool)
         except (TypeError, ValueError, OverflowError):
             ok = False
         if ok and 0 <= v < 1 << r.width:
-            b = r.part_width
-            lo, hi = r.bounds
             for i in range(r.parts):
                 x = (v >> (i * b)) & ((1 << b) - 1)
                 if r.signed and x >> (b - 1):

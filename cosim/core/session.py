@@ -184,11 +184,15 @@ class FrontendSession:
         cycle to run, :attr:`cycle`; a write cannot go into the past). Returns ``cycle``.
         Two writes on one cycle are applied in the order made (the later wins)."""
         self._check_open()
-        c = self.cycle if cycle is None else _int("write cycle", cycle, 0)
+        if cycle is None:
+            c = self.cycle
+        else:   # (a plain int needs no more checks than its sign)
+            c = cycle if type(cycle) is int and cycle >= 0 else _int("write cycle", cycle, 0)
         if c < self.cycle:
             raise ValueError(f"a write cannot take effect in the past: cycle {c} < the "
                              f"session's cycle {self.cycle}")
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if type(value) is not int and (isinstance(value, bool)
+                                       or not isinstance(value, (int, np.integer))):
             raise ValueError(f"value written to {port!r} must be an integer, not {value!r}")
         self._check_port(port)
         bisect.insort(self._pending, (c, self._seq, port, int(value)))

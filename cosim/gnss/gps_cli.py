@@ -99,6 +99,8 @@ def add_parser(sub, make_parser) -> None:
     p.add_argument("--bn-hz", type=float, default=15.0, help="carrier loop noise bandwidth")
     p.add_argument("--backend", type=str.lower, default="model",
                    choices=("model", "pysim", "verilator"), help="the channel array")
+    p.add_argument("--parallel", action="store_true",
+                   help="the model's channels on numba's threads (same bits)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output directory")
     p.add_argument("--jump-bound-m", type=float, default=None,
                    help="a fix more than this off the truth, or stepping this much more than "
@@ -123,7 +125,7 @@ def run(a) -> int:
     from .gps_receiver import GpsConfig, navigate
     from .gps_scenario import ScenarioSpec, scenario_signal
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
-    from .multichannel_session import array_channel_params
+    from .multichannel_session import array_channel_params, check_parallel
     from .rinex_nav import read_rinex_nav
     t_wall = time.time()
     prns = check_search_options(a, tracker=a.tracker)
@@ -131,7 +133,9 @@ def run(a) -> int:
     bound = JUMP_BOUND_M if a.jump_bound_m is None else \
         check_float("--jump-bound-m", a.jump_bound_m, 0.0, lo_open=True, unit="m")
     gcfg = GpsConfig(rate_hz=a.rate)
-    tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz)
+    tcfg = TrackConfig(channels=a.channels, pfa=a.acq_pfa, max_doppler_hz=a.max_doppler_hz,
+                       parallel=a.parallel)
+    check_parallel(a.parallel, a.backend)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
     hot = rinex = None
     if a.ephemeris is not None:

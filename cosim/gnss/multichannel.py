@@ -96,9 +96,13 @@ class TrackConfig:
     reacq_ms: int = 70
     pfa: float = 1e-3
     max_doppler_hz: float = 5000.0
+    #: The bit-exact array's channels on numba's threads (the same bits; model backend).
+    parallel: bool = False
 
     def __post_init__(self):
         check_int("--channels", self.channels, 1, 12)
+        if not isinstance(self.parallel, bool):
+            raise ValueError(f"--parallel must be a bool, not {self.parallel!r}")
         check_int("lock_window_ms", self.lock_window_ms, 2, 1000)
         check_int("pli_block_ms", self.pli_block_ms, 1, 20)
         if self.lock_window_ms % self.pli_block_ms:
@@ -357,7 +361,7 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=n, unit="S", unit_scale=True, desc="gnss-track", leave=False)
-    with open_gnss_array(run.backend, p, cfg.channels) as fe:
+    with open_gnss_array(run.backend, p, cfg.channels, cfg.parallel) as fe:
         pipe = Pipeline(fe, svc, dsp, compute_cycles=run.compute_cycles,
                         control_latency_cycles=run.control_latency_cycles,
                         keep_words=keep_words)

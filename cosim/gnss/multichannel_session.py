@@ -21,7 +21,7 @@ import numpy as np
 from ..core.session import BusModelSession, RegisterSession, fifo_step
 
 __all__ = ["GnssArrayModelSession", "array_registers", "register_name", "open_gnss_array",
-           "array_channel_params"]
+           "array_channel_params", "check_parallel"]
 
 
 def register_name(channels: int, channel: int, reg: str) -> str:
@@ -63,12 +63,15 @@ class GnssArrayModelSession(BusModelSession):
         With the array's ``channel_bits`` (:func:`array_channel_params`).
     channels : int
         2..64.
+    parallel : bool
+        The channels on numba's threads (:class:`hdl.gnss.model.GnssArrayModel`; the same
+        bits).
     """
 
     backend = "model"
     what = "GNSS channel array model"
 
-    def __init__(self, params, channels: int):
+    def __init__(self, params, channels: int, parallel: bool = False):
         from hdl.gnss.model import GnssArrayModel
         from hdl.gnss.params import GnssChannelParams
         if not isinstance(params, GnssChannelParams):
@@ -79,7 +82,7 @@ class GnssArrayModelSession(BusModelSession):
                              f"({params.channel_bits}) can number, not {channels!r}")
         super().__init__()
         self.params, self.channels = params, int(channels)
-        self.model = GnssArrayModel(params, self.channels)
+        self.model = GnssArrayModel(params, self.channels, parallel=bool(parallel))
         addr_bits = 2 + max(1, (self.channels - 1).bit_length())
         self._widths = {"reg_we": 1, "reg_addr": addr_bits, "reg_data": params.reg_data_width}
         self._fifo = params.fifo
@@ -96,15 +99,11 @@ class GnssArrayModelSession(BusModelSession):
         them out of the FIFO."""
         if not self._ended:
             self._ended = True
-            self._add(*self.model.flush())
+            self._add(*self.model.flush_words())
 
-    def _add(self, rc, vals) -> None:
-        fp = self._fifo
-        rw, m = fp.record_words, (1 << fp.width) - 1
-        self.n_records += len(vals)
-        new = np.array([[(v >> (j * fp.width)) & m for j in range(rw)] for v in vals],
-                       np.int64).reshape(-1, rw)
-        wc = np.r_[self._carry_wc, np.asarray(rc, np.int64)]
+    def _add(self, rc, new) -> None:
+        self.n_records += new.shape[0]
+        wc = np.concatenate([self._carry_wc, np.asarray(rc, np.int64)])
         w = np.concatenate([self._carry_w, new])
         order = np.argsort(wc, kind="stable")
         self._carry_wc, self._carry_w = wc[order], w[order]
@@ -118,8 +117,8 @@ class GnssArrayModelSession(BusModelSession):
         bus = self._bus_cycles(writes, start, stop)
         self.bus_writes += bus
         if x.size or bus:
-            self._add(*self.model.step(x, bus, cycles=np.arange(start, start + len(x),
-                                                                 dtype=np.int64)))
+            cyc = np.arange(start, start + len(x), dtype=np.int64)
+            self._add(*self.model.step_words(x, bus, cycles=cyc))
         now = self._carry_wc < stop
         wc, w = self._carry_wc[now], self._carry_w[now]
         self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
@@ -143,18 +142,27 @@ class GnssArrayRegisterSession(RegisterSession):
             self.inner.end_input()
 
 
-def open_gnss_array(backend: str, params, channels: int):
+def check_parallel(parallel: bool, backend: str) -> None:
+    """``--parallel`` (the model's channels on threads) goes with ``--backend model`` only."""
+    if parallel and backend != "model":
+        raise ValueError(f"--parallel shares the bit-exact model's channels among threads: it "
+                         f"needs --backend model, not {backend!r}")
+
+
+def open_gnss_array(backend: str, params, channels: int, parallel: bool = False):
     """``channels`` GNSS channels on one input stream on ``backend`` (``model``, ``pysim``,
     ``verilator``) with per-channel register writes (module doc). ``params``: the array's
-    (:func:`array_channel_params`)."""
+    (:func:`array_channel_params`); ``parallel``: the model's channels on numba's threads
+    (the model backend only; a single channel has nothing to share)."""
     from ..backends.factory import BACKENDS, open_stream_session
     from .session import open_gnss
     if backend not in BACKENDS:
         raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    check_parallel(parallel, backend)
     if channels == 1:
         return open_gnss(backend, params)
     if backend == "model":
-        inner = GnssArrayModelSession(params, channels)
+        inner = GnssArrayModelSession(params, channels, parallel)
     else:
         from hdl.gnss.channel import GnssChannelArray
         inner = open_stream_session(backend, GnssChannelArray(params, channels),

@@ -81,12 +81,9 @@ class GnssModelSession(BusModelSession):
         bus = self._bus_cycles(writes, start, stop)
         self.bus_writes += bus
         r = self.model.step(x, bus, cycles=np.arange(start, start + len(x), dtype=np.int64))
-        vals = r.values(p)
-        self.n_records += len(vals)
-        rw, m = fp.record_words, (1 << fp.width) - 1
-        new = np.array([[(v >> (j * fp.width)) & m for j in range(rw)] for v in vals],
-                       np.int64).reshape(-1, rw)
-        wc = np.r_[self._carry_wc, r.cycles]
+        new = r.words(p)
+        self.n_records += new.shape[0]
+        wc = np.concatenate([self._carry_wc, r.cycles])
         w = np.concatenate([self._carry_w, new])
         now = wc < stop
         self._carry_wc, self._carry_w = wc[~now], w[~now]

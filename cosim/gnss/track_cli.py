@@ -48,6 +48,9 @@ def add_parser(sub, make_parser) -> None:
                    help="the array: model (bit-exact), verilator, pysim (slow: ms only)")
     p.add_argument("--duration-s", type=float, default=None,
                    help="track the first seconds only (default: the whole recording)")
+    p.add_argument("--parallel", action="store_true",
+                   help="the model's channels on numba's threads (NUMBA_NUM_THREADS; same "
+                        "bits, faster on idle cores)")
     p.add_argument("--pull-in-ms", type=int, default=100,
                    help="a channel not locked this long after its hand-over drops its PRN")
     p.add_argument("--plots", nargs="?", const=DEFAULT_PLOTS, default=None, metavar="DIR",
@@ -62,10 +65,12 @@ def run(a) -> int:
 
     from .config import GnssRunConfig
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
+    from .multichannel_session import check_parallel
     from .track_report import summarise, table, write_plots
     prns = check_search_options(a, tracker=a.tracker)
     cfg = TrackConfig(channels=a.channels, pull_in_ms=a.pull_in_ms, pfa=a.acq_pfa,
-                      max_doppler_hz=a.max_doppler_hz)
+                      max_doppler_hz=a.max_doppler_hz, parallel=a.parallel)
+    check_parallel(a.parallel, a.backend)
     run_cfg = GnssRunConfig(tracker=a.tracker, dsp=a.dsp, backend=a.backend, bn_hz=a.bn_hz)
     if a.plots is not None:
         check_out_dir(a.plots, "--plots")

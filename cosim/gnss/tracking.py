@@ -155,11 +155,9 @@ class PipelineDsp:
         b = receive_records(call.words, width=fp.width, record_words=fp.record_words,
                             parity=fp.parity, state=self.rx)
         out = {}
-        for row in b.records:
-            v = 0
-            for j, w in enumerate(row):
-                v |= int(w) << (j * fp.width)
-            d = self.layout.unpack(v)
+        names = self.layout.names
+        for row in self.layout.from_word_array(b.records, fp.width).tolist():
+            d = dict(zip(names, row))
             ch = d.get("channel", 0)
             r = self.sinks[ch](d)
             if r is not None:

@@ -50,135 +50,25 @@ Record layout (LSB first): ``ie, qe, ip, qp, il, ql`` (signed ``acc_width`` each
 ``epoch`` (``epoch_bits``), ``carr_phase`` (``carr_phase_bits``), ``code_phase``
 (``code_phase_bits``), then in an array ``channel``; split into FIFO words of
 ``fifo_width`` bits (word 0 = the lowest bits).
+
+The per-sample work is the compiled kernel of :mod:`hdl.gnss.kernel`, one call per step for
+all the channels of an array (:class:`ChannelBank`); records become FIFO words with numpy
+(:meth:`dsp.record_layout.RecordLayout.to_word_array`).
 """
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from dsp.gnss.ca_code import ca_code_table
-from dsp.jit import njit_cached
 from hdl.model.fifo import FifoState, fifo_model_events
 from hdl.model.nco import nco_full_tables
-from .params import ACC_FIELDS, GnssChannelParams
-
-
-# -- compiled kernel ---------------------------------------------------------------------
-# int64 state vector layout
-(_CODE_ACC, _CHIP, _HOLD, _CF, _PRN, _GEN_K, _GEN_EP, _GEN_FIRST, _CODE_EPOCH, _CARR_ACC,
- _CARR_F, _PEND_CARR, _CARR_AT, _CODE_AT, _EPOCH, _SH_CARR, _SH_CODE, _SH_PRN, _SH_SLEW,
- _SLEW_PEND, _POS, _ACC0) = range(22)
-_NSTATE = _ACC0 + 6
-
-
-@njit_cached(nogil=True)
-def _channel_kernel(x, xq, cplx, scyc, wc, wa, wv, wi, st, ring, table, cos_t, sin_t, K, d,
-                    code_bits, carr_bits, trunc, epoch_mask, lat, rec_cyc, rec_f):
-    """Advance over samples ``x`` (complex input, ``cplx``: I in ``x``, Q in ``xq``; real:
-    ``xq`` unused) at input cycles ``scyc``; returns (records, next write)."""
-    L = 2 * d
-    cmask = (1 << code_bits) - 1
-    pmask = (1 << carr_bits) - 1
-    nrec = 0
-    for n in range(x.shape[0]):
-        # -- replicas (generator state before this sample's update) --------------------
-        prn = st[_PRN]
-        row = prn if 1 <= prn <= 32 else 0
-        bit_e = table[row, st[_CHIP]]
-        pos = st[_POS]
-        late = ring[pos]
-        prompt = ring[(pos + d) % L]
-        ring[pos] = bit_e | (st[_GEN_EP] << 1) | (st[_GEN_FIRST] << 2)
-        st[_POS] = (pos + 1) % L
-        bit_p = prompt & 1
-        ep_p = (prompt >> 1) & 1
-        first_p = (prompt >> 2) & 1
-        bit_l = late & 1
-        # -- carrier, wipe-off ----------------------------------------------------------
-        ph = st[_CARR_ACC]
-        a = ph >> trunc
-        xi = x[n]
-        if cplx:
-            i = xi * cos_t[a] + xq[n] * sin_t[a]
-            q = xq[n] * cos_t[a] - xi * sin_t[a]
-        else:
-            i = xi * cos_t[a]
-            q = -xi * sin_t[a]
-        if first_p:
-            st[_CARR_AT] = ph
-            st[_CODE_AT] = st[_CODE_EPOCH]
-            st[_CARR_F] = st[_PEND_CARR]
-        st[_CARR_ACC] = (ph + st[_CARR_F]) & pmask
-        # -- integrate and dump ---------------------------------------------------------
-        re = 1 - 2 * bit_e
-        rp = 1 - 2 * bit_p
-        rl = 1 - 2 * bit_l
-        if ep_p:
-            st[_EPOCH] = (st[_EPOCH] + 1) & epoch_mask
-        if first_p:
-            for j in range(6):
-                rec_f[nrec, j] = st[_ACC0 + j]
-            rec_f[nrec, 6] = st[_EPOCH]
-            rec_f[nrec, 7] = st[_CARR_AT]
-            rec_f[nrec, 8] = st[_CODE_AT]
-            rec_cyc[nrec] = scyc[n] + lat
-            nrec += 1
-            st[_ACC0 + 0] = i * re
-            st[_ACC0 + 1] = q * re
-            st[_ACC0 + 2] = i * rp
-            st[_ACC0 + 3] = q * rp
-            st[_ACC0 + 4] = i * rl
-            st[_ACC0 + 5] = q * rl
-        else:
-            st[_ACC0 + 0] += i * re
-            st[_ACC0 + 1] += q * re
-            st[_ACC0 + 2] += i * rp
-            st[_ACC0 + 3] += q * rp
-            st[_ACC0 + 4] += i * rl
-            st[_ACC0 + 5] += q * rl
-        # -- code NCO and generator update ------------------------------------------------
-        wrap = 0
-        if st[_HOLD] > 0:
-            st[_HOLD] -= 1
-        else:
-            s = st[_CODE_ACC] + st[_CF]
-            st[_CODE_ACC] = s & cmask
-            if s >> code_bits:
-                if st[_CHIP] == 1022:
-                    st[_CHIP] = 0
-                    wrap = 1
-                else:
-                    st[_CHIP] += 1
-        st[_GEN_EP] = wrap
-        st[_GEN_FIRST] = 0
-        if wrap:
-            st[_GEN_K] += 1
-            if st[_GEN_K] == K:
-                st[_GEN_K] = 0
-            if st[_GEN_K] == 0:
-                c = scyc[n]
-                while wi < wc.shape[0] and wc[wi] < c:
-                    r = wa[wi]
-                    if r == 0:
-                        st[_SH_CARR] = wv[wi]
-                    elif r == 1:
-                        st[_SH_CODE] = wv[wi]
-                    elif r == 2:
-                        st[_SH_PRN] = wv[wi]
-                    else:
-                        st[_SH_SLEW] = wv[wi]
-                        st[_SLEW_PEND] = 1
-                    wi += 1
-                st[_CF] = st[_SH_CODE]
-                st[_PRN] = st[_SH_PRN]
-                st[_HOLD] = st[_SH_SLEW] if st[_SLEW_PEND] else 0
-                st[_SLEW_PEND] = 0
-                st[_PEND_CARR] = st[_SH_CARR]
-                st[_CODE_EPOCH] = st[_CODE_ACC]
-                st[_GEN_FIRST] = 1
-    return nrec, wi
+from .kernel import (CARR_F, CF, NSTATE, PEND_CARR, PRN, SH_CARR, SH_CODE, SH_PRN,
+                     array_kernel, array_kernel_parallel, empty_records)
+from .params import GnssChannelParams
 
 
 @functools.lru_cache(maxsize=64)
@@ -188,6 +78,28 @@ def _layout(params: GnssChannelParams):
     return params.acc_width, params.record, params.registers, params.latency
 
 
+@functools.lru_cache(maxsize=64)
+def _fifo(params: GnssChannelParams):
+    return params.fifo
+
+
+def _initial_state(p: GnssChannelParams) -> np.ndarray:
+    """A channel's state vector after reset (:mod:`hdl.gnss.kernel`)."""
+    st = np.zeros(NSTATE, np.int64)
+    cw, kw = p.carr_word(p.if_hz), p.code_word()
+    st[CF] = st[SH_CODE] = kw
+    st[PRN] = st[SH_PRN] = p.prn
+    st[CARR_F] = st[PEND_CARR] = st[SH_CARR] = cw
+    return st
+
+
+@functools.lru_cache(maxsize=8)
+def _tables(nco):
+    """(C/A code table, cos and sin tables of the carrier NCO ``nco``) as int64."""
+    cos_t, sin_t = nco_full_tables(nco)
+    return ca_code_table().astype(np.int64), cos_t.astype(np.int64), sin_t.astype(np.int64)
+
+
 @dataclass
 class ChannelRecords:
     """Records a model step produced (before the FIFO)."""
@@ -195,18 +107,131 @@ class ChannelRecords:
     cycles: np.ndarray                   #: FIFO input cycle of each record
     fields: np.ndarray                   #: (n, 9) int64: ie qe ip qp il ql epoch carr code
 
+    def words(self, params: GnssChannelParams, channel=None) -> np.ndarray:
+        """The records as FIFO words, ``(n, record_words)`` int64 (the accumulators wrap to
+        ``acc_width`` bits as the hardware's); ``channel``: the ``channel`` field of an
+        array's records (an int or one per record)."""
+        return record_words(params, self.fields, channel)
+
     def values(self, params: GnssChannelParams, channel: int | None = None) -> list[int]:
-        out = []
-        w, layout, _, _ = _layout(params)
-        for row in self.fields:
-            d = {n: int(v) for n, v in zip(ACC_FIELDS, row[:6])}
-            for n in ACC_FIELDS:   # the hardware's accumulators wrap
-                d[n] = ((d[n] + (1 << (w - 1))) & ((1 << w) - 1)) - (1 << (w - 1))
-            d.update(epoch=int(row[6]), carr_phase=int(row[7]), code_phase=int(row[8]))
-            if params.channel_bits:
-                d["channel"] = 0 if channel is None else int(channel)
-            out.append(layout.pack(d))
-        return out
+        """The records as integers (:meth:`dsp.record_layout.RecordLayout.pack`)."""
+        return words_to_values(params, self.words(params, channel))
+
+
+def record_words(params: GnssChannelParams, fields, channel=None) -> np.ndarray:
+    """Records ``fields`` (``(n, 9)``: ie qe ip qp il ql epoch carr code) as FIFO words,
+    ``(n, record_words)`` (:meth:`ChannelRecords.words`)."""
+    _, layout, _, _ = _layout(params)
+    fp = _fifo(params)
+    f = np.asarray(fields, np.int64).reshape(-1, 9)
+    if not f.shape[0]:
+        return np.zeros((0, fp.record_words), np.int64)
+    if params.channel_bits:
+        g = np.empty((f.shape[0], 10), np.int64)
+        g[:, :9] = f
+        g[:, 9] = 0 if channel is None else channel
+        f = g
+    return layout.to_word_array(f, fp.width, fp.record_words)
+
+
+def words_to_values(params: GnssChannelParams, words) -> list[int]:
+    """FIFO words of records ``(n, record_words)`` -> the records as integers."""
+    w = _fifo(params).width
+    return [sum(int(x) << (j * w) for j, x in enumerate(row)) for row in words.tolist()]
+
+
+class ChannelBank:
+    """The state of ``channels`` channels on one input (stacked, one row each) and the
+    compiled kernel that advances them all over a chunk (:func:`hdl.gnss.kernel.array_kernel`);
+    :class:`GnssChannelModel` is a bank of one, :class:`GnssArrayModel` holds one.
+
+    Parameters
+    ----------
+    params : GnssChannelParams
+    channels : int
+    parallel : bool
+        Share the channels out among numba's threads
+        (:func:`hdl.gnss.kernel.array_kernel_parallel`; the same bits). Sets
+        ``OMP_WAIT_POLICY=passive`` unless it is set (idle threads must not spin between
+        the calls, one per DSP service).
+    """
+
+    def __init__(self, params: GnssChannelParams, channels: int = 1, parallel: bool = False):
+        self.params = p = params
+        self.channels = int(channels)
+        self.parallel = bool(parallel)
+        if self.parallel:
+            # OpenMP threads that spin between the (sub-millisecond) calls burn the cores a
+            # shared machine needs: they wait passively unless the user chose otherwise
+            # (read when numba first starts its threads).
+            os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+        self._table, self._cos, self._sin = _tables(p.nco)
+        self.state = np.tile(_initial_state(p), (self.channels, 1))
+        self.ring = np.zeros((self.channels, p.el_spacing_samples), np.int64)
+        self._writes = np.zeros((0, 4), np.int64)       # channel, cycle, reg, value
+        self._k = (p.complex_input, p.dump_epochs, p.half_spacing, p.code_phase_bits,
+                   p.carr_phase_bits, p.nco.trunc_bits, (1 << p.epoch_bits) - 1)
+        self.n_samples = 0
+        self.next_cycle = 0
+
+    def prepare(self, samples, cycles):
+        """The checked samples (int64, the 1-bit map applied) as the kernel's ``I`` and ``Q``
+        streams (real input: the one stream twice) and their input cycles (default: one
+        per cycle from :attr:`next_cycle`)."""
+        p = self.params
+        x = p.check_samples(samples)
+        if p.odd_levels:
+            x = 2 * x + 1
+        if p.complex_input:
+            x, xq = np.ascontiguousarray(x[:, 0]), np.ascontiguousarray(x[:, 1])
+        else:
+            xq = x
+        if cycles is None:
+            scyc = np.arange(self.next_cycle, self.next_cycle + x.shape[0], dtype=np.int64)
+        else:
+            scyc = np.ascontiguousarray(cycles, dtype=np.int64)
+        if scyc.shape != x.shape:
+            raise ValueError(f"GNSS cycles must give one input cycle per sample ({x.size}), "
+                             f"not shape {scyc.shape}")
+        return x, xq, scyc
+
+    def add_writes(self, writes) -> None:
+        """Bus writes ``(channel, cycle, reg, value)`` (each value checked by the register
+        map), pending until their dump boundary."""
+        _, _, regs, _ = _layout(self.params)
+        w = [(int(ch), int(c), int(a), regs.check_write(int(a), v)) for ch, c, a, v in writes]
+        if not w:
+            return
+        allw = np.concatenate([self._writes, np.array(w, np.int64)])
+        # per channel by cycle; a channel's writes of one cycle in the order given
+        allw = allw[np.argsort(allw[:, 1], kind="stable")]
+        self._writes = allw[np.argsort(allw[:, 0], kind="stable")]
+
+    def advance(self, x, xq, scyc):
+        """Every channel over prepared samples (:meth:`prepare`); returns the records'
+        ``(FIFO input cycles, fields (n, 9), channels)``, channel by channel."""
+        _, _, _, lat = _layout(self.params)
+        cplx, K, d, cb, pb, trunc, emask = self._k
+        wv = self._writes
+        chans = np.arange(self.channels)
+        wstart = np.searchsorted(wv[:, 0], chans, "left")
+        wend = np.searchsorted(wv[:, 0], chans, "right")
+        rec_cyc, rec_f, nrec = empty_records(self.channels, x.shape[0])
+        kern = array_kernel_parallel if self.parallel else array_kernel
+        kern(x, xq, cplx, scyc, np.ascontiguousarray(wv[:, 1]),
+                     np.ascontiguousarray(wv[:, 2]), np.ascontiguousarray(wv[:, 3]), wstart,
+                     wend, self.state, self.ring, self._table, self._cos, self._sin, K, d, cb,
+                     pb, trunc, emask, lat, rec_cyc, rec_f, nrec)
+        if wv.shape[0]:             # drop the writes applied
+            self._writes = wv[np.arange(wv.shape[0]) >= wstart[wv[:, 0]]]
+        self.n_samples += x.shape[0]
+        if x.shape[0]:
+            self.next_cycle = int(scyc[-1]) + 1
+        if self.channels == 1:
+            k = int(nrec[0])
+            return rec_cyc[0, :k].copy(), rec_f[0, :k].copy(), np.zeros(k, np.int64)
+        have = np.arange(rec_cyc.shape[1])[None, :] < nrec[:, None]
+        return rec_cyc[have], rec_f[have], np.repeat(chans, nrec)
 
 
 class GnssChannelModel:
@@ -221,25 +246,19 @@ class GnssChannelModel:
     params : GnssChannelParams
     """
 
-    _table = None
-
     def __init__(self, params: GnssChannelParams):
-        self.params = p = params
-        if GnssChannelModel._table is None:
-            GnssChannelModel._table = ca_code_table().astype(np.int64)
-        cos_t, sin_t = nco_full_tables(p.nco)
-        self._cos, self._sin = cos_t.astype(np.int64), sin_t.astype(np.int64)
-        self._trunc = p.nco.trunc_bits
-        st = np.zeros(_NSTATE, np.int64)
-        cw, kw = p.carr_word(p.if_hz), p.code_word()
-        st[_CF] = st[_SH_CODE] = kw
-        st[_PRN] = st[_SH_PRN] = p.prn
-        st[_CARR_F] = st[_PEND_CARR] = st[_SH_CARR] = cw
-        self.state = st
-        self.ring = np.zeros(p.el_spacing_samples, np.int64)
-        self._writes = np.zeros((0, 3), np.int64)
-        self.n_samples = 0
-        self.next_cycle = 0
+        self.params = params
+        self.bank = ChannelBank(params, 1)
+        #: the state vector (:mod:`hdl.gnss.kernel`) and delay line
+        self.state, self.ring = self.bank.state[0], self.bank.ring[0]
+
+    @property
+    def n_samples(self) -> int:
+        return self.bank.n_samples
+
+    @property
+    def next_cycle(self) -> int:
+        return self.bank.next_cycle
 
     def step(self, samples, writes=(), *, cycles=None) -> ChannelRecords:
         """Advance over ``samples``.
@@ -258,52 +277,10 @@ class GnssChannelModel:
             Input cycle of each sample (default: one per cycle, continuing from the last
             step).
         """
-        x, xq, scyc = self._prepare(samples, cycles)
-        return self._advance(x, xq, scyc, writes)
-
-    def _prepare(self, samples, cycles):
-        """The checked samples (int64, the 1-bit map applied) as the kernel's ``I`` and ``Q``
-        streams (real input: the one stream twice) and their input cycles."""
-        p = self.params
-        x = p.check_samples(samples)
-        if p.odd_levels:
-            x = 2 * x + 1
-        if p.complex_input:
-            x, xq = np.ascontiguousarray(x[:, 0]), np.ascontiguousarray(x[:, 1])
-        else:
-            xq = x
-        if cycles is None:
-            scyc = np.arange(self.next_cycle, self.next_cycle + x.size, dtype=np.int64)
-        else:
-            scyc = np.ascontiguousarray(cycles, dtype=np.int64)
-        return x, xq, scyc
-
-    def _advance(self, x, xq, scyc, writes) -> ChannelRecords:
-        """:meth:`step` on prepared samples (:meth:`_prepare`)."""
-        p = self.params
-        _, _, regs, lat = _layout(p)
-        w = [(int(c), int(a), regs.check_write(int(a), v)) for c, a, v in writes]
-        if w:
-            new = np.array(w, np.int64)
-            allw = np.concatenate([self._writes, new])
-            self._writes = allw[np.argsort(allw[:, 0], kind="stable")]
-        wv = self._writes
-        max_rec = x.size // 1000 + 2
-        rec_cyc = np.zeros(max_rec, np.int64)
-        rec_f = np.zeros((max_rec, 9), np.int64)
-        if scyc.shape != x.shape:
-            raise ValueError(f"GNSS cycles must give one input cycle per sample ({x.size}), "
-                             f"not shape {scyc.shape}")
-        nrec, wi = _channel_kernel(
-            x, xq, p.complex_input, scyc, np.ascontiguousarray(wv[:, 0]), np.ascontiguousarray(wv[:, 1]),
-            np.ascontiguousarray(wv[:, 2]), 0, self.state, self.ring, self._table, self._cos,
-            self._sin, p.dump_epochs, p.half_spacing, p.code_phase_bits, p.carr_phase_bits,
-            self._trunc, (1 << p.epoch_bits) - 1, lat, rec_cyc, rec_f)
-        self._writes = wv[wi:]
-        self.n_samples += x.size
-        if x.size:
-            self.next_cycle = int(scyc[-1]) + 1
-        return ChannelRecords(rec_cyc[:nrec].copy(), rec_f[:nrec].copy())
+        x, xq, scyc = self.bank.prepare(samples, cycles)
+        self.bank.add_writes((0, c, a, v) for c, a, v in writes)
+        cyc, fields, _ = self.bank.advance(x, xq, scyc)
+        return ChannelRecords(cyc, fields)
 
 
 # -- whole channel / array with the FIFO ---------------------------------------------------
@@ -381,15 +358,21 @@ class GnssArrayModel:
 
     ``step(samples, writes, cycles=...)`` returns the records of the chunk with their FIFO
     input cycles (state carried, chunks give the same bits); :meth:`run` is a whole run from
-    reset including the FIFO (:func:`hdl.model.fifo.fifo_model_events`).
+    reset including the FIFO (:func:`hdl.model.fifo.fifo_model_events`). The channels run in
+    one compiled call per step (:class:`ChannelBank`), on numba's threads with
+    ``parallel=True`` (the same bits; it pays on otherwise idle cores).
     """
 
-    def __init__(self, params: GnssChannelParams, channels: int = 1, *, arbiter=None):
+    def __init__(self, params: GnssChannelParams, channels: int = 1, *, arbiter=None,
+                 parallel: bool = False):
         self.params = params
         self.channels = channels
         self.arbiter = channels > 1 if arbiter is None else arbiter
-        self.models = [GnssChannelModel(params) for _ in range(channels)]
-        self._arb = Arbiter(params.fifo.record_words)
+        self.bank = ChannelBank(params, channels, parallel)
+        self._arb = Arbiter(_fifo(params).record_words)
+        self._held_ids = np.zeros(0, np.int64)          # records waiting for the arbiter
+        self._held = np.zeros((0, _fifo(params).record_words), np.int64)
+        self._next_id = 0
         self.fifo_state = FifoState()
 
     def step(self, samples, writes=(), *, cycles=None):
@@ -398,51 +381,70 @@ class GnssArrayModel:
         records decided so far (in the array, records the arbiter cannot grant yet because a
         later chunk may hold a lower channel's record wait for the next step or
         :meth:`flush`)."""
-        per = [[] for _ in range(self.channels)]
+        rc, words = self.step_words(samples, writes, cycles=cycles)
+        return rc, words_to_values(self.params, words)
+
+    def step_words(self, samples, writes=(), *, cycles=None):
+        """:meth:`step` with the records as FIFO words, ``(n, record_words)`` int64."""
+        w = []
         for c, a, v in writes:
             ch, reg = divmod(int(a), 4)
             if not 0 <= ch < self.channels:
                 raise ValueError(f"GNSS register address {a} is beyond {self.channels} "
                                  f"channels")
-            per[ch].append((c, reg, v))
-        cyc, vals, chans = [], [], []
+            w.append((ch, c, reg, v))
         # the samples are checked once for every channel (all at the same cycle)
-        x, xq, scyc = self.models[0]._prepare(samples, cycles)
-        recs = [m._advance(x, xq, scyc, w) for m, w in zip(self.models, per)]
-        for ch, r in enumerate(recs):
-            cyc.append(r.cycles)
-            vals += r.values(self.params, ch)
-            chans.append(np.full(r.cycles.size, ch))
-        cyc = np.concatenate(cyc) if cyc else np.zeros(0, np.int64)
-        chans = np.concatenate(chans) if chans else np.zeros(0, np.int64)
+        x, xq, scyc = self.bank.prepare(samples, cycles)
+        self.bank.add_writes(w)
+        cyc, fields, chans = self.bank.advance(x, xq, scyc)
+        words = record_words(self.params, fields, chans)
         if self.arbiter:
             # A later sample (cycle >= next_cycle) makes a record pending from
             # next_cycle + latency + 1 at the earliest.
-            horizon = self.models[0].next_cycle + _layout(self.params)[3] + 1
-            return self._arb.feed(cyc + 1, chans, vals, horizon)
+            horizon = self.bank.next_cycle + _layout(self.params)[3] + 1
+            return self._grant(cyc + 1, chans, words, horizon)
         order = np.argsort(cyc, kind="stable")
-        return cyc[order], [vals[j] for j in order]
+        return cyc[order], words[order]
+
+    def _grant(self, ready, chans, words, horizon):
+        """The arbiter's grants (FIFO input cycles, words) of the records waiting and the
+        new ones (``words``, pending from ``ready``); the rest are held."""
+        ids = np.arange(self._next_id, self._next_id + words.shape[0], dtype=np.int64)
+        self._next_id += words.shape[0]
+        held_ids = np.concatenate([self._held_ids, ids])
+        held = np.concatenate([self._held, words])
+        rc, got = self._arb.feed(ready, chans, ids.tolist(), horizon)
+        at = np.searchsorted(held_ids, np.asarray(got, np.int64))
+        keep = np.ones(held_ids.size, bool)
+        keep[at] = False
+        out = held[at]
+        self._held_ids, self._held = held_ids[keep], held[keep]
+        return rc, out
 
     def flush(self):
         """Grant every record still waiting (end of the run)."""
+        rc, words = self.flush_words()
+        return rc, words_to_values(self.params, words)
+
+    def flush_words(self):
+        """:meth:`flush` with the records as FIFO words."""
         if not self.arbiter:
-            return np.zeros(0, np.int64), []
-        return self._arb.feed([], [], [], None)
+            return np.zeros(0, np.int64), np.zeros((0, _fifo(self.params).record_words),
+                                                   np.int64)
+        return self._grant(np.zeros(0, np.int64), np.zeros(0, np.int64),
+                           np.zeros((0, self._held.shape[1]), np.int64), None)
 
     def run(self, samples, writes=(), *, n_cycles: int, out_ready=None,
             cycles=None) -> ChannelRun:
         """One whole run from reset: records, then the FIFO over ``n_cycles`` cycles."""
-        rc, vals = self.step(samples, writes, cycles=cycles)
-        rc2, vals2 = self.flush()
+        rc, words = self.step_words(samples, writes, cycles=cycles)
+        rc2, words2 = self.flush_words()
         rc = np.concatenate([rc, rc2])
-        vals = list(vals) + list(vals2)
+        recs = np.concatenate([words, words2])
         keep = rc < n_cycles
-        rc = rc[keep]
-        vals = [v for v, k in zip(vals, keep) if k]
-        p = self.params
-        fp = p.fifo
-        recs = np.array([p.record.to_words(v, fp.width, fp.record_words) for v in vals],
-                        np.int64).reshape(-1, fp.record_words)
+        rc, recs = rc[keep], recs[keep]
+        fp = _fifo(self.params)
+        vals = words_to_values(self.params, recs)
         ready = np.ones(n_cycles, bool) if out_ready is None else \
             np.asarray(out_ready, bool)[:n_cycles]
         if ready.size < n_cycles:

@@ -418,7 +418,7 @@ def _run(write_cycles, in_words, start, n_cycles, out_ready, p: FifoParams,
                          p.marker_max, TAG_MARKER << p.width, p.count_max, sv, ring,
                          out_w, out_c, dropped, hold, tagw)
     head, cnt = int(sv[SV_HEAD]), int(sv[SV_CNT])
-    queue = np.roll(ring, -head)[:cnt].copy()
+    queue = np.concatenate([ring[head:], ring[:head]])[:cnt]     # (np.roll, cheaper)
     new = FifoState(cycle=start + n_cycles, queue=queue, out_full=bool(sv[SV_OUT_FULL]),
                     out_reg=int(sv[SV_OUT_REG]), hold_valid=bool(sv[SV_HOLD_V]),
                     hold_data=int(hold[0]) if n == 1 else 0,

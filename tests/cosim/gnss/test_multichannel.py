@@ -130,6 +130,11 @@ def test_a_false_candidate_is_dropped_and_the_channel_takes_the_next(tmp_path):
 def test_refusals_name_the_option(tmp_path):
     with pytest.raises(ValueError, match="--channels"):
         TrackConfig(channels=13)
+    with pytest.raises(ValueError, match="--parallel"):
+        TrackConfig(parallel=1)
+    with pytest.raises(ValueError, match="--parallel.*--backend model"):
+        open_gnss_array("verilator", array_channel_params(GnssChannelParams(fs_hz=4e6, if_hz=1e6), 2), 2,
+                        parallel=True)
     path = tmp_path / "iq.bin"
     write_synthetic(path, "int8-iq", 4e6, 0.0, 0.005, [], seed=1)
     f = SampleFile(path, "int8-iq", 4e6, 0.0)
@@ -139,6 +144,22 @@ def test_refusals_name_the_option(tmp_path):
     f = SampleFile(path, "cf32", 4e6, 0.0, adc_map="float")
     with pytest.raises(ValueError, match="--adc-map float"):
         channel_params_for(f)
+
+
+def test_the_closed_loop_with_the_channels_on_threads_is_the_same(tmp_path):
+    """--parallel: the same words, cycles, writes and trackers as the serial array."""
+    path = tmp_path / "three.bin"
+    sats = [SatelliteSpec(12, 1320.0, 300.7, 45.0, 0.2), SatelliteSpec(21, -2150.0, 811.2, 42.0,
+                                                                        0.6),
+            SatelliteSpec(5, 400.0, 77.5, 44.0, 0.1)]
+    write_synthetic(path, "int8", 4e6, 1.25e6, 0.03, sats, seed=9)
+    f = SampleFile(path, "int8", 4e6, 1.25e6)
+    cands = [Candidate(s.prn, s.doppler_hz, s.code_phase_chips, s.cn0_dbhz) for s in sats]
+    runs = [track_file(f, cands, GnssRunConfig(), TrackConfig(channels=3, parallel=par))
+            for par in (False, True)]
+    assert runs[0].pipeline.digest == runs[1].pipeline.digest
+    assert [a.doppler for a in runs[0].assignments] == [a.doppler for a in runs[1].assignments]
+    assert min(len(a.t) for a in runs[0].assignments) >= 25
 
 
 @pytest.mark.slow

@@ -203,6 +203,7 @@ def test_the_throughput_bench_is_registered_and_measures_every_count(tmp_path):
     for x in r["rows"]:
         assert x["channel_samples_per_s"] > 0 and x["x_real_time"] > 0
         assert x["fifo_dropped"] == 0
+    assert r["parallel_12_channels"]["digest"] == r["rows"][-1]["digest"]   # same bits
     p = r["profile_12_channels"]
     assert 0 < p["array_kernel_s"] < p["total_s"] and 0 < p["trackers_s"] < p["total_s"]
     assert json.loads((tmp_path / "gnss_throughput.json").read_text())["rows"] == r["rows"]

@@ -6,7 +6,7 @@ import pytest
 
 from cosim.gnss.dynamics import aukf_patent_dynamics
 from cosim.gnss.loopsim import cycle_slips, track_fast, truth_for
-from dsp.gnss.discriminators import costas_atan, dll_nelp
+from dsp.gnss.discriminators import costas_atan, dll_nelp, pll_atan2
 from dsp.gnss.loops import TrackingChannel, hz_to_word
 from dsp.gnss.loops_fixed import (COEF_FRAC, DISC_CODE, DISC_PHASE, F16_FRAC, FLOAT, T_FRAC, V1,
                                   V2, WORD_COEF_FRAC, ChannelCore, FixedArith)
@@ -121,3 +121,46 @@ def test_fixed_within_bound_of_float_closed_loop_short():
 @pytest.mark.slow
 def test_fixed_within_bound_of_float_aukf_patent_jerk_10_s():
     _check_closed(*_closed(10.0, 8, 2))
+
+
+@pytest.mark.parametrize("fs,doppler,order,inverted", [
+    (12e6, 1234.5, 3, False), (2.046e6, 4900.0, 3, True),      # word product past int64: wraps
+    (5e6, 2e5, 2, False)])                                      # V1 saturates
+def test_scalar_step_is_the_batch_step(fs, doppler, order, inverted):
+    """One channel's step on Python ints (the closed loop's per-channel tracker) gives the
+    bits, states and saturation counts of the numpy batch path, also where the int64
+    products wrap and the formats saturate."""
+    rng = np.random.default_rng(7)
+    a, b = FixedArith(), FixedArith()
+    one = ChannelCore(a, fs, T, order, 15.0, 1.0, 0.5, fs / 4, inverted, np.asarray(doppler),
+                      np.asarray(50.0))
+    bat = ChannelCore(b, fs, T, order, 15.0, 1.0, 0.5, fs / 4, inverted, np.asarray([doppler]),
+                      np.asarray([50.0]))
+    assert type(one.v1) is int
+    for k in range(600):
+        x = rng.integers(-2 ** 21, 2 ** 21, 6)
+        if k % 37 == 0:
+            x[2] = 0                 # I = 0: the Costas discriminator's edge
+        if k % 41 == 0:
+            x[:] = 0                 # no energy: the DLL's edge
+        o1 = one.step(*(int(v) for v in x))
+        o2 = bat.step(*(np.array([v]) for v in x))
+        assert (o1[0], o1[1]) == (int(o2[0][0]), int(o2[1][0])), k
+        assert (one.v1, one.v2) == (int(bat.v1[0]), int(bat.v2[0])), k
+    assert a.sat == b.sat
+    if fs == 5e6:
+        assert a.sat                 # the case did saturate
+
+
+def test_scalar_discriminators_are_the_array_ones():
+    rng = np.random.default_rng(8)
+    v = rng.integers(-3000, 3000, (500, 4)).astype(float)
+    v[::13, 0] = 0.0
+    v[::17] = 0.0
+    e = costas_atan(v[:, 0], v[:, 1])
+    p = pll_atan2(v[:, 0], v[:, 1])
+    t = dll_nelp(v[:, 0], v[:, 1], v[:, 2], v[:, 3], 0.4)
+    for k in range(v.shape[0]):
+        i, q, il, ql = (int(x) for x in v[k])
+        assert costas_atan(i, q) == e[k] and pll_atan2(i, q) == p[k]
+        assert dll_nelp(i, q, il, ql, 0.4) == t[k]

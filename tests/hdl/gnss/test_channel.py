@@ -366,3 +366,29 @@ def test_write_in_the_boundary_cycle_waits_for_the_next_boundary():
     got = run_pysim(GnssChannel(p), x, writes, None, n + 60, p.reg_data_width)
     np.testing.assert_array_equal(got.words, want.words)
     np.testing.assert_array_equal(got.cycles, want.cycles)
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_array_bank_is_its_channels_one_by_one(parallel):
+    """The one compiled call over all channels (hdl.gnss.kernel.array_kernel, and its
+    threaded form) gives every channel the records and final state of that channel run
+    alone with its own writes, chunk by chunk."""
+    from hdl.gnss.model import ChannelBank
+    p = array_params(SMALL, 12)
+    n = 4 * 2046 + 77
+    x, writes, _ = stimulus(p, n, seed=12, n_writes=3, ch=12)
+    bank = ChannelBank(p, 12, parallel=parallel)
+    alone = [GnssChannelModel(p) for _ in range(12)]
+    cuts = [0, 1000, 2046, 2047, 5000, n]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        w = [(c, addr, v) for c, addr, v in writes if a <= c < b]
+        bank.add_writes((addr // 4, c, addr % 4, v) for c, addr, v in w)
+        cyc, fields, chans = bank.advance(*bank.prepare(x[a:b], None))
+        for ch, m in enumerate(alone):
+            r = m.step(x[a:b], [(c, addr % 4, v) for c, addr, v in w if addr // 4 == ch])
+            np.testing.assert_array_equal(cyc[chans == ch], r.cycles)
+            np.testing.assert_array_equal(fields[chans == ch], r.fields)
+    assert len({addr // 4 for _, addr, _ in writes}) >= 8     # most channels were written
+    for ch, m in enumerate(alone):
+        np.testing.assert_array_equal(bank.state[ch], m.state)
+        np.testing.assert_array_equal(bank.ring[ch], m.ring)
