@@ -31,7 +31,7 @@ from ..core.validate import check_float, check_out_dir, dumps
 from .acquire_cli import add_file_options, add_search_options, check_search_options, \
     open_file, search_file
 
-__all__ = ["add_parser", "run", "DEFAULT_OUT"]
+__all__ = ["add_parser", "run", "process", "DEFAULT_OUT"]
 
 #: Where the outputs (and a generated scenario) go.
 DEFAULT_OUT = "build/gps"
@@ -88,9 +88,12 @@ def _say(a, msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
-def run(a) -> int:
+def process(a):
+    """The work of ``run`` on parsed options ``a``: ``(GpsRun, summary, scenario)`` with the
+    outputs written; ``scenario`` is :func:`cosim.gnss.gps_scenario.write_scenario`'s result
+    (None with ``--file``)."""
     from .config import GnssRunConfig
-    from .gps_outputs import table, write_outputs
+    from .gps_outputs import write_outputs
     from .gps_receiver import GpsConfig, navigate
     from .gps_scenario import ScenarioSpec
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
@@ -108,7 +111,7 @@ def run(a) -> int:
         if not rinex.ephemerides:
             raise ValueError(f"--ephemeris {a.ephemeris}: no GPS ephemeris in the file")
         hot = rinex.ephemerides
-    truth = None
+    truth = sc = None
     if a.file is None:
         for opt in ("format", "adc_map"):
             if getattr(a, opt) is not None:
@@ -180,6 +183,12 @@ def run(a) -> int:
     s["recording"] = f.describe()
     s["acquired"] = [c.prn for c in cands]
     s["wall_s"] = round(time.time() - t_wall, 2)
+    return g, s, sc
+
+
+def run(a) -> int:
+    from .gps_outputs import table
+    _, s, _ = process(a)
     if a.json:
         print(dumps(s))
         return 0
