@@ -14,7 +14,8 @@ what was measured beside what the thermal noise of the tracking loops predicts
   left is the channel's measurement error. Its mean per satellite (a code-phase bias) is
   reported and removed; its standard deviation is set against the DLL formula at the
   satellite's mean measured C/N0. The same for the range rate ``-lambda D`` against the
-  generator's Doppler.
+  generator's Doppler. Pooled over the satellites: the root of the mean of the squared
+  ratios, with its statistical spread ``1 / sqrt(2 sum (n_i - 1))`` (``pooled_ratio_sigma``).
 * **Position and velocity.** The fixes' east/north/up errors against the true position
   (:func:`cosim.gnss.gps_outputs.fix_rows`) and the velocities against zero (static).
   The budget at every fix: the covariance ``A R A^T`` (:func:`dsp.gnss.budget.
@@ -24,8 +25,13 @@ what was measured beside what the thermal noise of the tracking loops predicts
   remove (``delta`` = the generator's ionosphere and troposphere minus the Klobuchar /
   Saastamoinen corrections the solution lists, evaluated at the true position). The
   predicted RMS is the root of the mean over the fixes of ``|A delta|^2 + tr(A R A^T)``.
+  Beside it, not part of the prediction, ``measured_code_bias_rms_3d_m``: the position
+  error the measured per-satellite pseudorange biases alone would make (``A b``).
   ``ratio`` = measured RMS / predicted RMS; its statistical spread for this many fixes
-  (Gaussian errors, independent fixes) is reported as ``ratio_sigma``.
+  (Gaussian errors, independent fixes) is reported as ``ratio_sigma``. The thermal part
+  alone: ``measured_std_3d_m``, the RMS of the errors about their mean over the run (the
+  atmosphere term varies little over a minute), against ``predicted_noise_rms_3d_m``
+  (``std_ratio_to_noise``); the mean east/north/up error against the mean ``A delta``.
 """
 from __future__ import annotations
 
@@ -61,13 +67,14 @@ def _rms(x) -> float:
     return float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
 
 
-def _applied_atmosphere(sol, truth, i, cols, iono):
-    """The corrections the solution applied (its ``corrections``), at the true position."""
+def _applied_atmosphere(sol, tow_s, truth, i, cols, iono):
+    """The corrections the solution applied (its ``corrections``), at the true position and
+    the receiver time ``tow_s`` the solver was given."""
     el, az = truth.elevation_deg[i, cols], truth.azimuth_deg[i, cols]
     d = np.zeros(len(cols))
     lat, lon, h = _truth_llh(truth)
     if "klobuchar" in sol.corrections:
-        d += klobuchar_delay_m(lat, lon, el, az, float(np.mod(sol.gps_tow_s, WEEK_S)),
+        d += klobuchar_delay_m(lat, lon, el, az, float(np.mod(tow_s, WEEK_S)),
                                iono.alpha, iono.beta)
     if "saastamoinen" in sol.corrections:
         d += saastamoinen_delay_m(lat, h, el)
@@ -123,9 +130,11 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
     rows = {r["t_s"]: r for r in fix_rows(run, truth0)}
     iono = scenario["iono"]
     pos_ms, vel_ms, pos_var2, vel_var2, pos_bias2 = [], [], [], [], []
-    noise_ms, bias_ms, pdops = [], [], []
+    noise_ms, bias_ms, pdops, code_bias_ms = [], [], [], []
+    pr_bias = {x["prn"]: x["pr_bias_m"] for x in sats}
     enu_pred = np.zeros(3)
     enu_vpred = np.zeros(3)
+    bias_enu = []
     for i, e in enumerate(fixes):
         sol = e.solution
         cols = np.array([col[int(p)] for p in sol.used_prns])
@@ -136,8 +145,11 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
         w = 1.0 / np.asarray(sol.sigmas_m) ** 2
         a = np.linalg.solve(g.T @ (w[:, None] * g), (g * w[:, None]).T)
         delta = tr.iono_m[i, cols] + tr.tropo_m[i, cols] - \
-            _applied_atmosphere(sol, tr, i, cols, iono)
+            _applied_atmosphere(sol, e.tow_s, tr, i, cols, iono)
         b = a @ delta
+        cb = a @ np.array([pr_bias[int(p)] for p in sol.used_prns])
+        code_bias_ms.append(float(cb[:3] @ cb[:3]))
+        bias_enu.append(b[:3])
         noise_ms.append(np.trace(cp[:3, :3]))
         bias_ms.append(float(b[:3] @ b[:3]))
         pos_var2.append(2 * np.trace(cp[:3, :3] @ cp[:3, :3]))
@@ -153,9 +165,15 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
     pos_pred = float(np.sqrt(np.mean(np.add(noise_ms, bias_ms))))
     vel_pred = float(np.sqrt(np.mean(vel_ms)))
     pos_meas = _rms(np.linalg.norm(err, axis=1))
+    # the fluctuation about the run's mean against the thermal noise alone (the slowly
+    # varying atmosphere term removed with the mean; n - 1 degrees of freedom)
+    fluct = err - err.mean(axis=0)
+    pos_std = float(np.sqrt(np.sum(fluct ** 2) / (n - 1)))
+    noise_rms = float(np.sqrt(np.mean(noise_ms)))
     vel_meas = _rms(np.linalg.norm(vel, axis=1))
     # relative spread of an RMS over n independent fixes: half that of the mean square
     pos_spread = 0.5 * np.sqrt(np.sum(pos_var2)) / np.sum(np.add(noise_ms, bias_ms))
+    pos_spread_noise = 0.5 * np.sqrt(np.sum(pos_var2)) / np.sum(noise_ms)
     vel_spread = 0.5 * np.sqrt(np.sum(vel_var2)) / np.sum(vel_ms)
     axes = ("east", "north", "up")
     pr_pool = np.sqrt(np.mean([x["pr_std_m"] ** 2 / x["pr_formula_m"] ** 2 for x in sats]))
@@ -170,10 +188,14 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
                   "latency": loops.latency},
         "position": {
             "measured_rms_3d_m": pos_meas, "predicted_rms_3d_m": pos_pred,
-            "predicted_noise_rms_3d_m": float(np.sqrt(np.mean(noise_ms))),
+            "predicted_noise_rms_3d_m": noise_rms,
+            "measured_std_3d_m": pos_std, "std_ratio_to_noise": pos_std / noise_rms,
+            "std_ratio_sigma": float(pos_spread_noise),
             "predicted_atmosphere_rms_3d_m": float(np.sqrt(np.mean(bias_ms))),
             "ratio": pos_meas / pos_pred, "ratio_sigma": float(pos_spread),
+            "measured_code_bias_rms_3d_m": float(np.sqrt(np.mean(code_bias_ms))),
             "measured_mean_enu_m": err.mean(axis=0).tolist(),
+            "predicted_mean_enu_m": np.mean(bias_enu, axis=0).tolist(),
             "measured_rms_enu_m": {k: _rms(err[:, j]) for j, k in enumerate(axes)},
             "predicted_rms_enu_m": {k: float(np.sqrt(enu_pred[j] / n))
                                     for j, k in enumerate(axes)}},
@@ -185,6 +207,7 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
             "predicted_rms_enu_mps": {k: float(np.sqrt(enu_vpred[j] / n))
                                       for j, k in enumerate(axes)}},
         "pseudorange_ratio_pooled": float(pr_pool), "range_rate_ratio_pooled": float(rr_pool),
+        "pooled_ratio_sigma": float(1 / np.sqrt(2 * sum(x["epochs"] - 1 for x in sats))),
         "satellites": sats, "chip_m": CHIP_M}
 
 
@@ -206,8 +229,13 @@ def markdown(r: dict) -> str:
              f"| {p['ratio']:.3f} | {p['ratio_sigma']:.3f} |",
              f"| 3-D velocity (m/s) | {v['measured_rms_3d_mps']:.4f} | "
              f"{v['predicted_rms_3d_mps']:.4f} | {v['ratio']:.3f} | {v['ratio_sigma']:.3f} |",
+             f"| 3-D position about its mean (m) vs thermal noise | {p['measured_std_3d_m']:.3f} "
+             f"| {p['predicted_noise_rms_3d_m']:.3f} | {p['std_ratio_to_noise']:.3f} | "
+             f"{p['std_ratio_sigma']:.3f} |",
              "", f"Position budget: thermal noise {p['predicted_noise_rms_3d_m']:.3f} m, "
-             f"atmosphere left uncorrected {p['predicted_atmosphere_rms_3d_m']:.3f} m.", "",
+             f"atmosphere left uncorrected {p['predicted_atmosphere_rms_3d_m']:.3f} m; the "
+             f"measured per-satellite pseudorange biases alone would give "
+             f"{p['measured_code_bias_rms_3d_m']:.3f} m (not in the budget).", "",
              "| PRN | C/N0 (dB-Hz) | el (deg) | PR bias (m) | PR std (m) | DLL formula (m) | "
              "ratio | RR std (m/s) | PLL formula (m/s) | ratio |",
              "|---|---|---|---|---|---|---|---|---|---|"]
@@ -218,5 +246,6 @@ def markdown(r: dict) -> str:
                      f"{s['rr_formula_mps']:.4f} | {s['rr_ratio']:.2f} |")
     lines += ["", f"Pooled over the satellites: pseudorange std / formula "
                   f"{r['pseudorange_ratio_pooled']:.3f}, range rate "
-                  f"{r['range_rate_ratio_pooled']:.3f}.", ""]
+                  f"{r['range_rate_ratio_pooled']:.3f} (1-sigma spread "
+                  f"{r['pooled_ratio_sigma']:.3f}).", ""]
     return "\n".join(lines)

@@ -1,7 +1,7 @@
 """A generated static run against its thermal-noise error budget (cosim.gnss.fix_budget,
 the gps-fix benchmark): the refusals (fast) and a short hot start through the bit-exact
-array whose position, velocity and pseudorange noise must be the budget's within 20 %
-(slow)."""
+array whose pseudorange and range-rate noise must be the budget's within 20 % and its
+position and velocity RMS within their statistical spread of it (slow)."""
 import argparse
 import json
 
@@ -28,14 +28,16 @@ def test_the_budget_needs_fixes_and_a_pll_tracker():
 @pytest.mark.slow
 def test_short_hot_start_meets_its_budget(tmp_path):
     """20 s hot start (fixes from ~8 s on) at 45 dB-Hz through the bit-exact array model with
-    the fixed-point pll3 trackers: 3-D position and velocity RMS and the pooled per-satellite
-    pseudorange and range-rate noise within 20 % of the budget."""
+    the fixed-point pll3 trackers. The pooled per-satellite pseudorange and range-rate noise
+    (~90 samples, ~7 % spread) within 20 % of the loops' formulas; the 3-D position and
+    velocity RMS of ~12 fixes (~15 % spread) within three of their own spreads of the
+    budget."""
     r = gps_fix(tmp_path, quick=True, work=tmp_path / "run")
     assert len(r["scenario"]["acquired"]) >= 8 and len(r["satellites_used"]) >= 8
     assert r["fixes"] >= 10
-    assert (tmp_path / "gps_fix_quick.json").exists()
-    json.loads((tmp_path / "gps_fix_quick.json").read_text())
-    assert abs(r["position"]["ratio"] - 1) < 0.2, r["position"]
-    assert abs(r["velocity"]["ratio"] - 1) < 0.2, r["velocity"]
+    assert json.loads((tmp_path / "gps_fix_quick.json").read_text())["fixes"] == r["fixes"]
+    assert r["pooled_ratio_sigma"] < 0.08
     assert abs(r["pseudorange_ratio_pooled"] - 1) < 0.2, r["satellites"]
     assert abs(r["range_rate_ratio_pooled"] - 1) < 0.2, r["satellites"]
+    for k in ("position", "velocity"):
+        assert abs(r[k]["ratio"] - 1) < 3 * r[k]["ratio_sigma"], r[k]
