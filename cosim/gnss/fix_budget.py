@@ -17,6 +17,10 @@ what was measured beside what the thermal noise of the tracking loops predicts
   window's M2M4 estimate scatters by ~1.5 dB). The same for the range rate ``-lambda D`` against the
   generator's Doppler. Pooled over the satellites: the root of the mean of the squared
   ratios, with its statistical spread ``1 / sqrt(2 sum (n_i - 1))`` (``pooled_ratio_sigma``).
+  The same at the tracking rate (``rec_*``, ``record_*_pooled``): every 5th record of each
+  channel from 1 s after its start, the prompt code phase (chips, its mean removed) and the
+  reported Doppler against the generator's at the record's sample -- many more samples
+  than the fixes give (correlated over the loops' time constants, ~0.25 s for the DLL).
 * **Position and velocity.** The fixes' east/north/up errors against the true position
   (:func:`cosim.gnss.gps_outputs.fix_rows`) and the velocities against zero (static).
   The budget at every fix: the covariance ``A R A^T`` (:func:`dsp.gnss.budget.
@@ -66,6 +70,11 @@ def loops_of(a, p) -> TrackingLoops:
                          T_s=1e-3, latency=1)
 
 
+def _pool(sats, key) -> float | None:
+    r = [x[key] for x in sats if key in x]
+    return float(np.sqrt(np.mean(np.square(r)))) if r else None
+
+
 def _rms(x) -> float:
     x = np.asarray(x, dtype=float)
     return float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
@@ -88,6 +97,26 @@ def _applied_atmosphere(sol, tow_s, truth, i, cols, iono):
 def _truth_llh(truth):
     import pymap3d
     return pymap3d.ecef2geodetic(*truth.rx_position_m[0])
+
+
+def _record_errors(run, sig, col, skip_s: float = 1.0, step: int = 5) -> dict:
+    """PRN -> (code error (chips), Doppler error (Hz)) of every ``step``-th record of its
+    channel from ``skip_s`` after the channel's first record: the prompt code phase and the
+    Doppler the tracker reported against the generator's at the record's sample."""
+    from dsp.gnss.ca_code import CODE_LENGTH
+    out: dict = {}
+    for c in run.channels:
+        if not c.ok or int(c.prn) not in col:
+            continue
+        k = np.arange(int(np.searchsorted(c.g, c.g[0] + skip_s * run.fs_hz)), c.g.size, step)
+        if k.size < 10:
+            continue
+        tt = sig.truth_at(c.g[k] / run.fs_hz)
+        j = col[int(c.prn)]
+        code = np.mod(c.code_phase[k] - tt.code_phase_chips[:, j] + CODE_LENGTH / 2,
+                      CODE_LENGTH) - CODE_LENGTH / 2
+        out.setdefault(int(c.prn), []).append((code, c.doppler[k] - tt.doppler_hz[:, j]))
+    return {p: tuple(np.concatenate(x) for x in zip(*v)) for p, v in out.items()}
 
 
 def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
@@ -124,6 +153,7 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
     for c in run.channels:
         if c.ok and c.win_t.size:
             windows.setdefault(int(c.prn), []).append(np.asarray(c.win_cn0)[c.win_ok])
+    recs = _record_errors(run, sig, col)
     for prn in sorted(pr_err):
         w = np.concatenate(windows[prn]) if prn in windows else np.asarray(cn0s[prn])
         c_lin = np.mean(10 ** (w / 10))
@@ -138,6 +168,13 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
                      "rr_bias_mps": float(v.mean()), "rr_std_mps": float(v.std(ddof=1)),
                      "rr_formula_mps": float(rr_s),
                      "rr_ratio": float(v.std(ddof=1) / rr_s)})
+        if prn in recs:
+            code, dop = recs[prn]
+            sats[-1].update(records=int(code.size),
+                            rec_pr_std_m=float(code.std() * CHIP_M),
+                            rec_pr_ratio=float(code.std() * CHIP_M / pr_s),
+                            rec_rr_std_mps=float(dop.std() * L1_WAVELENGTH_M),
+                            rec_rr_ratio=float(dop.std() * L1_WAVELENGTH_M / rr_s))
     # the budget at every fix
     rows = {r["t_s"]: r for r in fix_rows(run, truth0)}
     iono = scenario["iono"]
@@ -228,6 +265,8 @@ def fix_budget(run, scenario, loops: TrackingLoops) -> dict:
                                       for j, k in enumerate(axes)}},
         "pseudorange_ratio_pooled": float(pr_pool), "range_rate_ratio_pooled": float(rr_pool),
         "pooled_ratio_sigma": float(1 / np.sqrt(2 * sum(x["epochs"] - 1 for x in sats))),
+        "record_pseudorange_ratio_pooled": _pool(sats, "rec_pr_ratio"),
+        "record_range_rate_ratio_pooled": _pool(sats, "rec_rr_ratio"),
         "satellites": sats, "chip_m": CHIP_M}
 
 
@@ -259,15 +298,19 @@ def markdown(r: dict) -> str:
              f"from the measured per-satellite errors leave {p['unexplained_rms_3d_m']:.4f} m "
              f"and {v['unexplained_rms_3d_mps']:.5f} m/s unexplained.", "",
              "| PRN | C/N0 (dB-Hz) | el (deg) | PR bias (m) | PR std (m) | DLL formula (m) | "
-             "ratio | RR std (m/s) | PLL formula (m/s) | ratio |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "ratio | RR std (m/s) | PLL formula (m/s) | ratio | per record: PR ratio | "
+             "RR ratio |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in r["satellites"]:
         lines.append(f"| {s['prn']} | {s['cn0_dbhz']:.1f} | {s['elevation_deg']:.0f} | "
                      f"{s['pr_bias_m']:.2f} | {s['pr_std_m']:.3f} | {s['pr_formula_m']:.3f} | "
                      f"{s['pr_ratio']:.2f} | {s['rr_std_mps']:.4f} | "
-                     f"{s['rr_formula_mps']:.4f} | {s['rr_ratio']:.2f} |")
+                     f"{s['rr_formula_mps']:.4f} | {s['rr_ratio']:.2f} | "
+                     f"{s.get('rec_pr_ratio', float('nan')):.2f} | "
+                     f"{s.get('rec_rr_ratio', float('nan')):.2f} |")
     lines += ["", f"Pooled over the satellites: pseudorange std / formula "
                   f"{r['pseudorange_ratio_pooled']:.3f}, range rate "
                   f"{r['range_rate_ratio_pooled']:.3f} (1-sigma spread "
-                  f"{r['pooled_ratio_sigma']:.3f}).", ""]
+                  f"{r['pooled_ratio_sigma']:.3f}); at the tracking rate "
+                  f"{r['record_pseudorange_ratio_pooled']:.3f} and "
+                  f"{r['record_range_rate_ratio_pooled']:.3f}.", ""]
     return "\n".join(lines)
