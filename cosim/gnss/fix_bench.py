@@ -42,6 +42,7 @@ def gps_fix(out: Path, quick: bool = False, duration_s: float | None = None,
     ``gps_fix.json`` / ``.md`` under ``out`` (``gps_fix_quick`` with ``quick``), the run's
     own outputs under ``work`` (default ``build/gps_fix``) with the run itself
     (``run.pkl``: the GpsRun, the options, the scenario without its signal object)."""
+    from .fix_budget import fix_budget, loops_of, markdown
     from .gps_cli import process
     from .multichannel import channel_params_for
     from .acquire_cli import open_file
@@ -53,7 +54,6 @@ def gps_fix(out: Path, quick: bool = False, duration_s: float | None = None,
     with open(work / "run.pkl", "wb") as fh:         # the run, kept for a re-analysis
         pickle.dump({"run": run, "options": vars(a),
                      "scenario": {k: v for k, v in scenario.items() if k != "signal"}}, fh)
-    from .fix_budget import fix_budget, loops_of, markdown   # after the long run
     loops = loops_of(a, channel_params_for(open_file(a)))
     res = {"benchmark": "gps-fix", "machine": machine_info(), "quick": quick,
            "scenario": {"duration_s": dur, "cn0_dbhz": cn0_dbhz, "seed": seed,
