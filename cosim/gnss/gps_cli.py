@@ -43,7 +43,7 @@ from ..core.validate import check_float, check_out_dir, dumps
 from .acquire_cli import add_file_options, add_search_options, check_search_options, \
     open_file, search_file
 
-__all__ = ["add_parser", "run", "DEFAULT_OUT"]
+__all__ = ["add_parser", "run", "process", "DEFAULT_OUT"]
 
 #: Where the outputs (and a generated scenario) go.
 DEFAULT_OUT = "build/gps"
@@ -116,12 +116,15 @@ def _say(a, msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
-def run(a) -> int:
+def process(a):
+    """The work of ``run`` on parsed options ``a``: ``(GpsRun, summary, scenario)`` with the
+    outputs written; ``scenario`` is :func:`cosim.gnss.gps_scenario.write_scenario`'s result
+    (None with ``--file``)."""
     from dsp.gnss.atmosphere import TROPO_MIN_ELEVATION_DEG
 
     from .config import GnssRunConfig
     from .fix_integrity import JUMP_BOUND_M
-    from .gps_outputs import table, write_outputs
+    from .gps_outputs import write_outputs
     from .gps_receiver import GpsConfig, navigate
     from .gps_scenario import ScenarioSpec, scenario_signal
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
@@ -143,7 +146,7 @@ def run(a) -> int:
         if not rinex.ephemerides:
             raise ValueError(f"--ephemeris {a.ephemeris}: no GPS ephemeris in the file")
         hot = rinex.ephemerides
-    truth = sig = None
+    truth = sig = sc = None
     if a.file is None:
         for opt in ("format", "adc_map"):
             if getattr(a, opt) is not None:
@@ -232,6 +235,13 @@ def run(a) -> int:
     s["recording"] = f.describe()
     s["acquired"] = [c.prn for c in cands]
     s["wall_s"] = round(time.time() - t_wall, 2)
+    return g, s, sc
+
+
+def run(a) -> int:
+    """``python -m cosim gps``: exit 1 when the run gives no fix or a fix jump."""
+    from .gps_outputs import table
+    _, s, _ = process(a)
     rc = 0 if s["fixes"] and not s["fix_jumps"]["count"] else 1
     if a.json:
         print(dumps(s))

@@ -209,12 +209,17 @@ def _gps_fast(out, quick: bool = False, jobs: int | None = None) -> dict:
     return gps_fast(out, quick=quick)
 
 
+def _gps_fix(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .fix_bench import gps_fix
+    return gps_fix(out, quick=quick)
+
+
 #: ``python -m cosim bench <name>`` of the GNSS receiver (the AUKF's among them).
 BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_gnss_tracking),
               "gnss-throughput": Benchmark(_gnss_throughput),
               "gnss-acquisition": Benchmark(_gnss_acquisition, jobs=True),
               "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence),
-              "gps-fast": Benchmark(_gps_fast)}
+              "gps-fast": Benchmark(_gps_fast), "gps-fix": Benchmark(_gps_fix)}
 
 
 def _frontend():

@@ -201,6 +201,15 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
             add(f"GNSS PLL through {fmt(t['jerk_g_per_s'])} g/s", "tracking threshold",
                 f"{fmt(t['threshold_dbhz'])} dB-Hz (Kaplan's rule "
                 f"{t['kaplan_rule_dbhz']:.1f})", "gnss_tracking")
+    d = _get(results, "gps_fix")
+    if d and d.get("position") and d.get("velocity"):
+        p, v, sc = d["position"], d["velocity"], d.get("scenario", {})
+        add(f"GPS {sc.get('start', '')} start, {len(d['satellites_used'])} satellites at "
+            f"{fmt(sc.get('cn0_dbhz'))} dB-Hz (bit-exact array, fixed-point pll3)",
+            "TTFF; 3-D position, velocity RMS (measured / thermal-noise budget)",
+            f"{d['ttff_s']:.1f} s; {p['measured_rms_3d_m']:.2f} m ({p['ratio']:.2f}), "
+            f"{v['measured_rms_3d_mps']:.3f} m/s ({v['ratio']:.2f}) over {d['fixes']} fixes",
+            "gps_fix")
     d = _get(results, "aukf")
     if d:
         q0 = min(p["q_true"] for p in d["points"]) * 10  # points at 0.1, 1 and 10 q0

@@ -82,26 +82,56 @@ class CarrierLoop:
         return self.v1 + A2 * w * e
 
 
-def noise_bandwidth(order: int, bn_hz: float, T_s: float, latency: int = 0,
-                    n: int | None = None) -> float:
-    """The actual one-sided noise bandwidth of the digital loop (Hz), from its impulse
-    response ``h`` (measurement noise to replica phase, the timing of this module):
-    ``Bn = sum h^2 / (2 T (sum h)^2)``."""
+def loop_impulse_response(step, T_s: float, latency: int = 0, n: int = 20000):
+    """Impulse responses of a digital tracking loop to its discriminator noise, with this
+    module's timing: epoch ``k``'s error is the input minus the replica's mid-epoch phase
+    ``r_k``, the frequency computed from dump ``k`` is in force from epoch ``k + 1 + latency``
+    and the NCO integrates it. ``step(e) -> (f, y)``: the loop filter on one error (phase
+    units), returning the frequency (phase units per s) and any output ``y`` of interest.
+
+    Returns ``(h_r, h_y)`` (``n`` samples each): the replica mid-epoch phase and ``y`` after
+    dump ``k`` for a unit error impulse at epoch 0. A white discriminator noise of variance
+    ``s2`` gives the replica phase variance ``s2 sum h_r^2`` and that of ``y`` ``s2 sum
+    h_y^2``."""
+    phi, f = 0.0, [0.0] * (int(latency) + 1)
+    h_r, h_y = np.empty(n), np.empty(n)
+    for k in range(n):
+        r = phi + f[0] * T_s / 2          # replica mid-epoch phase
+        h_r[k] = r
+        e = (1.0 if k == 0 else 0.0) - r
+        phi += f[0] * T_s
+        fk, h_y[k] = step(e)
+        f = f[1:] + [float(fk)]
+    return h_r, h_y
+
+
+def carrier_loop_response(order: int, bn_hz: float, T_s: float, latency: int = 0,
+                          n: int | None = None):
+    """:func:`loop_impulse_response` of the PLL filter (:class:`CarrierLoop`) with ``y`` its
+    frequency state ``v1`` (Hz per cycle of error: the Doppler the trackers report); raises
+    ``ValueError`` if the loop is unstable or has not settled in ``n`` epochs."""
     # The 3rd-order loop's complex poles decay at only ~0.149 w0 (damping ~0.2): ~20
     # time constants of 5.3 / Bn s.
     n = max(20000, int(150 / (bn_hz * T_s))) if n is None else int(n)
     loop = CarrierLoop(order, bn_hz, T_s)
-    phi, f = 0.0, [0.0] * (latency + 1)
-    h = np.empty(n)
-    for k in range(n):
-        r = phi + f[0] * T_s / 2          # replica mid-epoch phase
-        h[k] = r
-        e = (1.0 if k == 0 else 0.0) - r
-        phi += f[0] * T_s
-        f = f[1:] + [float(loop.update(e))]
-    if not np.all(np.isfinite(h)) or abs(h[-50:]).max() > 1e-9:
+
+    def step(e):
+        f = float(loop.update(e))
+        return f, float(loop.v1)
+    h_r, h_v = loop_impulse_response(step, T_s, latency, n)
+    if not (np.all(np.isfinite(h_r)) and np.all(np.isfinite(h_v))) or \
+            abs(h_r[-50:]).max() > 1e-9:
         raise ValueError(f"the loop (order {order}, Bn {bn_hz} Hz, T {T_s} s, latency "
                          f"{latency}) is unstable or has not settled in {n} epochs")
+    return h_r, h_v
+
+
+def noise_bandwidth(order: int, bn_hz: float, T_s: float, latency: int = 0,
+                    n: int | None = None) -> float:
+    """The actual one-sided noise bandwidth of the digital loop (Hz), from its impulse
+    response ``h`` (measurement noise to replica phase, :func:`carrier_loop_response`):
+    ``Bn = sum h^2 / (2 T (sum h)^2)``."""
+    h, _ = carrier_loop_response(order, bn_hz, T_s, latency, n)
     return float(np.sum(h ** 2) / (2 * T_s * np.sum(h) ** 2))
 
 

@@ -179,11 +179,19 @@ def rotate_z(vectors, angle_rad):
     return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]])
 
 
+def enu_geometry(elevation_deg, azimuth_deg) -> np.ndarray:
+    """The rows ``G_i = [-e_i, -n_i, -u_i, 1]`` of the module doc (n, 4): the pseudorange's
+    partial derivatives in east, north, up and the clock bias."""
+    el = np.deg2rad(np.asarray(elevation_deg, dtype=np.float64))
+    az = np.deg2rad(np.asarray(azimuth_deg, dtype=np.float64))
+    return np.column_stack([-np.cos(el) * np.sin(az), -np.cos(el) * np.cos(az), -np.sin(el),
+                            np.ones_like(el)])
+
+
 def dop_enu(elevation_deg, azimuth_deg) -> Dop:
     """DOPs of satellites at these elevations / azimuths (module doc); NaN if singular."""
-    el, az = np.deg2rad(elevation_deg), np.deg2rad(azimuth_deg)
-    g = np.column_stack([-np.cos(el) * np.sin(az), -np.cos(el) * np.cos(az), -np.sin(el),
-                         np.ones_like(el)])
+    el = np.asarray(elevation_deg)
+    g = enu_geometry(elevation_deg, azimuth_deg)
     try:
         q = np.linalg.inv(g.T @ g)
     except np.linalg.LinAlgError:
