@@ -62,8 +62,8 @@ def _tampered_open(nth_carrier_write: int):
     ``nth_carrier_write``-th carrier word written 1 LSB higher (no Verilator needed)."""
     real = multichannel.open_gnss_array
 
-    def open_array(backend, params, channels):
-        fe = real("model", params, channels)
+    def open_array(backend, params, channels, parallel=False):
+        fe = real("model", params, channels, parallel)
         if backend == "verilator":
             write, seen = fe.write, [0]
 
