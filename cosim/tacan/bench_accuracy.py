@@ -55,9 +55,12 @@ class AccuracyGrid:
             raise ValueError(f"modes must be X and/or Y, not {self.modes!r}")
         if isinstance(self.records, bool) or not isinstance(self.records, int) or self.records < 1:
             raise ValueError(f"records must be an integer >= 1, not {self.records!r}")
-        if not 1.5 <= float(self.duration_s) <= 10:
-            raise ValueError(f"duration_s must be in [1.5, 10] s (the filter settles in 1 s), "
-                             f"not {self.duration_s!r}")
+        if not 3.0 <= float(self.duration_s) <= 10:
+            raise ValueError(f"duration_s must be in [3, 10] s, not {self.duration_s!r}: the "
+                             f"bearings are scored after 1 s, and in X mode the second second "
+                             f"alone is not settled (measured, 10 dB, 0 / 180 deg, seed 100: "
+                             f"mean error -0.10 / +0.11 deg in 2 s records, with single pulses "
+                             f"too; -0.001 deg at 0 deg in a 3 s record)")
         if not self.variants or self.variants[0] != "both" or not set(self.variants) <= set(VARIANTS):
             raise ValueError(f"variants must start with the default 'both' and be among "
                              f"{VARIANTS}, not {self.variants!r}")
@@ -74,7 +77,7 @@ class AccuracyGrid:
 
 
 FULL = AccuracyGrid()
-QUICK = AccuracyGrid(bearing_step_deg=120.0, snrs_db=(0.0, 6.0), records=1, duration_s=2.0,
+QUICK = AccuracyGrid(bearing_step_deg=120.0, snrs_db=(0.0, 6.0), records=1, duration_s=3.0,
                      variants=("both", "pulse"))
 
 

@@ -24,7 +24,7 @@ def test_the_full_grid_is_the_issue_s():
 
 
 @pytest.mark.parametrize("bad", [dict(bearing_step_deg=0), dict(modes=("Z",)),
-                                 dict(records=0), dict(duration_s=1.0),
+                                 dict(records=0), dict(duration_s=2.0),
                                  dict(variants=("pulse", "both")), dict(snrs_db=())])
 def test_a_bad_grid_is_refused(bad):
     with pytest.raises(ValueError):
