@@ -1,6 +1,5 @@
 """The ``tacan-robustness`` benchmark: the bias at 10 dB with the beacon rotating off 15 Hz
-and with a -6 dB echo, with ``--detector pulse`` and with ``--detector both`` (its table is
-also part of ``tacan-accuracy``); results written to ``results/`` with the machine, date
+and with a -6 dB echo, with ``--detector pulse`` and with ``--detector both``; results written to ``results/`` with the machine, date
 and command (registered in the TACAN receiver's entry, :mod:`cosim.tacan.receiver`).
 """
 from __future__ import annotations
@@ -58,7 +57,7 @@ def robustness_markdown(rows, what: str = "") -> list:
 
 
 def tacan_robustness(out: Path, quick: bool = False, jobs: int | None = None) -> dict:
-    """The robustness table of ``tacan-accuracy`` alone (rotation off 15 Hz, echo), and the
+    """The robustness table (rotation off 15 Hz, echo) with ``--detector pulse``, and the
     same with ``--detector both``."""
     t_start = time.perf_counter()
     rows = robustness_rows(quick, jobs, detector="pulse")

@@ -148,3 +148,45 @@ def bias_runs(detector: str = "pair", noise_floor: str = "clipped", seeds=range(
                 bearing_deg=b, snr_db=float(snr), duration_s=duration_s, seed=seed),
                 detector=detector, noise_floor=noise_floor))
     return out
+
+
+def pair_report_kinds(run: TacanRunConfig) -> dict:
+    """What the pair search reports on ``run``'s scenario with both searches (golden chain,
+    direct path), against the generator's truth: each pair report is a *pair* (a transmitted
+    pulse within :data:`MATCH_S` of both its pulses, ``t - D`` and ``t``), a *half pair* (of
+    one) or a *noise pair* (of neither). Per kind: the count, the median report over the
+    threshold estimate the DSP makes (:meth:`dsp.tacan.peakbias.PeakBias.threshold`), the
+    median report over the pulse's amplitude (pairs, half pairs), and the share the DSP's
+    confirmation keeps (both pulses among the single-pulse reports,
+    :func:`dsp.tacan.pairsource.confirmed_pairs`); and the paired fraction. The evidence
+    of :mod:`dsp.tacan.pairsource`."""
+    from dsp.tacan.frontend import run_golden_frontend
+    from dsp.tacan.pairsource import confirmed_pairs, paired_fraction
+    from dsp.tacan.standard import SOURCE_PAIR, pair_spacing_s
+    if run.detector != "both":
+        raise ValueError(f"pair report kinds need both searches (detector 'both'), not "
+                         f"{run.detector!r}")
+    sig = run.signal
+    s = generate(sig)
+    cfg = run.frontend
+    pk = run_golden_frontend(s.samples, cfg, sig.adc_bits)
+    t = (pk.timestamps - cfg.group_delay_samples) / sig.fs_hz
+    pr = pk.source == SOURCE_PAIR
+    tp = s.truth.pulse_times_s
+    D = pair_spacing_s(sig.mode)
+    j2, n2 = match_nearest(tp, t[pr], MATCH_S)
+    j1, n1 = match_nearest(tp, t[pr] - D, MATCH_S)
+    a = pk.amplitudes[pr]
+    conf = confirmed_pairs(t[pr], t[~pr], sig.mode, run.receiver.decoder.tol_s
+                           if run.receiver.decoder else 1e-6)
+    thr = run.receiver.peak_bias.threshold(a)
+    ap = s.truth.pulse_amplitudes
+    amp_of = np.where(n2, ap[j2], ap[j1])
+    out = {"reports": int(a.size), "threshold": thr, "paired_fraction": paired_fraction(conf)}
+    for name, m in (("pair", n1 & n2), ("half_pair", n1 ^ n2), ("noise_pair", ~n1 & ~n2)):
+        out[name] = {"count": int(m.sum()), "share": float(m.mean()) if m.size else None,
+                     "report_over_threshold": float(np.median(a[m] / thr)) if m.any() else None,
+                     "report_over_pulse": float(np.median(a[m] / amp_of[m]))
+                     if m.any() and name != "noise_pair" else None,
+                     "confirmed": float(conf[m].mean()) if m.any() else None}
+    return out

@@ -197,6 +197,9 @@ def cmd_tacan(a) -> int:
         print(f"  {r['n_peaks']} peaks, {r['n_measurements']} measurements, {r['n_updates']} Kalman updates, "
               f"{r['n_main_refs']} main + {r['n_aux_refs']} aux references, {r['gated']} gated, "
               f"{r['reinit']} re-initialisations, {r['adc_clipped']} ADC samples clipped")
+        pf = r.get("paired_fraction")
+        print(f"  measured on: {r['measured_on']}"
+              + ("" if pf is None else f" (paired fraction {pf:.2f})"))
         ev = ", ".join(f"{k} {v}" for k, v in r["dsp_events"].items() if v) or "none"
         print(f"  FIFO: {r['fifo_dropped']} peaks dropped (FPGA counter), "
               f"{r['fifo_dropped_reported']} reported by gap markers; DSP core events: {ev}")

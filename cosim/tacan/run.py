@@ -163,6 +163,10 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         "misleading_bearings": int(st["misleading"][0]),
         "n_peaks": int(track.n_peaks),
         "n_measurements": int(track.n_measurements),
+        # what the DSP measured on, and with both searches the paired fraction it chose by
+        # (dsp.tacan.pairsource)
+        "measured_on": track.measured_on,
+        "paired_fraction": track.paired_fraction,
         "n_main_refs": int(track.n_main_refs),
         "n_aux_refs": int(track.n_aux_refs),
         "refs_off_grid": int(track.n_refs_off_grid),

@@ -20,6 +20,7 @@ from .scoring import REF_MAIN
 from .kalman import EnvelopeKalman
 from .kalman_config import KalmanConfig, KalmanFixedConfig
 from .standard import F15, F135
+from .pairsource import choose_pairs
 from .peakbias import PeakBias
 from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s
 
@@ -47,6 +48,11 @@ class BearingTrack:
     produced_s: np.ndarray | None = None  # (M,) when each bearing became available (the
     #: reference known and the pulses up to it filtered; >= times_s)
     coarse_sigma_deg: np.ndarray | None = None  # (B, M) the filter's coarse-bearing std (deg)
+    #: what the amplitude measurements were (:data:`dsp.tacan.pairsource.MEASURED_ON`) and,
+    #: with both searches, the share of pair reports whose two pulses the single-pulse
+    #: search reported (:func:`dsp.tacan.pairsource.paired_fraction`; None otherwise)
+    measured_on: str = "pulses"
+    paired_fraction: float | None = None
 
     def first_valid_s(self) -> np.ndarray:
         """Per trial: when the first valid (not flagged) bearing became available (s from
@@ -161,6 +167,13 @@ class ReceiverConfig:
     #: expects each report at its predicted amplitude plus that bias. None: reports are
     #: taken as unbiased.
     peak_bias: PeakBias | None = None
+    #: With both searches (``source``): when at least this share of the block's pair
+    #: reports has both its pulses among the single-pulse reports (the paired fraction, ~0.24
+    #: at 0 dB, ~0.54 at 3 dB, ~0.81 at 6 dB), the DSP measures on those confirmed pair
+    #: reports only, leaving out the noise pairs and half pairs that bend the envelope;
+    #: below it, near the floor, on every pair report (:mod:`dsp.tacan.pairsource`). None:
+    #: always on every pair report.
+    confirm_pairs_above: float | None = 0.45
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -181,6 +194,9 @@ class ReceiverConfig:
             raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
         if self.peak_bias is not None and not isinstance(self.peak_bias, PeakBias):
             raise ValueError(f"peak_bias must be a PeakBias or None, not {self.peak_bias!r}")
+        if self.confirm_pairs_above is not None and not 0 < float(self.confirm_pairs_above) <= 1:
+            raise ValueError(f"confirm_pairs_above must be in (0, 1] or None, not "
+                             f"{self.confirm_pairs_above!r}")
         if not isinstance(self.pair_reports, bool):
             raise ValueError(f"pair_reports must be True or False, not {self.pair_reports!r}")
         if not isinstance(self.track_rotation, bool):
@@ -260,6 +276,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         raise ValueError("peak times and amplitudes must be finite (NaN/inf from the front end)")
     dcfg = cfg.decoder or DecoderConfig(mode=cfg.mode)
     n_peaks = int(t.size)
+    paired, measured_on = None, "pairs" if cfg.pair_reports else "pulses"
     if source is not None:
         src = np.asarray(source)
         if src.shape != t.shape or src.dtype.kind not in "iu" \
@@ -271,9 +288,15 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
                              "pair_reports says every peak is a pair: not both")
         dec = decode(t[src == SOURCE_PULSE], cfg.mode, dcfg)
         pm = src == SOURCE_PAIR
+        keep, paired, measured_on = choose_pairs(t[pm], t[src == SOURCE_PULSE], cfg.mode,
+                                                 dcfg.tol_s, cfg.confirm_pairs_above)
+        # the threshold from every pair report (the noise pairs make its low quantile)
+        thr = cfg.peak_bias.threshold(amps[:, pm]) if cfg.peak_bias is not None else None
+        pm[pm] = keep
         t, amps = t[pm], amps[:, pm]
         ticks = ticks[pm] if ticks is not None else None
-    thr = cfg.peak_bias.threshold(amps) if cfg.peak_bias is not None else None
+    else:
+        thr = cfg.peak_bias.threshold(amps) if cfg.peak_bias is not None else None
     if cfg.pair_reports or source is not None:
         t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks,
                                       tick_hz=cfg.kalman.tick_hz, tol_s=dcfg.tol_s)
@@ -436,7 +459,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         gated=kf.events["gated"], reinit=kf.events["reinit"], r_est=kf.r.copy(),
         events={**kf.events, "invalid_bearings": n_invalid, "flagged_bearings": n_flagged},
         state=state, valid=ok, produced_s=np.array(out_done),
-        coarse_sigma_deg=sig)
+        coarse_sigma_deg=sig, measured_on=measured_on, paired_fraction=paired)
 
 
 def expand_pairs(times_s, amplitudes, mode: str, *, ticks=None, tick_hz: float | None = None,
