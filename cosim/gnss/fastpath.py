@@ -40,6 +40,7 @@ R(0) sinc^2`` (C/N0 as defined in ``cosim.gnss.signal``), times ``eta`` with an 
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -119,6 +120,16 @@ def noise_correlation(spacing_chips: float = 0.5, bandwidth_hz: float | None = N
     return r
 
 
+@functools.lru_cache(maxsize=64)
+def _noise_factor(spacing_chips: float, bandwidth_hz, prn) -> np.ndarray:
+    """``L`` with ``L L^T`` = :func:`noise_correlation` (its eigen-decomposition; read-only,
+    kept per spacing, bandwidth and PRN)."""
+    w, V = np.linalg.eigh(noise_correlation(spacing_chips, bandwidth_hz, prn))
+    L = V * np.sqrt(np.clip(w, 0.0, None))
+    L.setflags(write=False)
+    return L
+
+
 @dataclass
 class FastCorrelations:
     """Complex E, P, L, each of the broadcast shape of the inputs."""
@@ -168,8 +179,7 @@ def correlate_fast(cn0_dbhz, phase_err_cycles=0.0, freq_err_hz=0.0, code_err_chi
     sig = [common * code_correlation(tau - o, bandwidth_hz, prn) for o in (h, 0.0, -h)]
     if cn0_dbhz is not None:
         rng = np.random.default_rng() if rng is None else rng
-        w, V = np.linalg.eigh(noise_correlation(d, bandwidth_hz, prn))
-        L = V * np.sqrt(np.clip(w, 0.0, None))
+        L = _noise_factor(d, bandwidth_hz, prn)
         z = rng.standard_normal(full + (2, 3)) @ L.T
         n = sigma * (z[..., 0, :] + 1j * z[..., 1, :])
         sig = [s + n[..., i] for i, s in enumerate(sig)]

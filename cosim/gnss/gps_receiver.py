@@ -56,7 +56,8 @@ from dsp.gnss.pvt import PvtConfig, solve
 
 from .navigation import channel_navigation
 
-__all__ = ["GpsConfig", "GpsEpoch", "GpsRun", "navigate", "RATES_HZ"]
+__all__ = ["GpsConfig", "GpsEpoch", "GpsRun", "ReceiverTime", "fix_epoch", "navigate",
+           "RATES_HZ"]
 
 #: Measurement rates offered (Hz).
 RATES_HZ = (1.0, 10.0)
@@ -113,6 +114,74 @@ def _split(whole: int, frac: float) -> tuple[int, float]:
     return int(whole + w) % int(WEEK_S), frac - w
 
 
+class ReceiverTime:
+    """The receiver clock of the measurement epochs (module doc, *Receiver time*): unset
+    until :meth:`set` at the first epoch with a usable channel, then ``t_rx(t) = T0 + t``
+    for ``t`` seconds of the recording, ``T0`` held as whole seconds plus a fraction and
+    moved by :meth:`steer` after each valid fix."""
+
+    def __init__(self, initial_travel_s: float = 0.070):
+        self.initial_travel_s = float(initial_travel_s)
+        self.whole, self.frac = None, 0.0
+
+    @property
+    def is_set(self) -> bool:
+        return self.whole is not None
+
+    def set(self, latest_t_tx: float, t: float) -> None:
+        """At recording time ``t`` put the latest transmit time ``initial_travel_s`` before
+        the receiver time."""
+        w = int(latest_t_tx // 1)
+        self.whole, self.frac = _split(w, float(latest_t_tx) - w + self.initial_travel_s - t)
+
+    def at(self, t: float) -> tuple[int, float]:
+        """``(whole, fraction)`` of the receiver time at recording time ``t``."""
+        return _split(self.whole, self.frac + t)
+
+    def steer(self, bias_s: float) -> None:
+        """Take a fix's clock bias (s) out of the receiver time."""
+        self.whole, self.frac = _split(self.whole, self.frac - bias_s)
+
+
+def fix_epoch(sample: int, t_rx: tuple, prns, counts, ephemerides, doppler_hz, cn0_dbhz,
+              carrier_cycles, lli, *, reference_week: int, iono=None,
+              config: GpsConfig = GpsConfig()) -> GpsEpoch:
+    """One measurement epoch (module doc, *Observables* and *Navigation*): the channels'
+    ``counts`` ``(tow_sf, n_bits, n_codes, chips)`` at the receiver time ``t_rx`` (a
+    ``(whole, fraction)`` pair) -> pseudoranges, the satellites' states from
+    ``ephemerides`` (one per row, None: unusable) at their transmit times, the solution
+    (:func:`dsp.gnss.pvt.solve`) and the :class:`~dsp.gnss.observables.ObservationEpoch`.
+    ``doppler_hz``, ``cn0_dbhz`` (NaN or infinite: unknown, reported NaN and weighted as
+    45 dB-Hz), ``carrier_cycles``
+    (RINEX sign) and ``lli`` are the rows' other observables."""
+    tw, tf = t_rx
+    t_rx_s = tw + tf
+    pr, _ok = pseudoranges_from_channels((tw, tf), *counts)
+    t_tx = transmit_time(*counts)
+    n = len(prns)
+    pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    clk, drift = np.full(n, np.nan), np.full(n, np.nan)
+    for j, e in enumerate(ephemerides):
+        if e is None:
+            continue
+        st = satellite_states(e, system_time(e, t_tx[j]))
+        pos[j], vel[j] = st.position, st.velocity
+        clk[j], drift[j] = float(st.clock_bias), float(st.clock_drift)
+    kw = {} if iono is None else dict(iono_alpha=iono.alpha, iono_beta=iono.beta)
+    cn0 = np.asarray(cn0_dbhz, dtype=np.float64)
+    cn0 = np.where(np.isfinite(cn0), cn0, np.nan)    # an estimator's -inf: no reading
+    sol = solve(prns, pos, clk, pr, cn0_dbhz=np.where(np.isfinite(cn0), cn0, 45.0),
+                sat_vel_mps=vel, sat_clock_drift=drift, doppler_hz=doppler_hz,
+                gps_week=reference_week, gps_tow_s=t_rx_s, troposphere=config.troposphere,
+                config=config.pvt, **kw)
+    el = {int(p_): (float(e_), float(a_)) for p_, e_, a_ in
+          zip(prns, sol.elevation_deg, sol.azimuth_deg)} \
+        if len(sol.elevation_deg) == len(prns) else {}
+    obs = ObservationEpoch(reference_week, t_rx_s, prns, pr, carrier_cycles, doppler_hz, cn0,
+                           lli, clock_offset_s=sol.clock_bias_s if sol.valid else None)
+    return GpsEpoch(int(sample), reference_week, t_rx_s, obs, sol, el)
+
+
 def navigate(track, p, *, reference_week: int, inverted: bool, if_hz: float,
              ephemerides=None, iono=None, config: GpsConfig = GpsConfig(),
              progress=None) -> GpsRun:
@@ -134,7 +203,7 @@ def navigate(track, p, *, reference_week: int, inverted: bool, if_hz: float,
     hot = ephemerides is not None
     ephs = tuple(ephemerides) if hot else ()
     samples = np.arange(step, track.n_samples, step, dtype=np.int64)
-    whole, frac = None, 0.0
+    clock = ReceiverTime(config.initial_travel_s)
     epochs, ttff, t_set = [], None, None
     seen: set = set()
     for i, n in enumerate(samples):
@@ -149,41 +218,20 @@ def navigate(track, p, *, reference_week: int, inverted: bool, if_hz: float,
                 continue
             rows.append((c.prn, c, float(tow_sf[0]), int(n_bits[0]), int(n_codes[0]),
                          float(chips[0])))
-        if whole is None:
+        if not clock.is_set:
             if not rows:
                 epochs.append(GpsEpoch(int(n), reference_week, math.nan, None, None))
                 continue
-            t_tx = max(transmit_time(r[2], r[3], r[4], r[5]) for r in rows)
-            whole, frac = int(t_tx // 1), float(t_tx) - int(t_tx // 1) + \
-                config.initial_travel_s - n / fs
-            whole, frac = _split(whole, frac)
+            clock.set(max(transmit_time(r[2], r[3], r[4], r[5]) for r in rows), n / fs)
             t_set = n / fs
-        tw, tf = _split(whole, frac + n / fs)
-        t_rx = tw + tf
+        tw, tf = clock.at(n / fs)
         if not rows:
-            epochs.append(GpsEpoch(int(n), reference_week, t_rx, None, None))
+            epochs.append(GpsEpoch(int(n), reference_week, tw + tf, None, None))
             continue
-        prns = np.array([r[0] for r in rows], dtype=np.int64)
         cnt = [np.array([r[j] for r in rows]) for j in range(2, 6)]
         cnt[1], cnt[2] = cnt[1].astype(np.int64), cnt[2].astype(np.int64)
-        pr, _ok = pseudoranges_from_channels((tw, tf), *cnt)
-        t_tx = transmit_time(*cnt)
-        eph = []
-        for r in rows:
-            e = select_ephemeris(ephs, r[0], reference_week, t_rx) if hot else \
-                r[1].ephemeris
-            eph.append(e)
-        pos = np.full((len(rows), 3), np.nan)
-        vel = np.full((len(rows), 3), np.nan)
-        clk = np.full(len(rows), np.nan)
-        drift = np.full(len(rows), np.nan)
-        for j, e in enumerate(eph):
-            if e is None:
-                continue
-            tg = system_time(e, t_tx[j])
-            st = satellite_states(e, tg)
-            pos[j], vel[j] = st.position, st.velocity
-            clk[j], drift[j] = float(st.clock_bias), float(st.clock_drift)
+        eph = [select_ephemeris(ephs, r[0], reference_week, tw + tf) if hot else
+               r[1].ephemeris for r in rows]
         cs = [r[1] for r in rows]
         dop = np.array([c.doppler[c.record_at(np.array([n]))[0][0]] for c in cs])
         cn0 = np.array([float(c.cn0_at(np.array([n]))[0]) for c in cs])
@@ -195,23 +243,14 @@ def navigate(track, p, *, reference_week: int, inverted: bool, if_hz: float,
             if key not in seen or (k >= 0 and not c.win_ok[k]):
                 lli[j] = 1
             seen.add(key)
-        kw = {}
-        if iono is not None:
-            kw = dict(iono_alpha=iono.alpha, iono_beta=iono.beta)
-        sol = solve(prns, pos, clk, pr, cn0_dbhz=np.where(np.isfinite(cn0), cn0, 45.0),
-                    sat_vel_mps=vel, sat_clock_drift=drift, doppler_hz=dop,
-                    gps_week=reference_week, gps_tow_s=t_rx, troposphere=config.troposphere,
-                    config=config.pvt, **kw)
-        el = {int(p_): (float(e_), float(a_)) for p_, e_, a_ in
-              zip(prns, sol.elevation_deg, sol.azimuth_deg)} \
-            if len(sol.elevation_deg) == len(prns) else {}
-        obs = ObservationEpoch(reference_week, t_rx, prns, pr, carr, dop, cn0, lli,
-                               clock_offset_s=sol.clock_bias_s if sol.valid else None)
-        epochs.append(GpsEpoch(int(n), reference_week, t_rx, obs, sol, el))
-        if sol.valid:
+        ep = fix_epoch(int(n), (tw, tf), np.array([r[0] for r in rows], dtype=np.int64), cnt,
+                       eph, dop, cn0, carr, lli, reference_week=reference_week, iono=iono,
+                       config=config)
+        epochs.append(ep)
+        if ep.solution.valid:
             if ttff is None:
                 ttff = n / fs
-            whole, frac = _split(whole, frac - sol.clock_bias_s)
+            clock.steer(ep.solution.clock_bias_s)
         if progress is not None:
             progress(i + 1, samples.size)
     return GpsRun(navs, epochs, fs, "hot" if hot else "cold", ttff, t_set)

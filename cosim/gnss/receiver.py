@@ -204,11 +204,17 @@ def _gnss_acquisition(out, quick: bool = False, jobs: int | None = None) -> dict
     return gnss_acquisition(out, quick=quick, jobs=jobs)
 
 
+def _gps_fast(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .gps_fast_bench import gps_fast
+    return gps_fast(out, quick=quick)
+
+
 #: ``python -m cosim bench <name>`` of the GNSS receiver (the AUKF's among them).
 BENCHMARKS = {"gnss-speed": Benchmark(_gnss_speed), "gnss-tracking": Benchmark(_gnss_tracking),
               "gnss-throughput": Benchmark(_gnss_throughput),
               "gnss-acquisition": Benchmark(_gnss_acquisition, jobs=True),
-              "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence)}
+              "aukf": Benchmark(_aukf), "aukf-convergence": Benchmark(_aukf_convergence),
+              "gps-fast": Benchmark(_gps_fast)}
 
 
 def _frontend():

@@ -29,7 +29,10 @@ position solution (``dsp.gnss.pvt``), not the fixed-point loops.
   atmosphere unless given: ``P = 1013.25 (1 - 2.2557e-5 h)^5.2568`` hPa,
   ``T = 288.15 - 0.0065 h`` K, relative humidity 50 %, water-vapour pressure
   ``e = RH 6.108 exp(17.15 (T - 273.15) / (T - 38.45))`` hPa (Magnus form). Valid from
-  -500 m to 40 km and above 3 degrees of elevation; outside it the function raises.
+  -500 m to 10 km (the standard atmosphere's constant lapse rate holds up to the
+  tropopause, ~11 km; its temperature reaches the Magnus form's pole, 38.45 K, at 38.4 km;
+  RTKLIB's ``tropmodel`` stops at 10 km too) and above 3 degrees of elevation; outside it
+  the function raises.
 """
 from __future__ import annotations
 
@@ -39,7 +42,7 @@ from .ephemeris import C_LIGHT
 
 
 #: The model's height range (m) for :func:`saastamoinen_delay_m`.
-TROPO_HEIGHT_RANGE_M = (-500.0, 40_000.0)
+TROPO_HEIGHT_RANGE_M = (-500.0, 10_000.0)
 #: The lowest elevation (deg) :func:`saastamoinen_delay_m` accepts.
 TROPO_MIN_ELEVATION_DEG = 3.0
 
