@@ -49,6 +49,7 @@ def test_bad_input_is_refused_before_work():
                       ({"duration_s": 0.05}, "no measurement epoch"),
                       ({"duration_s": 2.0}, "duration_s"), ({"mai": 1}, "mai"),
                       ({"aiding": 3.0}, "aiding"), ({"tracker_options": 1}, "tracker_options"),
+                      ({"doppler_instant": 1}, "doppler_instant"),
                       ({"run": GnssRunConfig(tracker="aided-kf")}, "needs an aiding"),
                       ({"adc_bits": 0}, "adc_bits")):
         with pytest.raises(ValueError, match=match):
