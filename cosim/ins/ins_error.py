@@ -67,6 +67,32 @@ class InsErrors:
             raise ValueError(f"signs must be 3 finite numbers, not {self.signs!r}")
 
 
+def acceleration_error_enu(f_enu, T_s: float, errors: InsErrors, seed: int) -> np.ndarray:
+    """The INS acceleration error ``da = -psi x f + b_a + w_a`` (3, n) (local east, north,
+    up; module doc) for the specific force ``f_enu`` (3, n) on a uniform grid of step
+    ``T_s`` (s) starting at ``T_s / 2``; ``seed`` draws the angle and velocity random walks."""
+    f_enu = np.asarray(f_enu, float)
+    n = f_enu.shape[1]
+    t = (np.arange(n) + 0.5) * T_s
+    rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7,)))
+    sg = np.asarray(errors.signs, float)
+    eps = errors.gyro_drift_deg_h * DEG_PER_H * sg
+    arw = errors.arw_deg_rt_h * math.pi / 180.0 / 60.0          # rad/sqrt(s)
+    vrw = errors.vrw_mps_rt_h / 60.0                            # m/s/sqrt(s)
+    psi = eps[:, None] * t + np.cumsum(rng.standard_normal((3, n)) * arw * math.sqrt(T_s), axis=1)
+    ba = errors.accel_bias_mg * 1e-3 * G_MPS2 * sg
+    wa = rng.standard_normal((3, n)) * vrw / math.sqrt(T_s)
+    return -np.cross(psi.T, f_enu.T).T + ba[:, None] + wa
+
+
+def integrate_errors(da, T_s: float):
+    """Velocity and position errors ``(dv, dp)`` (3, n): the acceleration error ``da``
+    integrated twice (trapezoid, grid step ``T_s``, zero at the first point)."""
+    dv = np.concatenate([np.zeros((3, 1)), np.cumsum((da[:, 1:] + da[:, :-1]) / 2 * T_s, axis=1)], axis=1)
+    dp = np.concatenate([np.zeros((3, 1)), np.cumsum((dv[:, 1:] + dv[:, :-1]) / 2 * T_s, axis=1)], axis=1)
+    return dv, dp
+
+
 class InsAiding:
     """The INS solution along a :class:`Scenario` and its Doppler-rate prediction.
 
@@ -95,19 +121,9 @@ class InsAiding:
         Ru, Vu, Au = scenario.user(t)
         _, e, nn, up = scenario.geom.frame()
         C = np.stack([e, nn, up])                      # ENU -> frame rows
-        rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7,)))
-        sg = np.asarray(self.err.signs, float)
-        eps = self.err.gyro_drift_deg_h * DEG_PER_H * sg
-        arw = self.err.arw_deg_rt_h * math.pi / 180.0 / 60.0          # rad/sqrt(s)
-        vrw = self.err.vrw_mps_rt_h / 60.0                            # m/s/sqrt(s)
-        psi = eps[:, None] * t + np.cumsum(rng.standard_normal((3, n)) * arw * math.sqrt(self.T), axis=1)
         f_enu = C @ Au + G_MPS2 * np.array([0.0, 0.0, 1.0])[:, None]
-        ba = self.err.accel_bias_mg * 1e-3 * G_MPS2 * sg
-        wa = rng.standard_normal((3, n)) * vrw / math.sqrt(self.T)
-        da_enu = -np.cross(psi.T, f_enu.T).T + ba[:, None] + wa
-        da = C.T @ da_enu
-        dv = np.concatenate([np.zeros((3, 1)), np.cumsum((da[:, 1:] + da[:, :-1]) / 2 * self.T, axis=1)], axis=1)
-        dp = np.concatenate([np.zeros((3, 1)), np.cumsum((dv[:, 1:] + dv[:, :-1]) / 2 * self.T, axis=1)], axis=1)
+        da = C.T @ acceleration_error_enu(f_enu, self.T, self.err, seed)
+        dv, dp = integrate_errors(da, self.T)
         self.da, self.dv, self.dp = da, dv, dp
         Rs, Vs, As = scenario.satellite(t)
         self.rate = doppler_rate_hz_s(Ru + dp, Vu + dv, Au + da, Rs, Vs, As)

@@ -59,6 +59,11 @@ def _bench(out, quick: bool = False, jobs: int | None = None) -> dict:
     return ins_bench(out, quick=quick, jobs=jobs)
 
 
+def _bench_table2(out, quick: bool = False, jobs: int | None = None) -> dict:
+    from .table2_bench import ins_table2_bench
+    return ins_table2_bench(out, quick=quick)
+
+
 INS = register(Receiver(
     name="ins", help="the INS paper: INS-aided Kalman carrier loop, aided PLL or unaided Kalman "
                      "loop over the paper's trajectory on the GNSS channel; LOS velocity and "
@@ -67,4 +72,5 @@ INS = register(Receiver(
     metrics=("vel_err_std_mps", "vel_err_mean_mps", "range_err_std_m", "range_err_mean_m",
              "lock_fraction", "cycle_slips"),
     primary=Figure("vel_err_std_mps", "LOS velocity error std", "m/s"),
-    benchmarks={"ins": Benchmark(_bench, jobs=True)}))
+    benchmarks={"ins": Benchmark(_bench, jobs=True),
+                "ins-table2": Benchmark(_bench_table2)}))

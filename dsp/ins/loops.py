@@ -283,10 +283,8 @@ def steady_state_gain(A, H, Q, R):
 class AidedPll:
     """Kaplan 3rd-order Costas PLL (``ChannelCore``) with the INS Doppler rate fed
     forward into its frequency integrator. Its Doppler estimate after epoch ``k`` is the
-    frequency of interval ``k + 1`` (``doppler_offset_epochs`` = 0.5: it stands for the
-    interval's midpoint)."""
-
-    doppler_offset_epochs = 0.5
+    frequency of the interval it is in force, ``k + 1 + latency`` (``ctx.latency_epochs``):
+    ``doppler_offset_epochs`` = 0.5 + latency (it stands for that interval's midpoint)."""
 
     def __init__(self, ctx, arith, bn_hz: float = 15.0, dll_bn_hz: float = 1.0, pli_epochs: int = 10):
         from dsp.gnss.loops_fixed import T_FRAC, V1, V2, ChannelCore
@@ -295,6 +293,7 @@ class AidedPll:
         _finite("T_s", ctx.T_s, 0.0, strict=True)
         _finite("bn_hz", bn_hz, 0.0, strict=True)
         self.aiding = ctx.aiding
+        self.doppler_offset_epochs = 0.5 + int(ctx.latency_epochs)
         self.core = ChannelCore(arith, ctx.fs_hz, ctx.T_s, 3, bn_hz, dll_bn_hz, ctx.spacing_chips,
                                 ctx.if_hz, ctx.inverted, np.asarray(ctx.doppler0_hz, float),
                                 0.0 * np.asarray(ctx.doppler_rate0_hz_s, float), True)
