@@ -110,6 +110,7 @@ def test_a_slot_once_auxiliary_is_never_declared_the_main_one():
             assert r["first_valid_bearing_s"] is not None and r["max_abs_error_deg"] < 5.0
 
 
+@pytest.mark.slow          # a benchmark's smoke run: 48 s of the suite's budget
 def test_confidence_bench_quick(tmp_path):
     """`bench tacan-confidence` in its quick form (2 records at 3 dB per bearing): every point
     has its interval around the ratio, the verdict follows the criterion, and the report
