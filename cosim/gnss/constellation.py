@@ -64,21 +64,20 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ, ca_code_levels
+from dsp.gnss.ca_code import CHIP_RATE_HZ, ca_code_levels
 from dsp.gnss.ephemeris import C_LIGHT, WEEK_S, Ephemeris, KlobucharParameters, \
     UtcParameters, select_ephemeris
 from dsp.gnss.lnav import encode_frames
-from dsp.jit import njit_cached
 
+from ..core.validate import check_float
+from .constellation_kernels import CHIP_M, L1_WAVELENGTH_M, constellation_kernel, \
+    interpolate_ranges
 from .constellation_geometry import ClockRealisation, Cn0Model, ReceiverClock, \
     StaticReceiver, TrajectoryReceiver, atmosphere, check_motion, geometry
 from .files import BLOCK_SAMPLES, FORMATS, AdcMap, samples_per_ms, write_samples
 from .signal import CHIPS_PER_BIT, agc_step_sigma
 from .synthetic_file import adc_levels, noise_block
 
-#: L1 wavelength and C/A chip length (m).
-L1_WAVELENGTH_M = C_LIGHT / L1_HZ
-CHIP_M = C_LIGHT / CHIP_RATE_HZ
 #: Grid points per page of precomputed geometry.
 PAGE_POINTS = 1000
 #: Longest record (s): one ephemeris per satellite serves the whole record.
@@ -89,75 +88,6 @@ TRUTH_MARGIN_S = 0.5
 SCAN_S = 10.0
 STREAM_OSC = 3
 STREAM_BIT_ERRORS = 4
-
-
-@njit_cached(nogil=True)
-def hermite(s, s0, h, val, der):
-    """Cubic Hermite interpolation at ``s`` of grid values ``val`` and rates ``der`` on the
-    grid ``s0 + k h``."""
-    u = (s - s0) / h
-    k = min(max(np.int64(np.floor(u)), 0), val.shape[0] - 2)
-    x = u - k
-    x2 = x * x
-    x3 = x2 * x
-    return ((2.0 * x3 - 3.0 * x2 + 1.0) * val[k] + (x3 - 2.0 * x2 + x) * h * der[k]
-            + (3.0 * x2 - 2.0 * x3) * val[k + 1] + (x3 - x2) * h * der[k + 1])
-
-
-@njit_cached(nogil=True)
-def linear(s, s0, h, val):
-    """Linear interpolation at ``s`` of ``val`` on the grid ``s0 + k h``."""
-    u = (s - s0) / h
-    k = min(max(np.int64(np.floor(u)), 0), val.shape[0] - 2)
-    return val[k] + (u - k) * (val[k + 1] - val[k])
-
-
-@njit_cached(nogil=True)
-def interpolate_ranges(s, s0, h, gcode, dgcode, gphase, dgphase, c_step, cdt, out):
-    """``out[i] = (P, Phi)`` at receiver times ``s[i]`` as the kernel computes them."""
-    for i in range(s.shape[0]):
-        clk = linear(s[i], 0.0, c_step, cdt)
-        out[i, 0] = hermite(s[i], s0, h, gcode, dgcode) + clk
-        out[i, 1] = hermite(s[i], s0, h, gphase, dgphase) + clk
-
-
-@njit_cached(nogil=True)
-def constellation_kernel(n0, fs, f_ratio, sign, s0, h, gcode, dgcode, gphase, dgphase, amp,
-                         c_step, cdt, chi0, code, bits, out_re, out_im):
-    """Add one satellite (module notes) to samples ``n0 ..`` of ``out_re`` (and ``out_im``
-    when it is not empty: complex output)."""
-    cplx = out_im.shape[0] > 0
-    for i in range(out_re.shape[0]):
-        n = n0 + i
-        s = n / fs
-        a = linear(s, s0, h, amp)
-        if a == 0.0:
-            continue
-        clk = linear(s, 0.0, c_step, cdt)
-        p = hermite(s, s0, h, gcode, dgcode) + clk
-        ph = hermite(s, s0, h, gphase, dgphase) + clk
-        chi = chi0 + s * 1.023e6 - p / CHIP_M
-        ci = np.int64(np.floor(chi))
-        bi = np.int64(np.floor(chi / 20460.0))
-        if bi < 0 or bi >= bits.shape[0]:
-            raise ValueError("constellation_kernel: code phase outside the encoded LNAV bits")
-        v = a * code[ci % 1023] * bits[bi]
-        cyc = -ph / L1_WAVELENGTH_M
-        cyc -= np.floor(cyc)
-        f = n * f_ratio
-        arg = 2.0 * np.pi * ((f - np.floor(f)) + sign * cyc)
-        out_re[i] += v * np.cos(arg)
-        if cplx:
-            out_im[i] += v * np.sin(arg)
-
-
-def _check_number(name, v, lo=None, hi=None, lo_open=False):
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(v):
-        raise ValueError(f"{name} must be a finite number, not {v!r}")
-    if (lo is not None and (v <= lo if lo_open else v < lo)) or (hi is not None and v > hi):
-        raise ValueError(f"{name} must be in {'(' if lo_open else '['}{lo}, {hi}], not {v!r}")
-    return float(v)
 
 
 @dataclass(frozen=True)
@@ -228,16 +158,16 @@ class ConstellationConfig:
         if isinstance(self.week, bool) or not isinstance(self.week, (int, np.integer)) \
                 or self.week < 0:
             raise ValueError(f"week must be a GPS week number, not {self.week!r}")
-        _check_number("tow_s", self.tow_s, 0.0, WEEK_S)
+        check_float("tow_s", self.tow_s, 0.0, WEEK_S)
         if not isinstance(self.receiver, (StaticReceiver, TrajectoryReceiver)):
             raise ValueError(f"receiver must be a StaticReceiver or TrajectoryReceiver, not "
                              f"{type(self.receiver).__name__}")
         for name in ("complex_output", "nav_data", "noise", "inverted"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, not {getattr(self, name)!r}")
-        fs = _check_number("fs_hz", self.fs_hz, 0.0, None, lo_open=True)
+        fs = check_float("fs_hz", self.fs_hz, 0.0, None, lo_open=True)
         samples_per_ms(fs)
-        f_if = _check_number("if_hz", self.if_hz)
+        f_if = check_float("if_hz", self.if_hz)
         half = CHIP_RATE_HZ
         if self.complex_output and not (abs(f_if) + half < fs / 2):
             raise ValueError(f"if_hz {f_if:g} Hz: a complex stream must keep the C/A main lobe "
@@ -245,10 +175,10 @@ class ConstellationConfig:
         if not self.complex_output and not (half < f_if < fs / 2 - half):
             raise ValueError(f"if_hz {f_if:g} Hz: a real stream must keep the C/A main lobe "
                              f"(IF +- {half:g} Hz) inside (0, fs/2 = {fs / 2:g} Hz)")
-        _check_number("duration_s", self.duration_s, 0.0, MAX_DURATION_S, lo_open=True)
+        check_float("duration_s", self.duration_s, 0.0, MAX_DURATION_S, lo_open=True)
         if not isinstance(self.clock, ReceiverClock):
             raise ValueError("clock must be a ReceiverClock")
-        _check_number("mask_deg", self.mask_deg, 0.0, 89.999)
+        check_float("mask_deg", self.mask_deg, 0.0, 89.999)
         if not isinstance(self.cn0, Cn0Model):
             raise ValueError("cn0 must be a Cn0Model")
         for name in ("iono", "tropo"):
@@ -264,8 +194,8 @@ class ConstellationConfig:
                             or not 1 <= x <= 32 for x in p):
                 raise ValueError(f"prns must be GPS PRNs 1..32, not {self.prns!r}")
             object.__setattr__(self, "prns", tuple(sorted(set(int(x) for x in p))))
-        _check_number("grid_s", self.grid_s, 1e-5, 0.01)
-        _check_number("bit_error_rate", self.bit_error_rate, 0.0, 0.5)
+        check_float("grid_s", self.grid_s, 1e-5, 0.01)
+        check_float("bit_error_rate", self.bit_error_rate, 0.0, 0.5)
         if self.bit_error_rate > 0 and not self.nav_data:
             raise ValueError("bit_error_rate needs nav_data: without data there are no bits "
                              "to flip")

@@ -83,8 +83,8 @@ from dsp.jit import njit_cached
 
 from ..core.validate import check_float, check_int
 from .config import GnssRunConfig
-from .constellation import CHIP_M, L1_WAVELENGTH_M, PAGE_POINTS, ConstellationSignal, hermite, \
-    linear
+from .constellation import CHIP_M, L1_WAVELENGTH_M, PAGE_POINTS, ConstellationSignal
+from .constellation_kernels import linear, ranges_at
 from .fastpath import adc_efficiency, correlate_fast
 from .gps_receiver import GpsConfig, GpsEpoch, GpsRun, ReceiverTime, fix_epoch
 from .multichannel import TrackConfig
@@ -110,9 +110,8 @@ def _ranges_kernel(s, sat, q, page, s0, h, gcode, dgcode, gphase, dgphase, amp, 
         if q[i] != page:
             continue
         j = sat[i]
-        clk = linear(s[i], 0.0, c_step, cdt)
-        out[i, 0] = hermite(s[i], s0, h, gcode[j], dgcode[j]) + clk
-        out[i, 1] = hermite(s[i], s0, h, gphase[j], dgphase[j]) + clk
+        out[i, 0], out[i, 1] = ranges_at(s[i], s0, h, gcode[j], dgcode[j], gphase[j],
+                                         dgphase[j], c_step, cdt)
         out[i, 2] = linear(s[i], s0, h, amp[j])
 
 

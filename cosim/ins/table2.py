@@ -66,7 +66,8 @@ __all__ = ["Table2Config", "PAPER_TABLE2", "CLAIMS", "table2_signal", "ChannelAi
 
 LOOPS = ("unaided-kf", "aided-pll", "aided-kf")
 AXES = ("x", "y", "z", "vx", "vy", "vz")
-#: The paper's Table 2 (RECEIVERS.md section 2: units presumably m and m/s).
+#: The paper's Table 2 (its decimals restored; units not given, presumably m and m/s;
+#: docs/explanation/ins.md).
 PAPER_TABLE2 = {
     "mean": {"unaided-kf": (0.725, 3.806, 0.914, 0.068, -0.077, 0.003),
              "aided-pll": (0.701, 3.803, 0.931, 0.118, -0.066, 0.002),
