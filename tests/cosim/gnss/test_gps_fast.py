@@ -17,6 +17,7 @@ from cosim.gnss.gps_receiver import GpsConfig
 from cosim.gnss.gps_scenario import scenario_config
 from cosim.gnss.config import GnssRunConfig
 from cosim.gnss.fastpath import adc_efficiency
+from dsp.gnss.budget import betz_dll_sigma_chips
 from dsp.gnss.ca_code import CHIP_RATE_HZ
 from dsp.gnss.observables import transmit_time
 
@@ -92,8 +93,7 @@ def test_pseudorange_noise_matches_the_dll_theory(static):
     tr = sig.truth_at(np.array([1.0]))
     total = float(np.sum(10 ** (tr.cn0_dbhz[0] / 10)))
     cn0 = mai_cn0_dbhz(45.0, total) + 10 * math.log10(adc_efficiency(2))
-    c, d, T = 10 ** (cn0 / 10), spacing_for(sig.cfg.fs_hz), 1e-3
-    theory = 1.0 * d / (2 * c) * (1 + 2 / ((2 - d) * T * c)) * CHIP_M ** 2
+    theory = (betz_dll_sigma_chips(cn0, 1.0, spacing_for(sig.cfg.fs_hz), 1e-3) * CHIP_M) ** 2
     nu = effective_dof(e)
     ratio = np.mean(e ** 2) / theory
     assert chi2.ppf(0.001, nu) / nu <= ratio <= chi2.ppf(0.999, nu) / nu, (ratio, nu)
