@@ -129,17 +129,31 @@ def search_file(f: SampleFile, a, prns, **kw):
                       a.acq_pfa, a.max_doppler_hz, stages_of(a), **kw)
 
 
+#: ``status`` of a search that found no satellite: a result (exit 1), not bad input.
+NOT_FOUND = "no satellite found"
+
+
+def search_status(rep) -> str:
+    """``status`` of a recording's search for the JSON: ``found`` or :data:`NOT_FOUND`
+    (``gnss-acquire``, ``gnss-track`` and ``gps`` exit 1 on the latter)."""
+    return "found" if rep.detections else NOT_FOUND
+
+
 def run(a) -> int:
+    """``gnss-acquire``: exit 0 with a satellite found, 1 with none (a weak or absent
+    signal is a result), 2 for bad input (before any work)."""
     prns = check_search_options(a)
     check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
     stages_of(a)                        # the dwell options checked before the file opens
     f = open_file(a)
     t0 = time.time()
     rep = search_file(f, a, prns, min_rate_hz=a.min_rate_hz)
-    out = {"recording": f.describe(), **rep.as_dict(), "wall_s": round(time.time() - t0, 1)}
+    out = {"status": search_status(rep), "recording": f.describe(), **rep.as_dict(),
+           "wall_s": round(time.time() - t0, 1)}
+    rc = 0 if rep.detections else 1
     if a.json:
         print(dumps(out))
-        return 0
+        return rc
     d = f.describe()
     print(f"{d['file']}: {d['format']}, {d['fs_hz'] / 1e6:g} MS/s, IF {d['if_hz'] / 1e6:g} MHz"
           f"{', spectrum inverted' if f.inverted else ''}, ADC map {d['adc_map']}, "
@@ -161,4 +175,4 @@ def run(a) -> int:
                                                     if "cross_correlation_of" in r else
                                                     " (not re-detected)")
                              for r in rep.rejected) if rep.rejected else ""))
-    return 0
+    return rc

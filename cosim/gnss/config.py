@@ -9,7 +9,6 @@ tracking loop are :mod:`cosim.gnss.tracking`.
 """
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import dataclass, field
 
@@ -20,7 +19,8 @@ from ..core.validate import check_float, check_int, check_memory
 from .signal import GnssSignalConfig
 
 __all__ = ["GnssRunConfig", "DynamicsChoice", "BACKENDS", "DSP_MODES", "SCENARIOS", "DYNAMICS",
-           "WORD_BITS", "check_run_size", "run_memory_bytes"]
+           "WORD_BITS", "check_run_size", "run_memory_bytes", "JERK_DEFAULTS",
+           "CONTROL_LATENCY_CYCLES", "TRACKER_RUN_OPTIONS"]
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
 DSP_MODES = ("float", "fixed")
@@ -31,6 +31,19 @@ CYCLES_PER_S = {"pysim": 2e3, "verilator": 2e6}
 MAX_WALL_S = 3600.0
 #: NCO word width the trackers write (dsp.gnss.loops_fixed.WORD_BITS).
 WORD_BITS = 32
+
+
+#: The jerk segment of ``--dynamics aukf-patent-jerk`` when its options are not given.
+JERK_DEFAULTS = {"jerk_g_per_s": 5.0, "jerk_start_s": 2.0, "jerk_duration_s": 2.0}
+#: Cycles from the DSP issuing a register write to the register holding it, not given.
+CONTROL_LATENCY_CYCLES = 40
+#: The command-line flag of a field whose flag is not its kebab-case name.
+FLAGS = {"control_latency_cycles": "--latency", "acq_pfa": "--pfa",
+         "acq_coherent_ms": "--coherent-ms", "acq_noncoherent": "--noncoherent"}
+
+
+def _flag(name: str) -> str:
+    return FLAGS.get(name, "--" + name.replace("_", "-"))
 
 
 #: Named scenarios of ``python -m cosim gnss --scenario NAME``: the options each sets (an
@@ -62,28 +75,52 @@ class DynamicsChoice:
         AUKF patent's initial dynamics, 1000 m/s and 1 g, deterministic), ``aukf-patent-jerk`` (that
         plus a constant jerk segment), ``aukf-patent-process`` (the patent's Singer jerk process,
         q = 5).
-    jerk_g_per_s, jerk_start_s, jerk_duration_s : float
-        The jerk segment of ``aukf-patent-jerk``.
+    jerk_g_per_s, jerk_start_s, jerk_duration_s : float or None
+        The jerk segment of ``aukf-patent-jerk`` (None: :data:`JERK_DEFAULTS`); refused with
+        any other dynamics, which have no jerk segment.
     """
 
     dynamics: str = field(default="static", metadata={
         "help": "line-of-sight dynamics: static, aukf-patent (1000 m/s, 1 g), aukf-patent-jerk "
                 "(plus a jerk segment), aukf-patent-process (Singer jerk process, q 5); default static",
         "choices": DYNAMICS, "case": "lower"})
-    jerk_g_per_s: float = field(default=5.0, metadata={
-        "help": "jerk of the aukf-patent-jerk segment (g/s)"})
-    jerk_start_s: float = field(default=2.0, metadata={
-        "help": "start of the aukf-patent-jerk segment (s)"})
-    jerk_duration_s: float = field(default=2.0, metadata={
-        "help": "length of the aukf-patent-jerk segment (s)"})
+    jerk_g_per_s: float | None = field(default=None, metadata={
+        "help": "jerk of the aukf-patent-jerk segment (g/s; default 5)"})
+    jerk_start_s: float | None = field(default=None, metadata={
+        "help": "start of the aukf-patent-jerk segment (s from the record's first sample, "
+                "acquisition included; default 2)"})
+    jerk_duration_s: float | None = field(default=None, metadata={
+        "help": "length of the aukf-patent-jerk segment (s; default 2)"})
 
     def __post_init__(self):
         if self.dynamics not in DYNAMICS:
             raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, not "
                              f"{self.dynamics!r}")
-        check_float("jerk_g_per_s", self.jerk_g_per_s, unit="g/s")
-        check_float("jerk_start_s", self.jerk_start_s, 0.0, unit="s")
-        check_float("jerk_duration_s", self.jerk_duration_s, 0.0, lo_open=True, unit="s")
+        given = [k for k in JERK_DEFAULTS if getattr(self, k) is not None]
+        if given and self.dynamics != "aukf-patent-jerk":
+            raise ValueError(f"{', '.join(_flag(k) for k in given)} "
+                             f"{'sets' if len(given) == 1 else 'set'} the jerk segment of "
+                             f"--dynamics aukf-patent-jerk; --dynamics {self.dynamics} has "
+                             f"none (the option would change nothing)")
+        check_float("--jerk-g-per-s", self.jerk("jerk_g_per_s"), unit="g/s")
+        check_float("--jerk-start-s", self.jerk("jerk_start_s"), 0.0, unit="s")
+        check_float("--jerk-duration-s", self.jerk("jerk_duration_s"), 0.0, lo_open=True,
+                    unit="s")
+
+    def jerk(self, name: str) -> float:
+        """The jerk segment's ``name`` (given, or its :data:`JERK_DEFAULTS` value)."""
+        v = getattr(self, name)
+        return JERK_DEFAULTS[name] if v is None else v
+
+    def check_record(self, record_s: float) -> None:
+        """Refuse a jerk segment that starts after a record of ``record_s`` seconds ends
+        (the longest the run generates: the acquisition's span and the tracking)."""
+        if self.dynamics == "aukf-patent-jerk" and self.jerk("jerk_start_s") >= record_s:
+            given = "" if self.jerk_start_s is not None else " (its default)"
+            raise ValueError(f"--jerk-start-s {self.jerk('jerk_start_s'):g} s{given} starts "
+                             f"after the record ends ({record_s:g} s: --duration-s and the "
+                             f"acquisition): the jerk segment would change nothing; start it "
+                             f"earlier or lengthen --duration-s")
 
     def apply(self, sig: GnssSignalConfig) -> GnssSignalConfig:
         from .dynamics import aukf_patent_dynamics
@@ -93,9 +130,9 @@ class DynamicsChoice:
             return sig.replace(dynamics=aukf_patent_dynamics(q=0))
         if self.dynamics == "aukf-patent-process":
             return sig.replace(dynamics=aukf_patent_dynamics(q=5.0))
-        return sig.replace(dynamics=aukf_patent_dynamics(q=0, jerk_g_per_s=self.jerk_g_per_s,
-                                                         jerk_start_s=self.jerk_start_s,
-                                                         jerk_duration_s=self.jerk_duration_s))
+        return sig.replace(dynamics=aukf_patent_dynamics(
+            q=0, jerk_g_per_s=self.jerk("jerk_g_per_s"), jerk_start_s=self.jerk("jerk_start_s"),
+            jerk_duration_s=self.jerk("jerk_duration_s")))
 
 
 @dataclass(frozen=True)
@@ -107,14 +144,18 @@ class GnssRunConfig:
     ----------
     tracker : str
         A tracker registered in :mod:`dsp.gnss.trackers`.
-    bn_hz, dll_bn_hz : float
-        Carrier and code loop noise bandwidths (Hz), for trackers that take them.
+    bn_hz, dll_bn_hz, r_mode : float, float, str or None
+        Carrier and code loop noise bandwidths (Hz) and the measurement noise of the AUKF
+        patent's trackers, for the trackers that take them
+        (:func:`dsp.gnss.trackers.tracker_options`; given to another tracker: refused);
+        None: the tracker's own default.
     backend : str
         One of :data:`BACKENDS`.
     dsp : str
         ``float`` or ``fixed`` arithmetic of the tracker.
-    control_latency_cycles : int
-        Cycles from the DSP issuing a register write to the register holding it.
+    control_latency_cycles : int or None
+        Cycles from the DSP issuing a register write to the register holding it (HDL
+        backends; None: :data:`CONTROL_LATENCY_CYCLES`; refused on ``golden``).
     compute_cycles : int
         Cycles from the end of the DSP's read window to its writes.
     service_period_us : float
@@ -138,7 +179,8 @@ class GnssRunConfig:
         coherent lengths of the detecting dwell, up to 200 ms:
         :func:`cosim.gnss.handover.refine_length_ms`).
     compare : str or None
-        ``golden``: also run the golden chain (float) and report the differences.
+        ``golden``: also run the golden chain (float) and report the differences (not on
+        ``backend="golden"``, which is that chain).
     hdl_changes : tuple of (name, value)
         Overrides of :class:`hdl.gnss.params.GnssChannelParams`.
     block_samples : int
@@ -148,16 +190,19 @@ class GnssRunConfig:
     tracker: str = field(default="pll3", metadata={
         "help": "tracker (dsp.gnss.trackers): " + ", ".join(tracker_names()),
         "choices": tracker_names(), "case": "lower"})
-    bn_hz: float = field(default=15.0, metadata={"help": "carrier loop noise bandwidth (Hz)"})
-    dll_bn_hz: float = field(default=1.0, metadata={"help": "code loop noise bandwidth (Hz)"})
+    bn_hz: float | None = field(default=None, metadata={
+        "help": "carrier loop noise bandwidth (Hz) of the PLL trackers (default 15)"})
+    dll_bn_hz: float | None = field(default=None, metadata={
+        "help": "code loop noise bandwidth (Hz; default 1)"})
     backend: str = field(default="model", metadata={
         "help": "channel: golden (float correlators, no HDL), model (bit-exact), pysim "
                 "(Amaranth, ~2k cycles/s: a few ms), verilator",
         "choices": BACKENDS, "case": "lower"})
     dsp: str = field(default="fixed", metadata={"help": "arithmetic of the tracker",
                                                 "choices": DSP_MODES, "case": "lower"})
-    control_latency_cycles: int = field(default=40, metadata={
-        "help": "cycles from the DSP issuing a register write to the register holding it"})
+    control_latency_cycles: int | None = field(default=None, metadata={
+        "help": "cycles from the DSP issuing a register write to the register holding it "
+                f"(HDL backends; default {CONTROL_LATENCY_CYCLES})"})
     compute_cycles: int = field(default=200, metadata={
         "help": "DSP processing cycles from its read window to its writes"})
     service_period_us: float = field(default=500.0, metadata={
@@ -187,9 +232,9 @@ class GnssRunConfig:
         "help": "shortest Doppler / code-phase refinement after the detection (ms)"})
     handover_doppler_sigma_hz: float = field(default=3.0, metadata={
         "help": "1-sigma error of the refined hand-over Doppler told to the tracker (Hz)"})
-    r_mode: str = field(default="cn0", metadata={
+    r_mode: str | None = field(default=None, metadata={
         "help": "measurement noise R of the AUKF patent's trackers (aukf, ukf): cn0 = 1/(2 T C/N0) "
-                "of the nominal C/N0, seed = the patent's 1e-9",
+                "of the nominal C/N0 (default), seed = the patent's 1e-9",
         "choices": ("cn0", "seed"), "case": "lower"})
     handover_doppler_rate_hz_s: float = field(default=0.0, metadata={
         "help": "Doppler rate the tracker starts on (Hz/s; acquisition does not measure it; "
@@ -209,18 +254,16 @@ class GnssRunConfig:
                              f"{self.backend!r}")
         if self.dsp not in DSP_MODES:
             raise ValueError(f"dsp must be float or fixed, not {self.dsp!r}")
-        if self.r_mode not in ("cn0", "seed"):
-            raise ValueError(f"r_mode must be cn0 or seed, not {self.r_mode!r}")
-        if self.r_mode != "cn0":
-            from dsp.gnss.trackers import TRACKERS
-            if "r_mode" not in inspect.signature(TRACKERS[self.tracker][0]).parameters:
-                raise ValueError(f"r_mode {self.r_mode} applies to the AUKF patent's trackers "
-                                 f"(aukf, ukf), not {self.tracker}")
+        if self.r_mode not in (None, "cn0", "seed"):
+            raise ValueError(f"--r-mode must be cn0 or seed, not {self.r_mode!r}")
         if self.compare not in (None, "golden"):
             raise ValueError(f"compare must be None or 'golden', not {self.compare!r}")
-        check_float("bn_hz", self.bn_hz, 0.0, 100.0, lo_open=True, unit="Hz")
-        check_float("dll_bn_hz", self.dll_bn_hz, 0.0, 20.0, lo_open=True, unit="Hz")
-        check_int("control_latency_cycles", self.control_latency_cycles, 0)
+        if self.bn_hz is not None:
+            check_float("--bn-hz", self.bn_hz, 0.0, 100.0, lo_open=True, unit="Hz")
+        if self.dll_bn_hz is not None:
+            check_float("--dll-bn-hz", self.dll_bn_hz, 0.0, 20.0, lo_open=True, unit="Hz")
+        self.check_applies()
+        check_int("--latency", self.latency_cycles, 0)
         check_int("compute_cycles", self.compute_cycles, 0)
         check_float("service_period_us", self.service_period_us, 0.0, 900.0, lo_open=True,
                     unit="us")
@@ -240,6 +283,69 @@ class GnssRunConfig:
         for kv in self.hdl_changes:
             if not (isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)):
                 raise ValueError(f"hdl_changes are (name, value) pairs, not {kv!r}")
+
+    def check_applies(self) -> None:
+        """Refuse an option given for a run it cannot change (the one rule set of what
+        applies where): a tracker option the tracker does not take
+        (:func:`dsp.gnss.trackers.tracker_options`), the control latency on the golden
+        chain (no register bus), the golden comparison of the golden chain itself."""
+        from dsp.gnss.trackers import tracker_names as names, tracker_options
+        takes = tracker_options(self.tracker)
+        for k in TRACKER_RUN_OPTIONS:
+            if getattr(self, k) is not None and k not in takes:
+                who = [t for t in names() if k in tracker_options(t)]
+                raise ValueError(f"{_flag(k)} applies to the trackers {', '.join(who)}; "
+                                 f"--tracker {self.tracker} has no such setting (the option "
+                                 f"would change nothing)")
+        if self.backend == "golden" and self.control_latency_cycles is not None:
+            raise ValueError("--latency is the HDL channel's register-write latency; "
+                             "--backend golden has no register bus (the option would change "
+                             "nothing): use --backend model, pysim or verilator")
+        if self.backend == "golden" and self.compare == "golden":
+            raise ValueError("--compare golden compares the channel with the golden chain; "
+                             "--backend golden is that chain (it would compare it with "
+                             "itself): use --backend model, pysim or verilator")
+
+    @property
+    def latency_cycles(self) -> int:
+        """The control latency in force (:data:`CONTROL_LATENCY_CYCLES` if not given)."""
+        return CONTROL_LATENCY_CYCLES if self.control_latency_cycles is None \
+            else self.control_latency_cycles
+
+    def tracker_kwargs(self) -> dict:
+        """The run's options the tracker takes (``bn_hz``, ``dll_bn_hz``, ``r_mode``), those
+        given; the tracker's own defaults for the rest."""
+        return {k: getattr(self, k) for k in TRACKER_RUN_OPTIONS if getattr(self, k) is not None}
+
+    def tracker_setting(self, name: str):
+        """The value of tracker option ``name`` in force (given or the tracker's default),
+        None if the tracker has no such setting (the JSON's ``bn_hz`` of an AUKF)."""
+        from dsp.gnss.trackers import tracker_options
+        takes = tracker_options(self.tracker)
+        if name not in takes:
+            return None
+        v = getattr(self, name)
+        return takes[name] if v is None else v
+
+    def check_loop_timing(self, fs_hz: float) -> None:
+        """Refuse an HDL run whose DSP loop cannot answer a record before the channel's next
+        dump: the trackers close the loop with one epoch of latency
+        (``TrackerContext.latency_epochs = 1``), so the worst case (a record dumped just
+        after a service: the service period, its interrupt latency, reading a batch, the
+        compute and the control latency) must stay under one code period."""
+        if self.backend == "golden":
+            return
+        svc = self.service(fs_hz)
+        rest = (svc.period_cycles + svc.latency_cycles + svc.cycles_per_word * svc.batch_words
+                + self.compute_cycles)
+        epoch = int(round(fs_hz * CODE_PERIOD_S))
+        if rest + self.latency_cycles >= epoch:
+            raise ValueError(f"--latency {self.latency_cycles} cycles: the DSP's writes would "
+                             f"reach the channel up to {rest + self.latency_cycles:,} cycles "
+                             f"after a record's dump, later than the next dump ({epoch:,} "
+                             f"cycles, one code period at {fs_hz / 1e6:g} MS/s) the trackers' "
+                             f"one-epoch loop needs them by: at most {max(0, epoch - 1 - rest)} "
+                             f"cycles here")
 
     def acq_schedule(self) -> tuple:
         """The acquisition's dwells (:mod:`dsp.gnss.dwell`) within ``acq_limit_ms``
@@ -276,6 +382,10 @@ class GnssRunConfig:
                              f"and code_phase_bits must be {WORD_BITS}, not "
                              f"{p.carr_phase_bits} and {p.code_phase_bits}")
         return p
+
+
+#: The run options a tracker may take (:func:`dsp.gnss.trackers.tracker_options`).
+TRACKER_RUN_OPTIONS = ("bn_hz", "dll_bn_hz", "r_mode")
 
 
 #: Memory of a run (bytes), as :func:`run_memory_bytes` adds it up: the process itself

@@ -60,7 +60,7 @@ def gps_fix(out: Path, quick: bool = False, duration_s: float | None = None,
                         "start": "hot" if hot else "cold", "constellation": "nominal",
                         "receiver": "static, 52 N 4.4 E 30 m",
                         "channel": "bit-exact array model, 12 channels, fixed-point pll3 "
-                                   f"(Bn {a.bn_hz:g} Hz) + carrier-aided DLL",
+                                   f"(Bn {loops.bn_hz:g} Hz) + carrier-aided DLL",
                         "acquired": summary["acquired"]},
            "wall_s": summary["wall_s"], **fix_budget(run, scenario, loops)}
     out = Path(out)

@@ -64,8 +64,9 @@ def loops_of(a, p) -> TrackingLoops:
     if a.tracker not in ("pll2", "pll3"):
         raise ValueError(f"--tracker {a.tracker}: the budget covers the PLL trackers "
                          f"(pll2, pll3)")
-    return TrackingLoops(order=int(a.tracker[-1]), bn_hz=a.bn_hz,
-                         dll_bn_hz=GnssRunConfig().dll_bn_hz,
+    run = GnssRunConfig(tracker=a.tracker, bn_hz=a.bn_hz)
+    return TrackingLoops(order=int(a.tracker[-1]), bn_hz=run.tracker_setting("bn_hz"),
+                         dll_bn_hz=run.tracker_setting("dll_bn_hz"),
                          spacing_chips=p.el_spacing_samples * CHIP_RATE_HZ / p.fs_hz,
                          T_s=1e-3, latency=1)
 

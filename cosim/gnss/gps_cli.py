@@ -41,7 +41,7 @@ import numpy as np
 
 from ..core.validate import check_float, check_out_dir, dumps
 from .acquire_cli import add_file_options, add_search_options, check_search_options, \
-    open_file, search_file
+    open_file, search_file, search_status
 
 __all__ = ["add_parser", "run", "process", "DEFAULT_OUT"]
 
@@ -96,7 +96,8 @@ def add_parser(sub, make_parser) -> None:
                    help="the DSP tracker of every channel")
     p.add_argument("--dsp", type=str.lower, default="fixed", choices=("fixed", "float"),
                    help="arithmetic of the trackers")
-    p.add_argument("--bn-hz", type=float, default=15.0, help="carrier loop noise bandwidth")
+    p.add_argument("--bn-hz", type=float, default=None,
+                   help="carrier loop noise bandwidth of the PLL trackers (Hz; default 15)")
     p.add_argument("--backend", type=str.lower, default="model",
                    choices=("model", "pysim", "verilator"), help="the channel array")
     p.add_argument("--parallel", action="store_true",
@@ -234,6 +235,7 @@ def process(a):
     s = write_outputs(g, out, truth, plots=not a.no_plots, jump_bound_m=bound)
     s["recording"] = f.describe()
     s["acquired"] = [c.prn for c in cands]
+    s["status"] = search_status(rep)
     s["wall_s"] = round(time.time() - t_wall, 2)
     return g, s, sc
 

@@ -456,7 +456,7 @@ def run_fast(cfg, *, run: GnssRunConfig = GnssRunConfig(), gps: GpsConfig = GpsC
     return FastGpsRun(prns, t_m, ser, truth, runs, trials, float(dur),
                       time.perf_counter() - t_wall, track_wall,
                       {"chi0": sig.chi0, "frame_tow": sig.frame_tow, "tracker": run.tracker,
-                       "dsp": run.dsp, "bn_hz": run.bn_hz, "dll_bn_hz": run.dll_bn_hz,
+                       "dsp": run.dsp, "bn_hz": run.tracker_setting("bn_hz"), "dll_bn_hz": run.tracker_setting("dll_bn_hz"),
                        "adc_bits": adc_bits, "eta": eta, "spacing_chips": spacing,
                        "seed": seed, "rate_hz": gps.rate_hz, "mai": mai,
                        "doppler_instant": doppler_instant}, groups)

@@ -42,6 +42,7 @@ from .config import GnssRunConfig
 from .signal import GnssSignalConfig, GnssSignalGenerator
 
 __all__ = ["handover_writes", "Satellite", "array_handover_writes", "RecordFrom", "acquire_handover",
+           "AcquisitionFailed",
            "acquired_record", "acquisition_span_ms",
            "refine_length_ms", "REFINE_COHERENT", "REFINE_MAX_MS"]
 
@@ -99,12 +100,23 @@ class RecordFrom:
         return r
 
 
+class AcquisitionFailed(ValueError):
+    """The search did not find the PRN within ``--acq-limit-ms``: a result of the run (the
+    signal is too weak for the search), not bad input. ``acquisition`` holds the search's
+    record for the JSON; the commands report it with exit 1 (a ValueError for callers
+    that treat any refusal alike)."""
+
+    def __init__(self, message: str, acquisition: dict):
+        super().__init__(message)
+        self.acquisition = acquisition
+
+
 def acquire_handover(gen, run: GnssRunConfig) -> tuple[dict, dict]:
     """Acquire the signal of ``gen`` from its first sample, refine, hand over (module
     docstring). Returns the acquisition's record for the JSON and the hand-over
     (``doppler_hz``, ``code_phase_chips`` at sample ``n_start``, and ``n_start``).
-    ValueError if the record is shorter than the search needs or the PRN is not detected
-    within the limit."""
+    ValueError if the record is shorter than the search needs; :class:`AcquisitionFailed`
+    if the PRN is not detected within the limit."""
     from dsp.gnss.dwell import Baseband, refine, sequential_search
     sig = gen.cfg
     N = int(round(sig.fs_hz * CODE_PERIOD_S))
@@ -130,11 +142,11 @@ def acquire_handover(gen, run: GnssRunConfig) -> tuple[dict, dict]:
            "code_phase_dwell_chips": r.code_phase_chips,
            "code_phase_dwell_true_chips": float(truth["code_phase_chips"][0])}
     if not r.detected:
-        raise ValueError(
+        raise AcquisitionFailed(
             f"acquisition did not find PRN {sig.prn} within {r.t_detect_ms} ms of signal "
             f"(last look {r.dwell} at {r.noncoherent} sums: peak / threshold "
             f"{r.metric:.2f}, pfa {run.acq_pfa:g} per search): C/N0 too low for this "
-            f"search; a longer --acq-limit-ms lets the dwell extend further")
+            f"search; a longer --acq-limit-ms lets the dwell extend further", out)
     R = refine_length_ms(run, r.coherent_ms)
     k = r.t_detect_ms                                  # the refinement's first ms
     cp = (r.code_phase_chips + r.doppler_hz / CARRIER_PER_CHIP

@@ -363,7 +363,7 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
         bar = tqdm(total=n, unit="S", unit_scale=True, desc="gnss-track", leave=False)
     with open_gnss_array(run.backend, p, cfg.channels, cfg.parallel) as fe:
         pipe = Pipeline(fe, svc, dsp, compute_cycles=run.compute_cycles,
-                        control_latency_cycles=run.control_latency_cycles,
+                        control_latency_cycles=run.latency_cycles,
                         keep_words=keep_words)
         init = []
         for ch, c in enumerate(cands[:cfg.channels]):

@@ -12,7 +12,7 @@ from .study import SWEEP_MODEL
 from .acq_options import ACQ_OPTIONS
 from .config import SCENARIOS, DynamicsChoice, GnssRunConfig
 from .run import run_gnss
-from .signal import GnssSignalConfig
+from .signal import GnssSignalConfig, check_cn0
 
 _SIG, _DYN, _RUN = GnssSignalConfig, DynamicsChoice, GnssRunConfig
 
@@ -46,12 +46,16 @@ def build_configs(a) -> tuple[GnssSignalConfig, GnssRunConfig]:
         for k, v in SCENARIOS[a.scenario]["options"].items():
             if getattr(a, k) is None:
                 setattr(a, k, v)
+    from .handover import acquisition_span_ms
     sig = _SIG(**config_kwargs(a, OPTIONS, _SIG))
-    sig = _DYN(**config_kwargs(a, OPTIONS, _DYN)).apply(sig)
+    dyn = _DYN(**config_kwargs(a, OPTIONS, _DYN))
     run = config_kwargs(a, OPTIONS, _RUN)
     if getattr(a, "scenario", None):
         run = {**SCENARIOS[a.scenario].get("run", {}), **run}
-    return sig, _RUN(**run)
+    run = _RUN(**run)
+    dyn.check_record(sig.duration_s + acquisition_span_ms(run) * 1e-3)
+    run.check_loop_timing(sig.fs_hz)
+    return dyn.apply(sig), run
 
 
 # -- sweep gnss: the AUKF core's word lengths (cosim/gnss/study.py) --------------------------
@@ -59,8 +63,8 @@ _SW = SweepConfig
 
 SWEEP_OPTIONS = (
     Arg("--param", action="append", default=[], metavar="NAME=VALUES",
-        help="swept width of an AUKF core format, e.g. dsp.P=28:48:4, dsp.gain=16:32:4 "
-             "(repeatable; default dsp.P=28:48:4)"),
+        help="swept width of an AUKF core format, e.g. dsp.P=32:48:4, dsp.gain=16:32:4 "
+             "(repeatable; default dsp.P=32:48:4)"),
     Arg("--cn0-dbhz", default=None, help="C/N0 values (dB-Hz; a:b:step or a list; default 32)"),
     Option(_SW, "design", choices=("grid", "oat"), case="lower",
            help="grid: every combination; oat: one parameter at a time (the others at their "
@@ -87,6 +91,8 @@ def cmd_sweep(a) -> int:
     cn0 = (32.0,) if a.cn0_dbhz is None else parse_values(a.cn0_dbhz, "--cn0-dbhz")
     if not all(isinstance(v, (int, float)) for v in cn0):
         raise ValueError(f"--cn0-dbhz takes numbers (dB-Hz), not {a.cn0_dbhz!r}")
+    for v in cn0:
+        check_cn0("--cn0-dbhz", v)
     check_out_dir(a.out, "--out")
     cfg = SweepConfig(receiver="gnss", params=params, snr_db=tuple(float(v) for v in cn0),
                       recheck=0, **config_kwargs(a, SWEEP_OPTIONS, SweepConfig))
@@ -106,18 +112,35 @@ def cmd_sweep(a) -> int:
     return 0
 
 
+def not_acquired(e, head: dict, as_json: bool) -> int:
+    """A run whose acquisition found nothing (:class:`~cosim.gnss.handover.AcquisitionFailed`):
+    a result, ``status`` ``"not acquired"`` with the search's record, exit 1 (``gnss``,
+    ``ins``)."""
+    r = {**head, "status": "not acquired", "acquired": e.acquisition, "message": str(e)}
+    print(dumps(r) if as_json else f"not acquired: {e}")
+    return 1
+
+
 def cmd_gnss(a) -> int:
+    from .handover import AcquisitionFailed
     sig, run = build_configs(a)
-    r = run_gnss(sig, run)
+    try:
+        r = run_gnss(sig, run)
+    except AcquisitionFailed as e:
+        return not_acquired(e, {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz,
+                                "duration_s": sig.duration_s, "tracker": run.tracker,
+                                "backend": run.backend, "dsp": run.dsp}, a.json)
     r.pop("_series", None)
+    r = {"status": "tracked", **r}
     if a.scenario:
         r["scenario"] = {"name": a.scenario, **SCENARIOS[a.scenario]}
     if a.json:
         print(dumps(r))
         return 0
     acq = r["acquired"]
+    bn = "" if r["bn_hz"] is None else f" (Bn {r['bn_hz']:g} Hz)"
     print(f"PRN {r['prn']}  C/N0 {r['cn0_dbhz']} dB-Hz  {r['duration_s']:g} s  tracker "
-          f"{r['tracker']} (Bn {r['bn_hz']:g} Hz)  backend {r['backend']}  dsp {r['dsp']}")
+          f"{r['tracker']}{bn}  backend {r['backend']}  dsp {r['dsp']}")
     print(f"acquired by the {acq['search']} search ({acq['dwell']}, at {acq['noncoherent']} "
           f"sums) after {1e3 * acq['t_detect_s']:.0f} ms of signal, pfa {acq['pfa']:g}; "
           f"tracking from {1e3 * acq['t_start_s']:.0f} ms: Doppler "

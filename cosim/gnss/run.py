@@ -168,6 +168,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     sig, run = signal_cfg, run_cfg
     p = run.hdl_params(sig)
     run.service(sig.fs_hz)      # DspServiceConfig's own checks (window inside the period)
+    run.check_loop_timing(sig.fs_hz)
     check_run_size(sig, run)
     from dsp.gnss.trackers import needs_aiding
     if needs_aiding(run.tracker) and tracker_setup is None:
@@ -180,7 +181,7 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     acq, hand, gen = acquired_record(sig, run)      # gen: the record from tracking's start
     extra = None if tracker_setup is None else tracker_setup(gen, p, hand, run.backend)
     result = {"prn": sig.prn, "cn0_dbhz": sig.cn0_dbhz, "duration_s": sig.duration_s,
-              "tracker": run.tracker, "bn_hz": run.bn_hz, "backend": run.backend,
+              "tracker": run.tracker, "bn_hz": run.tracker_setting("bn_hz"), "backend": run.backend,
               "dsp": run.dsp, "acquired": acq}
     tr = track_record(gen, run, hand, extra, keep_words=keep_words)
     track, n_b, pres = tr.track, tr.boundaries, tr.pipeline

@@ -3,7 +3,7 @@ the fixed-point AUKF core (:class:`dsp.gnss.aukf_master.AukfFormats`) swept on t
 correlation-domain fast path, each point paired with the float64 (golden) AUKF on the same
 truth and the same correlator noise.
 
-``python -m cosim sweep gnss --param dsp.P=28:48:4 --param dsp.gain=16:32:4 --design oat``
+``python -m cosim sweep gnss --param dsp.P=32:48:4 --param dsp.gain=16:32:4 --design oat``
 
 Parameters (``--param NAME=VALUES``)
 -----------------------------------
@@ -83,8 +83,7 @@ def _truth_and_ctx(cfg, cn0_dbhz: float, trial: int):
     return truth, ctx, seed
 
 
-def check_point(cfg, combo: tuple) -> None:
-    """Build the point's formats and the tracker (its range checks: "formats too narrow")."""
+def _build(cfg, combo: tuple) -> None:
     from dsp.gnss.trackers import TrackerContext, make_tracker
     from dsp.gnss.aukf import PATENT_X0
     fm = formats_of(combo)
@@ -92,6 +91,25 @@ def check_point(cfg, combo: tuple) -> None:
                          doppler_rate0_hz_s=np.array([PATENT_X0[2] / (2 * np.pi)]),
                          cn0_dbhz=float(cfg.snr_db[0]))
     make_tracker("aukf", ctx, fm)
+
+
+def check_point(cfg, combo: tuple) -> None:
+    """Build the point's formats and the tracker (its range checks: "formats too narrow");
+    a refused point's message names the smallest width of a swept format that the core
+    accepts with the point's other values (the same checks, tried upwards)."""
+    try:
+        _build(cfg, combo)
+    except ValueError as e:
+        for i, (name, v) in enumerate(combo):
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool):
+                continue
+            for w in range(int(v) + 1, 63):
+                try:
+                    _build(cfg, combo[:i] + ((name, w),) + combo[i + 1:])
+                except ValueError:
+                    continue
+                raise ValueError(f"{e}; the smallest {name} that passes is {w}") from None
+        raise
 
 
 class GnssSweepRecord:
@@ -131,7 +149,7 @@ class GnssSweepRecord:
 
 #: What :mod:`cosim.studies.sweep` needs of the GNSS AUKF core (``sweep gnss``).
 SWEEP_MODEL = SweepModel(check_param=check_param, check_point=check_point, record=GnssSweepRecord,
-                         confirm_recheck=None, default_params=(("dsp.P", (28, 32, 36, 40, 44, 48)),),
+                         confirm_recheck=None, default_params=(("dsp.P", (32, 36, 40, 44, 48)),),
                          cpu_s_per_record_s=0.5, title="GNSS AUKF core word-length sweep",
                          description="Path: jerk truth (the AUKF patent's model, q = q0 = 5), correlation-domain "
                                      "fast path, fixed-point AUKF core (AukfFormats, word-length "

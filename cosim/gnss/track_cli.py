@@ -43,7 +43,8 @@ def add_parser(sub, make_parser) -> None:
                    help="the DSP tracker of every channel (dsp.gnss.trackers)")
     p.add_argument("--dsp", type=str.lower, default="fixed", choices=("fixed", "float"),
                    help="arithmetic of the trackers")
-    p.add_argument("--bn-hz", type=float, default=15.0, help="carrier loop noise bandwidth")
+    p.add_argument("--bn-hz", type=float, default=None,
+                   help="carrier loop noise bandwidth of the PLL trackers (Hz; default 15)")
     p.add_argument("--backend", type=str.lower, default="model", choices=ARRAY_BACKENDS,
                    help="the array: model (bit-exact), verilator, pysim (slow: ms only)")
     p.add_argument("--duration-s", type=float, default=None,
@@ -66,6 +67,7 @@ def run(a) -> int:
     from .config import GnssRunConfig
     from .multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from .multichannel_session import check_parallel
+    from .acquire_cli import NOT_FOUND
     from .track_report import summarise, table, write_plots
     prns = check_search_options(a, tracker=a.tracker)
     cfg = TrackConfig(channels=a.channels, pull_in_ms=a.pull_in_ms, pfa=a.acq_pfa,
@@ -89,10 +91,10 @@ def run(a) -> int:
     rep = search_file(f, a, prns)
     cands = [Candidate.of(d) for d in rep.detections]
     if not cands:
-        out = {"recording": f.describe(), "acquisition": rep.as_dict(), "assignments": [],
-               "tracked": []}
-        print(dumps(out) if a.json else "no satellite found: nothing to track")
-        return 0
+        out = {"status": NOT_FOUND, "recording": f.describe(), "acquisition": rep.as_dict(),
+               "assignments": [], "tracked": []}
+        print(dumps(out) if a.json else f"{NOT_FOUND}: nothing to track")
+        return 1
     m = track_file(f, cands, run_cfg, cfg, n_samples=n,
                    progress=not a.json and sys.stderr.isatty())
     s = summarise(m, f.describe(), {"detections": [d.as_dict() for d in rep.detections],

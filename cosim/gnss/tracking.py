@@ -30,7 +30,6 @@ The HDL takes the ADC's two's-complement word ``q`` (the signal's odd codes ``2 
 from __future__ import annotations
 
 import hashlib
-import inspect
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,15 +50,14 @@ SKIP_RECORDS = 2
 def _make_tracker(run: GnssRunConfig, fs_hz, if_hz, inverted, cn0_dbhz, doppler_hz: float,
                   spacing_chips: float, arith_name: str, extra: tuple | None = None):
     from dsp.gnss.loops_fixed import FLOAT, FixedArith
-    from dsp.gnss.trackers import TrackerContext, TRACKERS, make_tracker
+    from dsp.gnss.trackers import TrackerContext, make_tracker
     ctx = TrackerContext(fs_hz=fs_hz, T_s=CODE_PERIOD_S, if_hz=if_hz,
                          inverted=inverted, doppler0_hz=doppler_hz,
                          doppler_rate0_hz_s=run.handover_doppler_rate_hz_s, cn0_dbhz=cn0_dbhz,
                          spacing_chips=spacing_chips, latency_epochs=1,
                          doppler0_sigma_hz=run.handover_doppler_sigma_hz)
     arith = FixedArith() if arith_name == "fixed" else FLOAT
-    params = inspect.signature(TRACKERS[run.tracker][0]).parameters
-    opts = {k: getattr(run, k) for k in ("bn_hz", "dll_bn_hz", "r_mode") if k in params}
+    opts = run.tracker_kwargs()
     if extra is not None:       # (TrackerContext changes, tracker options) of the caller
         ctx = replace(ctx, **extra[0])
         opts.update(extra[1])
@@ -194,7 +192,7 @@ def closed_loop(backend: str, p, run: GnssRunConfig, blocks, doppler_hz: float,
     svc = run.service(p.fs_hz)
     with open_gnss(backend, p) as fe:
         pipe = Pipeline(fe, svc, dsp, compute_cycles=run.compute_cycles,
-                        control_latency_cycles=run.control_latency_cycles,
+                        control_latency_cycles=run.latency_cycles,
                         keep_words=keep_words)
         pipe.schedule(handover_writes(p, doppler_hz, code_phase_chips, inverted))
         for x in blocks:

@@ -33,9 +33,17 @@ def build_configs(a) -> tuple[InsRunConfig, GnssRunConfig]:
 
 
 def cmd_ins(a) -> int:
+    from ..gnss.handover import AcquisitionFailed
+    from ..gnss.receiver import not_acquired
     ins, run = build_configs(a)
-    r = run_ins(ins, run)
+    try:
+        r = run_ins(ins, run)
+    except AcquisitionFailed as e:
+        return not_acquired(e, {"loop": ins.loop, "cn0_dbhz": ins.cn0_dbhz,
+                                "duration_s": ins.duration_s, "backend": run.backend,
+                                "dsp": run.dsp}, a.json)
     r.pop("_series", None)
+    r = {"status": "tracked", **r}
     if a.json:
         print(dumps(r))
         return 0

@@ -40,9 +40,13 @@ from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S
 
 from ..core.validate import check_float, check_int
 from .study import CHIP_M, LOOPS
+from cosim.gnss.signal import check_cn0
+
 from .trajectory import L1_WAVELENGTH_M, Geometry, Scenario, PaperTrajectory
 
 OSCILLATORS = ("tcxo", "ocxo")
+#: The fields that shape the built-in profile (not a CSV's).
+PROFILE_FIELDS = ("start_s", "jerk_g_s", "accel_g", "v_max_mps")
 
 
 @dataclass(frozen=True)
@@ -62,8 +66,9 @@ class InsRunConfig:
         Record length (s); the paper's trajectory is 150 s.
     seed : int
         Noise, oscillator and INS sensor noise.
-    start_s, jerk_g_s, accel_g, v_max_mps : float
-        The trajectory (:class:`cosim.ins.trajectory.PaperTrajectory`).
+    start_s, jerk_g_s, accel_g, v_max_mps : float or None
+        The profile (:class:`cosim.ins.trajectory.PaperTrajectory`; None: its defaults);
+        refused with ``trajectory_csv``, which replaces the profile.
     trajectory_csv : str or None
         A CSV of (time s, along-track distance m) instead of the profile.
     pli_epochs : int
@@ -82,10 +87,14 @@ class InsRunConfig:
     duration_s: float = field(default=150.0, metadata={
         "help": "record length (s; the INS paper's trajectory is 150 s)"})
     seed: int = field(default=1, metadata={"help": "random seed (>= 0): noise, clock, INS"})
-    start_s: float = field(default=5.0, metadata={"help": "start of the first jerk ramp (s)"})
-    jerk_g_s: float = field(default=5.0, metadata={"help": "jerk of the ramps (g/s)"})
-    accel_g: float = field(default=50.0, metadata={"help": "peak acceleration (g)"})
-    v_max_mps: float = field(default=8300.0, metadata={"help": "cruise speed (m/s)"})
+    start_s: float | None = field(default=None, metadata={
+        "help": "start of the profile's first jerk ramp (s; default 5)"})
+    jerk_g_s: float | None = field(default=None, metadata={
+        "help": "jerk of the profile's ramps (g/s; default 5)"})
+    accel_g: float | None = field(default=None, metadata={
+        "help": "peak acceleration of the profile (g; default 50)"})
+    v_max_mps: float | None = field(default=None, metadata={
+        "help": "cruise speed of the profile (m/s; default 8300)"})
     trajectory_csv: str | None = field(default=None, metadata={
         "help": "CSV of (time s, along-track distance m), time strictly increasing, instead "
                 "of the profile", "metavar": "PATH"})
@@ -97,11 +106,16 @@ class InsRunConfig:
             raise ValueError(f"loop must be one of {', '.join(LOOPS)}, not {self.loop!r}")
         if self.oscillator not in OSCILLATORS + (None,):
             raise ValueError(f"oscillator must be tcxo, ocxo or None, not {self.oscillator!r}")
-        check_float("cn0_dbhz", self.cn0_dbhz, 10.0, 70.0, unit="dB-Hz")
+        check_cn0("--cn0-dbhz", self.cn0_dbhz)
         check_float("duration_s", self.duration_s, 0.0, lo_open=True, unit="s")
         check_int("seed", self.seed, 0)
         check_int("pli_epochs", self.pli_epochs, 1, 1000)
         check_float("pli_threshold", self.pli_threshold, -1.0, 1.0, lo_open=True, hi_open=True)
+        given = [k for k in PROFILE_FIELDS if getattr(self, k) is not None]
+        if given and self.trajectory_csv is not None:
+            raise ValueError(f"{', '.join('--' + k.replace('_', '-') for k in given)} "
+                             f"{'shapes' if len(given) == 1 else 'shape'} the built-in profile; --trajectory-csv replaces it (the option "
+                             f"would change nothing)")
         tr = self.trajectory()       # the trajectory's own checks (ramps, CSV) before any work
         if self.trajectory_csv is not None:
             a = tr._table()
@@ -110,9 +124,8 @@ class InsRunConfig:
                                  f"it must cover duration_s + 0.05 s (from t <= 0)")
 
     def trajectory(self) -> PaperTrajectory:
-        return PaperTrajectory(duration_s=self.duration_s, start_s=self.start_s,
-                              jerk_g_s=self.jerk_g_s, accel_g=self.accel_g,
-                              v_max_mps=self.v_max_mps, csv_path=self.trajectory_csv)
+        prof = {k: getattr(self, k) for k in PROFILE_FIELDS if getattr(self, k) is not None}
+        return PaperTrajectory(duration_s=self.duration_s, csv_path=self.trajectory_csv, **prof)
 
 
 def ins_signal(cfg: InsRunConfig, scenario: Scenario, acq_span_s: float = 0.0):

@@ -5,7 +5,8 @@ line heading east, level (roll = pitch = 0), from rest; from ``start_s`` a +``je
 ``accel_g``), a hold at ``accel_g``, a -``jerk_g_s`` ramp back to 0 g, then cruise to
 ``duration_s``. The hold is sized so the cruise speed is ``v_max_mps``: with the defaults
 (5 g/s, 10 s, 50 g, 8300 m/s) the hold lasts 6.93 s. :class:`PaperTrajectory` also reads a
-CSV (time s, along-track distance m) whose time must increase strictly.
+CSV (time s, along-track distance m) whose time must increase strictly and whose motion is
+plausible (:func:`read_trajectory_csv`).
 
 Geometry (a documented simplification): one inertial Cartesian frame whose origin is the
 Earth's centre (Earth rotation neglected: it adds < 0.5 m/s^2 to both user and
@@ -23,6 +24,7 @@ at 8300 m/s and is needed for the derivative check (B4) at 1e-6.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,6 +48,74 @@ def _pos(name, v, allow_zero=False):
         rule = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name} must be a finite number {rule}, not {v!r}")
     return float(v)
+
+
+#: A trajectory CSV's plausible motion between rows: faster than the Earth's escape
+#: velocity is no flight along the scenario's straight line near the surface, and twice the
+#: INS paper's peak acceleration (50 g) is beyond what the loops are built for; a position
+#: step in the file shows as both (and would otherwise fail deep in the aiding).
+CSV_MAX_SPEED_MPS = 11_200.0
+CSV_MAX_ACCEL_G = 100.0
+
+
+@functools.lru_cache(maxsize=8)
+def read_trajectory_csv(path: str, mtime_ns: int = 0, size: int = 0) -> np.ndarray:
+    """The ``(n, 2)`` table (time s, along-track distance m) of a trajectory CSV, checked
+    row by row (``#`` comments and blank lines skipped): two numeric columns, at least 4
+    rows, finite values, time strictly increasing, and motion within
+    :data:`CSV_MAX_SPEED_MPS` and :data:`CSV_MAX_ACCEL_G`; a refusal names the file, its line
+    and column. ``mtime_ns``, ``size``: the cache's key (a changed file is read again)."""
+    name = f"--trajectory-csv {path!r}"
+    rows, lines = [], []
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for ln, text in enumerate(fh, 1):
+            text = text.split("#", 1)[0].strip()
+            if not text:
+                continue
+            cells = [c.strip() for c in text.split(",")]
+            if len(cells) != 2:
+                raise ValueError(f"{name} line {ln}: {len(cells)} columns; a row is "
+                                 f"time_s, distance_m (2 columns)")
+            row = []
+            for col, c in enumerate(cells, 1):
+                try:
+                    v = float(c)
+                except ValueError:
+                    v = math.nan
+                if not math.isfinite(v):
+                    raise ValueError(f"{name} line {ln}, column {col}: {c!r} is not a finite "
+                                     f"number")
+                row.append(v)
+            rows.append(row)
+            lines.append(ln)
+    if len(rows) < 4:
+        raise ValueError(f"{name} has {len(rows)} rows of (time_s, distance_m); the spline "
+                         f"needs at least 4")
+    a = np.array(rows, np.float64)
+    dt = np.diff(a[:, 0])
+    bad = np.nonzero(dt <= 0)[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"{name} line {lines[i + 1]}, column 1: time must increase strictly; "
+                         f"{a[i + 1, 0]:g} s does not follow {a[i, 0]:g} s (line {lines[i]})")
+    v = np.diff(a[:, 1]) / dt
+    bad = np.nonzero(np.abs(v) > CSV_MAX_SPEED_MPS)[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"{name} line {lines[i + 1]}, column 2: {a[i + 1, 1]:g} m after "
+                         f"{a[i, 1]:g} m {dt[i]:g} s earlier (line {lines[i]}) is "
+                         f"{abs(v[i]):.3g} m/s, faster than {CSV_MAX_SPEED_MPS:g} m/s: a "
+                         f"position step?")
+    acc = np.diff(v) / ((a[2:, 0] - a[:-2, 0]) / 2)
+    bad = np.nonzero(np.abs(acc) > CSV_MAX_ACCEL_G * G_MPS2)[0]
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise ValueError(f"{name} line {lines[i]}, column 2: the speed changes from "
+                         f"{v[i - 1]:.4g} to {v[i]:.4g} m/s around {a[i, 0]:g} s, "
+                         f"{abs(acc[i - 1]) / G_MPS2:.3g} g, more than {CSV_MAX_ACCEL_G:g} g: "
+                         f"a position step?")
+    a.setflags(write=False)
+    return a
 
 
 @dataclass(frozen=True)
@@ -110,18 +180,9 @@ class PaperTrajectory:
     def _table(self):
         p = Path(self.csv_path)
         if not p.is_file():
-            raise ValueError(f"csv_path must name a file, not {self.csv_path!r}")
-        a = np.loadtxt(p, delimiter=",", ndmin=2, comments="#")
-        if a.ndim != 2 or a.shape[1] != 2 or a.shape[0] < 4:
-            raise ValueError(f"csv_path {self.csv_path!r} must have >= 4 rows of (time_s, distance_m)")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"csv_path {self.csv_path!r} has non-finite values")
-        bad = np.nonzero(np.diff(a[:, 0]) <= 0)[0]
-        if bad.size:
-            i = int(bad[0])
-            raise ValueError(f"csv_path {self.csv_path!r}: time must increase strictly; row {i + 1} "
-                             f"({a[i + 1, 0]} s) does not follow row {i} ({a[i, 0]} s)")
-        return a
+            raise ValueError(f"--trajectory-csv must name a file, not {self.csv_path!r}")
+        st = p.stat()
+        return read_trajectory_csv(str(p), st.st_mtime_ns, st.st_size)
 
     def kinematics(self, t_s) -> np.ndarray:
         """``(4, n)``: distance, speed, acceleration, jerk along track at ``t_s``."""

@@ -481,5 +481,7 @@ def _make_ukf(ctx, arith, *, r_mode: str = "cn0", **opts):
     return AukfTracker(ctx, arith, adaptive=False, r_mode=r_mode, **opts)
 
 
-register_tracker("aukf", _make_aukf, "the AUKF patent's master-slave adaptive UKF (jerk model, I/Q)")
-register_tracker("ukf", _make_ukf, "the AUKF patent's master UKF with fixed q (baseline)")
+register_tracker("aukf", _make_aukf, "the AUKF patent's master-slave adaptive UKF (jerk model, I/Q)",
+                 options={"r_mode": "cn0", "dll_bn_hz": 1.0})
+register_tracker("ukf", _make_ukf, "the AUKF patent's master UKF with fixed q (baseline)",
+                 options={"r_mode": "cn0", "dll_bn_hz": 1.0})

@@ -31,7 +31,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["TrackerContext", "register_tracker", "make_tracker", "tracker_names", "needs_aiding"]
+__all__ = ["TrackerContext", "register_tracker", "make_tracker", "tracker_names", "needs_aiding",
+           "tracker_options"]
 
 
 @dataclass(frozen=True)
@@ -80,18 +81,40 @@ class TrackerContext:
 TRACKERS: dict[str, tuple[Callable, str]] = {}
 #: names of the trackers that need ``TrackerContext.aiding`` (an external sensor)
 _NEEDS_AIDING: set[str] = set()
+#: the options declared at registration (trackers whose factory takes ``**options``)
+_OPTIONS: dict[str, dict] = {}
 
 
 def register_tracker(name: str, factory: Callable, help: str = "", *,
-                     needs_aiding: bool = False) -> Callable:
+                     needs_aiding: bool = False, options: dict | None = None) -> Callable:
     """Register ``factory(ctx, arith, **options)`` under ``name`` (unique);
-    ``needs_aiding``: the tracker cannot run without ``TrackerContext.aiding``."""
+    ``needs_aiding``: the tracker cannot run without ``TrackerContext.aiding``;
+    ``options``: the keyword options it takes, with their defaults, for a factory that
+    passes ``**options`` on (else its named keyword parameters are, :func:`tracker_options`)."""
     if name in TRACKERS and TRACKERS[name][0] is not factory:
         raise ValueError(f"tracker {name!r} is registered twice")
     TRACKERS[name] = (factory, help)
     if needs_aiding:
         _NEEDS_AIDING.add(name)
+    if options is not None:
+        _OPTIONS[name] = dict(options)
     return factory
+
+
+def tracker_options(name: str) -> dict:
+    """The keyword options the tracker ``name`` takes (``bn_hz``, ``dll_bn_hz``,
+    ``r_mode``, ...) and their defaults: those declared at registration, else the factory's
+    named keyword parameters after ``ctx`` and ``arith``. A run option not among them has
+    no effect on that tracker (the run configurations refuse it)."""
+    import inspect
+    _load_builtin()
+    if name not in TRACKERS:
+        raise ValueError(f"unknown tracker {name!r}; choose from {', '.join(sorted(TRACKERS))}")
+    if name in _OPTIONS:
+        return dict(_OPTIONS[name])
+    ps = list(inspect.signature(TRACKERS[name][0]).parameters.values())[2:]
+    return {p.name: p.default for p in ps if p.default is not p.empty and
+            p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
 def needs_aiding(name: str) -> bool:

@@ -335,8 +335,9 @@ def _kf(aided):
 
 
 register_tracker("aided-kf", _kf(True), "the INS paper's INS-aided 3rd-order Kalman carrier loop + DLL",
-                 needs_aiding=True)
-register_tracker("unaided-kf", _kf(False), "the INS paper's unaided 3rd-order Kalman carrier loop + DLL")
+                 needs_aiding=True, options={"dll_bn_hz": 1.0})
+register_tracker("unaided-kf", _kf(False), "the INS paper's unaided 3rd-order Kalman carrier loop + DLL",
+                 options={"dll_bn_hz": 1.0})
 register_tracker("aided-pll", lambda ctx, arith, **o: AidedPll(ctx, arith, **o),
                  "the INS paper's INS-aided 3rd-order PLL (Kaplan, Bn 15 Hz, rate feed-forward) + DLL",
-                 needs_aiding=True)
+                 needs_aiding=True, options={"bn_hz": 15.0, "dll_bn_hz": 1.0})

@@ -31,11 +31,12 @@ def test_gnss_json_has_the_issue_keys(capsys):
     (["--fs-hz", "2e6"], "error: sample rate must be >= the C/A main-lobe bandwidth 2.046 MHz"),
     (["--if-hz", "9e6"], "error: IF must keep the C/A main lobe (IF +- 1.023 MHz) inside the "
                          "first Nyquist zone"),
-    (["--bn-hz", "0"], "error: bn_hz must be a finite number > 0 Hz"),
+    (["--bn-hz", "0"], "error: --bn-hz must be a finite number > 0 Hz"),
     (["--coherent-ms", "21", "--noncoherent", "2"],
      "error: --coherent-ms must be a whole number in 1..20, not 21"),
     (["--duration-s", "0.3"], "error: duration_s 0.3 s leaves nothing after settle_s 0.5 s"),
-    (["--jerk-duration-s", "0"], "error: jerk_duration_s must be a finite number > 0 s"),
+    (["--dynamics", "aukf-patent-jerk", "--jerk-duration-s", "0"],
+     "error: --jerk-duration-s must be a finite number > 0 s"),
     (["--tracker", "aided-kf"], "error: tracker aided-kf needs an INS aiding source: run it "
                                 "with `python -m cosim ins --loop aided-kf`"),
     (["--tracker", "aided-pll"], "error: tracker aided-pll needs an INS aiding source"),

@@ -20,8 +20,9 @@ from dsp.gnss.correlator import correlate
     (dict(if_hz=20.46e6), "inside the first Nyquist zone .* not IF = 20.46 MHz"),
     (dict(if_hz=16.368e6, bandpass=True), "must lie inside one Nyquist zone .* not straddle an edge "
                                           r"\(IF = 16.368 MHz\)"),
-    (dict(cn0_dbhz=math.nan), r"cn0_dbhz must be a finite number \(dB-Hz\) or None, not nan"),
-    (dict(cn0_dbhz=math.inf), r"cn0_dbhz must be a finite number \(dB-Hz\) or None, not inf"),
+    (dict(cn0_dbhz=math.nan), r"--cn0-dbhz must be a finite number >= 10 dB-Hz and <= 70 dB-Hz, not nan"),
+    (dict(cn0_dbhz=math.inf), r"--cn0-dbhz must be a finite number >= 10 dB-Hz and <= 70 dB-Hz, not inf"),
+    (dict(cn0_dbhz=200.0), r"--cn0-dbhz must be a finite number >= 10 dB-Hz and <= 70 dB-Hz, not 200.0"),
     (dict(adc_bits=0), r"adc_bits must be an integer in \[1, 16\], not 0"),
     (dict(adc_bits=17), r"adc_bits must be an integer in \[1, 16\], not 17"),
     (dict(duration_s=0.0), "duration_s must be > 0, not 0.0"),

@@ -32,7 +32,8 @@ def test_sweep_gnss_proposes_and_confirms(tmp_path, capsys):
     (["--param", "dsp.gain=8"], "error: sweep point dsp.gain=8: dsp.gain = 8 bits leaves no "
                                 "fraction bits (the format keeps 10 integer bits)"),
     (["--param", "dsp.P=24"], "error: sweep point dsp.P=24: formats too narrow: AukfFormats.P "
-                              "QFormat(bits=24, frac=12) resolves 0.000244141, not 1 % of min diag P0"),
+                              "QFormat(bits=24, frac=12) resolves 0.000244141, not 1 % of min diag "
+                              "P0; the smallest dsp.P that passes is 29"),
     (["--param", "dsp.w0=17"], "error: sweep point dsp.w0=17: dsp.w0 = 17 bits leaves no fraction bits"),
 ])
 def test_sweep_gnss_bad_params(args, msg, capsys, tmp_path):

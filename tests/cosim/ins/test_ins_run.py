@@ -100,7 +100,8 @@ def _csv(tmp_path, monotonic):
     (["--jerk-g-s", "-5"], "error: jerk_g_s must be a finite number > 0, not -5.0"),
     (["--pli-epochs", "0"], "error: pli_epochs must be an integer in [1, 1000], not 0"),
     (["--backend", "pysim", "--duration-s", "150"], "error: pysim simulates about 2e+03 cycles/s"),
-    (["--trajectory-csv", "NONMONO"], "error: csv_path '{csv}': time must increase strictly; row 9"),
+    (["--trajectory-csv", "NONMONO"], "error: --trajectory-csv '{csv}' line 10, column 1: time "
+                                      "must increase strictly"),
     (["--trajectory-csv", "GOOD", "--duration-s", "5"], "error: trajectory_csv '{good}' ends at 2 s: "
      "it must cover duration_s + 0.05 s"),
 ])

@@ -66,7 +66,8 @@ def test_csv_trajectory_and_non_monotonic_time(tmp_path):
     tt = t.copy()
     tt[7] = tt[5]
     np.savetxt(bad, np.c_[tt, t], delimiter=",")
-    with pytest.raises(ValueError, match=r"time must increase strictly; row 7 .* does not follow row 6"):
+    with pytest.raises(ValueError, match=r"line 8, column 1: time must increase strictly; .* does "
+                                         r"not follow .* \(line 7\)"):
         PaperTrajectory(duration_s=10, csv_path=str(bad))
 
 
