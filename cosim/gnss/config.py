@@ -37,13 +37,11 @@ WORD_BITS = 32
 JERK_DEFAULTS = {"jerk_g_per_s": 5.0, "jerk_start_s": 2.0, "jerk_duration_s": 2.0}
 #: Cycles from the DSP issuing a register write to the register holding it, not given.
 CONTROL_LATENCY_CYCLES = 40
-#: The command-line flag of a field whose flag is not its kebab-case name.
-FLAGS = {"control_latency_cycles": "--latency", "acq_pfa": "--pfa",
-         "acq_coherent_ms": "--coherent-ms", "acq_noncoherent": "--noncoherent"}
 
 
 def _flag(name: str) -> str:
-    return FLAGS.get(name, "--" + name.replace("_", "-"))
+    """The command-line flag of a field named in a refusal (its kebab-case name)."""
+    return "--" + name.replace("_", "-")
 
 
 #: Named scenarios of ``python -m cosim gnss --scenario NAME``: the options each sets (an

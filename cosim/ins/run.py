@@ -197,8 +197,9 @@ def run_ins(cfg: InsRunConfig, run_cfg=None) -> dict:
     # scoring from where the acquisition stopped, t_acq later: gen.t0_s below)
     from cosim.gnss.signal import GnssSignalConfig
     span_ms = acquisition_span_ms(run)
-    check_run_size(GnssSignalConfig(duration_s=float(cfg.duration_s) + span_ms * 1e-3,
-                                    seed=int(cfg.seed)), run)
+    size = GnssSignalConfig(duration_s=float(cfg.duration_s) + span_ms * 1e-3, seed=int(cfg.seed))
+    check_run_size(size, run)
+    run.check_loop_timing(size.fs_hz)
     traj = cfg.trajectory()
     sc = Scenario(traj, Geometry(), None, seed=cfg.seed)
     if cfg.trajectory_csv is not None:

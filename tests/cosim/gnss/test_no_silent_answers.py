@@ -103,6 +103,8 @@ def test_a_latency_past_the_next_dump_is_refused_with_the_limit(capsys):
     assert _err(capsys).startswith(
         "error: --latency 1000000000 cycles: the DSP's writes would reach the channel up to "
         "1,000,008,498 cycles after a record's dump, later than the next dump (16,368 cycles")
+    assert main(["ins", "--latency", "9000"]) == 2
+    assert _err(capsys).startswith("error: --latency 9000 cycles: the DSP's writes would reach")
     from cosim.gnss.config import GnssRunConfig
     GnssRunConfig(control_latency_cycles=7869).check_loop_timing(16.368e6)
     with pytest.raises(ValueError, match="at most 7869 cycles here"):
