@@ -207,8 +207,8 @@ class GnssSignalConfig:
             if not (half < f_if < fs / 2 - half):
                 raise ValueError(
                     f"IF must keep the C/A main lobe (IF +- {half / 1e6:g} MHz) inside the first "
-                    f"Nyquist zone (0, fs/2 = {fs / 2e6:g} MHz) unless bandpass=True, not "
-                    f"IF = {f_if / 1e6:g} MHz")
+                    f"Nyquist zone (0, fs/2 = {fs / 2e6:g} MHz), not IF = {f_if / 1e6:g} MHz "
+                    f"(sampled as it is, without bandpass sampling)")
         else:
             lo, hi = f_if - half, f_if + half
             zone = math.floor(lo / (fs / 2))

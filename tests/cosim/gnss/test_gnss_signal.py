@@ -16,7 +16,8 @@ from dsp.gnss.correlator import correlate
     (dict(prn=33), r"PRN must be an integer in \[1, 32\], not 33"),
     (dict(fs_hz=2.0e6), "sample rate must be >= the C/A main-lobe bandwidth 2.046 MHz, not 2 MS/s"),
     (dict(if_hz=7.5e6), r"IF must keep the C/A main lobe \(IF \+- 1.023 MHz\) inside the first "
-                        r"Nyquist zone \(0, fs/2 = 8.184 MHz\) unless bandpass=True, not IF = 7.5 MHz"),
+                        r"Nyquist zone \(0, fs/2 = 8.184 MHz\), not IF = 7.5 MHz \(sampled as it is, "
+                        r"without bandpass sampling\)"),
     (dict(if_hz=20.46e6), "inside the first Nyquist zone .* not IF = 20.46 MHz"),
     (dict(if_hz=16.368e6, bandpass=True), "must lie inside one Nyquist zone .* not straddle an edge "
                                           r"\(IF = 16.368 MHz\)"),

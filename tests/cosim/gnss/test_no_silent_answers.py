@@ -4,6 +4,7 @@ any work with one line naming the option (exit 2); a failed acquisition is a res
 and a status), not bad input. The refusals are reached before a record is generated: these
 tests run the parsers and the validation only."""
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,19 +19,21 @@ def _err(capsys) -> str:
 
 
 # -- a default the validation refused ---------------------------------------------------------
+# (check_point reads the C/N0 of the configuration only: no SweepConfig, whose receiver
+# registry would load every receiver)
+SWEEP_CFG = SimpleNamespace(snr_db=(32.0,))
+
+
 def test_the_default_sweep_points_all_pass_the_cores_checks():
     from cosim.gnss.study import SWEEP_MODEL, check_point
-    from cosim.studies.spec import SweepConfig
-    cfg = SweepConfig(receiver="gnss", snr_db=(32.0,), recheck=0)
-    assert cfg.params == SWEEP_MODEL.default_params
-    for combo in cfg.combos:
-        check_point(cfg, combo)
+    [(name, values)] = SWEEP_MODEL.default_params
+    for v in values:
+        check_point(SWEEP_CFG, ((name, v),))
 
 
 def test_a_refused_width_names_the_smallest_that_passes():
     from cosim.gnss.study import check_point
-    from cosim.studies.spec import SweepConfig
-    cfg = SweepConfig(receiver="gnss", params=(("dsp.P", (28,)),), snr_db=(32.0,), recheck=0)
+    cfg = SWEEP_CFG
     with pytest.raises(ValueError, match=r"AukfFormats.P QFormat\(bits=28, frac=16\) resolves "
                                          r".*; the smallest dsp.P that passes is 29$"):
         check_point(cfg, (("dsp.P", 28),))
@@ -80,14 +83,17 @@ def _csv(path, t, s):
     return str(path)
 
 
-@pytest.mark.parametrize("opt", [["--accel-g", "30"], ["--jerk-g-s", "2"], ["--start-s", "1"],
-                                 ["--v-max-mps", "100"]])
-def test_ins_refuses_profile_options_with_a_csv(opt, capsys, tmp_path):
+@pytest.mark.parametrize("opt, msg", [
+    (["--accel-g", "30"], "--accel-g shapes"),
+    (["--jerk-g-s", "2", "--start-s", "1", "--v-max-mps", "100"],
+     "--start-s, --jerk-g-s, --v-max-mps shape"),
+])
+def test_ins_refuses_profile_options_with_a_csv(opt, msg, capsys, tmp_path):
     t = np.arange(-0.1, 3.0, 0.01)
     good = _csv(tmp_path / "t.csv", t, 5.0 * np.clip(t, 0, None) ** 2)
     assert main(["ins", "--duration-s", "1", "--trajectory-csv", good] + opt) == 2
-    assert _err(capsys) == (f"error: {opt[0]} shapes the built-in profile; --trajectory-csv "
-                            f"replaces it (the option would change nothing)")
+    assert _err(capsys) == (f"error: {msg} the built-in profile; --trajectory-csv replaces it "
+                            f"(the option would change nothing)")
 
 
 # -- meaningless values ---------------------------------------------------------------------
