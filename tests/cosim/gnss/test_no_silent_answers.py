@@ -194,3 +194,13 @@ def test_a_failed_acquisition_is_status_not_acquired_exit_1(cmd, capsys, monkeyp
     assert out.err == "" and r["status"] == "not acquired"
     assert r["acquired"] == {"detected": False, "metric": 0.74}
     assert r["message"].startswith("acquisition did not find PRN 1")
+
+
+@pytest.mark.parametrize("tracker", ["unaided-kf", "aukf"])
+def test_the_code_loop_bandwidth_reaches_the_kalman_trackers(tracker):
+    # --dll-bn-hz of ins (and of gnss with an AUKF) was dropped on the way to the tracker
+    from cosim.gnss.config import GnssRunConfig
+    from cosim.gnss.tracking import make_tracker_for
+    kd = [make_tracker_for(GnssRunConfig(tracker=tracker, dll_bn_hz=d), 16.368e6, 4.092e6,
+                           False, 40.0, 100.0, 0.5, "float")[0].kd for d in (None, 2.0)]
+    assert kd == [4.0, 8.0]
