@@ -58,7 +58,7 @@ def test_cli_pll_has_no_q_hat(capsys):
 
 @pytest.mark.parametrize("args, msg", [
     (["--tracker", "pll3", "--r-mode", "seed"],
-     "error: r_mode seed applies to the AUKF patent's trackers (aukf, ukf), not pll3"),
+     "error: --r-mode applies to the trackers aukf, ukf; --tracker pll3 has no such setting"),
 ])
 def test_cli_bad_r_mode(args, msg, capsys):
     assert main(["gnss"] + args) == 2
