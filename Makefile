@@ -79,7 +79,7 @@ bench: setup  ## run every benchmark but suite-time (~4.7 h on 2 cores); results
 # A study's report, tables and plots are copied to results/ (shown in README.md); its
 # per-point cache stays under build/.
 PUBLISH = mkdir -p results/$(2) && cp build/studies/$(1)/report.md build/studies/$(1)/summary.csv \
-	build/studies/$(1)/*.png results/$(2)/
+	build/studies/$(1)/proposal.json build/studies/$(1)/*.png results/$(2)/
 
 study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 20 trials), also with single pulses -> results/study_default{,_pulse}
 	$(PY) -m cosim sweep tacan --out build/studies/default

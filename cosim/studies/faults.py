@@ -333,7 +333,8 @@ def _shown_table(rows: list[dict], quantity: str) -> list[str]:
         ci = p["misleading_rate_ci95"]
         out.append(f"| {r['ber']:g} | {f_(p['rmse'], '.4f')} | {f_(p['mean_error'], '+.4f')} | "
                    f"{f_(p['availability'], '.3f')} | {f_(r.get('availability_diff'), '+.3f')} | "
-                   f"{f_(p['first_valid_s_median'], '.3f')} / {f_(p['first_valid_s_max'], '.3f')} | "
+                   f"{f_(p['first_valid_s_median'], '.3f')} / "
+                   f"{f_(p['first_valid_s_max'], '.3f')} | "
                    f"{p['never_valid']} | {p['misleading']} | "
                    f"{'-' if not ci else f'{ci[0]:.2g}-{ci[1]:.2g}'} | "
                    f"{f_(r.get('excess_misleading'), 'd')} |")

@@ -20,8 +20,8 @@ import numpy as np
 from .shown import paired, pool
 from .spec import SweepConfig, primary_key
 
-__all__ = ["aggregate", "propose", "ratio_ci", "judged", "available_enough", "failing", "passes", "confirms",
-           "shortfall", "widen_one"]
+__all__ = ["aggregate", "propose", "ratio_ci", "judged", "available_enough", "failing", "passes",
+           "confirms", "shortfall", "widen_one"]
 
 
 def ratio_ci(pairs, key: str, n_boot: int = 2000, fig: str = "rmse_deg") -> list[float] | None:

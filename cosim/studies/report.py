@@ -13,7 +13,7 @@ import numpy as np
 from .proposal import failing
 from .spec import SweepConfig, primary_key, sweep_model
 
-__all__ = ["plot", "report_md", "ci_text"]
+__all__ = ["plot", "report_md", "ci_text", "proposal_record", "main"]
 
 
 def ci_text(ci, fmt: str = ".3f") -> str:
@@ -244,3 +244,51 @@ def _confirmation_md(cfg: SweepConfig, s: dict, P: str) -> list[str]:
                 f"{r.get('golden_reinit', 0)})" + (f" -- fails {', '.join(fails)}"
                                                    if fails else ""))
     return lines
+
+
+#: The figures of a row :func:`proposal_record` keeps (the three of what a user sees).
+RECORD_KEYS = ("snr_db", "trials", "locked", "golden_locked", "ratio_to_golden", "ratio_ci95",
+               "availability", "golden_availability", "availability_diff", "first_valid_s",
+               "misleading", "golden_misleading", "excess_misleading", "crb_deg")
+
+
+def proposal_record(s: dict) -> dict:
+    """The published summary of a study (``proposal.json``, beside its report): the command,
+    the proposal, the confirmation's verdict and widths with its rows' three figures -- what
+    the tables that compare studies read (:mod:`cosim.tools.tacan_trade`)."""
+    from cosim.core.receivers import get
+    cfg = s["config"]
+    P = get(cfg["receiver"]).primary.key
+    keep = lambda r: {**{k: r.get(k) for k in RECORD_KEYS}, "accuracy": r.get(P),
+                      "golden_accuracy": r.get("golden_" + P)}
+    c = s.get("confirmation") or {}
+    m = s["machine"]
+    return {"receiver": cfg["receiver"], "command": m["command"], "commit": m["commit"],
+            "date": m["date"], "elapsed_s": s["elapsed_s"], "primary": P,
+            "params": cfg["params"], "target_rel": cfg["target_rel"],
+            "availability_margin": cfg.get("availability_margin"),
+            "proposal": s["proposal"],
+            "confirmation": {"confirmed": c.get("confirmed"), "params": c.get("params"),
+                             "reason": c.get("reason"),
+                             "attempts": len(c.get("attempts", [])),
+                             "rows": [keep(r) for r in c.get("rows", [])]} if c else None,
+            "rows": [{**{n: r[n] for n, _ in cfg["params"]}, **keep(r)} for r in s["rows"]]}
+
+
+def main(argv=None) -> int:
+    """``python -m cosim.studies.report DIR``: (re)write ``DIR/proposal.json`` from the
+    study's ``DIR/summary.json``."""
+    import argparse
+    import json
+    from cosim.core.validate import dumps
+    ap = argparse.ArgumentParser(prog="python -m cosim.studies.report", description=main.__doc__)
+    ap.add_argument("dir", type=Path)
+    a = ap.parse_args(argv)
+    s = json.loads((a.dir / "summary.json").read_text())
+    (a.dir / "proposal.json").write_text(dumps(proposal_record(s), indent=1))
+    print(a.dir / "proposal.json")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

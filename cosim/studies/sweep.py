@@ -41,7 +41,7 @@ import numpy as np
 from cosim.core.validate import check_jobs, dumps
 
 from .proposal import aggregate, confirms, propose, shortfall, widen_one
-from .report import plot, report_md
+from .report import plot, proposal_record, report_md
 from .shown import FIGURE_KEYS
 from .spec import SweepConfig, primary_key, sweep_model
 
@@ -366,7 +366,8 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
 def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
           scheduler: str = "local", confirm_proposal: bool = True, progress: bool = True) -> dict:
     """A sweep, its word-length proposal and (optionally) the confirming re-run; the report
-    (``report.md``) includes the confirmation."""
+    (``report.md``) includes the confirmation; ``proposal.json`` is its published summary
+    (:func:`cosim.studies.report.proposal_record`)."""
     out = Path(out)
     s = run_sweep(cfg, out, jobs=jobs, scheduler=scheduler, progress=progress)
     if confirm_proposal:
@@ -375,4 +376,5 @@ def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
         (out / "summary.json").write_text(dumps(s, indent=1))
         plots = sorted(p.name for p in out.glob("rmse_vs_*.png"))
         (out / "report.md").write_text(report_md(cfg, s, plots))
+    (out / "proposal.json").write_text(dumps(proposal_record(s), indent=1))
     return s

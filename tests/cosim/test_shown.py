@@ -141,3 +141,21 @@ def test_fault_report_shows_the_three_figures():
     lines = _shown_table(rows, "bearing")
     assert lines[-2].split("|")[-2].strip() == "1" and lines[-2].split("|")[8].strip() == "1"
     assert lines[-1].startswith("| 0.01 | -")
+
+
+def test_the_published_proposal_record_keeps_the_three_figures():
+    from cosim.studies.report import proposal_record
+    res = _results(CFG, {6: _fig, 5: _fig, 4: lambda t: _fig(t, spike=70)})
+    rows = aggregate(CFG, res)
+    s = {"config": {"receiver": "tacan", "params": [["adc_bits", [4, 5, 6]]],
+                    "target_rel": 0.05, "availability_margin": 0.02},
+         "machine": {"command": "x", "commit": "c", "date": "d"}, "elapsed_s": 1.0, "rows": rows,
+         "proposal": propose(CFG, rows),
+         "confirmation": {"confirmed": True, "params": {"adc_bits": 5}, "attempts": [{}],
+                          "rows": [r for r in rows if r["adc_bits"] == 5]}}
+    p = proposal_record(s)
+    assert p["proposal"] == {"adc_bits": 5} and p["confirmation"]["params"] == {"adc_bits": 5}
+    r4 = next(r for r in p["rows"] if r["adc_bits"] == 4)
+    assert r4["misleading"] == 5 and r4["excess_misleading"] == 5 and r4["availability"] == 1.0
+    assert p["confirmation"]["rows"][0]["accuracy"] == pytest.approx(
+        p["confirmation"]["rows"][0]["golden_accuracy"])

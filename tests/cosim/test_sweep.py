@@ -96,7 +96,7 @@ def small_sweep(tmp_path_factory):
 def test_small_sweep_writes_every_output(small_sweep):
     cfg, out, s = small_sweep
     for f in ("summary.json", "points.csv", "summary.csv", "report.md", "rmse_vs_adc_bits.png",
-              "sweep.json"):
+              "sweep.json", "proposal.json"):
         assert (out / f).stat().st_size > 0, f
     assert s["n_points"] == 4 and len(list((out / "points").glob("*.json"))) == 4 + 2  # + golden
     rows = {r["adc_bits"]: r for r in s["rows"]}
