@@ -2,15 +2,18 @@
 
 A sweep crosses any word-length or mode parameter of the HDL front end and of the DSP core
 with SNR and trials, runs every point on the bit-exact fast path (the front end's numpy
-model, the FIFO/link model and the fixed-point DSP core), scores it against the float golden
-chain run on the *same* record (paired comparison: the trial-to-trial noise cancels in the
-ratio), and writes CSV/JSON of every point, plots, and a Markdown report with the range and
-saturation log and a word-length proposal.
+model, the FIFO/link model and the fixed-point DSP core), judges it as a user sees it --
+accuracy of the estimates shown valid, availability, integrity (:mod:`cosim.studies.shown`)
+-- against the float golden chain run on the *same* record (paired comparison: the
+trial-to-trial noise cancels), and writes CSV/JSON of every point, plots, and a Markdown
+report (:mod:`cosim.studies.report`) with the range and saturation log and a word-length
+proposal.
 
 The receiver is a registered one (:mod:`cosim.core.receivers`) whose ``sweep`` study has a
 :class:`~cosim.core.receivers.SweepModel`: it names the parameters (``--param NAME=VALUES``;
 TACAN's: :mod:`cosim.tacan.study`), runs one record (the point runner: swept values + SNR +
-trial seed -> metrics with the primary figure, and the golden run of the same record) and
+trial seed -> metrics with ``shown``, the three figures of what a user sees, and the golden
+run of the same record) and
 keeps its own front-end cache; everything else here is generic.
 
 Values: ``a:b`` (integers a..b), ``a:b:s`` (a, a+s, ... <= b), or a comma list.

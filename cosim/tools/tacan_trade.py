@@ -57,8 +57,46 @@ def _confirmed(p) -> dict:
     return (c.get("params") or {}) if c.get("confirmed") else {}
 
 
+def _confirmed_in_report(path: Path) -> tuple[dict, str]:
+    """The confirmed widths a study's ``report.md`` states (for a study published before it
+    wrote ``proposal.json``), and its first line's provenance (command, date, commit)."""
+    import re
+    if not path.exists():
+        return {}, ""
+    text = path.read_text()
+    m = re.search(r"\*\*confirmed\*\*: (.*)$", text, re.M)
+    if not m:
+        return {}, ""
+    out = {}
+    for n, v in re.findall(r"`([^`]+)`=([^,\s]+)", m.group(1)):
+        try:
+            out[n] = int(v)
+        except ValueError:
+            out[n] = v
+    prov = re.search(r"(\d{4}-\d\d-\d\dT[^,]*), commit (\w+(?:-dirty)?)", text)
+    return out, (f"{prov.group(1)[:10]}, commit {prov.group(2)}" if prov else "")
+
+
+def _widths(results: Path, name: str, need, notes: list) -> dict:
+    """The confirmed widths of ``results/<name>``: its ``proposal.json``, else (named in
+    ``notes``) the confirmation its ``report.md`` states."""
+    p = results / name / "proposal.json"
+    if p.exists():
+        return _confirmed(_json(p))
+    w, prov = _confirmed_in_report(results / name / "report.md")
+    if w:
+        notes.append(f"`results/{name}` has no `proposal.json`: its widths are the "
+                     f"confirmation its `report.md` states ({prov}), a study judged by the "
+                     f"RMSE of every bearing and the lock count, not yet re-run under the "
+                     f"three figures")
+    else:
+        need(f"{name}/proposal.json")
+    return w
+
+
 def trade_table(results: Path) -> tuple[list[str], list[str]]:
-    """The table's lines and the inputs it found missing."""
+    """The table's lines, and the inputs it found missing with notes on the widths read
+    from a report (those start with a backquote)."""
     missing = []
 
     def need(rel):
@@ -68,8 +106,9 @@ def trade_table(results: Path) -> tuple[list[str], list[str]]:
         return p
     sens = _json(need("tacan_sensitivity.json"))
     both, pulse = (_rows(need(f"study_default{s}/summary.csv")) for s in ("", "_pulse"))
-    adc = [_confirmed(_json(need(f"study_default{s}/proposal.json"))) for s in ("", "_pulse")]
-    wl = [_confirmed(_json(need(f"study_wordlength{s}/proposal.json"))) for s in ("", "_pulse")]
+    notes: list = []
+    adc = [_widths(results, f"study_default{s}", need, notes) for s in ("", "_pulse")]
+    wl = [_widths(results, f"study_wordlength{s}", need, notes) for s in ("", "_pulse")]
     L = ["| figure | both searches (default) | single pulse | both - single |",
          "|---|---|---|---|"]
     b0 = (sens or {}).get("bearing_sweep_if_0db")
@@ -115,7 +154,7 @@ def trade_table(results: Path) -> tuple[list[str], list[str]]:
                  f"| {d} |")
     if names:
         L.append(f"| sum of the confirmed widths | {tot[0]} | {tot[1]} | {tot[0] - tot[1]:+d} |")
-    return L, missing
+    return L, missing + notes
 
 
 def main(argv=None) -> int:
@@ -133,8 +172,11 @@ def main(argv=None) -> int:
             "in word lengths, against the single-pulse receiver (`detector=pulse`). Study "
             "rows: RMSE / CRB of the bearings shown valid, mean fraction of display epochs "
             "with a valid bearing, bearings shown valid more than 20 deg off.", "", *lines]
-    if missing:
-        text += ["", "Not found (cells '-'): " + ", ".join(f"`results/{m}`" for m in missing)]
+    absent = [m for m in missing if not m.startswith("`")]
+    notes = [m for m in missing if m.startswith("`")]
+    if absent:
+        text += ["", "Not found (cells '-'): " + ", ".join(f"`results/{m}`" for m in absent)]
+    text += [f"\n{n}." for n in notes]
     out = a.results / "tacan_trade.md"
     out.write_text("\n".join(text) + "\n")
     print(out)

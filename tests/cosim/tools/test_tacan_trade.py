@@ -41,3 +41,17 @@ def test_the_trade_table_sets_both_receivers_and_their_word_lengths_side_by_side
     assert row["`dsp.y` confirmed (5/10/20 dB, 10 records)"] == ["-", "8", ""]
     assert main(["--results", str(tmp_path)]) == 0
     assert "tacan_sensitivity.json" in (tmp_path / "tacan_trade.md").read_text()
+
+
+def test_a_study_without_proposal_json_gives_the_widths_its_report_states(tmp_path):
+    d = tmp_path / "study_wordlength_pulse"
+    d.mkdir()
+    d.joinpath("report.md").write_text(
+        "# TACAN quantisation sweep\n\n`python -m cosim sweep tacan` on X (2 cores), "
+        "2026-12-05T04:00:00+00:00, commit abc1234: 9 points in 1 s.\n\nConfirmation re-run "
+        "(...): **confirmed**: `adc_bits`=5, `dsp.y`=8, `detector`=pulse\n")
+    _proposal(tmp_path / "study_wordlength", True, {"adc_bits": 5, "dsp.y": 10})
+    lines, notes = trade_table(tmp_path)
+    row = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:5]] for ln in lines[2:]}
+    assert row["`dsp.y` confirmed (5/10/20 dB, 10 records)"] == ["10", "8", "+2"]
+    assert any("study_wordlength_pulse" in n and "commit abc1234" in n for n in notes)
