@@ -107,6 +107,11 @@ def trade_table(results: Path) -> tuple[list[str], list[str]]:
     sens = _json(need("tacan_sensitivity.json"))
     both, pulse = (_rows(need(f"study_default{s}/summary.csv")) for s in ("", "_pulse"))
     notes: list = []
+    for name, rows in (("study_default", both), ("study_default_pulse", pulse)):
+        if rows and "availability" not in next(iter(rows.values())):
+            notes.append(f"`results/{name}/summary.csv` predates the three figures: its RMSE "
+                         f"is over every bearing after settling, flagged ones included, and it "
+                         f"has no availability or misleading column")
     adc = [_widths(results, f"study_default{s}", need, notes) for s in ("", "_pulse")]
     wl = [_widths(results, f"study_wordlength{s}", need, notes) for s in ("", "_pulse")]
     L = ["| figure | both searches (default) | single pulse | both - single |",
@@ -123,6 +128,8 @@ def trade_table(results: Path) -> tuple[list[str], list[str]]:
             L.append(f"| {snr:g} dB at " + " / ".join(f"{r['bearing_deg']:g}" for r in rs)
                      + " deg (golden chain): RMSE / CRB | "
                      + " / ".join(f"{r['rmse_over_crb']:.2f}x" for r in rs) + " | - | |")
+    first = next(iter({**pulse, **both}.values()), {})
+    which = "valid" if "availability" in first else "(every)"
     for snr in SNRS:
         a, b = both.get(snr), pulse.get(snr)
 
@@ -135,7 +142,7 @@ def trade_table(results: Path) -> tuple[list[str], list[str]]:
                     f"{_f(_num(r, 'misleading'), '.0f')}")
         n = _f(_num(a or b, "trials"), ".0f")
         L.append(f"| {snr:g} dB, ADC {ADC_BITS} bits, fixed point ({n} "
-                 f"records): RMSE / CRB of the valid bearings, availability, misleading | "
+                 f"records): RMSE / CRB of the {which} bearings, availability, misleading | "
                  f"{cell(a)} | {cell(b)} | |")
     if adc[0] or adc[1]:
         x, y = adc[0].get("adc_bits"), adc[1].get("adc_bits")
