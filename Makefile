@@ -79,26 +79,28 @@ bench: setup  ## run every benchmark but suite-time (~4.7 h on 2 cores); results
 # A study's report, tables and plots are copied to results/ (shown in README.md); its
 # per-point cache stays under build/.
 PUBLISH = mkdir -p results/$(2) && cp build/studies/$(1)/report.md build/studies/$(1)/summary.csv \
-	build/studies/$(1)/*.png results/$(2)/
+	build/studies/$(1)/proposal.json build/studies/$(1)/*.png results/$(2)/
 
 study: setup  ## the default quantisation study (ADC bits 4-14 x SNR 0-20 dB x 20 trials), also with single pulses -> results/study_default{,_pulse}
 	$(PY) -m cosim sweep tacan --out build/studies/default
 	$(call PUBLISH,default,study_default)
 	$(PY) -m cosim sweep tacan --param adc_bits=4:14 --param detector=pulse --out build/studies/default_pulse
 	$(call PUBLISH,default_pulse,study_default_pulse)
+	$(PY) -m cosim.tools.tacan_trade
 
 WORDLENGTH_PARAMS = --param adc_bits=2:12 --param nco_amp_bits=3,4,5,6,8,10,12,16 \
 	--param fir_coef_bits=4,5,6,8,10,12,14,18 --param env_iterations=2,3,4,5,6,8,12 \
 	--param dsp.y=4,6,8,10,12,18 --param dsp.P=30,34,38,46 --param dsp.K=18,22,26,38 \
 	--param dsp.cs=14,16,18,20,22,24
 
-study-wordlength: setup  ## word-length proposal for the default scenario (one parameter at a time) + its confirmation, also with single pulses
+study-wordlength: setup  ## word-length proposal for the default scenario (one parameter at a time) + its confirmation, also with single pulses; results/tacan_trade.md
 	$(PY) -m cosim sweep tacan --design oat $(WORDLENGTH_PARAMS) --snr-db 5,10,20 --trials 10 \
 	  --out build/studies/wordlength
 	$(call PUBLISH,wordlength,study_wordlength)
 	$(PY) -m cosim sweep tacan --design oat $(WORDLENGTH_PARAMS) --param detector=pulse \
 	  --snr-db 5,10,20 --trials 10 --out build/studies/wordlength_pulse
 	$(call PUBLISH,wordlength_pulse,study_wordlength_pulse)
+	$(PY) -m cosim.tools.tacan_trade
 
 faults: setup  ## bit-error studies (ADC, FIFO with/without parity, NCO register, DSP state also with --detector pulse; BER 1e-6..1e-3) -> results/faults
 	for t in adc fifo register dsp-state; do \

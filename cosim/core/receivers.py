@@ -231,10 +231,11 @@ class SweepModel:
         ``record(cfg, snr_db, trial, combos)`` -> an object for one Monte Carlo record
         (the signal of that SNR and trial seed made once, a front-end cache shared by its
         points) with ``base`` (a dict every row of the record carries), ``golden()`` and
-        ``point(combo, recheck=False)``; each returns the metrics dict: the primary figure
-        (``Receiver.primary.key``), ``locked`` (bool), optionally ``dsp_events``,
-        ``ranges``, ``recheck`` and any other metric. A point is paired with the golden
-        run of its own record.
+        ``point(combo, recheck=False)``; each returns the metrics dict: ``shown``, the
+        three figures of what a user sees (:func:`cosim.studies.shown.shown_figures`:
+        the receiver's estimates, valid flags and error bound), optionally ``dsp_events``,
+        ``ranges``, ``recheck``, ``crb_deg`` and any other metric. A point is paired with
+        the golden run of its own record.
     confirm_recheck : callable, optional
         ``confirm_recheck(cfg, combo) -> dict``: re-check the confirmed combination on a
         cycle-accurate backend (``same_bits``, ...).
@@ -246,6 +247,9 @@ class SweepModel:
         The report's title.
     description : str
         The report's sentence on what a point runs and what its golden pairing is.
+    shown_note : str
+        The report's sentence on what the receiver's estimates, display epoch, valid flag
+        and misleading bound are.
     """
 
     check_param: Callable[[str], None]
@@ -256,6 +260,7 @@ class SweepModel:
     cpu_s_per_record_s: float = 1.5
     title: str = "quantisation sweep"
     description: str = ""
+    shown_note: str = ""
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,10 @@ A record is one (C/N0, trial): the engine's ``snr_db`` values are **C/N0 in dB-H
 (the report's "SNR dB" column), one jerk-process truth (the AUKF patent's model,
 ``q_true = q0 = 5``, seeded by the study seed, the trial and the C/N0), ``duration_s`` long, the AUKF started on
 the truth (fast path). Figures: ``phase_rmse_deg`` (the receiver's primary figure, second
-half of the record, wrapped to the Costas lock point), ``doppler_rmse_hz``, ``locked`` (no
-cycle slip and not diverged), the core's events (Cholesky failures, P not PD,
-saturations). No cycle-accurate re-check: the core is DSP software (its word lengths are an
+half of the record, wrapped to the Costas lock point), ``doppler_rmse_hz``, ``cycle_slips``,
+the core's events (Cholesky failures, P not PD,
+saturations), and what a user sees (:func:`shown_tracking`: accuracy, availability,
+integrity). No cycle-accurate re-check: the core is DSP software (its word lengths are an
 emulation, docs/explanation/gnss_aukf.md); the HDL channel's bits are checked by the closed-loop tests.
 """
 from __future__ import annotations
@@ -112,6 +113,31 @@ def check_point(cfg, combo: tuple) -> None:
         raise
 
 
+#: A Doppler estimate shown valid further than this from the truth is misleading (Hz; the
+#: "lost" rule of :mod:`cosim.gnss.study_aukf`).
+MISLEADING_DOPPLER_HZ = 5.0
+
+
+def shown_tracking(r, trk, duration_s: float) -> dict:
+    """What a user sees of a fast-path run's trial 0 (:func:`cosim.studies.shown.shown_figures`):
+    one estimate per 1 ms epoch, its carrier phase error (deg, wrapped to the Costas lock
+    point); valid unless the tracker has raised its ``diverged`` flag; display epoch 1 ms;
+    scored over the record's second half; misleading = shown valid after a cycle slip (the
+    true phase error's nearest lock point moved from where it locked) or with a Doppler
+    error beyond :data:`MISLEADING_DOPPLER_HZ`."""
+    from cosim.studies.shown import shown_figures
+    raw = r.phase_err_cycles[:, 0]
+    n = raw.size
+    lock = np.rint(raw / 0.5)
+    pe = (raw - 0.5 * lock) * 360.0
+    df = (r.freq_err_hz + r.doppler_hz - np.array(trk.est))[:, 0]
+    valid = ~np.array(trk.flagged)[:, 0] if trk.flagged else np.ones(n, bool)
+    bad = (lock != lock[0]) | (np.abs(df) > MISLEADING_DOPPLER_HZ)
+    t = (np.arange(n) + 1.0) * 1e-3
+    return shown_figures(t, pe, valid, settle_s=(n // 2) * 1e-3, end_s=duration_s,
+                         epoch_s=1e-3, misleading=bad)
+
+
 class GnssSweepRecord:
     """One (C/N0, trial) record: the truth made once; the golden (float64) AUKF and every
     point's fixed-point AUKF on the same truth and correlator noise (the fast path's
@@ -137,8 +163,8 @@ class GnssSweepRecord:
         slips = int(cycle_slips(r.phase_err_cycles)[0])
         return {"phase_rmse_deg": float(np.sqrt(np.mean(pe ** 2)) * 360.0),
                 "doppler_rmse_hz": float(np.sqrt(np.mean(df ** 2))), "cycle_slips": slips,
-                "locked": slips == 0 and not rep["diverged_count"],
-                "q_hat_final": rep["q_hat"]["median_final"], "dsp_events": rep["events"]}
+                "q_hat_final": rep["q_hat"]["median_final"], "dsp_events": rep["events"],
+                "shown": shown_tracking(r, trk, self.cfg.duration_s)}
 
     def golden(self) -> dict:
         return self._run("float64")
@@ -154,4 +180,10 @@ SWEEP_MODEL = SweepModel(check_param=check_param, check_point=check_point, recor
                          description="Path: jerk truth (the AUKF patent's model, q = q0 = 5), correlation-domain "
                                      "fast path, fixed-point AUKF core (AukfFormats, word-length "
                                      "emulation). Golden: float64 AUKF on the same truth and noise. "
-                                     "'SNR dB' = C/N0 dB-Hz; RMSE = carrier phase RMSE (deg).")
+                                     "'SNR dB' = C/N0 dB-Hz; RMSE = carrier phase RMSE (deg).",
+                         shown_note="GNSS: one estimate per 1 ms epoch (carrier phase error, "
+                                    "deg, wrapped to the Costas lock point); valid unless the "
+                                    "AUKF raised its divergence flag; display epoch 1 ms; "
+                                    "scored over the record's second half; misleading = "
+                                    "shown valid after a cycle slip or with a Doppler error "
+                                    "beyond 5 Hz.")

@@ -26,14 +26,18 @@ Q0 = 5.0
 
 class DopplerRecorder:
     """A tracker wrapper keeping ``doppler_hz()`` after every step (the estimate for the
-    epoch just dumped)."""
+    epoch just dumped) and, for a tracker with a ``diverged`` flag (the UKFs), whether it
+    was raised (``flagged``: what the receiver shows as not valid)."""
 
     def __init__(self, inner):
-        self.inner, self.est = inner, []
+        self.inner, self.est, self.flagged = inner, [], []
 
     def step(self, *iq):
         out = self.inner.step(*iq)
         self.est.append(np.array(self.inner.doppler_hz(), float))
+        d = getattr(self.inner, "diverged", None)
+        if d is not None:
+            self.flagged.append(np.array(d, bool).copy())
         return out
 
     def frequencies_hz(self, out):

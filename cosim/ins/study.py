@@ -13,7 +13,9 @@ velocity error along the line of sight ``-(f_hat - f) lambda`` (m/s; ``f_hat`` t
 Doppler estimate, ``f`` the LOS Doppler plus the clock's frequency error), range error ``code error x 293.05 m`` (the DLL's pseudorange error: no
 PVT is solved here), discriminator RMS over the jerk segments, PLI
 (prompt summed over ``pli_epochs``) and the fraction of PLI values above ``pli_threshold``,
-cycle slips of the true phase error (``cosim.gnss.loopsim.cycle_slips``, Costas).
+cycle slips of the true phase error (``cosim.gnss.loopsim.cycle_slips``, Costas); and what a
+user sees (``shown``, :func:`shown_loop`: accuracy of the valid velocity estimates,
+availability, misleading estimates), pooled over the trials.
 """
 from __future__ import annotations
 
@@ -136,11 +138,38 @@ def run_loop(loop: str, cfg: InsStudyConfig, scenario=None, keep: bool = False, 
            "pli_mean": float(pli[ps:].mean()), "pli_min": float(pli[ps:].min()),
            "lock_fraction_min": float(lockf.min()), "lock_fraction_mean": float(lockf.mean()),
            "cycle_slips": int(cycle_slips(r.phase_err_cycles[s:]).sum()),
+           "shown": shown_loop(cfg, tm, verr, pli, r.phase_err_cycles),
            "tracker": trk.report()}
     if keep:
         out["series"] = {"t_s": tm, "disc_cycles": h["disc_cycles"], "pli": pli,
                          "vel_err_mps": verr, "phase_err_cycles": r.phase_err_cycles}
     return out
+
+
+#: A velocity estimate shown valid further than this from the truth along the line of
+#: sight is misleading (m/s): 5 Hz of Doppler at L1, the GNSS studies' bound.
+MISLEADING_VEL_MPS = 5.0 * L1_WAVELENGTH_M
+
+
+def shown_loop(cfg: InsStudyConfig, t_s, vel_err, pli, phase_err_cycles) -> dict:
+    """What a user sees of a loop's trials (:mod:`cosim.studies.shown`), pooled: one LOS
+    velocity estimate per 1 ms epoch (error in m/s), valid while the latest complete PLI
+    value is above ``pli_threshold`` (none yet: not valid); display epoch 1 ms; scored after
+    ``skip_s``; misleading = shown valid after a cycle slip (the true phase error's nearest
+    Costas lock point moved from where it locked) or more than :data:`MISLEADING_VEL_MPS`
+    off."""
+    from cosim.studies.shown import pool, shown_figures
+    n, B = vel_err.shape
+    k = np.arange(n)
+    j = (k + 1) // cfg.pli_epochs - 1              # the latest complete PLI value
+    lock = np.rint(np.asarray(phase_err_cycles) / 0.5)
+    figs = []
+    for b in range(B):
+        valid = np.where(j >= 0, pli[np.clip(j, 0, None), b] > cfg.pli_threshold, False)
+        bad = (lock[:, b] != lock[0, b]) | (np.abs(vel_err[:, b]) > MISLEADING_VEL_MPS)
+        figs.append(shown_figures(t_s, vel_err[:, b], valid, settle_s=cfg.skip_s,
+                                  end_s=cfg.duration_s, epoch_s=1e-3, misleading=bad))
+    return pool(figs)
 
 
 def run_study(cfg: InsStudyConfig, loops=LOOPS, **opts) -> dict:

@@ -120,6 +120,8 @@ def record(fc, ber: float, trial: int, cache: dict) -> dict:
         r["pointing_unambiguous"] = run.signal_config().array.unambiguous_offset
         rec["flips"] = flips[0]
         rec.update(_score(r, fc))
+        from .study import shown_tracking
+        rec["shown"] = shown_tracking(r, run)
     except Exception as e:   # the study's point: report, never crash
         rec["exception"] = f"{type(e).__name__}: {e}"
         rec["traceback"] = traceback.format_exc(limit=5)
@@ -140,4 +142,7 @@ FAULT_MODEL = FaultModel(targets=TARGETS, check=check, check_size=check_size,
                              "lost-track events (the search restarted); gated = FIFO records "
                              "the DSP rejected (block counter or steering words not the ones "
                              "it sent). The tracker raises no integrity flag, so the flagged, "
-                             "misleading and unflagged columns are '-'."))
+                             "misleading and unflagged columns are '-'; in what a user sees "
+                             "(the second table) an estimate is valid while the loop is in "
+                             "track, and misleading when in track with the beam's pointing "
+                             "error beyond the unambiguous half-width."))

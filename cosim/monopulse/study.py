@@ -17,8 +17,8 @@ Parameters (``--param NAME=VALUES``)
 
 A record is one (SNR, trial): the scenario of ``python -m cosim monopulse`` (target, rates,
 channel mismatch, calibration) with the trial's seed; ``duration_s`` long, scored from
-``2 memory_s``. The primary figure is the azimuth tracking RMS (deg); a point is *locked*
-when it acquired and never lost track.
+``2 memory_s``. The primary figure is the azimuth tracking RMS (deg) of the blocks in track
+(:func:`shown_tracking`: what a user sees -- accuracy, availability, integrity).
 """
 from __future__ import annotations
 
@@ -93,12 +93,32 @@ _KEEP = ("az_track_rms_deg", "el_track_rms_deg", "az_meas_rms_deg", "el_meas_rms
          "lost_track_events", "acquired_trials", "fifo_dropped", "dsp_events", "digest")
 
 
-def _score(r: dict) -> dict:
+def shown_tracking(r: dict, run) -> dict:
+    """What a user sees of a run's trial 0 (:func:`cosim.studies.shown.shown_figures`; the run
+    made with ``keep_series``): one azimuth estimate per block (the tracker's, error in
+    deg), valid while the loop is in track; display epoch one block; misleading = in track
+    with the beam's pointing error beyond the unambiguous half-width (``lambda / 2D``, either
+    axis), where the monopulse ratio no longer points back to the target."""
+    from dsp.monopulse.angles import angles
+    from cosim.studies.shown import shown_figures
+    from .run import TRACK
+    s = r["series"]
+    est, truth = s["est"][:, 0], s["truth"][:, 0]
+    az_e, _ = angles(est[:, 0], est[:, 1])
+    az_t, _ = angles(truth[:, 0], truth[:, 1])
+    err = np.rad2deg(np.angle(np.exp(1j * (az_e - az_t))))
+    unamb = np.array(run.signal_config().array.unambiguous_offset)
+    beyond = np.max(np.abs(s["steer"][:, 0] - truth) / unamb, axis=-1) >= 1.0
+    return shown_figures(s["t_s"], err, s["modes"][:, 0] == TRACK, settle_s=run.settle_s,
+                         end_s=r["duration_s"], epoch_s=r["block_s"], misleading=beyond)
+
+
+def _score(r: dict, run) -> dict:
     out = {k: r.get(k) for k in _KEEP}
     for k, v in out.items():
         if isinstance(v, float) and v != v:
             out[k] = None
-    out["locked"] = bool(r["acquired_trials"] == 1 and r["lost_track_events"] == 0)
+    out["shown"] = shown_tracking(r, run)
     return out
 
 
@@ -140,11 +160,12 @@ class MonopulseSweepRecord:
         from .run import run_monopulse
         run = run_config(self.cfg, (), self.snr_db, self.trial, backend="golden", dsp="float",
                          adc_bits=GOLDEN_ADC_BITS)
-        return _score(run_monopulse(run))
+        return _score(run_monopulse(run, keep_series=True), run)
 
     def point(self, combo: tuple, recheck: bool = False) -> dict:
         from .run import run_monopulse
-        out = _score(run_monopulse(run_config(self.cfg, combo, self.snr_db, self.trial)))
+        run = run_config(self.cfg, combo, self.snr_db, self.trial)
+        out = _score(run_monopulse(run, keep_series=True), run)
         if recheck:
             out["recheck"] = globals()["recheck"](self.cfg, combo, self.snr_db, self.trial)
         return out
@@ -159,4 +180,9 @@ SWEEP_MODEL = SweepModel(check_param=check_param, check_point=check_point,
                                      f"front-end model (FIFO records, register writes), "
                                      f"fixed-point tracker. Golden: float IF chain + float "
                                      f"tracker on the same record (ADC {GOLDEN_ADC_BITS} bits). "
-                                     f"Figure: azimuth tracking RMS (deg).")
+                                     f"Figure: azimuth tracking RMS (deg).",
+                         shown_note="Monopulse: one azimuth estimate per block (the "
+                                    "tracker's, deg); valid = the loop in track; display "
+                                    "epoch one block; misleading = in track with the beam's "
+                                    "pointing error beyond the unambiguous half-width "
+                                    "(lambda / 2D on either axis).")

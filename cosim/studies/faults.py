@@ -28,7 +28,12 @@ the longest disturbance (s): the recovery time. Integrity, as for a bearing indi
 warning flag: the share of bearings the receiver flagged (``BearingTrack.valid`` False, for
 the reasons listed at :class:`dsp.tacan.receiver.ReceiverConfig`), the share of
 *misleading* bearings (disturbed but not flagged: what a user would be shown as good), and
-the RMSE / worst error of the unflagged bearings.
+the RMSE / worst error of the unflagged bearings. And, as every study reports them
+(:mod:`cosim.studies.shown`, the receiver's estimates, valid flags and error bound), the three
+figures of what a user sees beside the fault-free run of the same trials: accuracy of the
+estimates shown valid, availability (epochs with a valid estimate, time to the first) and
+integrity (estimates shown valid beyond the receiver's bound -- TACAN: 20 deg -- and those the
+fault-free run does not also make).
 """
 from __future__ import annotations
 
@@ -40,6 +45,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .shown import paired, pool
 
 #: TACAN's targets (kept here for callers of the first registry; a receiver gives its own
 #: in ``FaultModel.targets``).
@@ -254,7 +261,7 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
             "reinit": ev.get("reinit", 0), "gated": ev.get("gated", 0), "p_neg": ev.get("p_neg", 0),
             "state_faults": ev.get("state_faults"),      # None: the receiver has no such check
             "saturations": sum(v for k, v in ev.items() if k.startswith("sat_")),
-            "rx": rx})
+            "rx": rx, **_shown_row(rs, [r for r in recs if r["ber"] == 0.0], ber)})
     from cosim.core.provenance import machine_info
     summary = {"study": "faults", "machine": machine_info(), "config": asdict(fc),
                "elapsed_s": time.perf_counter() - t0, "rows": rows,
@@ -262,6 +269,24 @@ def run_faults(fc: FaultConfig, out: str | Path | None = None, progress: bool = 
     if out is not None:
         _write(fc, summary, Path(out))
     return summary
+
+
+def _shown_row(rs: list[dict], base: list[dict], ber: float) -> dict:
+    """What a user sees at one BER (:mod:`cosim.studies.shown`: accuracy of the estimates
+    shown valid, availability, misleading estimates), pooled over the trials, and beside the
+    fault-free run (BER 0) of the same trials: the availability difference and the
+    misleading estimates it does not also make. A run that raised is in the exceptions
+    column (the study fails on it), not here."""
+    figs = {r["trial"]: r["shown"] for r in rs if r.get("shown")}
+    b = {r["trial"]: r["shown"] for r in base if r.get("shown")}
+    if not figs:
+        return {"shown": None}
+    p = pool(list(figs.values()))
+    common = sorted(t for t in figs if t in b)
+    pr = paired([figs[t] for t in common], [b[t] for t in common],
+                json.dumps(["faults", ber])) if common else {}
+    return {"shown": p, "availability_diff": pr.get("availability_diff"),
+            "excess_misleading": pr.get("excess_misleading")}
 
 
 def report_stem(fc: FaultConfig) -> str:
@@ -288,6 +313,34 @@ def _max_of(recs, key):
     return float(max(v)) if v else None
 
 
+def _shown_table(rows: list[dict], quantity: str) -> list[str]:
+    """The report's table of what a user sees per BER (:func:`_shown_row`)."""
+    f_ = lambda v, fmt: "-" if v is None else format(v, fmt)
+    out = ["", f"What a user sees (accuracy, availability, integrity of the {quantity}s "
+               "shown valid after settling; beside the fault-free run of the same trials): "
+               "availability = mean fraction of display epochs whose latest estimate is "
+               "valid; misleading = shown valid and beyond the receiver's error bound, with "
+               "the rate's 95 % Wilson interval; beyond BER 0 = misleading estimates the "
+               "fault-free run of the same trial does not also make.", "",
+               "| BER | valid RMSE | valid mean err | availability | vs BER 0 | first valid s "
+               "(median / worst) | never valid | misleading | rate 95 % CI | beyond BER 0 |",
+               "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        p = r.get("shown")
+        if not p:
+            out.append(f"| {r['ber']:g} | - | - | - | - | - | - | - | - | - |")
+            continue
+        ci = p["misleading_rate_ci95"]
+        out.append(f"| {r['ber']:g} | {f_(p['rmse'], '.4f')} | {f_(p['mean_error'], '+.4f')} | "
+                   f"{f_(p['availability'], '.3f')} | {f_(r.get('availability_diff'), '+.3f')} | "
+                   f"{f_(p['first_valid_s_median'], '.3f')} / "
+                   f"{f_(p['first_valid_s_max'], '.3f')} | "
+                   f"{p['never_valid']} | {p['misleading']} | "
+                   f"{'-' if not ci else f'{ci[0]:.2g}-{ci[1]:.2g}'} | "
+                   f"{f_(r.get('excess_misleading'), 'd')} |")
+    return out
+
+
 def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     model = fault_model(fc.receiver)
@@ -298,10 +351,14 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
             "max_abs_error_deg", "disturbed_fraction", "longest_disturbance_s",
             "flagged_fraction", "misleading_fraction", "valid_rmse_deg",
             "valid_max_abs_error_deg", "state_faults", "reinit", "gated", "p_neg", "saturations"]
+    shown = ("rmse", "mean_error", "availability", "first_valid_s_median", "never_valid",
+             "misleading", "misleading_rate")
     with open(out / f"{stem}.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w = csv.DictWriter(f, fieldnames=keys + [f"shown_{k}" for k in shown]
+                           + ["availability_diff", "excess_misleading"], extrasaction="ignore")
         w.writeheader()
-        w.writerows(s["rows"])
+        for r in s["rows"]:
+            w.writerow({**r, **{f"shown_{k}": (r.get("shown") or {}).get(k) for k in shown}})
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -349,6 +406,7 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
                      f"{f_(r.get('valid_max_abs_error_deg'), '.3f')} | "
                      f"{f_(r.get('state_faults'), 'd')} | {r['reinit']} | "
                      f"{r['gated']} | {r['saturations']} |")
+    lines += _shown_table(s["rows"], model.quantity)
     if any(r["rx"] for r in s["rows"]):
         lines += ["", "DSP receiver (FIFO words): " + "; ".join(
             f"BER {r['ber']:g}: " + ", ".join(f"{k} {v}" for k, v in r["rx"].items() if v)

@@ -114,7 +114,11 @@ class SweepConfig:
         ``recheck_samples`` ADC samples (default 1,000,000 with Verilator, 60,000 with the
         much slower Amaranth simulation), comparing FIFO words and cycles with the model.
     target_rel : float
-        Word-length proposal: RMSE within ``(1 + target_rel)`` of the float golden.
+        Word-length proposal: the RMSE of the estimates shown valid within
+        ``(1 + target_rel)`` of the float golden chain's.
+    availability_margin : float
+        Word-length proposal: the fraction of epochs with a valid estimate not below the
+        golden chain's by more than this (absolute; 0.02 = two epochs in a hundred).
     design : {"grid", "oat"}
         ``grid``: every combination of the swept values; ``oat``: one parameter at a time,
         the others at their reference (largest) value -- what the proposal reads, at the
@@ -132,6 +136,7 @@ class SweepConfig:
     recheck_backend: str = "auto"
     recheck_samples: int | None = None
     target_rel: float = 0.05
+    availability_margin: float = 0.02
     design: str = "grid"
 
     def __post_init__(self):
@@ -165,6 +170,10 @@ class SweepConfig:
                              f"{self.recheck_samples!r}")
         if not (0 < self.target_rel < 10):
             raise ValueError(f"target_rel must be in (0, 10), not {self.target_rel}")
+        if not (isinstance(self.availability_margin, (int, float))
+                and 0 <= self.availability_margin < 1):
+            raise ValueError(f"availability_margin must be in [0, 1), not "
+                             f"{self.availability_margin!r}")
         if self.design not in ("grid", "oat"):
             raise ValueError(f"design must be 'grid' (every combination) or 'oat' (one "
                              f"parameter at a time), not {self.design!r}")

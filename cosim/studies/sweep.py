@@ -2,15 +2,18 @@
 
 A sweep crosses any word-length or mode parameter of the HDL front end and of the DSP core
 with SNR and trials, runs every point on the bit-exact fast path (the front end's numpy
-model, the FIFO/link model and the fixed-point DSP core), scores it against the float golden
-chain run on the *same* record (paired comparison: the trial-to-trial noise cancels in the
-ratio), and writes CSV/JSON of every point, plots, and a Markdown report with the range and
-saturation log and a word-length proposal.
+model, the FIFO/link model and the fixed-point DSP core), judges it as a user sees it --
+accuracy of the estimates shown valid, availability, integrity (:mod:`cosim.studies.shown`)
+-- against the float golden chain run on the *same* record (paired comparison: the
+trial-to-trial noise cancels), and writes CSV/JSON of every point, plots, and a Markdown
+report (:mod:`cosim.studies.report`) with the range and saturation log and a word-length
+proposal.
 
 The receiver is a registered one (:mod:`cosim.core.receivers`) whose ``sweep`` study has a
 :class:`~cosim.core.receivers.SweepModel`: it names the parameters (``--param NAME=VALUES``;
 TACAN's: :mod:`cosim.tacan.study`), runs one record (the point runner: swept values + SNR +
-trial seed -> metrics with the primary figure, and the golden run of the same record) and
+trial seed -> metrics with ``shown``, the three figures of what a user sees, and the golden
+run of the same record) and
 keeps its own front-end cache; everything else here is generic.
 
 Values: ``a:b`` (integers a..b), ``a:b:s`` (a, a+s, ... <= b), or a comma list.
@@ -41,6 +44,8 @@ import numpy as np
 from cosim.core.validate import check_jobs, dumps
 
 from .proposal import aggregate, confirms, propose, shortfall, widen_one
+from .report import plot, proposal_record, report_md
+from .shown import FIGURE_KEYS
 from .spec import SweepConfig, primary_key, sweep_model
 
 #: CPU seconds one point costs per second of record (TACAN's: model front end, FIFO, fixed
@@ -90,6 +95,17 @@ def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:20]
 
 
+def _shown(metrics: dict, cfg: SweepConfig) -> dict:
+    """A record's metrics with what a user sees: the receiver gives ``shown``, the figures
+    of :func:`cosim.studies.shown.shown_figures` (accuracy, availability, integrity); a
+    record is ``locked`` when it showed a valid estimate after settling."""
+    fig = metrics.get("shown")
+    if not isinstance(fig, dict) or any(k not in fig for k in FIGURE_KEYS):
+        raise RuntimeError(f"the {cfg.receiver} study model's record gave no 'shown' figures "
+                           f"(cosim.studies.shown.shown_figures)")
+    return {**metrics, "locked": fig["n_valid"] > 0}
+
+
 def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_dir: str | None,
              recheck_combos: tuple = ()) -> list[dict]:
     """All points of one record (SNR, trial): the receiver's record (its signal generated
@@ -114,7 +130,7 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
     if golden is None:
         golden = {**base, "combo": [["golden", 1]], "kind": "golden", "locked": False}
         try:
-            golden.update(rec.golden())
+            golden.update(_shown(rec.golden(), cfg))
         except (ValueError, RuntimeError) as e:
             golden["error"] = str(e)
         if gfile is not None:
@@ -124,7 +140,7 @@ def run_task(cfg: SweepConfig, snr_db: float, trial: int, combos: list, cache_di
                "key": key}
         # the configuration was validated before the study started (check_points); an
         # error here stops the study with its message instead of becoming a row
-        row.update(rec.point(combo, recheck=tuple(combo) in recheck_combos))
+        row.update(_shown(rec.point(combo, recheck=tuple(combo) in recheck_combos), cfg))
         if f is not None:
             f.write_text(json.dumps(row))
         out.append(row)
@@ -242,24 +258,29 @@ def write_report(cfg: SweepConfig, results: list[dict], out: Path, *, elapsed: f
     names = [n for n, _ in cfg.params]
     with open(out / "points.csv", "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["kind", "combo", "snr_db", "trial", "bearing_deg", "locked", P,
-                    "mean_error_deg", "max_abs_error_deg", "crb_deg", "adc_clipped",
-                    "fifo_dropped", "gated", "reinit", "error"])
+        shown = ("n_estimates", "n_valid", "rmse", "mean_error", "max_abs_error",
+                 "availability", "first_valid_s", "misleading")
+        w.writerow(["kind", "combo", "snr_db", "trial", "bearing_deg", "locked"]
+                   + [f"shown_{k}" for k in shown]
+                   + ["crb_deg", "adc_clipped", "fifo_dropped", "gated", "reinit", "error"])
         for r in pts:
+            sh = r.get("shown") or {}
             w.writerow([r["kind"], json.dumps(r["combo"]), r["snr_db"], r["trial"],
-                        r.get("bearing_deg"), r["locked"], r.get(P),
-                        r.get("mean_error_deg"), r.get("max_abs_error_deg"), r.get("crb_deg"),
-                        r.get("adc_clipped"), r.get("fifo_dropped"), r.get("gated"),
-                        r.get("reinit"), r.get("error")])
+                        r.get("bearing_deg"), r["locked"]] + [sh.get(k) for k in shown]
+                       + [r.get("crb_deg"), r.get("adc_clipped"), r.get("fifo_dropped"),
+                          r.get("gated"), r.get("reinit"), r.get("error")])
     with open(out / "summary.csv", "w", newline="") as f:
         keys = names + ["snr_db", "trials", "locked", "golden_locked", P,
-                        "golden_" + P, "ratio_to_golden", "mean_error_deg", "crb_deg",
+                        "golden_" + P, "ratio_to_golden", "mean_error", "crb_deg",
+                        "availability", "golden_availability", "availability_diff",
+                        "first_valid_s", "golden_first_valid_s", "misleading",
+                        "golden_misleading", "excess_misleading", "misleading_rate",
                         "adc_clipped", "fifo_dropped", "invalid"]
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    plots = _plot(cfg, rows, out)
-    (out / "report.md").write_text(_report_md(cfg, summary, plots))
+    plots = plot(cfg, rows, out)
+    (out / "report.md").write_text(report_md(cfg, summary, plots))
     return summary
 
 
@@ -282,155 +303,6 @@ def _collect_ranges(pts) -> dict:
             a["overflows"] += int(d.get("overflows") or 0)
             a["points"] += 1
     return agg
-
-
-def _plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from cosim.core.receivers import get
-    P, fig_m = primary_key(cfg.receiver), get(cfg.receiver).primary
-    names = [n for n, _ in cfg.params]
-    ref = {n: max(v) if all(isinstance(x, (int, float)) for x in v) else v[0] for n, v in cfg.params}
-    files = []
-    for n, vals in cfg.params:
-        if len(vals) < 2:           # held fixed (e.g. detector=pulse): nothing to plot
-            continue
-        fig, ax = plt.subplots(figsize=(7, 4.5))
-        numeric = all(isinstance(x, (int, float)) for x in vals)
-        xs = list(vals) if numeric else list(range(len(vals)))
-        for ci, snr in enumerate(cfg.snr_db):
-            sel = {r[n]: r for r in rows if r["snr_db"] == float(snr)
-                   and all(r[m] == ref[m] for m in names if m != n)}
-            ys = [sel[v][P] if v in sel and sel[v][P] is not None else np.nan
-                  for v in vals]
-            col = f"C{ci}"
-            ax.semilogy(xs, ys, "o-", color=col, label=f"{snr:g} dB")
-            g = [sel[v]["golden_" + P] for v in vals if v in sel and sel[v]["golden_" + P]]
-            if g:
-                ax.axhline(float(np.median(g)), color=col, ls="--", lw=1)
-            c = [sel[v]["crb_deg"] for v in vals if v in sel and sel[v].get("crb_deg")]
-            if c:
-                ax.axhline(float(c[0]), color=col, ls=":", lw=1)
-        if not numeric:
-            ax.set_xticks(xs, [str(v) for v in vals])
-        ax.set_xlabel(n)
-        ax.set_ylabel(f"{fig_m.label} ({fig_m.unit})")
-        import textwrap
-        others = ", ".join(f"{m}={ref[m]}" for m in names if m != n)
-        sub = "\n".join(textwrap.wrap(f"others at {others}", 95)) + "\n" if others else ""
-        ax.set_title(f"{cfg.receiver.upper()} {fig_m.label} vs {n}\n{sub}"
-                     "dashed: float golden (same records)   dotted: Cramer-Rao bound",
-                     fontsize=8)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(title="SNR", fontsize=8)
-        fig.tight_layout()
-        fn = f"rmse_vs_{n.replace('.', '_')}.png"
-        fig.savefig(out / fn, dpi=110)
-        plt.close(fig)
-        files.append(fn)
-    return files
-
-
-def _report_md(cfg: SweepConfig, s: dict, plots: list[str]) -> str:
-    m = s["machine"]
-    P = primary_key(cfg.receiver)
-    names = [n for n, _ in cfg.params]
-    f = lambda v, fmt: "-" if v is None else format(v, fmt)
-    lines = [f"# {sweep_model(cfg.receiver).title}", "",
-             f"`{m['command']}` on {m['cpu']} ({m['cores']} cores), {m['date']}, commit "
-             f"{m['commit']}: {s['n_points']} points in {s['elapsed_s']:.0f} s"
-             + (f" ({s['from_cache']} of them read from the cache of an earlier run)"
-                if s.get("from_cache") else "") + ".", "",
-             f"Swept: " + "; ".join(f"`{n}` = {', '.join(map(str, v))}" for n, v in cfg.params) +
-             f"; SNR {', '.join(f'{x:g}' for x in cfg.snr_db)} dB; {cfg.trials} trials of "
-             f"{cfg.duration_s:g} s (filter memory {cfg.memory_s:g} s, bearings after "
-             f"{2 * cfg.memory_s:g} s scored). {sweep_model(cfg.receiver).description}", ""]
-    for p in plots:
-        lines += [f"![{p}]({p})", ""]
-    lines += ["## Every setting", "",
-              "| " + " | ".join(names) + " | SNR dB | locked | RMSE deg | golden RMSE | ratio | "
-              "ratio 95 % CI | mean err | CRB | ADC clipped | FIFO drops | DSP saturations |",
-              "|" + "---|" * (len(names) + 11)]
-    for r in s["rows"]:
-        sat = sum(v for k, v in r["dsp_events"].items() if k.startswith("sat_"))
-        inv = f" ({r['invalid']})" if r["invalid"] else ""
-        lines.append("| " + " | ".join(str(r[n]) for n in names) +
-                     f" | {r['snr_db']:g} | {r['locked']}/{r['trials']} (golden "
-                     f"{r['golden_locked']}){inv} | {f(r[P], '.4f')} | "
-                     f"{f(r['golden_' + P], '.4f')} | {f(r['ratio_to_golden'], '.3f')} | "
-                     f"{_ci_text(r.get('ratio_ci95'))} | {f(r['mean_error_deg'], '+.4f')} | {f(r['crb_deg'], '.4f')} | "
-                     f"{r['adc_clipped']} | {r['fifo_dropped']} | {sat} |")
-    lines += ["", "## Ranges and overflows (all points)", "",
-              "Smallest and largest value each signal took over every point (front end `fe.*` "
-              "as a fraction of its word's full scale (FS); fixed-point DSP `dsp.*` in real "
-              "units, before saturation), the word's range and the least headroom (unused "
-              "MSBs) over the points, and the overflow/saturation count (`fe.adc`: samples "
-              "clipped).", "",
-              "| signal | min | max | unit | word range | least headroom bits | "
-              "overflows/saturations |", "|---|---:|---:|---|---:|---:|---:|"]
-    for k, v in sorted(s["ranges"].items()):
-        rng = "-" if v["lo"] is None else f"[{v['lo']:.4g}, {v['hi']:.4g}]"
-        lines.append(f"| {k} | {f(v['min'], '.4g')} | {f(v['max'], '.4g')} | {v['unit']} | {rng} | "
-                     f"{f(v['headroom_bits'], '.1f')} | {v['overflows']} |")
-    lines += ["", "## Word-length proposal", "",
-              f"Smallest value of each parameter (the others at their largest swept value) such "
-              f"that it and every larger value lock as often as the golden chain, re-initialise "
-              f"the filter no more often than it, and keep the paired RMSE within "
-              f"{100 * cfg.target_rel:g} % of it -- or not significantly above (the lower end "
-              f"of the ratio's 95 % bootstrap interval over the trials is) -- at every SNR "
-              f"where the golden chain locks on >= 80 % of the trials:",
-              ""]
-    lows = {n: min(v) for n, v in cfg.params if all(isinstance(x, (int, float)) for x in v)}
-    for n, v in s["proposal"].items():
-        note = ""
-        if v is not None and v == lows.get(n):
-            note = " (the smallest value swept: the true minimum may be lower, extend the range)"
-        lines.append(f"- `{n}`: {v if v is not None else 'none in the swept range'}{note}")
-    if s.get("confirmation"):
-        c = s["confirmation"]
-        lines += ["", f"Confirmation re-run (fresh seeds, all values together; stricter: the "
-                      f"measured ratio itself within {100 * cfg.target_rel:g} %, no more "
-                      f"filter re-initialisations than the golden chain; on failure each "
-                      f"parameter alone one swept step wider, the nearest kept for the next "
-                      f"round; last, every parameter at its widest): "
-                      f"**{'confirmed' if c['confirmed'] else 'NOT confirmed'}**"
-                  + (f" ({c.get('reason')})" if c.get("reason") else "")
-                  + (": " + ", ".join(f"`{n}`={v}" for n, v in c["params"].items())
-                     if c.get("confirmed") else "")]
-        for i, a in enumerate(c.get("attempts", [])):
-            w = a.get("widened")
-            how = "" if w is None else (" (every parameter at its widest)" if w == "all"
-                                        else f" (`{w}` one step wider)")
-            lines += ["", f"Attempt {i + 1}{how}: " + ", ".join(f"`{n}`={v}" for n, v in
-                                                                a["params"].items())
-                      + f" -- {'confirmed' if a['confirmed'] else 'not confirmed'}"]
-            for r in a["rows"]:
-                ev = r.get("dsp_events") or {}
-                lines.append(
-                    f"- SNR {r['snr_db']:g} dB: RMSE {f(r[P], '.4f')} deg vs golden "
-                    f"{f(r['golden_' + P], '.4f')} (ratio {f(r['ratio_to_golden'], '.3f')}, "
-                    f"95 % CI {_ci_text(r.get('ratio_ci95'))}), locked {r['locked']}/"
-                    f"{r['trials']} (golden {r['golden_locked']}), re-inits "
-                    f"{ev.get('reinit', 0)} (golden {r.get('golden_reinit', 0)})")
-    cr = (s.get("confirmation") or {}).get("recheck")
-    if s["rechecks"] or cr:
-        lines += ["", "## Cycle-accurate re-checks", ""]
-    if cr:
-        lines.append(f"- the confirmed combination {cr['combo']}: {cr.get('backend')} on "
-                     f"{cr.get('samples', 0)} samples, {cr.get('words', 0)} FIFO words, same "
-                     f"bits: {cr.get('same_bits')}" + (f" ({cr['error']})" if cr.get("error")
-                                                       else ""))
-    if s["rechecks"]:
-        for c in s["rechecks"]:
-            lines.append(f"- {c['combo']}: {c.get('backend')} on {c.get('samples', 0)} samples, "
-                         f"{c.get('words', 0)} FIFO words, same bits: {c.get('same_bits')}"
-                         + (f" ({c['error']})" if c.get("error") else ""))
-    return "\n".join(lines) + "\n"
-
-
-def _ci_text(ci) -> str:
-    return "-" if not ci else f"{ci[0]:.3f}-{ci[1]:.3f}"
 
 
 def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler="local",
@@ -462,7 +334,8 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
                             progress=progress)
         rows = s["rows"]
         a = {"params": dict(params), "widened": widened, "rows": rows,
-             "confirmed": bool(all(confirms(r, cfg.target_rel) for r in rows))}
+             "confirmed": bool(all(confirms(r, cfg.target_rel, cfg.availability_margin)
+                                        for r in rows))}
         attempts.append(a)
         return a
 
@@ -477,7 +350,8 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
         best = min(cands, key=lambda a: (not a["confirmed"],
                                          a["params"][a["widened"]] - best["params"][a["widened"]]
                                          if a["confirmed"] else 0,
-                                         shortfall(a["rows"], cfg.target_rel)))
+                                         shortfall(a["rows"], cfg.target_rel,
+                                                   cfg.availability_margin)))
     if not best["confirmed"]:
         widest = {n: ref[n] for n, _ in cfg.params}
         if widest != best["params"]:
@@ -495,7 +369,8 @@ def confirm(cfg: SweepConfig, proposal: dict, out: Path, *, jobs=None, scheduler
 def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
           scheduler: str = "local", confirm_proposal: bool = True, progress: bool = True) -> dict:
     """A sweep, its word-length proposal and (optionally) the confirming re-run; the report
-    (``report.md``) includes the confirmation."""
+    (``report.md``) includes the confirmation; ``proposal.json`` is its published summary
+    (:func:`cosim.studies.report.proposal_record`)."""
     out = Path(out)
     s = run_sweep(cfg, out, jobs=jobs, scheduler=scheduler, progress=progress)
     if confirm_proposal:
@@ -503,5 +378,6 @@ def study(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
                                     progress=progress)
         (out / "summary.json").write_text(dumps(s, indent=1))
         plots = sorted(p.name for p in out.glob("rmse_vs_*.png"))
-        (out / "report.md").write_text(_report_md(cfg, s, plots))
+        (out / "report.md").write_text(report_md(cfg, s, plots))
+    (out / "proposal.json").write_text(dumps(proposal_record(s), indent=1))
     return s

@@ -69,6 +69,7 @@ def _run_cfg(fc, trial: int):
 
 def _score(fc, run, track, truth_deg) -> dict:
     from dsp.tacan.bearing import wrap_deg
+    from .run import shown_bearings
     keep = track.times_s >= run.settle
     b = track.bearing_deg[0, keep]
     t = track.times_s[keep]
@@ -96,7 +97,8 @@ def _score(fc, run, track, truth_deg) -> dict:
             "flagged_fraction": float(np.mean(~valid)) if b.size else None,
             "misleading_fraction": float(np.mean(dist & valid)) if b.size else None,
             "valid_rmse_deg": float(np.sqrt(np.mean(ev_ok ** 2))) if ev_ok.size else None,
-            "valid_max_abs_error_deg": float(np.abs(ev_ok).max()) if ev_ok.size else None}
+            "valid_max_abs_error_deg": float(np.abs(ev_ok).max()) if ev_ok.size else None,
+            "shown": shown_bearings(track, truth_deg, run.settle, fc.duration_s)}
 
 
 def record(fc, ber: float, trial: int, cache: dict) -> dict:

@@ -21,7 +21,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from dsp.tacan.receiver import (BearingTrack, amplitude_codes, bearing_stats, ReceiverState, process_peaks)
+from dsp.tacan.receiver import (MISLEADING_DEG, BearingTrack, amplitude_codes, bearing_stats,
+                                ReceiverState, process_peaks)
+from dsp.tacan.standard import F15
 from dsp.tacan.bounds import crb_deg
 from dsp.tacan.bearing import wrap_deg
 from .config import TacanRunConfig
@@ -101,6 +103,26 @@ def check_run_size(run: TacanRunConfig) -> None:
                                    if be in ("pysim", "icarus") else ""))
 
 
+#: The display epoch of the studies' availability: one antenna revolution (15 Hz).
+EPOCH_S = 1.0 / F15
+
+
+def shown_bearings(track: BearingTrack, bearing_true_deg: float, settle_s: float,
+                   end_s: float) -> dict:
+    """What a user sees of trial 0's bearings (:func:`cosim.studies.shown.shown_figures`):
+    each bearing when it became available, its error, its valid flag; display epoch one
+    revolution (:data:`EPOCH_S`); a bearing shown valid more than
+    :data:`dsp.tacan.receiver.MISLEADING_DEG` (20 deg: a sector error) off is misleading."""
+    from cosim.studies.shown import shown_figures
+    t = track.produced_s if track.produced_s is not None else track.times_s
+    b = track.bearing_deg[0] if track.bearing_deg.shape[0] else np.zeros(0)
+    err = wrap_deg(b - float(bearing_true_deg))
+    valid = np.ones(b.size, bool) if track.valid is None else track.valid[0]
+    order = np.argsort(t, kind="stable")
+    return shown_figures(np.asarray(t)[order], err[order], valid[order], settle_s=settle_s,
+                         end_s=end_s, epoch_s=EPOCH_S, bound=MISLEADING_DEG)
+
+
 def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = None,
               progress: bool = False) -> dict:
     """Run one scenario end to end; returns the result record (JSON-serialisable).
@@ -161,6 +183,8 @@ def run_tacan(run: TacanRunConfig, signal=None, frontend_cache: dict | None = No
         "n_valid_bearings": int(st["n_valid"][0]),
         "valid_rmse_deg": _finite_or_none(st["valid_rmse_deg"][0]),
         "misleading_bearings": int(st["misleading"][0]),
+        # the three figures every study judges by (accuracy, availability, integrity)
+        "shown": shown_bearings(track, s.truth.bearing_deg, run.settle, sig.duration_s),
         "n_peaks": int(track.n_peaks),
         "n_measurements": int(track.n_measurements),
         # what the DSP measured on, and with both searches the paired fraction it chose by

@@ -127,17 +127,9 @@ def check_point(cfg, combo: tuple) -> None:
     run_config(cfg, combo, trial_signal(cfg, cfg.snr_db[0], 0))
 
 
-def _shows_bearing(r: dict) -> bool:
-    """A record is locked when the receiver shows a bearing after settling: one it does not
-    flag. Bearings that are all flagged (the receiver says it has none, e.g. the pair search
-    flooded by an under-dithered 4-bit ADC's noise at 20 dB: its 0.5-3 deg errors) do not
-    count as a lock; they are still in the RMSE of a record that locked."""
-    return r["n_bearings"] > 0 and r["n_valid_bearings"] > 0
-
-
 def _score(r: dict) -> dict:
-    keep = ("rmse_deg", "mean_error_deg", "max_abs_error_deg", "crb_deg", "n_bearings",
-            "n_valid_bearings", "misleading_bearings",
+    keep = ("shown", "rmse_deg", "mean_error_deg", "max_abs_error_deg", "crb_deg",
+            "n_bearings", "n_valid_bearings", "misleading_bearings", "first_valid_bearing_s",
             "gated", "reinit", "adc_clipped", "fifo_dropped", "dsp_events", "ranges", "digest")
     return {k: r.get(k) for k in keep}
 
@@ -194,16 +186,14 @@ class TacanSweepRecord:
         grun = TacanRunConfig(signal=gs.truth.config, backend="golden", dsp="float",
                               kalman=KalmanConfig(memory_s=self.cfg.memory_s),
                               detector=study_detector(self.cfg), require_bearing=False)
-        g = tr.run_tacan(grun, gs)
-        return {**_score(g), "locked": _shows_bearing(g)}
+        return _score(tr.run_tacan(grun, gs))
 
     def point(self, combo: tuple, recheck: bool = False) -> dict:
         from . import run as tr
         run = run_config(self.cfg, combo, self.sig)
         run = replace(run, require_bearing=False)
         s = self.signals[run.signal.adc_bits]
-        r = tr.run_tacan(run, s, frontend_cache=self.fe_cache)
-        out = {**_score(r), "locked": _shows_bearing(r)}
+        out = _score(tr.run_tacan(run, s, frontend_cache=self.fe_cache))
         if recheck:
             out["recheck"] = recheck_point(self.cfg, run, s)
         return out
@@ -216,7 +206,9 @@ SWEEP_MODEL = SweepModel(check_param=check_param, check_point=check_point,
                          cpu_s_per_record_s=1.5, title="TACAN quantisation sweep",
                          description=f"Path: bit-exact front-end model, FIFO/link model, "
                                      f"fixed-point DSP core. Golden: float front end + float "
-                                     f"DSP on the same records (ADC {GOLDEN_ADC_BITS} bits). "
-                                     f"Locked: the receiver showed a bearing after settling "
-                                     f"that it did not flag; the RMSE is over every bearing "
-                                     f"after settling of the locked trials.")
+                                     f"DSP on the same records (ADC {GOLDEN_ADC_BITS} bits).",
+                         shown_note="TACAN: the estimates are the bearings (deg), each when it "
+                                    "became available; valid = not flagged by the receiver; "
+                                    "display epoch one antenna revolution (1/15 s); "
+                                    "misleading = shown valid and more than 20 deg off (a "
+                                    "sector error); scored after 2 x the filter memory.")

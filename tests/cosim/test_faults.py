@@ -123,6 +123,13 @@ def test_dsp_state_upsets_are_detected_and_recovered(tmp_path):
     assert lo["valid_rmse_deg"] < 0.25 and lo["valid_max_abs_error_deg"] < 1.0
     assert r["misleading_fraction"] < 0.25 * r["disturbed_fraction"]
     assert "| flagged | misleading |" in (tmp_path / "faults_dsp_state.md").read_text()
+    # What a user sees: every display epoch of the fault-free run shows a valid bearing;
+    # upsets cost availability (flagged bearings), never integrity
+    assert _row(s, 0.0)["shown"]["availability"] == 1.0
+    for row in (lo, r):
+        assert row["shown"]["misleading"] == 0 and row["excess_misleading"] == 0
+        assert row["shown"]["rmse"] < 0.25
+    assert "| BER | valid RMSE |" in (tmp_path / "faults_dsp_state.md").read_text()
 
 
 def test_fifo_parity_turns_link_errors_into_skipped_words(tmp_path):

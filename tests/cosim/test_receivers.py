@@ -246,10 +246,21 @@ class _GainRecord:
         self.truth = 0.5 + 0.4 * np.sin(np.arange(n) * 0.05)
         self.x = np.clip(self.truth + 10 ** (-snr_db / 20) * 0.1 * rng.standard_normal(n), 0, 1)
         self.base = {"n_samples": n}
+        self.cfg = cfg
+
+    def _shown(self, y):
+        """What a user sees: every sample an estimate, valid, misleading beyond 0.25 FS."""
+        import numpy as np
+        from cosim.studies.shown import shown_figures
+        t = np.arange(self.truth.size) / 1000.0
+        return shown_figures(t, y - self.truth, np.ones(t.size, bool),
+                             settle_s=2 * self.cfg.memory_s, end_s=self.cfg.duration_s,
+                             epoch_s=0.01, bound=0.25)
 
     def golden(self):
         import numpy as np
-        return {"err_rms": float(np.sqrt(np.mean((self.x - self.truth) ** 2))), "locked": True}
+        return {"err_rms": float(np.sqrt(np.mean((self.x - self.truth) ** 2))),
+                "shown": self._shown(self.x)}
 
     def point(self, combo, recheck=False):
         import numpy as np
@@ -259,7 +270,7 @@ class _GainRecord:
         with open_frontend("model", p) as fe:
             w = fe.step(codes).words
         y = w / (p.gain * ((1 << p.in_bits) - 1))
-        return {"err_rms": float(np.sqrt(np.mean((y - self.truth) ** 2))), "locked": True}
+        return {"err_rms": float(np.sqrt(np.mean((y - self.truth) ** 2))), "shown": self._shown(y)}
 
 
 def _gain_check_param(name):

@@ -8,6 +8,7 @@ import cosim.studies.sweep as sw
 import cosim.tacan.run
 from cosim.cli import main
 from cosim.studies.proposal import confirms, passes, propose, ratio_ci
+from cosim.studies.report import plot
 from cosim.studies.spec import SweepConfig, parse_param, parse_values
 from cosim.studies.sweep import study
 from cosim.backends.verilator_harness import verilator_available
@@ -49,7 +50,8 @@ def test_sweep_config_errors(kw, msg):
 def _rows(table):
     """Synthetic aggregate rows: {bits: ratio} at one SNR where the golden chain locks."""
     return [{"adc_bits": b, "snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10,
-             "golden_locked": 10, "ratio_to_golden": r} for b, r in table.items()]
+             "golden_locked": 10, "ratio_to_golden": r, "availability_diff": 0.0,
+             "excess_misleading": 0} for b, r in table.items()]
 
 
 def test_proposal_is_the_smallest_width_from_which_every_larger_one_passes():
@@ -58,9 +60,9 @@ def test_proposal_is_the_smallest_width_from_which_every_larger_one_passes():
     # passing at 5 by chance but failing at 6 does not make 5 the proposal
     assert propose(cfg, _rows({4: 1.5, 5: 1.03, 6: 1.06, 7: 1.01, 8: 1.0})) == {"adc_bits": 7}
     assert propose(cfg, _rows({4: 1.5, 5: 1.3, 6: 1.2, 7: 1.1, 8: 1.07})) == {"adc_bits": None}
-    # fewer locks than the golden chain fail even with a good RMSE
+    # less availability than the golden chain fails even with a good RMSE
     rows = _rows({4: 1.0, 5: 1.0, 6: 1.0, 7: 1.0, 8: 1.0})
-    rows[0]["locked"] = 7
+    rows[0]["availability_diff"] = -0.3
     assert propose(cfg, rows) == {"adc_bits": 5}
 
 
@@ -94,7 +96,7 @@ def small_sweep(tmp_path_factory):
 def test_small_sweep_writes_every_output(small_sweep):
     cfg, out, s = small_sweep
     for f in ("summary.json", "points.csv", "summary.csv", "report.md", "rmse_vs_adc_bits.png",
-              "sweep.json"):
+              "sweep.json", "proposal.json"):
         assert (out / f).stat().st_size > 0, f
     assert s["n_points"] == 4 and len(list((out / "points").glob("*.json"))) == 4 + 2  # + golden
     rows = {r["adc_bits"]: r for r in s["rows"]}
@@ -207,7 +209,8 @@ def _fake_confirmation(monkeypatch, reinits):
         k = reinits(p)
         row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10,
                "golden_locked": 10, "golden_reinit": 0, "dsp_events": {"reinit": k},
-               "ratio_to_golden": 1.01 if k == 0 else 1.04, "ratio_ci95": [0.9, 1.1]}
+               "ratio_to_golden": 1.01 if k == 0 else 1.04, "ratio_ci95": [0.9, 1.1],
+               "availability_diff": 0.0, "excess_misleading": 0}
         return {"rows": [row]}
     monkeypatch.setattr(sw, "run_sweep", fake_run_sweep)
     return tried
@@ -251,7 +254,7 @@ def test_confirmation_keeps_the_nearest_and_widens_again(monkeypatch, tmp_path):
 def test_confirmation_is_stricter_than_the_proposal():
     row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
            "golden_reinit": 0, "dsp_events": {}, "ratio_to_golden": 1.07,
-           "ratio_ci95": [1.0, 1.1]}
+           "ratio_ci95": [1.0, 1.1], "availability_diff": 0.0, "excess_misleading": 0}
     assert passes(row, 0.05) and not confirms(row, 0.05)
 
 
@@ -286,7 +289,7 @@ def test_a_width_that_makes_the_filter_diverge_is_not_proposed():
     reaches the target (one divergent trial in ten widens it down to ~0.9)."""
     row = {"snr_db": 10.0, "trials": 10, "invalid": None, "locked": 10, "golden_locked": 10,
            "golden_reinit": 0, "dsp_events": {"reinit": 1}, "ratio_to_golden": 37.4,
-           "ratio_ci95": [0.94, 75.2]}
+           "ratio_ci95": [0.94, 75.2], "availability_diff": 0.0, "excess_misleading": 0}
     assert not passes(row, 0.05)
     assert passes({**row, "dsp_events": {"reinit": 0}}, 0.05)
     assert passes({**row, "golden_reinit": 1}, 0.05)
@@ -317,6 +320,8 @@ def test_of_several_confirming_widenings_the_smallest_is_kept(monkeypatch, tmp_p
 def test_a_parameter_held_at_one_value_gets_no_plot(tmp_path):
     cfg = SweepConfig(params=(("adc_bits", (6, 8)), ("detector", ("pulse",))), recheck=0)
     rows = [{"adc_bits": b, "detector": "pulse", "snr_db": float(s), "rmse_deg": 0.1,
-             "golden_rmse_deg": 0.1, "crb_deg": 0.09} for b in (6, 8) for s in cfg.snr_db]
-    assert sw._plot(cfg, rows, tmp_path) == ["rmse_vs_adc_bits.png"]
+             "golden_rmse_deg": 0.1, "crb_deg": 0.09, "availability": 1.0,
+             "golden_availability": 1.0, "misleading": 0, "golden_misleading": 0}
+            for b in (6, 8) for s in cfg.snr_db]
+    assert plot(cfg, rows, tmp_path) == ["rmse_vs_adc_bits.png"]
     assert not (tmp_path / "rmse_vs_detector.png").exists()

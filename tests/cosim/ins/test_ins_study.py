@@ -28,6 +28,12 @@ def test_b1_b3_short():
                          start_s=0.2, accel_g=1.5, v_max_mps=10.0, seed=3)
     r = run_study(cfg)
     _check_b1_b3(r)
+    # what a user sees agrees with B3: every epoch after the pull-in shows a valid velocity,
+    # none misleading
+    for name, x in r.items():
+        sh = x["shown"]
+        assert sh["trials_valid"] == 8 and sh["availability"] >= 0.99, (name, sh)
+        assert sh["misleading"] == 0 and sh["rmse"] < 1.0, (name, sh)
     # the checks can fail: the aided PLL in the Kalman loop's place fails B1, the unaided
     # loop in the aided PLL's place fails B3's discriminator comparison
     with pytest.raises(AssertionError):
