@@ -152,7 +152,7 @@ def test_faults_parameters_checked_before_the_first_point(capsys, tmp_path):
             "of the dsp-state words")
     refused(capsys, ["faults", "tacan", "--bits", "a,b", "--out", out],
             "--bits takes a comma list of bit positions, not 'a,b'")
-    refused(capsys, ["faults", "tacan", "--ber", "2", "--out", out], "BER values must lie in [0, 1)")
+    refused(capsys, ["faults", "tacan", "--ber", "2", "--out", out], "BER values must lie in (0, 1)")
     assert not Path(out).exists()
 
 
