@@ -150,7 +150,9 @@ def check_budget(what: str, options: str, *, memory_bytes: float = 0.0,
     A non-finite estimate (a run without end) is refused too."""
     check_memory(memory_bytes, what, options)
     limit = MAX_RUN_S if max_seconds is None else max_seconds
-    if not math.isfinite(seconds) or seconds > limit:
+    if not math.isfinite(seconds):
+        raise ValueError(f"{what} has no finite run time: reduce {options}")
+    if seconds > limit:
         raise ValueError(f"{what} would take about {_duration(seconds)} on this machine "
                          f"(limit {_duration(limit)}): reduce {options}")
     if note and seconds > NOTE_RUN_S:

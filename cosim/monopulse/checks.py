@@ -124,9 +124,9 @@ def check_values(run, sig) -> None:
     snr = block_sum_snr_db(sig)
     if snr < run.detect_db:
         raise ValueError(f"--snr-db {run.snr_db:g} gives the sum beam of a block {snr:.1f} dB "
-                         f"over its noise (4 channels x --snapshots {sig.snapshots}), below "
-                         f"--detect-db {run.detect_db:g}: the target could never be "
-                         f"detected; raise --snr-db or --snapshots, or lower --detect-db")
+                         f"over its noise (4 channels x {sig.snapshots} snapshots), below the "
+                         f"{run.detect_db:g} dB detection threshold: the target could never "
+                         f"be detected; raise --snr-db")
 
 
 def first_scored_block(run, sig) -> int:
