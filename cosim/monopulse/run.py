@@ -21,6 +21,9 @@ backends (``model``, ``pysim``, ``verilator``, ``icarus``) are refused until the
 ``hdl/monopulse`` exists (:func:`_hdl_frontend` is the hook). No FIFO on these paths:
 ``fifo_dropped`` is 0 by construction and says so (``fifo``).
 
+Checks before work (:class:`MonopulseRunConfig`): :mod:`cosim.monopulse.checks` (the run's
+size per backend, options without effect, meaningless values, the record).
+
 Calibration: before the run a calibration source at the initial pointing is measured over
 ``cal_snapshots`` snapshots at ``cal_snr_db`` (fast path, noisy), ``c = calibration_from_measurement``; the
 report gives the noise-free angle bias at the initial truth before and after it.
