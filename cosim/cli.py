@@ -24,6 +24,16 @@ class _Help(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's own errors (a bad type, an unknown choice, a missing argument) as one line
+    on stderr and exit 2, like every other error of the command line, instead of the usage
+    block. Subcommands inherit it (``add_subparsers`` makes parsers of the parent's class)."""
+
+    def error(self, message):
+        text = " ".join(str(message).split())
+        self.exit(2, f"error: {text} (see {self.prog} --help)\n")
+
+
 def _parser(sub, name, **kw):
     p = sub.add_parser(name, formatter_class=_Help, **kw)
     p.add_argument("--debug", action="store_true",
@@ -93,7 +103,7 @@ def _cmd_bench(a) -> int:
     from pathlib import Path
     from .core.provenance import REPO_ROOT
     from .tools.bench import run
-    out = a.out or ("build/bench_quick" if a.quick else "results")
+    out = a.out if a.out is not None else ("build/bench_quick" if a.quick else "results")
     if a.quick and Path(out).resolve() == (REPO_ROOT / "results").resolve():
         raise ValueError("--quick results are a smoke test: they must not overwrite the "
                          "published results/ (use another --out)")
@@ -121,8 +131,10 @@ def _add_hdl(sub):
     p.add_argument("--samples", type=parse_int, default=None,
                    help="ADC samples (default 20000; pysim and icarus run up to 40000); with "
                         "--scenario the window (default 500000: 100 ms at 5 MS/s)")
-    p.add_argument("--backends", default="model,pysim,verilator,icarus",
-                   help="comma-separated subset of model,pysim,verilator,icarus (at least two)")
+    p.add_argument("--backends", default=None,
+                   help="comma-separated subset of model,pysim,verilator,icarus (at least two; "
+                        "each one named must run on the record); default all four, a backend "
+                        "that cannot run (not installed, record too long) skipped with a note")
     p.add_argument("--seed", type=int, default=1, help="signal seed (>= 0)")
     p.add_argument("--stall", action="store_true",
                    help="DSP ready pattern with long stalls and a 4-word FIFO (drops, markers)")
@@ -178,15 +190,21 @@ def _add_hdl(sub):
     p.set_defaults(func=_cmd_synth)
 
 
+#: ``check-equivalence``'s record without ``--samples`` (the tops' and the scenarios').
+EQUIVALENCE_SAMPLES, SCENARIO_SAMPLES = 20_000, 500_000
+
+
 def _cmd_check_equivalence(a) -> int:
-    from .tools.equivalence import BACKENDS, check_record_size
-    backends = tuple(b.strip().lower() for b in a.backends.split(",") if b.strip())
+    from .tools.equivalence import BACKENDS, check_record_size, skip_reason
+    named = a.backends is not None
+    text = a.backends if named else ",".join(BACKENDS)
+    backends = tuple(b.strip().lower() for b in text.split(",") if b.strip())
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
         raise ValueError(f"--backends takes a subset of {','.join(BACKENDS)}, not {unknown}")
     if len(set(backends)) < 2:
         raise ValueError(f"--backends must name at least two backends to compare, not "
-                         f"{a.backends!r}")
+                         f"{text!r}")
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
     kw = {}
@@ -207,6 +225,14 @@ def _cmd_check_equivalence(a) -> int:
         kw.update(scenario=a.scenario, channels=a.channels)
     elif a.channels is not None:
         raise ValueError("--channels needs --scenario (the channel array's closed loop)")
+    if named:       # a backend asked for by name runs, or the check is refused before work
+        n = a.samples if a.samples is not None else \
+            (SCENARIO_SAMPLES if a.scenario is not None else EQUIVALENCE_SAMPLES)
+        for name in backends:
+            why = skip_reason(name, n) if name != "model" else None
+            if why is not None:
+                raise ValueError(f"--backends names {name}, which cannot run this check: {why} "
+                                 f"(--samples {n:,}; lower --samples or leave {name} out)")
     r = rx.equivalence(backends=backends, seed=a.seed, stall=a.stall, progress=not a.json,
                        **kw)
     if a.json:
@@ -363,7 +389,7 @@ def _cmd_synth(a) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m cosim", formatter_class=_Help,
+    p = OneLineParser(prog="python -m cosim", formatter_class=_Help,
                                 description="FPGA+DSP co-simulation of Kalman-filter navigation "
                                             "receivers. Bad input exits 2 with one line on "
                                             "stderr (--debug: the traceback).")
@@ -387,7 +413,7 @@ def main(argv=None) -> int:
     source_commit()         # results name the code this run started with
     if argv[:1] == ["adc-loss"]:        # its own parser (python -m cosim.studies.adc_loss)
         from .studies.adc_loss import main as adc_loss_main
-        return adc_loss_main(argv[1:])
+        return adc_loss_main(argv[1:], parser_class=OneLineParser)
     parser = build_parser()
     a = parser.parse_args(argv)
     try:

@@ -8,8 +8,11 @@ option that has no effect in the run asked for.
 
 * numbers: :func:`check_int`, :func:`check_float`, :func:`check_choice`;
 * machine limits: :func:`check_jobs` (worker processes, bounded by the cores),
-  :func:`check_memory` (estimated bytes against the machine's memory);
-* output paths: :func:`check_out_dir`, :func:`check_out_file` (creatable, writable, not a
+  :func:`check_memory` (estimated bytes against the machine's memory), :func:`check_budget`
+  (a run's memory and wall time, estimated from its configuration, against the machine's
+  memory and :data:`MAX_RUN_S`; every receiver and backend states its own estimate);
+* output paths: :func:`check_out_dir`, :func:`check_out_file` (creatable, writable -- a probe
+  file is created and removed, so a read-only place is refused also as root --, not a
   file where a directory is wanted, suffix);
 * JSON: :func:`json_safe` / :func:`dumps` (non-finite floats become ``null``, never the
   invalid ``NaN``/``Infinity`` tokens).
@@ -25,13 +28,18 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["check_int", "check_float", "check_choice", "check_jobs", "check_memory",
-           "check_out_dir", "check_out_file", "json_safe", "dumps", "warn", "cores",
-           "memory_bytes", "MAX_LIST_VALUES"]
+           "check_budget", "check_out_dir", "check_out_file", "json_safe", "dumps", "warn",
+           "cores", "memory_bytes", "MAX_LIST_VALUES", "MAX_RUN_S", "NOTE_RUN_S"]
 
 #: Most values a range or list option (``--snr-db a:b:s``, ``--param``) may expand to.
 MAX_LIST_VALUES = 1000
 #: Share of the machine's memory one run may plan to use (the machine is shared).
 MEMORY_SHARE = 0.5
+#: Longest run a command starts (s of estimated wall time on this machine).
+MAX_RUN_S = 2 * 3600.0
+#: A run estimated to take longer than this says so on stderr before it starts
+#: (:func:`check_budget` with ``note=True``).
+NOTE_RUN_S = 60.0
 
 
 def check_int(name: str, value, lo: int | None = None, hi: int | None = None) -> int:
@@ -111,6 +119,59 @@ def check_memory(need_bytes: float, what: str, option: str, limit_hint: str = ""
                          f"reduce {option}{hint}")
 
 
+def _duration(s: float) -> str:
+    return f"{s:.3g} s" if s < 120 else f"{s / 60:.3g} min" if s < 7200 else f"{s / 3600:.3g} h"
+
+
+def check_budget(what: str, options: str, *, memory_bytes: float = 0.0,
+                 seconds: float = 0.0, max_seconds: float | None = None,
+                 note: bool = False) -> None:
+    """Refuse, before any work, a run too big for this machine, from an estimate of its
+    configuration (the one size rule every receiver and backend applies).
+
+    Parameters
+    ----------
+    what : str
+        The run's size in the user's terms, e.g. ``"2,500,000 blocks x 1 trial on the fast
+        backend (--duration-s 2 / 0.8 us a block)"``; the message starts with it.
+    options : str
+        The options that make the run smaller, e.g. ``"--duration-s, --trials or raise
+        --snapshots"``; the message ends with ``reduce <options>``.
+    memory_bytes : float
+        Estimated peak memory (bytes): refused above :data:`MEMORY_SHARE` of the machine's
+        memory (:func:`check_memory`).
+    seconds : float
+        Estimated wall time (s): refused above ``max_seconds`` (default :data:`MAX_RUN_S`).
+    note : bool
+        Also say on stderr (:func:`warn`) how long an accepted run estimated above
+        :data:`NOTE_RUN_S` will take (the command line does; studies building many runs
+        do not).
+
+    A non-finite estimate (a run without end) is refused too."""
+    check_memory(memory_bytes, what, options)
+    limit = MAX_RUN_S if max_seconds is None else max_seconds
+    if not math.isfinite(seconds):
+        raise ValueError(f"{what} has no finite run time: reduce {options}")
+    if seconds > limit:
+        raise ValueError(f"{what} would take about {_duration(seconds)} on this machine "
+                         f"(limit {_duration(limit)}): reduce {options}")
+    if note and seconds > NOTE_RUN_S:
+        warn(f"{what}: about {_duration(seconds)} estimated")
+
+
+def _probe(d: Path, path, option: str) -> None:
+    """Create and remove a file in the existing directory ``d`` (``os.access`` says yes to
+    root also where nothing can be written, e.g. ``/proc``)."""
+    import tempfile
+    try:
+        fd, name = tempfile.mkstemp(prefix=".cosim-probe-", dir=d)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as e:
+        raise ValueError(f"{option} {str(path)!r} is not writable (cannot create a file in "
+                         f"{str(d)!r}: {e.strerror or e})") from None
+
+
 def _nearest_existing(p: Path) -> Path:
     q = p
     while not q.exists():
@@ -121,8 +182,9 @@ def _nearest_existing(p: Path) -> Path:
 
 
 def check_out_dir(path, option: str) -> Path:
-    """An output directory: non-empty, not an existing file, creatable and writable.
-    Nothing is created here."""
+    """An output directory: non-empty, not an existing file, creatable and writable (a probe
+    file is created and removed in it, or in its nearest existing parent). Nothing else is
+    created here."""
     if path is None or str(path).strip() == "":
         raise ValueError(f"{option} needs a directory name, not an empty string")
     p = Path(path)
@@ -134,6 +196,7 @@ def check_out_dir(path, option: str) -> Path:
     if not os.access(base, os.W_OK | os.X_OK):
         raise ValueError(f"{option} {str(path)!r} is not writable (no write permission "
                          f"in {str(base)!r})")
+    _probe(base, path, option)
     return p
 
 
@@ -148,8 +211,12 @@ def check_out_file(path, option: str, suffixes=None) -> Path:
                          f"({' or '.join(suffixes)}), not {str(path)!r}")
     if p.is_dir():
         raise ValueError(f"{option} {str(path)!r} is a directory, not a file")
-    if p.exists() and not os.access(p, os.W_OK):
-        raise ValueError(f"{option} {str(path)!r} is not writable")
+    if p.exists():
+        try:
+            open(p, "ab").close()       # appends nothing: the file is left as it was
+        except OSError as e:
+            raise ValueError(f"{option} {str(path)!r} is not writable "
+                             f"({e.strerror or e})") from None
     check_out_dir(p.parent if str(p.parent) else ".", f"the directory of {option}")
     return p
 

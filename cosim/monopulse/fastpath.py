@@ -16,6 +16,8 @@ steps; clipping is not modelled -- the IF path counts it).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .array import N_CHANNELS
@@ -31,6 +33,13 @@ def noise_variance(cfg: MonopulseSignalConfig) -> np.ndarray:
     if cfg.snr_db is None and cfg.adc_bits is None:
         s2 = 0.0
     return 4 * s2 * np.abs(cfg.array.channel_gains) ** 2 / (cfg.decimation * cfg.snapshots)
+
+
+def snapshot_snr(cfg: MonopulseSignalConfig) -> float:
+    """Per-channel SNR per snapshot including the ADC's quantisation noise (unit gain,
+    ``|AF| = 1``): ``1 / E|n|^2`` of one snapshot (``noise_variance`` times N)."""
+    var = noise_variance(cfg)[0] / abs(cfg.array.channel_gains[0]) ** 2 * cfg.snapshots
+    return math.inf if var == 0 else 1.0 / var
 
 
 def mean_outputs(cfg: MonopulseSignalConfig, steering, first_block=0, n_blocks=1,

@@ -294,7 +294,10 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
             chips = np.repeat((rec.replica[0] < 0).astype(np.int64), D)
             x = rec.samples if faults is None or faults.adc is None else faults.adc(k, rec.samples)
             pipe.feed(pack_input(np.asarray(x).T.astype(np.int64), chips, p))
-        pipe.idle(p.latency + 2 * svc.period_cycles + 64)
+        # flush: the last record leaves the front end, waits for a service, is read, and
+        # the DSP's call comes compute_cycles after the read window
+        turnaround = svc.latency_cycles + p.record_words * CYCLES_PER_WORD + run.compute_cycles
+        pipe.idle(p.latency + svc.period_cycles + max(svc.period_cycles, turnaround) + 64)
         res = pipe.result()
         bus = list(fe.bus_writes)
     extra = {}
@@ -316,22 +319,13 @@ def hdl_closed_loop(run, sig, loop, cal, ut, vt, thr, faults: FaultHooks | None 
 
 
 #: Approximate simulated cycles per second of each backend on the closed loop (measured on
-#: the 2-core development machine, results/monopulse.md), for refusing hours-long runs.
+#: the 2-core development machine, results/monopulse.md): the run's wall-time estimate
+#: (:func:`cosim.monopulse.checks.run_cost`).
 CYCLES_PER_S = {"model": 7e5, "pysim": 2e3, "verilator": 1e6, "icarus": 1e3}
-#: Longest HDL closed-loop run accepted (s of wall time, estimated).
-MAX_WALL_S = 2 * 3600
 
 
 def check_hdl_run(run, sig) -> None:
     """Refuse, before work, an HDL closed loop the front end cannot run: its parameters
-    (``hdl_changes``), the DSP's turnaround (:func:`check_hdl_timing`) and a run that would
-    take hours on the backend (the message names ``--duration-s``)."""
-    p = hdl_params(run, sig)
-    check_hdl_timing(run, p)
-    blocks = max(1, int(round(run.duration_s / sig.block_s))) + 1
-    n = blocks * sig.samples_per_block
-    rate = CYCLES_PER_S[run.backend]
-    if n / rate > MAX_WALL_S:
-        raise ValueError(f"{run.backend} simulates about {rate:.0e} cycles/s: {n:,} cycles "
-                         f"would take ~{n / rate / 3600:.1f} h (limit {MAX_WALL_S / 3600:g} h): "
-                         f"reduce --duration-s or --snapshots")
+    (``hdl_changes``) and the DSP's turnaround (:func:`check_hdl_timing`). (Its size: the
+    run's, :func:`cosim.monopulse.checks.check_run_size`.)"""
+    check_hdl_timing(run, hdl_params(run, sig))

@@ -29,7 +29,9 @@ def _f(v, spec=".4f"):
 
 
 def cmd_monopulse(a) -> int:
+    from .checks import check_run_size
     run = MonopulseRunConfig(**config_kwargs(a, OPTIONS, MonopulseRunConfig))
+    check_run_size(run, note=True)      # accepted (the configuration checked it): how long
     r = run_monopulse(run)
     if a.json:
         print(dumps(r))
@@ -115,6 +117,9 @@ def cmd_sweep(a) -> int:
     cfg = SweepConfig(receiver="monopulse", snr_db=tuple(float(v) for v in snrs),
                       recheck=a.recheck, **({"params": params} if params else {}),
                       **_record_kwargs(a), **kw)
+    if a.recheck > len(cfg.combos):
+        raise ValueError(f"--recheck {a.recheck} is more than the {len(cfg.combos)} points it "
+                         f"picks from (the combinations of the swept values)")
     check_points(cfg)
     s = study(cfg, a.out, jobs=jobs, confirm_proposal=not a.no_confirm, progress=not a.json)
     if a.json:

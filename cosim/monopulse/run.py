@@ -21,6 +21,9 @@ backends (``model``, ``pysim``, ``verilator``, ``icarus``) are refused until the
 ``hdl/monopulse`` exists (:func:`_hdl_frontend` is the hook). No FIFO on these paths:
 ``fifo_dropped`` is 0 by construction and says so (``fifo``).
 
+Checks before work (:class:`MonopulseRunConfig`): :mod:`cosim.monopulse.checks` (the run's
+size per backend, options without effect, meaningless values, the record).
+
 Calibration: before the run a calibration source at the initial pointing is measured over
 ``cal_snapshots`` snapshots at ``cal_snr_db`` (fast path, noisy), ``c = calibration_from_measurement``; the
 report gives the noise-free angle bias at the initial truth before and after it.
@@ -38,8 +41,10 @@ from dsp.monopulse.golden import beams, golden_chain
 from dsp.monopulse.tracker import (MONOPULSE_FORMATS, AngleTracker, SearchCapture, TrackerConfig,
                                    calibration_from_measurement, measure_uv)
 
+from ..core.validate import check_float, check_int
 from .array import ArrayConfig
-from .fastpath import mean_outputs, noise_variance
+from .checks import check_run
+from .fastpath import mean_outputs, noise_variance, snapshot_snr
 from .signal import STREAM_FAST, MonopulseSignalConfig, generate
 from .trajectory import ConstantRate, Manoeuvre
 
@@ -131,6 +136,9 @@ class MonopulseRunConfig:
     #: Total widths of the fixed-point tracker's formats, (format, width) pairs (``dsp``
     #: fixed; integer bits kept, fraction bits change; studies).
     dsp_changes: tuple = ()
+    #: Refuse a record too short to score anything (:func:`cosim.monopulse.checks.check_record`);
+    #: False for runs compared on their bits only (the sweep's cycle-accurate re-check).
+    require_score: bool = True
 
     def __post_init__(self):
         for name in ("snr_db", "duration_s", "sigma_a", "noise_floor", "alpha_relax", "u0", "v0",
@@ -161,18 +169,21 @@ class MonopulseRunConfig:
             if not 0 <= self.manoeuvre_start_s < self.manoeuvre_end_s:
                 raise ValueError(f"a manoeuvre needs 0 <= manoeuvre_start_s < manoeuvre_end_s, "
                                  f"not {self.manoeuvre_start_s!r}..{self.manoeuvre_end_s!r}")
-        for name in ("pointing_u", "pointing_v", "spacing_wl", "cal_snr_db"):
+        for name in ("pointing_u", "pointing_v", "cal_snr_db"):
             v = getattr(self, name)
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
                                   or not math.isfinite(v)):
-                raise ValueError(f"{name} must be a finite number or None, not {v!r}")
-        # The parts validate their own fields (spacing, snapshots, visible region, bits).
+                raise ValueError(f"{name} must be a finite number or none, not {v!r}")
+        if self.spacing_wl is not None:
+            check_float("spacing_wl", self.spacing_wl, 0, lo_open=True)
+        check_int("phase_bits", self.phase_bits, 1, 24)
+        check_int("adc_bits", self.adc_bits, 2, 16)
+        # The parts validate their own fields (snapshots, initial visible region).
         self.tracker_config()
         sig = self.signal_config()
-        sig.trajectory(np.array([0.0, self.duration_s]))
-        if self.pointing is not None:
-            from .array import check_visible
-            check_visible(*self.pointing, "guided pointing")
+        check_run(self, sig)        # ignored options, meaningless values, record, size
+        from .array import check_visible
+        check_visible(*self.pointing, "guided pointing")
         if self.backend in HDL_BACKENDS:
             from .hdl_loop import check_hdl_run
             check_hdl_run(self, sig)
@@ -228,13 +239,6 @@ class MonopulseRunConfig:
         return TrackerConfig(mode=self.tracker, eq36=self.eq36, sigma_a=self.sigma_a,
                              floor_scaling=self.floor_scaling, noise_floor=self.noise_floor,
                              alpha_relax=self.alpha_relax, latency_blocks=self.latency_blocks)
-
-
-def snapshot_snr(sig: MonopulseSignalConfig) -> float:
-    """Per-channel SNR per snapshot including the ADC's quantisation noise (unit gain,
-    ``|AF| = 1``): ``1 / E|n|^2`` of one snapshot (``noise_variance`` times N)."""
-    var = noise_variance(sig)[0] / abs(sig.array.channel_gains[0]) ** 2 * sig.snapshots
-    return math.inf if var == 0 else 1.0 / var
 
 
 def block_outputs(sig, steering, u, v, correction, carrier, rng, noise=True):

@@ -132,7 +132,7 @@ def recheck(cfg, combo: tuple, snr_db: float, trial: int) -> dict:
     sig = base.signal_config()
     blocks = max(3, n // sig.samples_per_block)
     t0 = time.perf_counter()
-    short = dict(duration_s=blocks * sig.block_s, settle_s=0.0)
+    short = dict(duration_s=blocks * sig.block_s, settle_s=0.0, require_score=False)
     a = run_monopulse(run_config(cfg, combo, snr_db, trial, **short))
     try:
         b = run_monopulse(run_config(cfg, combo, snr_db, trial, backend=backend, **short))

@@ -43,10 +43,13 @@ class ConstantRate:
             _num(n, getattr(self, n))
         check_visible(self.u0, self.v0, "initial target direction")
 
-    def __call__(self, t_s):
+    def unchecked(self, t_s):
+        """``(u, v)`` at ``t_s`` without the visible-region check (the caller's own)."""
         t = np.asarray(t_s, float)
-        u = self.u0 + self.du_dt * t
-        v = self.v0 + self.dv_dt * t
+        return self.u0 + self.du_dt * t, self.v0 + self.dv_dt * t
+
+    def __call__(self, t_s):
+        u, v = self.unchecked(t_s)
         check_visible(u, v, "target direction")
         return u, v
 
@@ -81,7 +84,8 @@ class Manoeuvre:
                 raise ValueError(f"manoeuvre segments must not overlap, not {a!r} and {b!r}")
         object.__setattr__(self, "segments", tuple(segs))
 
-    def __call__(self, t_s):
+    def unchecked(self, t_s):
+        """``(u, v)`` at ``t_s`` without the visible-region check (the caller's own)."""
         t = np.asarray(t_s, float)
         u = self.u0 + self.du_dt * t
         v = self.v0 + self.dv_dt * t
@@ -91,6 +95,10 @@ class Manoeuvre:
             disp = 0.5 * tin * tin + (t1 - t0) * np.maximum(t - t1, 0.0)
             u = u + au * disp
             v = v + av * disp
+        return u, v
+
+    def __call__(self, t_s):
+        u, v = self.unchecked(t_s)
         check_visible(u, v, "target direction")
         return u, v
 

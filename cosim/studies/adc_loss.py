@@ -482,9 +482,10 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
     return paths
 
 
-def main(argv=None) -> int:
-    """CLI: run the sweep and write the report; exit 1 when a reference point FAILs."""
-    p = argparse.ArgumentParser(prog="python -m cosim adc-loss",
+def main(argv=None, parser_class=argparse.ArgumentParser) -> int:
+    """CLI: run the sweep and write the report; exit 1 when a reference point FAILs
+    (``parser_class``: ``python -m cosim adc-loss`` gives its one-line-error parser)."""
+    p = parser_class(prog="python -m cosim adc-loss",
                                 description=__doc__.split("\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--out", default="build/adc_loss", help="output directory")

@@ -117,8 +117,9 @@ def parse_ber(spec: str) -> tuple[float, ...]:
         n = int(round(math.log10(hi / lo)))
         return tuple(float(f"{lo * 10 ** k:.3g}") for k in range(n + 1))
     vals = tuple(float(p) for p in spec.split(","))
-    if not all(0 <= v < 1 for v in vals):
-        raise ValueError(f"BER values must lie in [0, 1), not {spec!r}")
+    if not all(0 < v < 1 for v in vals):
+        raise ValueError(f"BER values must lie in (0, 1) (BER 0, the baseline, is always run), "
+                         f"not {spec!r}")
     return vals
 
 
@@ -188,7 +189,9 @@ class FaultConfig:
         if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
             raise ValueError(f"trials must be an integer >= 1, not {self.trials!r}")
         if not (math.isfinite(self.duration_s) and self.duration_s > 2 * self.memory_s + 0.1):
-            raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s, not {self.duration_s}")
+            raise ValueError(f"--duration-s must exceed {2 * self.memory_s + 0.1:g} s (scoring "
+                             f"starts at twice the filter memory {self.memory_s:g} s, plus "
+                             f"0.1 s to score), not {self.duration_s:g}")
         if self.backend not in ("model", "pysim", "verilator"):
             raise ValueError(f"backend must be model, pysim or verilator, not {self.backend!r}")
         if not (math.isfinite(self.scrub_period_s) and self.scrub_period_s > 0):

@@ -158,8 +158,9 @@ class SweepConfig:
         if not (math.isfinite(self.memory_s) and self.memory_s > 0):
             raise ValueError(f"memory_s must be > 0, not {self.memory_s}")
         if not (math.isfinite(self.duration_s) and self.duration_s > 2 * self.memory_s + 0.1):
-            raise ValueError(f"duration_s must exceed 2 x memory_s + 0.1 s "
-                             f"({2 * self.memory_s + 0.1:g} s), not {self.duration_s}")
+            raise ValueError(f"--duration-s must exceed {2 * self.memory_s + 0.1:g} s (scoring "
+                             f"starts at twice the filter memory {self.memory_s:g} s, plus "
+                             f"0.1 s to score), not {self.duration_s:g}")
         if self.recheck_backend not in ("auto", "pysim", "verilator"):
             raise ValueError(f"recheck_backend must be 'auto', 'pysim' or 'verilator', not "
                              f"{self.recheck_backend!r}")

@@ -22,7 +22,7 @@ def test_registered_with_options_from_the_config(capsys):
 
 
 def test_json_report(capsys):
-    rc = main(["monopulse", "--snr-db", "-8", "--snapshots", "8192", "--duration-s", "0.1",
+    rc = main(["monopulse", "--snr-db", "-8", "--snapshots", "8192", "--duration-s", "0.2",
                "--tracker", "fixed", "--backend", "fast", "--dsp", "fixed", "--json"])
     assert rc == 0
     r = json.loads(capsys.readouterr().out)
@@ -30,19 +30,19 @@ def test_json_report(capsys):
               "az_meas_over_crb", "pointing_error_max_fraction", "lost_track_events",
               "fifo_dropped", "digest", "calibration"):
         assert k in r
-    assert r["dsp"] == "fixed" and r["tracker"] == "fixed" and r["blocks"] == 122
+    assert r["dsp"] == "fixed" and r["tracker"] == "fixed" and r["blocks"] == 244
 
 
 @pytest.mark.parametrize("argv,msg", [
-    (["--spacing-wl", "0"], "error: subarray_spacing_x_wl must be a finite number > 0, not 0.0"),
-    (["--spacing-wl", "-1"], "error: subarray_spacing_x_wl must be a finite number > 0, not -1.0"),
+    (["--spacing-wl", "0"], "error: spacing_wl must be a finite number > 0, not 0.0"),
+    (["--spacing-wl", "-1"], "error: spacing_wl must be a finite number > 0, not -1.0"),
     (["--snapshots", "0"], "error: snapshots must be an integer >= 1, not 0"),
     (["--u0", "0.8", "--v0", "0.7"], "error: initial target direction must lie in the visible "
                                       "region u^2 + v^2 < 1, not u = 0.8, v = 0.7"),
-    (["--phase-bits", "0"], "error: phase_bits must be an integer in [1, 24] or None (ideal), not 0"),
+    (["--phase-bits", "0"], "error: phase_bits must be an integer in [1, 24], not 0"),
     (["--backend", "verilator", "--trials", "2"],
      "error: the verilator backend runs one trial, not trials = 2"),
-    (["--backend", "pysim", "--duration-s", "2"], "error: pysim simulates about 2e+03 cycles/s"),
+    (["--backend", "pysim", "--duration-s", "2"], "error: 200,048,640 cycles on the pysim backend (about 2e+03 cycles/s"),
 ])
 def test_bad_input_exits_2_with_an_error_line(argv, msg, capsys):
     assert main(["monopulse", "--duration-s", "0.01"] + argv) == 2

@@ -70,7 +70,7 @@ def test_record_gain_matches_the_model():
     """The record's sum beam is ``G N`` times the golden chain's on the same ADC codes
     (noise-free, steering and coefficients written before block 1): the detection's noise
     scale. Within 1e-3 (the LO table's ~1e-4 amplitude error and the roundings)."""
-    run = MonopulseRunConfig(snapshots=256, duration_s=0.001)
+    run = MonopulseRunConfig(snapshots=256, duration_s=0.001, settle_s=0.0)
     sig = replace(run.signal_config(), snr_db=None)
     p = hdl_params(run, sig)
     st = (0.31, 0.19)

@@ -56,19 +56,19 @@ def test_c6_acquires_a_target_off_the_guided_pointing():
 
 
 def test_calibration_removes_the_mismatch_bias():
-    r = run_monopulse(MonopulseRunConfig(duration_s=0.01, gain_spread_db=0.5,
+    r = run_monopulse(MonopulseRunConfig(duration_s=0.01, settle_s=0.0, gain_spread_db=0.5,
                                          phase_spread_deg=4.0, seed=2))
     b0, b1 = r["calibration"]["bias_before"], r["calibration"]["bias_after"]
     assert max(abs(b0["u"]), abs(b0["v"])) > 5e-4
     assert max(abs(b1["u"]), abs(b1["v"])) < 0.1 * max(abs(b0["u"]), abs(b0["v"]))
-    r = run_monopulse(MonopulseRunConfig(duration_s=0.01, gain_spread_db=0.5,
+    r = run_monopulse(MonopulseRunConfig(duration_s=0.01, settle_s=0.0, gain_spread_db=0.5,
                                          phase_spread_deg=4.0, seed=2, cal_snr_db=None))
     b1 = r["calibration"]["bias_after"]
     assert max(abs(b1["u"]), abs(b1["v"])) < 1e-6      # noise-free: left, the 0.4 ms of motion
 
 
 def test_block_centre_outputs_match_the_fast_path_mean():
-    cfg = MonopulseRunConfig(duration_s=0.01).signal_config()
+    cfg = MonopulseRunConfig(duration_s=0.01, settle_s=0.0).signal_config()
     st = np.array([[0.31, 0.19]])
     s_ref, _ = mean_outputs(cfg, st[0], first_block=3)
     u, v = cfg.trajectory(cfg.block_centre_s(3))
@@ -78,18 +78,19 @@ def test_block_centre_outputs_match_the_fast_path_mean():
 
 
 def test_same_seed_same_digest_other_seed_other():
-    a = run_monopulse(MonopulseRunConfig(duration_s=0.05, seed=8))
-    b = run_monopulse(MonopulseRunConfig(duration_s=0.05, seed=8))
-    c = run_monopulse(MonopulseRunConfig(duration_s=0.05, seed=9))
+    a = run_monopulse(MonopulseRunConfig(duration_s=0.05, settle_s=0.0, seed=8))
+    b = run_monopulse(MonopulseRunConfig(duration_s=0.05, settle_s=0.0, seed=8))
+    c = run_monopulse(MonopulseRunConfig(duration_s=0.05, settle_s=0.0, seed=9))
     assert a["digest"] == b["digest"] != c["digest"]
 
 
 @pytest.mark.parametrize("kw,msg", [
     (dict(snapshots=0), "snapshots must be an integer >= 1, not 0"),
-    (dict(spacing_wl=0.0), "subarray_spacing_x_wl must be a finite number > 0, not 0.0"),
+    (dict(spacing_wl=0.0), "spacing_wl must be a finite number > 0, not 0.0"),
     (dict(u0=0.9, v0=0.9), "initial target direction must lie in the visible region"),
-    (dict(phase_bits=0), "phase_bits must be an integer in [1, 24] or None (ideal), not 0"),
-    (dict(du_dt=1.0), "target direction must lie in the visible region"),
+    (dict(phase_bits=0), "phase_bits must be an integer in [1, 24], not 0"),
+    (dict(du_dt=1.0), "the target leaves the visible region u^2 + v^2 < 1 at t = 0.682 s "
+     "(u = 0.982, v = 0.1898): shorten --duration-s 2 to below that"),
     (dict(trials=0), "trials must be an integer >= 1, not 0"),
     (dict(backend="golden", trials=2), "the golden backend runs one trial, not trials = 2"),
     (dict(backend="model", trials=2), "the model backend runs one trial, not trials = 2"),
@@ -97,8 +98,9 @@ def test_same_seed_same_digest_other_seed_other():
      "effect at the next block boundary (latency_blocks 1), not latency_blocks = 2"),
     (dict(backend="model", snapshots=64), "the DSP service cannot turn a record around within "
      "one block on the HDL front end: worst case 20477 cycles (service_period_cycles 20000"),
-    (dict(backend="pysim", duration_s=2.0), "pysim simulates about 2e+03 cycles/s: "
-     "200,048,640 cycles would take ~27.8 h (limit 2 h): reduce --duration-s or --snapshots"),
+    (dict(backend="pysim", duration_s=2.0), "200,048,640 cycles on the pysim backend (about "
+     "2e+03 cycles/s; --duration-s 2) would take about 27.8 h on this machine (limit 2 h): "
+     "reduce --duration-s; long records run on --backend model"),
     (dict(backend="model", service_batch_words=4, snapshots=1 << 14),
      "service_batch_words must hold one record (9 words), not 4"),
     (dict(backend="model", hdl_changes=(("cordic_iterations", 2),)),
