@@ -347,12 +347,12 @@ def _tables(text: str):
 
 def test_sweep_report_tables_render():
     from cosim.studies.spec import SweepConfig
-    from cosim.studies.sweep import _report_md
+    from cosim.studies.report import report_md
     cfg = SweepConfig(params=(("adc_bits", (4, 6)), ("nco_amp_bits", (8, 12))))
     s = {"machine": {"command": "x", "cpu": "c", "cores": 2, "date": "d", "commit": "h"},
          "n_points": 0, "elapsed_s": 0.0, "rows": [], "ranges": {}, "proposal": {},
          "rechecks": []}
-    tables = list(_tables(_report_md(cfg, s, [])))
+    tables = list(_tables(report_md(cfg, s, [])))
     assert tables and all(h == sep for h, sep, _ in tables), tables
 
 

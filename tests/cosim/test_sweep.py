@@ -35,7 +35,7 @@ def test_parse_values_and_params():
 @pytest.mark.parametrize("kw, msg", [
     (dict(trials=0), "trials must be an integer >= 1"),
     (dict(snr_db=()), "snr_db must be finite numbers"),
-    (dict(duration_s=0.4, memory_s=0.25), "duration_s must exceed"),
+    (dict(duration_s=0.4, memory_s=0.25), "--duration-s must exceed"),
     (dict(params=(("adc_bits", (4,)), ("adc_bits", (5,)))), "parameter given twice"),
     (dict(params=(("adc_bits", ()),)), "has no values"),
     (dict(recheck_backend="iverilog"), "recheck_backend must be"),
