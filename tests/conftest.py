@@ -17,3 +17,9 @@ _ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("NUMBA_BOUNDSCHECK", "1")
 if os.environ["NUMBA_BOUNDSCHECK"] == "1":
     os.environ.setdefault("NUMBA_CACHE_DIR", str(_ROOT / "build" / "numba-boundscheck"))
+
+
+def pytest_report_header(config):
+    """The simulators the suite runs on and their versions (Verilator, Icarus, cocotb)."""
+    from cosim.tools.toolversions import versions_line
+    return [f"simulators: {versions_line()}"]

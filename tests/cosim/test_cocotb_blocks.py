@@ -4,10 +4,13 @@ four-state defect that only Icarus sees.
 - Each HDL block (:data:`cosim.tools.stream_cases.BLOCK_CASES`) runs its seeded case
   (random words with full-scale values, gaps in ``valid``, run-time writes, a stall that
   overflows the FIFO) through :func:`cosim.testing.check_stream` on the ``icarus`` backend:
-  every output word and its cycle equal the model's (0 mismatches), no output X or Z. The
-  receivers' tops with a front-end model session run their case too (slow: whole tops run at
-  ~1e3 cycles/s under cocotb); the tops without one are checked on their own models in
-  ``tests/cosim/test_icarus.py`` (:data:`TOPS_IN_TEST_ICARUS`).
+  every output word and its cycle equal the model's (0 mismatches), no output X or Z.
+- Every receiver top runs its short case (:mod:`cosim.tools.top_cases`: the top's HDL at
+  the reduced parameters of its equivalence check, register writes mid-run, seeded stalls
+  into a FIFO of one record) in the fast suite, but the 12-channel I/Q array (its real-input
+  twin runs; slow: ~30 s). Icarus runs whole tops at ~0.2-1.5e3 cycles/s. The registered
+  tops with their own parameters (the cases ``python -m cosim verilog --cocotb`` exports)
+  are slow.
 - A new exported design without a case fails :func:`test_every_exported_design_has_a_case`.
 - The four-state defect: a lookup table of 10 entries read by a 4-bit counter that is never
   wrapped at 9. The Amaranth simulator and Verilator (two-state) read 0 past the end and
@@ -17,7 +20,6 @@ four-state defect that only Icarus sees.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,13 +35,8 @@ from cosim.tools.stream_cases import BLOCK_CASES, exported_designs, stream_case,
 pytestmark = [pytest.mark.icarus,
               pytest.mark.skipif(not icarus_available(), reason=icarus_missing_message())]
 
-#: Exported tops whose model is not a front-end session: the test of test_icarus.py that runs
-#: each on Icarus against its model.
-TOPS_IN_TEST_ICARUS = {
-    "gnss_channel_array12": "test_gnss_array12_matches_model_with_random_stalls",
-    "gnss_channel_iq": "test_gnss_channel_iq_matches_model_under_stalls",
-    "gnss_channel_array12_iq": "test_gnss_array12_iq_matches_model_with_random_stalls",
-}
+#: The tops whose short case is slow (its twin of the other input runs in the fast suite).
+SLOW_SHORT_TOPS = ("gnss_channel_array12_iq",)
 
 
 def _check(case):
@@ -50,15 +47,12 @@ def _check(case):
 
 
 def test_every_exported_design_has_a_case():
-    """Every design ``python -m cosim verilog`` exports has a cocotb case here, or a named
-    Icarus test in test_icarus.py that exists."""
+    """Every design ``python -m cosim verilog`` exports has a cocotb case."""
     designs = set(exported_designs())
-    cased = set(BLOCK_CASES) | set(top_case_names()) | set(TOPS_IN_TEST_ICARUS)
+    cased = set(BLOCK_CASES) | set(top_case_names())
     assert designs - cased == set(), f"exported without a cocotb case: {designs - cased}"
     assert cased - designs == set(), f"cases of designs not exported: {cased - designs}"
-    src = (Path(__file__).with_name("test_icarus.py")).read_text()
-    for name, test in TOPS_IN_TEST_ICARUS.items():
-        assert re.search(rf"^def {test}\(", src, re.M), f"{name}: {test} not in test_icarus.py"
+    assert set(SLOW_SHORT_TOPS) < set(top_case_names())
 
 
 @pytest.mark.parametrize("name", list(BLOCK_CASES))
@@ -69,15 +63,34 @@ def test_block_on_icarus_equals_model(name):
     assert len(res.words) == len(case.words)
 
 
+def _top_checked(name, short):
+    """Top ``name``'s case on Icarus: its words and cycles, and register writes on the bus
+    (or the NCO word) that fall between output words, so the words after them carry their
+    effect."""
+    case = stream_case(name, short=short)
+    assert len(case.words) >= 3, "the case must produce output words"
+    w = [c for c, port, v in case.writes if port in ("reg_we", "freq") and v and c > 0]
+    assert len(w) >= 3 and min(w) < case.cycles[-1], "writes mid-run"
+    res = _check(case).results["icarus"]
+    assert len(res.words) == len(case.words)
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
+                                  if n in SLOW_SHORT_TOPS else n for n in top_case_names()])
+def test_top_on_icarus_equals_model(name):
+    """A registered top's HDL on its short case (reduced parameters, register writes
+    mid-run, stalls that drop records): TACAN 5,400 cycles, the GNSS channel 10,930 (real) /
+    4,792 (I/Q), the 12-channel array 4,792, monopulse 1,944."""
+    _top_checked(name, short=True)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", top_case_names())
-def test_top_on_icarus_equals_model(name):
-    """A registered top on its case (noise bursts, long stalls; as long as its first output
-    word needs: 6,400 cycles for TACAN, 20,650 for the GNSS channel, 102,914 for
-    monopulse)."""
-    case = stream_case(name)
-    assert len(case.words) > 0, "the case must produce output words"
-    _check(case)
+def test_registered_top_on_icarus_equals_model(name):
+    """The registered top with its own parameters on the case ``verilog --cocotb`` exports:
+    TACAN 6,400 cycles, the GNSS tops two code periods (33,036 cycles), monopulse one
+    record (~84,000 cycles)."""
+    _top_checked(name, short=False)
 
 
 # -- the four-state defect ------------------------------------------------------------------------
