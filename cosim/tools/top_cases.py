@@ -8,21 +8,20 @@ the closed loop makes, set at cycles chosen by a seed, through the whole record:
 - ``tacan_frontend``: seeded noise bursts over a noise floor (:func:`_bursts`: a peak report
   every few hundred samples; the equivalence check's TACAN record has a pulse pair every
   ~5,600) with writes of the NCO word ``freq`` (the IF retuned by up to +-40 kHz and back),
-  under seeded stalls
-  (:func:`cosim.tools.equivalence.stall_pattern`); the model is the front end's session.
+  under seeded stalls (:func:`cosim.tools.equivalence.stall_pattern`); the model is the
+  front end's session.
 - ``gnss_channel``, ``gnss_channel_iq`` and the 12-channel arrays ``gnss_channel_array12``,
   ``gnss_channel_array12_iq``: the GPS L1 C/A record of ``check-equivalence --top gnss``
   (:func:`cosim.gnss.equivalence.gnss_equivalence_stimulus`: PRN 7 at 45 dB-Hz, real IF or
-  zero-IF I/Q; the real-input array's short case seeded ADC words,
-  :data:`GNSS_SHORT_REAL_ARRAY`) with its hand-over to channel 0 (PRN, carrier and code words, slew) and the
-  seeded writes of every register (carrier and code words near the truth, slews, a PRN
-  switched away and back) from a quarter code period on, a third of a code period apart
-  on average, so each dump boundary takes new words (a write becomes active at the next
-  one); an array's other channels are handed
-  over to other PRNs at random Doppler and code phase, and each seeded write goes to a
-  random channel. Writes that fall on one cycle go out on consecutive cycles (one bus write a
-  cycle). The model is :class:`hdl.gnss.model.GnssArrayModel` (the arbiter and FIFO
-  included).
+  zero-IF I/Q; the real-input short cases seeded ADC words, :data:`GNSS_SHORT`) with its
+  hand-over to channel 0 (PRN, carrier and code words, slew) and seeded writes of every
+  register (carrier and code words near the truth, slews, a PRN switched away and back)
+  from a quarter code period on, a third of a code period apart on average, so each dump
+  boundary takes new words (a write becomes active at the next one); an array's other
+  channels are handed over to other PRNs at random Doppler and code phase, and each seeded
+  write goes to a random channel. Writes that fall on one cycle go out on consecutive
+  cycles (one bus write a cycle). Stalls of a quarter code period on average. The model is
+  :class:`hdl.gnss.model.GnssArrayModel` (the arbiter and FIFO included).
 - ``monopulse_frontend``: the record of ``check-equivalence --top monopulse``
   (:func:`cosim.monopulse.equivalence.stimulus`: random ADC codes and replica bits, seeded
   writes of the channel coefficients and the steering words); the model is the front end's
@@ -30,11 +29,13 @@ the closed loop makes, set at cycles chosen by a seed, through the whole record:
 
 Two sizes. ``short=False`` (``python -m cosim verilog --cocotb``): the registered top with
 its own parameters (the exported Verilog), a record long enough for its closed-loop
-behaviour (GNSS: two code periods, 16,368 samples each; monopulse: one record of 81,920
-samples). ``short=True`` (the Icarus check in ``make test``): the same top's HDL at the
-reduced parameters of its equivalence check (:data:`GNSS_SHORT`: a GNSS
-channel at 5.115 MS/s real or 2.046 MS/s I/Q, the arrays at 2.046 MS/s; the 12-snapshot
-monopulse block; a TACAN FIFO of 4 words), a record of 1,500 to 10,530 samples, and a FIFO that holds one record and a marker, so records are dropped and counted.
+behaviour (TACAN 10,000 samples; GNSS three code periods of 16,368 samples; monopulse one
+record of 81,920 samples). ``short=True`` (the Icarus check in ``make test``): the same
+top's HDL at reduced parameters (:data:`GNSS_SHORT`: the GNSS channels at 2.046 MS/s; the
+12-snapshot monopulse block of its equivalence check; a TACAN FIFO of 4 words and
+noise-floor blocks of 1,024 cycles, :data:`TACAN_SHORT_BLOCK_LOG2`) on a record of 1,500 to
+8,500 samples (:data:`GNSS_PERIODS`), and a FIFO that holds one record and a marker (an
+array: half its channels' records), so records are dropped and counted.
 """
 from __future__ import annotations
 
@@ -47,17 +48,22 @@ __all__ = ["TOP_CASES", "top_case", "GNSS_SHORT"]
 
 #: Cycles run after the last ADC sample (the last record leaves the pipeline and the FIFO).
 FLUSH_CYCLES = 400
-#: The reduced GNSS channel of the short cases, by input: real at the equivalence check's
-#: 5.115 MS/s (IF fs/4: the C/A main lobe inside the first Nyquist zone), complex at 2.046
-#: MS/s, zero IF (2 samples per chip); a small carrier table.
-GNSS_SHORT = {"real": dict(fs_hz=5.115e6, if_hz=5.115e6 / 4, el_spacing_samples=2,
-                           slew_bits=13, carr_table_bits=6, lo_bits=3),
+#: The reduced GNSS channel of the short cases, by input: 2.046 MS/s (2 samples per chip,
+#: 2,046 per code period), a small carrier table; complex at zero IF, real at 0.3 MHz -- a
+#: rate at which no real IF keeps the C/A main lobe in the first Nyquist zone, so the real
+#: input's record is seeded uniform ADC words (the same hand-over and writes); the satellite's
+#: real-IF signal runs in ``check-equivalence --top gnss`` at 5.115 MS/s.
+GNSS_SHORT = {"real": dict(fs_hz=2.046e6, if_hz=0.3e6, el_spacing_samples=2, slew_bits=12,
+                           carr_table_bits=6, lo_bits=3),
               "complex": dict(fs_hz=2.046e6, if_hz=0.0, el_spacing_samples=2, slew_bits=12,
                               carr_table_bits=6, lo_bits=3, input="complex")}
-#: The real-input array's short case: 2.046 MS/s (Icarus runs 12 channels at ~200 cycles/s),
-#: a rate at which no real IF keeps the C/A main lobe in the first Nyquist zone, so its
-#: record is seeded uniform ADC words (the same hand-over and writes).
-GNSS_SHORT_REAL_ARRAY = dict(GNSS_SHORT["real"], fs_hz=2.046e6, if_hz=0.3e6, slew_bits=12)
+#: Code periods in a GNSS case's record: the hand-over's slew holds the first dump back by up
+#: to a period, so a channel gives ``periods - 1`` or ``periods`` records (short case: one
+#: channel, the arrays; the registered tops).
+GNSS_PERIODS = {"channel": 4, "array": 3, "registered": 3}
+#: ``block_log2`` of the TACAN short case's peak searches (noise-floor blocks of 256 envelope
+#: samples; the registered front end's 1,024 hold its first report back ~4,300 cycles).
+TACAN_SHORT_BLOCK_LOG2 = 8
 
 
 def _elaborated(comp):
@@ -108,9 +114,12 @@ def _tacan(make_top, seed, size, short):
     fe = _frontend("tacan_frontend")
     comp = _elaborated(make_top())
     p = comp.params
-    if short:
-        p = replace(p, fifo_depth=4)
-    n = int(size or (5000 if short else 6000))
+    if short:           # noise-floor blocks of 256 samples (1,024 cycles), not 4,096 cycles
+        cfg = p.config
+        blocks = {k: replace(getattr(cfg, k), block_log2=TACAN_SHORT_BLOCK_LOG2)
+                  for k in ("peak", "pair_peak") if getattr(cfg, k) is not None}
+        p = replace(p, fifo_depth=4, config=replace(cfg, **blocks))
+    n = int(size or (3000 if short else 10_000))
     rng = np.random.default_rng([seed, 1])
     x = _bursts(rng, _width(comp, "i__payload"), n)
     n_cycles = n + FLUSH_CYCLES
@@ -147,20 +156,21 @@ def _gnss(make_top, seed, size, short, *, channels: int, iq: bool):
     from ..gnss.handover import array_handover_writes
     from .equivalence import stall_pattern
     if short:
-        short_p = GNSS_SHORT["complex"] if iq else \
-            GNSS_SHORT_REAL_ARRAY if channels > 1 else GNSS_SHORT["real"]
-        comp = _elaborated(gnss_top(channels, GnssChannelParams(**short_p)))
+        comp = _elaborated(gnss_top(channels,
+                                    GnssChannelParams(**GNSS_SHORT["complex" if iq else "real"])))
     else:
         comp = _elaborated(make_top())
     p = comp.params
-    if short:
-        p = replace(p, fifo_depth=p.fifo.record_words + 2)
+    if short:           # one record (a channel) or half the channels' records, and a marker
+        p = replace(p, fifo_depth=max(channels // 2, 1) * p.fifo.record_words + 2)
     period = round(p.fs_hz * 1e-3)
-    n = int(size or 2 * period + 300)
+    periods = GNSS_PERIODS["registered" if not short else "array" if channels > 1 else
+                           "channel"]
+    n = int(size or periods * period + 300)
     rng = np.random.default_rng([seed, channels, 2 + iq])
     x, named = gnss_equivalence_stimulus(replace(p, channel_bits=0), n, seed,
                                          write_spacing=max(period // 3, 1), first=period // 4,
-                                         signal=not (short and channels > 1 and not iq))
+                                         signal=not (short and not iq))
     regs = p.registers
     handed = named[:4]                                  # PRN 7's hand-over, to channel 0
     later = named[4:]
@@ -177,7 +187,7 @@ def _gnss(make_top, seed, size, short, *, channels: int, iq: bool):
         writes.append((c, 4 * ch + regs[r].address, v))
     writes = _serial(writes)
     n_cycles = n + FLUSH_CYCLES
-    ready = stall_pattern(n_cycles, seed, burst=max(n_cycles // 8, 1))
+    ready = stall_pattern(n_cycles, seed, burst=max(period // 4, 1))   # records get out
     model = GnssArrayModel(p, channels)
     want = model.run(x, writes, n_cycles=n_cycles, out_ready=ready)
     make = (lambda: gnss_top(channels, p)) if short else make_top
