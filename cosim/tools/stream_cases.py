@@ -282,9 +282,10 @@ BLOCK_CASES: dict[str, tuple[Callable, int]] = {
 
 # -- the tops ---------------------------------------------------------------------------------
 def top_case_names() -> tuple:
-    """The tops :func:`stream_case` has a case for (:data:`cosim.tools.top_cases.TOP_CASES`)."""
-    from .top_cases import TOP_CASES
-    return tuple(TOP_CASES)
+    """The tops :func:`stream_case` has a case for (the receivers' ``stream_cases``,
+    :func:`cosim.tools.top_cases.top_cases`)."""
+    from .top_cases import top_cases
+    return tuple(top_cases())
 
 
 def stream_case(name: str, *, seed: int = 1, size: int | None = None,
