@@ -6,9 +6,10 @@ four-state defect that only Icarus sees.
   overflows the FIFO) through :func:`cosim.testing.check_stream` on the ``icarus`` backend:
   every output word and its cycle equal the model's (0 mismatches), no output X or Z.
 - Every receiver top runs its short case (:mod:`cosim.tools.top_cases`: the top's HDL at
-  the reduced parameters of its equivalence check, register writes mid-run, seeded stalls
-  into a FIFO of one record) in the fast suite, but the 12-channel I/Q array (its real-input
-  twin runs; slow). Icarus runs whole tops at ~0.2-1.5e3 cycles/s. The registered
+  reduced parameters, register writes mid-run, seeded stalls into a FIFO of one record) in
+  the fast suite, but the 12-channel I/Q array (its real-input twin runs) and the monopulse
+  front end (its Icarus session with writes and drops runs in test_icarus.py), slow:
+  :data:`SLOW_SHORT_TOPS`. Icarus runs whole tops at ~0.2-1.5e3 cycles/s. The registered
   tops with their own parameters (the cases ``python -m cosim verilog --cocotb`` exports)
   are slow.
 - A new exported design without a case fails :func:`test_every_exported_design_has_a_case`.
@@ -20,6 +21,7 @@ four-state defect that only Icarus sees.
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -35,8 +37,11 @@ from cosim.tools.stream_cases import BLOCK_CASES, exported_designs, stream_case,
 pytestmark = [pytest.mark.icarus,
               pytest.mark.skipif(not icarus_available(), reason=icarus_missing_message())]
 
-#: The tops whose short case is slow (its twin of the other input runs in the fast suite).
-SLOW_SHORT_TOPS = ("gnss_channel_array12_iq",)
+#: The tops whose short case is slow, and the fast Icarus check of the same HDL: the real-input
+#: array's case; the monopulse front end's session on Icarus (register writes mid-run, stalls
+#: that drop records, every word and cycle against the model) in test_icarus.py.
+SLOW_SHORT_TOPS = {"gnss_channel_array12_iq": "test_top_on_icarus_equals_model",
+                   "monopulse_frontend": "test_session_in_blocks_equals_one_step_and_reads_ports"}
 
 
 def _check(case):
@@ -53,6 +58,9 @@ def test_every_exported_design_has_a_case():
     assert designs - cased == set(), f"exported without a cocotb case: {designs - cased}"
     assert cased - designs == set(), f"cases of designs not exported: {cased - designs}"
     assert set(SLOW_SHORT_TOPS) < set(top_case_names())
+    src = Path(__file__).read_text() + Path(__file__).with_name("test_icarus.py").read_text()
+    for name, test in SLOW_SHORT_TOPS.items():
+        assert re.search(rf"^def {test}\(", src, re.M), f"{name}: no fast check {test}"
 
 
 @pytest.mark.parametrize("name", list(BLOCK_CASES))
@@ -80,8 +88,9 @@ def _top_checked(name, short):
                                   if n in SLOW_SHORT_TOPS else n for n in top_case_names()])
 def test_top_on_icarus_equals_model(name):
     """A registered top's HDL on its short case (reduced parameters, register writes
-    mid-run, stalls that drop records): TACAN 3,400 cycles, the GNSS channels 8,884 (four
-    code periods), the 12-channel arrays 6,838 (three), monopulse 1,944."""
+    mid-run, stalls that drop records): TACAN 3,400 cycles (17 s on Icarus), the GNSS
+    channels 8,884 (four code periods; 9-21 s), the 12-channel arrays 6,838 (three; 38 s),
+    monopulse 1,944 (14 s)."""
     _top_checked(name, short=True)
 
 

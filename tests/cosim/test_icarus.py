@@ -4,12 +4,12 @@ equivalence checks and sessions: every registered top (TACAN, the GNSS channel a
 same cycles, under seeded random stalls; the check fails when the expectation is wrong; the
 session keeps its state across steps.
 
-The check ``make test`` runs on every top is its stream case in
-``tests/cosim/test_cocotb_blocks.py`` (short records with register writes mid-run); here the
-GNSS channel's ``check-equivalence`` record and the session run in the fast suite, the other
-top checks (the equivalence checks' own records, the registered tops with their default
-parameters over longer windows) are marked slow (Icarus runs a whole top at ~0.2-1.5e3
-cycles/s). Skipped, with the reason, when ``iverilog``/``vvp`` or cocotb is missing
+The check ``make test`` runs on the TACAN and GNSS tops is their stream case in
+``tests/cosim/test_cocotb_blocks.py`` (short records with register writes mid-run); on the
+monopulse front end it is the session test here (writes mid-run, stalls that drop records)
+and ``check-equivalence --backends model,icarus``. The other top checks (the equivalence
+checks' own records, the registered tops with their default parameters over longer windows)
+are marked slow (Icarus runs a whole top at ~0.2-1.5e3 cycles/s). Skipped, with the reason, when ``iverilog``/``vvp`` or cocotb is missing
 (``make setup`` installs both).
 """
 from __future__ import annotations
@@ -49,10 +49,11 @@ def test_tacan_frontend_matches_model_under_stalls():
     assert "model == icarus over 6,400 cycles" in r["simulators"]
 
 
+@pytest.mark.slow
 def test_gnss_channel_matches_model_under_stalls():
     """One GNSS channel, the record of ``check-equivalence --top gnss`` (5.115 MS/s) over two
     code periods: the hand-over and seeded writes, stalls, a FIFO of one record and a
-    marker."""
+    marker (slow: the fast suite runs the GNSS tops' stream cases)."""
     from cosim.gnss.equivalence import check_gnss_equivalence
     r = check_gnss_equivalence(2 * 5115 + 300, backends=("model", "icarus"), stall=True,
                                seed=2)
