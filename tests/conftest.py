@@ -19,7 +19,8 @@ if os.environ["NUMBA_BOUNDSCHECK"] == "1":
     os.environ.setdefault("NUMBA_CACHE_DIR", str(_ROOT / "build" / "numba-boundscheck"))
 
 
-def pytest_report_header(config):
-    """The simulators the suite runs on and their versions (Verilator, Icarus, cocotb)."""
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """The simulators the suite ran on and their versions (Verilator, Icarus, cocotb), at the
+    end of the output (shown under ``-q`` too, as ``make test`` runs it)."""
     from cosim.tools.toolversions import versions_line
-    return [f"simulators: {versions_line()}"]
+    terminalreporter.write_line(f"simulators: {versions_line()}")

@@ -1,5 +1,5 @@
 """The simulators the toolkit finds and their versions (``python -m cosim.tools.toolversions``;
-``make tools`` prints them, and the test suite's header names them).
+``make tools`` prints them, and the test suite names them at the end of its output).
 
 - Verilator: ``verilator --version`` of the ``verilator`` on ``PATH`` -- the distribution's
   (``apt-get install verilator``) or, set up without root, the wrapper ``make tools`` writes
