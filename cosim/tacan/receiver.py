@@ -369,6 +369,11 @@ def _top():
     return TacanFrontEnd(TacanRunConfig().hdl_params)
 
 
+def _stream_case(*args) -> dict:
+    from .stream_case import tacan_case
+    return tacan_case(*args)
+
+
 def _equivalence(**kw) -> dict:
     from .equivalence import check_equivalence
     return check_equivalence(top="tacan", **kw)
@@ -435,6 +440,7 @@ TACAN = register(Receiver(
     primary=Figure("rmse_deg", "bearing RMSE", "deg"),
     frontend=_frontend(),
     tops={"tacan_frontend": _top},
+    stream_cases={"tacan_frontend": _stream_case},
     equivalence=_equivalence,
     sweep=Study("quantisation sweep: word lengths/modes x SNR x trials, report, word-length "
                 "proposal and its confirmation", SWEEP_OPTIONS, cmd_sweep, model=SWEEP_MODEL),

@@ -17,13 +17,12 @@ and writes with a stall long enough to overflow it (records dropped and counted)
 expected cycles follow each block's timing rule (a fixed latency after the input that
 completes an output; the FIFO's cycle model gives its own).
 
-Top stimulus: seeded ADC codes (:func:`_bursts`: noise bursts over a noise floor) and a
-seeded random ``ready`` with long stalls (:func:`cosim.tools.equivalence.stall_pattern`),
-run from reset on the receiver's bit-exact model session
-(:class:`cosim.core.receivers.Frontend`) with the parameters the registered top is built
-with. Tops whose model is not a registered front-end session (the 12-channel GNSS arrays,
-the I/Q builds) have no case here; their Icarus checks run on their own models in
-``tests/cosim/test_icarus.py``.
+Top stimulus (:mod:`cosim.tools.top_cases`): each top's equivalence-check record (a TACAN
+IF record, a GPS L1 C/A record, random monopulse ADC codes) with the register writes the
+closed loop makes (NCO word; carrier and code words, PRN, slew on every GNSS channel;
+monopulse coefficients and steering), seeded stalls, run from reset on the bit-exact model;
+``short=True`` the same HDL at reduced parameters on a record of a few thousand cycles (the
+check ``make test`` runs on Icarus).
 """
 from __future__ import annotations
 
@@ -281,79 +280,27 @@ BLOCK_CASES: dict[str, tuple[Callable, int]] = {
 }
 
 
-# -- the tops ----------------------------------------------------------------------------------
-def _top_entries() -> dict:
-    """Top name -> its receiver's front end, for the tops a front-end model session models
-    (the front end's Verilog name, default parameters)."""
-    from ..core.receivers import receivers
-    return {r.frontend.verilog_name: r.frontend for r in receivers()
-            if r.frontend is not None and r.frontend.verilog_name in r.tops}
-
-
+# -- the tops ---------------------------------------------------------------------------------
 def top_case_names() -> tuple:
-    """The tops :func:`stream_case` has a case for."""
-    return tuple(_top_entries())
+    """The tops :func:`stream_case` has a case for (the receivers' ``stream_cases``,
+    :func:`cosim.tools.top_cases.top_cases`)."""
+    from .top_cases import top_cases
+    return tuple(top_cases())
 
 
-def _bursts(rng, width: int, n: int) -> np.ndarray:
-    """Signed ``width``-bit ADC codes: a noise floor (2 % of full scale rms) with bursts of
-    strong noise (30 % rms, clipped at full scale), 70 samples long, 100..400 samples apart:
-    broadband energy in any pass band, switched on and off."""
-    x = rng.normal(0.0, 0.02, n)
-    t = int(rng.integers(0, 100))
-    while t < n:
-        x[t:t + 70] += rng.normal(0.0, 0.3, len(x[t:t + 70]))
-        t += int(rng.integers(100, 400))
-    full = 1 << (width - 1)
-    return np.clip(np.round(x * full), -full, full - 1).astype(np.int64)
-
-
-def _top_design(name: str, make):
-    """The front end of top ``name``, the parameters the registered top is built with (its
-    ``params``) and its input payload width."""
-    from amaranth.hdl import Fragment
-    fe = _top_entries()[name]
-    comp = make()
-    params = getattr(comp, "params", None)
-    if not isinstance(params, fe.params):
-        raise TypeError(f"top {name!r}: its params {params!r} are not a {fe.params.__name__}")
-    width = next(len(v) for path, _, v in comp.signature.flatten(comp)
-                 if "__".join(map(str, path)) == "i__payload")
-    Fragment.get(comp, None)        # elaborated: only asked for its parameters and width
-    return fe, params, width
-
-
-def _top(fe, params, width, rng, samples):
-    from .equivalence import stall_pattern
-    x = _bursts(rng, width, samples)
-    n_cycles = samples + 400
-    ready = stall_pattern(n_cycles, int(rng.integers(1 << 30)), burst=max(n_cycles // 8, 1))
-    with fe.model(params) as s:
-        r = s.step(x, ready, n_cycles=n_cycles)
-    return dict(in_words=x, in_valid=None, out_ready=ready, words=np.asarray(r.words),
-                cycles=np.asarray(r.cycles, np.int64), n_cycles=n_cycles,
-                inputs=fe.reset_inputs(params))
-
-
-#: Default record length of a top's case (ADC samples), grown by half (up to
-#: :data:`TOP_MAX_SAMPLES`) until the model gives an output word: a top whose first output
-#: comes late (a GNSS dump per code period, a monopulse record per snapshot set) gets a
-#: record long enough to give one.
-TOP_SAMPLES = 6000
-TOP_MAX_SAMPLES = 400_000
-
-
-def stream_case(name: str, *, seed: int = 1, size: int | None = None) -> StreamCase:
+def stream_case(name: str, *, seed: int = 1, size: int | None = None,
+                short: bool = False) -> StreamCase:
     """The case of design ``name`` (a key of :data:`BLOCK_CASES` or :func:`top_case_names`):
     seeded stimulus and the bit-exact model's words and cycles. ``size``: input words (the
-    FIFO: cycles; a top: ADC samples); default the block's own, for a top
-    :data:`TOP_SAMPLES` or more (see there)."""
+    FIFO: cycles; a top: ADC samples); default the design's own. ``short`` (tops only): the
+    top's HDL at the reduced parameters of its equivalence check on a short record, the
+    check ``make test`` runs (:mod:`cosim.tools.top_cases`); default the registered top as
+    exported."""
     designs = exported_designs()
     tops = top_case_names()
     if name not in BLOCK_CASES and name not in tops:
         have = ", ".join([*BLOCK_CASES, *tops])
-        why = " (an exported top without a front-end model session)" if name in designs else ""
-        raise ValueError(f"no stream case for {name!r}{why}; cases: {have}")
+        raise ValueError(f"no stream case for {name!r}; cases: {have}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, not {seed!r}")
     if size is not None and (isinstance(size, bool) or not isinstance(size, (int, np.integer))
@@ -362,16 +309,14 @@ def stream_case(name: str, *, seed: int = 1, size: int | None = None) -> StreamC
     def rng():
         return np.random.default_rng([int(seed), sum(map(ord, name))])
     if name in BLOCK_CASES:
+        if short:
+            raise ValueError(f"short is for the tops, not the block {name!r}")
         make_case, default = BLOCK_CASES[name]
         d = make_case(rng(), int(size or default))
     else:
-        top = _top_design(name, designs[name])
-        n = int(size or TOP_SAMPLES)
-        d = _top(*top, rng(), n)
-        while size is None and not len(d["words"]) and n < TOP_MAX_SAMPLES:
-            n = min(n * 3 // 2, TOP_MAX_SAMPLES)
-            d = _top(*top, rng(), n)
-    return StreamCase(name=name, make=designs[name], in_words=d["in_words"],
+        from .top_cases import top_case
+        d = top_case(name, designs[name], int(seed), size, short)
+    return StreamCase(name=name, make=d.get("make", designs[name]), in_words=d["in_words"],
                       in_valid=d.get("in_valid"), out_ready=d.get("out_ready"),
                       n_cycles=int(d["n_cycles"]), words=np.asarray(d["words"]),
                       cycles=np.asarray(d["cycles"], np.int64), inputs=d.get("inputs", {}),

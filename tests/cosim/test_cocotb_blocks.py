@@ -4,10 +4,14 @@ four-state defect that only Icarus sees.
 - Each HDL block (:data:`cosim.tools.stream_cases.BLOCK_CASES`) runs its seeded case
   (random words with full-scale values, gaps in ``valid``, run-time writes, a stall that
   overflows the FIFO) through :func:`cosim.testing.check_stream` on the ``icarus`` backend:
-  every output word and its cycle equal the model's (0 mismatches), no output X or Z. The
-  receivers' tops with a front-end model session run their case too (slow: whole tops run at
-  ~1e3 cycles/s under cocotb); the tops without one are checked on their own models in
-  ``tests/cosim/test_icarus.py`` (:data:`TOPS_IN_TEST_ICARUS`).
+  every output word and its cycle equal the model's (0 mismatches), no output X or Z.
+- Every receiver top runs its short case (:mod:`cosim.tools.top_cases`: the top's HDL at
+  reduced parameters, register writes mid-run, seeded stalls into a FIFO of one record) in
+  the fast suite, but the 12-channel I/Q array (its real-input twin runs) and the monopulse
+  front end (its Icarus session with writes and drops runs in test_icarus.py), slow:
+  :data:`SLOW_SHORT_TOPS`. Icarus runs whole tops at ~0.2-1.5e3 cycles/s. The registered
+  tops with their own parameters (the cases ``python -m cosim verilog --cocotb`` exports)
+  are slow.
 - A new exported design without a case fails :func:`test_every_exported_design_has_a_case`.
 - The four-state defect: a lookup table of 10 entries read by a 4-bit counter that is never
   wrapped at 9. The Amaranth simulator and Verilator (two-state) read 0 past the end and
@@ -33,13 +37,11 @@ from cosim.tools.stream_cases import BLOCK_CASES, exported_designs, stream_case,
 pytestmark = [pytest.mark.icarus,
               pytest.mark.skipif(not icarus_available(), reason=icarus_missing_message())]
 
-#: Exported tops whose model is not a front-end session: the test of test_icarus.py that runs
-#: each on Icarus against its model.
-TOPS_IN_TEST_ICARUS = {
-    "gnss_channel_array12": "test_gnss_array12_matches_model_with_random_stalls",
-    "gnss_channel_iq": "test_gnss_channel_iq_matches_model_under_stalls",
-    "gnss_channel_array12_iq": "test_gnss_array12_iq_matches_model_with_random_stalls",
-}
+#: The tops whose short case is slow, and the fast Icarus check of the same HDL: the real-input
+#: array's case; the monopulse front end's session on Icarus (register writes mid-run, stalls
+#: that drop records, every word and cycle against the model) in test_icarus.py.
+SLOW_SHORT_TOPS = {"gnss_channel_array12_iq": "test_top_on_icarus_equals_model",
+                   "monopulse_frontend": "test_session_in_blocks_equals_one_step_and_reads_ports"}
 
 
 def _check(case):
@@ -50,15 +52,15 @@ def _check(case):
 
 
 def test_every_exported_design_has_a_case():
-    """Every design ``python -m cosim verilog`` exports has a cocotb case here, or a named
-    Icarus test in test_icarus.py that exists."""
+    """Every design ``python -m cosim verilog`` exports has a cocotb case."""
     designs = set(exported_designs())
-    cased = set(BLOCK_CASES) | set(top_case_names()) | set(TOPS_IN_TEST_ICARUS)
+    cased = set(BLOCK_CASES) | set(top_case_names())
     assert designs - cased == set(), f"exported without a cocotb case: {designs - cased}"
     assert cased - designs == set(), f"cases of designs not exported: {cased - designs}"
-    src = (Path(__file__).with_name("test_icarus.py")).read_text()
-    for name, test in TOPS_IN_TEST_ICARUS.items():
-        assert re.search(rf"^def {test}\(", src, re.M), f"{name}: {test} not in test_icarus.py"
+    assert set(SLOW_SHORT_TOPS) < set(top_case_names())
+    src = Path(__file__).read_text() + Path(__file__).with_name("test_icarus.py").read_text()
+    for name, test in SLOW_SHORT_TOPS.items():
+        assert re.search(rf"^def {test}\(", src, re.M), f"{name}: no fast check {test}"
 
 
 @pytest.mark.parametrize("name", list(BLOCK_CASES))
@@ -69,15 +71,38 @@ def test_block_on_icarus_equals_model(name):
     assert len(res.words) == len(case.words)
 
 
+def _top_checked(name, short):
+    """Top ``name``'s case on Icarus: its words and cycles, and register writes on the bus
+    (or the NCO word) that fall between output words (``short``; else before the last one),
+    so the words after them carry their effect."""
+    case = stream_case(name, short=short)
+    assert len(case.words) >= 3, "the case must produce output words"
+    w = [c for c, port, v in case.writes if port in ("reg_we", "freq") and v and c > 0]
+    assert len(w) >= 3, "register writes"
+    # between output words; the registered monopulse top gives one record (84,372 cycles)
+    first = case.cycles[0] if short else 0
+    assert any(first < c < case.cycles[-1] for c in w), "writes between output words"
+    res = _check(case).results["icarus"]
+    assert len(res.words) == len(case.words)
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
+                                  if n in SLOW_SHORT_TOPS else n for n in top_case_names()])
+def test_top_on_icarus_equals_model(name):
+    """A registered top's HDL on its short case (reduced parameters, register writes
+    mid-run, stalls that drop records): TACAN 3,400 cycles (17 s on Icarus), the GNSS
+    channels 8,884 (four code periods; 9-21 s), the 12-channel arrays 6,838 (three; 38 s),
+    monopulse 1,944 (14 s)."""
+    _top_checked(name, short=True)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", top_case_names())
-def test_top_on_icarus_equals_model(name):
-    """A registered top on its case (noise bursts, long stalls; as long as its first output
-    word needs: 6,400 cycles for TACAN, 20,650 for the GNSS channel, 102,914 for
-    monopulse)."""
-    case = stream_case(name)
-    assert len(case.words) > 0, "the case must produce output words"
-    _check(case)
+def test_registered_top_on_icarus_equals_model(name):
+    """The registered top with its own parameters on the case ``verilog --cocotb`` exports:
+    TACAN 10,400 cycles, the GNSS tops three code periods (49,804 cycles), monopulse one
+    record (84,372 cycles)."""
+    _top_checked(name, short=False)
 
 
 # -- the four-state defect ------------------------------------------------------------------------

@@ -69,8 +69,6 @@ def test_nco_bench_runs_standalone_and_fails_on_a_wrong_word(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, match", [
     (["--designs", "nco,bogus", "--cocotb", "X"], r"--designs takes names among"),
-    (["--designs", "gnss_channel_iq", "--cocotb", "X"], r"--cocotb: no stimulus case for "
-                                                         r"\['gnss_channel_iq'\]"),
     (["--cocotb-size", "100"], r"--cocotb-seed and --cocotb-size need --cocotb DIR"),
     (["--cocotb", "X", "--cocotb-size", "0"], r"--cocotb-size must be >= 1"),
     (["--cocotb", "X", "--cocotb-seed", "-1"], r"--cocotb-seed must be >= 0"),
@@ -97,3 +95,31 @@ def test_tacan_bench_runs_from_a_clean_directory(tmp_path, capsys):
     r = _run(bench, os.environ.get("KFNAV_CLEAN_PYTHON", sys.executable))
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert f"{b['words']} output words equal the model's" in r.stdout + r.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.icarus
+@needs_icarus
+def test_gnss_benches_with_register_writes(tmp_path, capsys):
+    """The GNSS I/Q channel's and the two 12-channel arrays' benches (the registered tops,
+    three code periods): every channel handed over and rewritten on the bus mid-run, the
+    model's records of every channel expected; the I/Q channel's bench runs from a directory
+    of its own."""
+    out = _export(tmp_path, capsys,
+                  "gnss_channel_iq,gnss_channel_array12,gnss_channel_array12_iq")
+    benches = {b["name"]: b for b in out["cocotb"]}
+    assert sorted(benches) == ["gnss_channel_array12", "gnss_channel_array12_iq",
+                               "gnss_channel_iq"]
+    for name, b in benches.items():
+        case = json.loads((tmp_path / "tb" / name / "case.json").read_text())
+        addr = {v for c, p, v in case["writes"] if p == "reg_addr"}
+        channels = 12 if "array" in name else 1
+        assert len(addr) == 4 * channels, (name, sorted(addr))     # every register of each
+        late = [c for c, p, v in case["writes"] if p == "reg_we" and v and c > 16368]
+        assert late and b["words"] > 0 and b["cycles"] == 3 * 16368 + 700
+    bench = tmp_path / "clean"
+    shutil.copytree(benches["gnss_channel_iq"]["path"], bench)
+    r = _run(bench, os.environ.get("KFNAV_CLEAN_PYTHON", sys.executable))
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    words = benches["gnss_channel_iq"]["words"]
+    assert f"{words} output words equal the model's" in r.stdout + r.stderr

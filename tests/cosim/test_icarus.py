@@ -1,16 +1,22 @@
-"""Icarus Verilog driven by cocotb, the third simulator of the exported Verilog: every
-registered top (TACAN, the GNSS channel and its 12-channel array, real and I/Q input,
-monopulse) gives the bit-exact model's FIFO words on the same cycles, under seeded random
-stalls; the check fails when the
-expectation is wrong; the session keeps its state across steps.
+"""Icarus Verilog driven by cocotb, the third simulator of the exported Verilog, through the
+equivalence checks and sessions: every registered top (TACAN, the GNSS channel and its
+12-channel array, real and I/Q input, monopulse) gives the bit-exact model's FIFO words on the
+same cycles, under seeded random stalls; the check fails when the expectation is wrong; the
+session keeps its state across steps.
 
-Short windows here (Icarus runs a whole top at ~0.3-2e3 cycles/s); the registered tops with
-their default parameters over longer windows are marked slow. Skipped, with the reason, when
-``iverilog``/``vvp`` or cocotb is missing (``make setup`` installs both).
+The check ``make test`` runs on the TACAN and GNSS tops is their stream case in
+``tests/cosim/test_cocotb_blocks.py`` (short records with register writes mid-run); on the
+monopulse front end it is the session test here (writes mid-run, stalls that drop records)
+and ``check-equivalence --backends model,icarus``. The other top checks (the equivalence
+checks' own records, the registered tops with their default parameters over longer windows)
+are marked slow (Icarus runs a whole top at ~0.2-1.5e3 cycles/s). Skipped, with the reason, when ``iverilog``/``vvp`` or cocotb is missing
+(``make setup`` installs both).
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,13 +24,11 @@ import pytest
 from cosim.backends.icarus import IcarusStreamSim, icarus_available, icarus_missing_message
 from cosim.backends.verilator_harness import verilator_available
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "hdl"))
+from _util import gnss_stimulus  # noqa: E402  (the GNSS channel tests' stimulus)
+
 pytestmark = [pytest.mark.icarus,
               pytest.mark.skipif(not icarus_available(), reason=icarus_missing_message())]
-
-#: A reduced-rate GNSS channel (2 samples per chip, 2046 samples per code period).
-GNSS_SMALL = dict(fs_hz=2.046e6, if_hz=0.3e6, el_spacing_samples=2, slew_bits=6,
-                  carr_table_bits=6, lo_bits=3, fifo_depth=64)
-
 
 def _equivalent(r, backends=("model", "icarus")):
     assert r["backends"] == list(backends), r["skipped"]
@@ -34,18 +38,22 @@ def _equivalent(r, backends=("model", "icarus")):
 
 # -- every registered top: Icarus == model ---------------------------------------------------
 
+@pytest.mark.slow
 def test_tacan_frontend_matches_model_under_stalls():
-    """The default TACAN front end (tacan_frontend), a 4-word FIFO, seeded on/off stalls."""
+    """The default TACAN front end (tacan_frontend), a 4-word FIFO, seeded on/off stalls, on
+    the TACAN record of ``check-equivalence`` (~50 s; the fast suite runs the top's stream
+    case)."""
     from cosim.tacan.equivalence import check_equivalence
     r = check_equivalence(samples=6000, backends=("model", "icarus"), stall=True, seed=6)
     _equivalent(r)
     assert "model == icarus over 6,400 cycles" in r["simulators"]
 
 
+@pytest.mark.slow
 def test_gnss_channel_matches_model_under_stalls():
     """One GNSS channel, the record of ``check-equivalence --top gnss`` (5.115 MS/s) over two
     code periods: the hand-over and seeded writes, stalls, a FIFO of one record and a
-    marker."""
+    marker (slow: the fast suite runs the GNSS tops' stream cases)."""
     from cosim.gnss.equivalence import check_gnss_equivalence
     r = check_gnss_equivalence(2 * 5115 + 300, backends=("model", "icarus"), stall=True,
                                seed=2)
@@ -53,36 +61,14 @@ def test_gnss_channel_matches_model_under_stalls():
     assert r["peaks"] >= 1
 
 
-def _array_stimulus(p, channels, n, seed):
-    """ADC codes (``(n, 2)`` I/Q pairs for a complex input), register writes ``(cycle,
-    4 * channel + reg, value)`` to random channels and registers, a seeded random
-    ``ready``."""
-    from hdl.gnss.params import REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN
-    rng = np.random.default_rng(seed)
-    lo = -(1 << (p.adc_bits - 1))
-    x = rng.integers(lo, -lo, (n, 2) if p.complex_input else n)
-    writes = []
-    for c in sorted(rng.choice(np.arange(10, n - 10), 2 * channels, replace=False)):
-        reg, ch = int(rng.integers(0, 4)), int(rng.integers(0, channels))
-        if reg == REG_CARR_FREQ:
-            v = p.carr_word(p.if_hz + float(rng.uniform(-5e3, 5e3)))
-        elif reg == REG_CODE_FREQ:
-            v = p.code_word(1.023e6 + float(rng.uniform(-50, 50)))
-        elif reg == REG_PRN:
-            v = int(rng.integers(1, 33))
-        else:
-            v = int(rng.integers(0, 1 << p.slew_bits))
-        writes.append((int(c), 4 * ch + reg, v))
-    return x, writes, rng.random(n + 400) < 0.5
-
-
 def _array_check(p, channels, n, seed, *, name):
     """``channels`` GNSS channels (one: :class:`GnssChannel`, more: the array) on Icarus
-    against the model, with register writes and random ``ready``."""
+    against the model, with register writes (two per channel, every register in turn, random
+    channels) and random ``ready``."""
     from hdl.gnss.channel import GnssChannel, GnssChannelArray, array_params
     from hdl.gnss.model import GnssArrayModel
     from hdl.model.bus import bus_writes
-    x, writes, ready = _array_stimulus(p, channels, n, seed)
+    x, writes, ready = gnss_stimulus(p, n, seed, n_writes=2, ch=channels, ready_p=0.5)
     n_cycles = n + 200
     model = GnssArrayModel(array_params(p, channels), channels) if channels > 1 \
         else GnssArrayModel(p)
@@ -97,34 +83,10 @@ def _array_check(p, channels, n, seed, *, name):
     return want
 
 
-def test_gnss_array12_matches_model_with_random_stalls():
-    """12 channels on one stream (reduced rate), one code period: the 12 records of the
-    first dump leave through the arbiter and the FIFO under random ready."""
-    from hdl.gnss.params import GnssChannelParams
-    want = _array_check(GnssChannelParams(**GNSS_SMALL), 12, 2046 + 100, seed=12,
-                        name="gnss_channel_array12_small")
-    assert len(want.records) == 12
-
-
-def test_gnss_channel_iq_matches_model_under_stalls():
-    """The complex-input channel (gnss_channel_iq's build, reduced rate, complex IF), I/Q
-    pairs packed into one payload, writes and random stalls."""
-    from hdl.gnss.params import GnssChannelParams
-    p = GnssChannelParams(**dict(GNSS_SMALL, if_hz=-0.3e6, input="complex"))
-    _array_check(p, 1, 2 * 2046 + 100, seed=21, name="gnss_channel_iq_small")
-
-
 @pytest.mark.slow
-def test_gnss_array12_iq_matches_model_with_random_stalls():
-    """12 complex-input channels on one stream (gnss_channel_array12_iq's build, reduced
-    rate), one code period (~20 s: the real-input array runs in the fast suite)."""
-    from hdl.gnss.params import GnssChannelParams
-    p = GnssChannelParams(**dict(GNSS_SMALL, if_hz=-0.3e6, input="complex"))
-    want = _array_check(p, 12, 2046 + 100, seed=22, name="gnss_channel_array12_iq_small")
-    assert len(want.records) == 12
-
-
 def test_monopulse_frontend_matches_model_under_stalls():
+    """The record of ``check-equivalence --top monopulse`` under stalls (the fast suite runs
+    the top's stream case and ``check-equivalence`` without stalls)."""
     from cosim.monopulse.equivalence import check_monopulse_equivalence
     r = check_monopulse_equivalence(1500, backends=("model", "icarus"), seed=3, stall=True)
     _equivalent(r)
@@ -276,7 +238,7 @@ def test_gnss_channel_default_parameters():
     from hdl.gnss.params import GnssChannelParams
     from hdl.model.bus import bus_writes
     p = GnssChannelParams()
-    x, writes, ready = _array_stimulus(p, 1, 2 * 16368 + 100, seed=7)
+    x, writes, ready = gnss_stimulus(p, 2 * 16368 + 100, 7, n_writes=2, ready_p=0.5)
     n_cycles = len(x) + 200
     want = GnssArrayModel(p).run(x, writes, n_cycles=n_cycles, out_ready=ready)
     assert len(want.records) >= 1

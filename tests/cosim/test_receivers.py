@@ -133,6 +133,10 @@ def test_registry_refuses_a_second_receiver_of_one_name(tone):
     with pytest.raises(ValueError, match="primary figure 'rmse' must be one of the metrics"):
         Receiver(name="t2", help="x", config=ToneConfig, options=(), run=_run,
                  metrics=("err_hz",), primary=Figure("rmse", "e", "Hz"))
+    with pytest.raises(ValueError, match=r"stream_cases of tops it does not have: \['t2_top'\]"):
+        Receiver(name="t2", help="x", config=ToneConfig, options=(), run=_run,
+                 metrics=("err_hz",), primary=Figure("err_hz", "e", "Hz"),
+                 stream_cases={"t2_top": lambda *a: {}})
 
 
 def test_tacan_options_are_its_dataclass_fields_with_their_defaults():
