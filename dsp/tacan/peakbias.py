@@ -59,6 +59,13 @@ class PeakBias:
         ``span`` thresholds).
     span : float
         Amplitudes the table covers, in thresholds.
+    confirmed : PeakBias, optional
+        With both searches: the bias of the pair reports the DSP confirms
+        (:mod:`dsp.tacan.pairsource`), which it expects when it measures on them alone. A
+        pair report near the threshold is confirmed only when the noise lifted both its
+        pulses over the single-pulse search's threshold too, so it lies higher over its
+        pulse than the average report. Its threshold is estimated the same way, on every
+        pair report. None: this model.
     """
 
     u: tuple
@@ -69,8 +76,12 @@ class PeakBias:
     noise_predicted: float = 0.0
     entries: int = 256
     span: float = 6.0
+    confirmed: "PeakBias | None" = None
 
     def __post_init__(self):
+        if self.confirmed is not None and not isinstance(self.confirmed, PeakBias):
+            raise ValueError(f"peak bias: confirmed must be a PeakBias or None, not "
+                             f"{self.confirmed!r}")
         u, b = np.asarray(self.u, float), np.asarray(self.beta, float)
         if u.ndim != 1 or u.size < 2 or u.shape != b.shape:
             raise ValueError("peak bias: u and beta must be 1-D, the same length, >= 2 knots")

@@ -174,12 +174,6 @@ class ReceiverConfig:
     #: below it, near the floor, on every pair report (:mod:`dsp.tacan.pairsource`). None:
     #: always on every pair report.
     confirm_pairs_above: float | None = 0.45
-    #: The bias of the confirmed pair reports, which the filter expects when it measures on
-    #: them (``BOTH_CONFIRMED_PEAK_BIAS``): a pair report near the threshold is confirmed
-    #: only when the noise lifted both its pulses over the single-pulse search's threshold,
-    #: so it lies higher over the pulse than the average pair report (at 1.35 thresholds
-    #: +0.19 against +0.06). None: ``peak_bias``.
-    confirmed_peak_bias: PeakBias | None = None
 
     def __post_init__(self):
         if self.mode not in ("X", "Y"):
@@ -200,10 +194,6 @@ class ReceiverConfig:
             raise ValueError(f"sector_track must be True or False, not {self.sector_track!r}")
         if self.peak_bias is not None and not isinstance(self.peak_bias, PeakBias):
             raise ValueError(f"peak_bias must be a PeakBias or None, not {self.peak_bias!r}")
-        if self.confirmed_peak_bias is not None and not isinstance(self.confirmed_peak_bias,
-                                                                   PeakBias):
-            raise ValueError(f"confirmed_peak_bias must be a PeakBias or None, not "
-                             f"{self.confirmed_peak_bias!r}")
         if self.confirm_pairs_above is not None and not 0 < float(self.confirm_pairs_above) <= 1:
             raise ValueError(f"confirm_pairs_above must be in (0, 1] or None, not "
                              f"{self.confirm_pairs_above!r}")
@@ -264,7 +254,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         (references, acquisition, the mode check, which needs the pairs' partners); the
         pair reports, each at its pair's centre (:func:`dsp.tacan.pairsource.pair_centres`),
         are the amplitude measurements -- near the noise floor those outside the reference
-        bursts -- with ``cfg.peak_bias`` (``cfg.confirmed_peak_bias`` on the confirmed ones)
+        bursts -- with ``cfg.peak_bias`` (its ``confirmed`` model on the confirmed ones)
         estimated on them. Not with ``cfg.pair_reports``.
     """
     cfg = cfg or ReceiverConfig()
@@ -302,8 +292,8 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         pm = src == SOURCE_PAIR
         keep, paired, measured_on = choose_pairs(t[pm], t[src == SOURCE_PULSE], cfg.mode,
                                                  dcfg.tol_s, cfg.confirm_pairs_above)
-        if measured_on == "confirmed pairs" and cfg.confirmed_peak_bias is not None:
-            bias = cfg.confirmed_peak_bias
+        if measured_on == "confirmed pairs" and bias is not None and bias.confirmed is not None:
+            bias = bias.confirmed      # the confirmed reports' own bias (PeakBias.confirmed)
         # the threshold from every pair report (the noise pairs make its low quantile)
         thr = bias.threshold(amps[:, pm]) if bias is not None else None
         pm[pm] = keep

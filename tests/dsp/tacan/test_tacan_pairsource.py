@@ -125,3 +125,26 @@ def test_pair_reports_in_the_reference_bursts_give_no_bearing_bias(mode):
     err = lambda x: ((np.asarray(x)[:, keep] - np.array(bearings)[:, None] + 180) % 360) - 180
     e_single, e_both = err(single.bearing_deg).mean(axis=1), err(both_b).mean(axis=1)
     np.testing.assert_allclose(e_both, e_single, atol=1.5e-3)
+
+
+def test_the_confirmed_reports_are_expected_with_their_own_bias():
+    """``PeakBias.confirmed`` is the model the filter uses when it measures on the confirmed
+    pair reports, and only then."""
+    from dsp.tacan.frontend import merge_sources
+    from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PeakBias
+    with pytest.raises(ValueError, match="confirmed"):
+        PeakBias(u=(1.0, 2.0), beta=(0.1, 0.0), confirmed=0.3)
+    t, amps, _ = pulse_observations(TacanSignalConfig(duration_s=1.2, snr_db=3, seed=2), [50.0])
+    ticks = np.round(t * 20e6).astype(np.int64)
+    second = np.flatnonzero(np.isin(ticks - 240, ticks))
+    first = np.searchsorted(ticks, ticks[second] - 240)
+    tk, a, src = merge_sources(ticks, amps[0], ticks[second],
+                               (amps[0, first] + amps[0, second]) / 2)
+    other = PeakBias(u=(0.5, 1.0, 2.0), beta=(0.6, 0.4, 0.1), u_min=0.7)
+    run = lambda pb, **kw: process_peaks(tk / 20e6, a, ReceiverConfig(peak_bias=pb, **kw),
+                                         ticks=tk, source=src).bearing_deg
+    with_own = PeakBias(**{**BOTH_PEAK_BIAS.__dict__, "confirmed": other})
+    np.testing.assert_array_equal(run(with_own), run(other))
+    assert not np.array_equal(run(with_own), run(BOTH_PEAK_BIAS))
+    np.testing.assert_array_equal(run(with_own, confirm_pairs_above=None),
+                                  run(BOTH_PEAK_BIAS, confirm_pairs_above=None))
