@@ -16,7 +16,10 @@ slips and misleading bearings, and the issue-41 checks (:func:`checks`).
 
 ``python -m cosim bench tacan-accuracy`` runs the full grid (:data:`FULL`);
 ``python -m cosim.tacan.bench_accuracy --bearing-step-deg 60 --records 1 ...`` a reduced
-one (the grid is written into the results).
+one (the grid is written into the results). ``--frontend-cache DIR`` keeps each record's
+front-end output in ``DIR`` (keyed by the run's front-end key, the detector and a digest of
+the front end's sources, :data:`FRONTEND_SOURCES`) and reads it back: a DSP change is judged
+again without running the FPGA model (~1 CPU-min per record) again; the JSON says so.
 """
 from __future__ import annotations
 

@@ -20,9 +20,12 @@ search reported a pulse at both its pulses (within the decoder's tolerance). The
 confirmed pair reports, the *paired fraction* (:func:`paired_fraction`), is what the DSP
 observes of where it is: ~0.24 at 0 dB, ~0.54 at 3 dB, ~0.81 at 6 dB (golden chain, X and
 Y). At or above :attr:`dsp.tacan.receiver.ReceiverConfig.confirm_pairs_above` the DSP
-measures on the confirmed pair reports only; below it, near the floor, the single-pulse
+measures on the confirmed pair reports only, expected with their own bias curve
+(:attr:`dsp.tacan.peakbias.PeakBias.confirmed`: a confirmed report near the threshold lies
+higher over its pulse than the average one); below it, near the floor, the single-pulse
 search misses most pulses (confirming would drop most pairs, in the envelope's troughs
-first) and it measures on every pair report.
+first) and it measures on every pair report. Either way each report is one measurement at
+its pair's centre (:func:`pair_centres`).
 """
 from __future__ import annotations
 
