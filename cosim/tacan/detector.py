@@ -32,23 +32,41 @@ def _measured_search(run: TacanRunConfig):
     return cfg if cfg.pair_peak is None else replace(cfg, peak=cfg.pair_peak, pair_peak=None)
 
 
-def _detections(run: TacanRunConfig):
+def _detections(run: TacanRunConfig, confirmed: bool = False):
     """The golden front end on ``run``'s scenario (its measured search,
     :func:`_measured_search`): ``(signal, amplitude, threshold, t, (j, near))`` per detection
     -- its reported amplitude, the threshold at it, its time (s, group delay removed) and the
-    nearest transmitted pulse (index, within :data:`MATCH_S`)."""
+    nearest transmitted pulse (index, within :data:`MATCH_S`). With ``confirmed`` (both
+    searches only) the pair reports the DSP confirms (:func:`dsp.tacan.pairsource.
+    confirmed_pairs`: the single-pulse search reported both their pulses) and no others."""
+    from dsp.tacan.peak import peak_search_float
+    full = run.frontend
+    if confirmed and full.pair_peak is None:
+        raise ValueError("confirmed pair reports need both searches (detector 'both')")
     cfg = _measured_search(run)
     s = generate(run.signal)
-    fe = GoldenFrontend(cfg, run.signal.adc_bits)
-    idx, amp, thr = [], [], []
+    fe = GoldenFrontend(full if confirmed else cfg, run.signal.adc_bits)
+    idx, amp, thr, pulses = [], [], [], []
+    st = None
     for c0, chunk in record_chunks(s.samples, cfg):
-        res = fe.search(chunk)
+        if confirmed:    # both searches on the one envelope, as the FPGA runs them
+            env = fe.envelope(chunk)
+            pulses.append(np.asarray(fe.search(chunk, env).index, np.int64))
+            res, st = peak_search_float(env, full.pair_peak, st, thr_min=full.thr_min_fs)
+        else:
+            res = fe.search(chunk)
         n = np.asarray(res.index, np.int64)
         idx.append(n)
         amp.append(np.asarray(res.amplitude, np.float64))
         thr.append(np.asarray(res.thresholds)[n - c0 // cfg.decimation])
     n, a, T = np.concatenate(idx), np.concatenate(amp), np.concatenate(thr)
     t = (n * cfg.decimation - cfg.group_delay_samples) / run.signal.fs_hz
+    if confirmed:
+        from dsp.tacan.pairsource import confirmed_pairs
+        tpu = (np.concatenate(pulses) * cfg.decimation - cfg.group_delay_samples) / run.signal.fs_hz
+        dec = run.receiver.decoder
+        keep = confirmed_pairs(t, tpu, run.signal.mode, dec.tol_s if dec else 1e-6)
+        n, a, T, t = n[keep], a[keep], T[keep], t[keep]
     tp = s.truth.pulse_times_s
     match = match_nearest(tp, t, MATCH_S) if tp.size else (np.zeros(t.size, int), np.zeros(t.size, bool))
     return s, a, T, t, match
@@ -94,13 +112,13 @@ def detector_bounds(op: dict, mod_15: float, mod_135: float, n_pulses: float) ->
             **{f"bound_{u}_deg": detection_bound_deg(*args, use=u) for u in ("both", "rate", "marks")}}
 
 
-def peak_bias_samples(run: TacanRunConfig) -> tuple[np.ndarray, np.ndarray]:
+def peak_bias_samples(run: TacanRunConfig, confirmed: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Each detection of a transmitted pulse on ``run``'s scenario (golden chain): the
     pulse's amplitude and its report's bias, both in units of the threshold the report
     passed (:mod:`dsp.tacan.peakbias`; a pair report is half the pair sum, so half the
     sum's threshold). Noise peaks and the floor's first settling (infinite threshold) are
-    left out."""
-    s, a, T, _, (j, near) = _detections(run)
+    left out; with ``confirmed``, the pair reports the DSP does not confirm too."""
+    s, a, T, _, (j, near) = _detections(run, confirmed)
     T = T * (0.5 if _measured_search(run).peak.pair_offset else 1.0)
     ap = s.truth.pulse_amplitudes
     ok = near & np.isfinite(T) & (T > 0)
@@ -109,14 +127,22 @@ def peak_bias_samples(run: TacanRunConfig) -> tuple[np.ndarray, np.ndarray]:
 
 
 def calibrate_peak_bias(runs, *, bin_width: float = 0.1, u_fit: float = 1.5,
-                        u_max: float = 5.0, min_count: int = 30) -> tuple[np.ndarray, np.ndarray]:
+                        u_max: float = 5.0, min_count: int = 30,
+                      confirmed: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The bias curve of :class:`dsp.tacan.peakbias.PeakBias` from the detections of
     ``runs`` (:func:`peak_bias_samples` pooled): the mean bias in ``bin_width`` bins of
     ``u`` below ``u_fit`` (bins of at least ``min_count`` detections), above it a fit ``c0 +
     c1 / u`` (the bias left there is small and its bins noisy) on knots 0.25 apart up to
-    ``u_max``. Returns ``(u, beta)``."""
-    us, es = zip(*(peak_bias_samples(r) for r in runs))
-    u, e = np.concatenate(us), np.concatenate(es)
+    ``u_max``; with ``confirmed``, of the confirmed pair reports only. Returns ``(u, beta)``."""
+    us, es = zip(*(peak_bias_samples(r, confirmed) for r in runs))
+    return fit_peak_bias(np.concatenate(us), np.concatenate(es), bin_width=bin_width,
+                         u_fit=u_fit, u_max=u_max, min_count=min_count)
+
+
+def fit_peak_bias(u, e, *, bin_width: float = 0.1, u_fit: float = 1.5, u_max: float = 5.0,
+                  min_count: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`calibrate_peak_bias`'s curve from pooled samples ``(u, e)`` of
+    :func:`peak_bias_samples`."""
     edges = np.arange(0.0, u_fit + 1e-9, bin_width)
     k = np.digitize(u, edges) - 1
     lo_u, lo_b = [], []

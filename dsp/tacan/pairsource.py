@@ -20,9 +20,12 @@ search reported a pulse at both its pulses (within the decoder's tolerance). The
 confirmed pair reports, the *paired fraction* (:func:`paired_fraction`), is what the DSP
 observes of where it is: ~0.24 at 0 dB, ~0.54 at 3 dB, ~0.81 at 6 dB (golden chain, X and
 Y). At or above :attr:`dsp.tacan.receiver.ReceiverConfig.confirm_pairs_above` the DSP
-measures on the confirmed pair reports only; below it, near the floor, the single-pulse
+measures on the confirmed pair reports only, expected with their own bias curve
+(:attr:`dsp.tacan.peakbias.PeakBias.confirmed`: a confirmed report near the threshold lies
+higher over its pulse than the average one); below it, near the floor, the single-pulse
 search misses most pulses (confirming would drop most pairs, in the envelope's troughs
-first) and it measures on every pair report.
+first) and it measures on every pair report. Either way each report is one measurement at
+its pair's centre (:func:`pair_centres`).
 """
 from __future__ import annotations
 
@@ -64,3 +67,27 @@ def choose_pairs(pair_times_s, pulse_times_s, mode: str, tol_s: float,
     if confirm_above is not None and f is not None and f >= confirm_above:
         return c, f, "confirmed pairs"
     return np.ones(c.shape, bool), f, "pairs"
+
+
+def pair_centres(times_s, amplitudes, mode: str, *, ticks=None, tick_hz: float | None = None):
+    """Pair reports as the amplitude measurements of the two-search DSP: each report (at its
+    second pulse, ``t``) one measurement at the pair's centre, ``t - pair_spacing_s(mode) /
+    2`` (with ``ticks``: ``round(spacing * tick_hz / 2)`` ticks earlier), where the mean of
+    the two pulses' envelope is the envelope to first order. Returns ``(times_s,
+    amplitudes, ticks)``; the order is kept.
+
+    Taken as its two pulses instead (:func:`dsp.tacan.receiver.expand_pairs`), a pulse that
+    two reports share is kept once, with the earlier report's amplitude -- in the reference
+    bursts, trains of pulses one pair spacing apart (X auxiliary 12 us, Y main 30 us, Y
+    auxiliary every other pulse of a 15 us train), each pulse then carries the envelope half
+    a spacing before it. Those bursts come at fixed rotation phases, so the shift is a
+    bearing bias: measured +0.003 deg (X) and +0.007 deg (Y) against the single-pulse
+    search at 20 dB, every bearing (0.3 x the bound in Y)."""
+    half = 0.5 * pair_spacing_s(mode)
+    t = np.asarray(times_s, dtype=np.float64)
+    amps = np.asarray(amplitudes)
+    if ticks is None:
+        return t - half, amps, None
+    d = int(round(half * tick_hz))
+    tk = np.asarray(ticks).astype(np.int64) - d
+    return tk / tick_hz, amps, tk

@@ -59,6 +59,13 @@ class PeakBias:
         ``span`` thresholds).
     span : float
         Amplitudes the table covers, in thresholds.
+    confirmed : PeakBias, optional
+        With both searches: the bias of the pair reports the DSP confirms
+        (:mod:`dsp.tacan.pairsource`), which it expects when it measures on them alone. A
+        pair report near the threshold is confirmed only when the noise lifted both its
+        pulses over the single-pulse search's threshold too, so it lies higher over its
+        pulse than the average report. Its threshold is estimated the same way, on every
+        pair report. None: this model.
     """
 
     u: tuple
@@ -69,8 +76,12 @@ class PeakBias:
     noise_predicted: float = 0.0
     entries: int = 256
     span: float = 6.0
+    confirmed: "PeakBias | None" = None
 
     def __post_init__(self):
+        if self.confirmed is not None and not isinstance(self.confirmed, PeakBias):
+            raise ValueError(f"peak bias: confirmed must be a PeakBias or None, not "
+                             f"{self.confirmed!r}")
         u, b = np.asarray(self.u, float), np.asarray(self.beta, float)
         if u.ndim != 1 or u.size < 2 or u.shape != b.shape:
             raise ValueError("peak bias: u and beta must be 1-D, the same length, >= 2 knots")
@@ -155,6 +166,23 @@ PAIR_PEAK_BIAS = PeakBias(
           0.043, 0.0396, 0.0335, 0.0288, 0.0253, 0.0224, 0.02, 0.0181, 0.0164, 0.015, 0.0138,
           0.0127, 0.0117, 0.0109, 0.0101, 0.0095))
 
+#: The bias of the pair reports the DSP confirms with both searches (``BOTH_PEAK_BIAS.
+#: confirmed``; :mod:`dsp.tacan.pairsource`), what it expects when it measures on them alone
+#: (paired fraction >= 0.45, ~3 dB up). ``calibrate_peak_bias(bias_runs("both", seeds=[0]),
+#: confirmed=True, u_fit=2.0)`` (golden chain, 7 records of 2 s at -3 to 12 dB; bins to u =
+#: 2 -- the bias falls more steeply than the average report's -- and ``c0 + c1 / u`` above).
+#: Near the threshold a confirmed report lies well above the average one (+0.19 against
+#: +0.06 thresholds at u = 1.35): taken with the average report's curve the envelope's
+#: troughs read shallow, 1.6-1.8 x the bound at 3 dB (X, seed 100, 0 / 90 / 200 deg); with
+#: this one 1.2 x.
+BOTH_CONFIRMED_PEAK_BIAS = PeakBias(
+    u_min=0.7, noise_report=1.15, noise_predicted=1.8,
+    u=(0.65, 0.75, 0.85, 0.95, 1.05, 1.15, 1.25, 1.35, 1.45, 1.55, 1.65, 1.75, 1.85, 1.95, 2.0,
+       2.25, 2.5, 2.75, 3.0, 3.25, 3.5, 3.75, 4.0, 4.25, 4.5, 4.75, 5.0),
+    beta=(0.6533, 0.5781, 0.4931, 0.4115, 0.3581, 0.3071, 0.2395, 0.1871, 0.1515, 0.1187,
+          0.0931, 0.0773, 0.0560, 0.0484, 0.0474, 0.0417, 0.0371, 0.0334, 0.0303, 0.0277,
+          0.0254, 0.0235, 0.0218, 0.0203, 0.0189, 0.0177, 0.0166))
+
 #: The pair search's bias with both searches (:data:`dsp.tacan.frontend.BOTH_PAIR_SEARCH`,
 #: threshold 40/16; ``python -m cosim tacan --detector both``), calibrated the same way on
 #: ``bias_runs("both")``, with the noise-report rule: a report under 1.15 T where the filter
@@ -162,7 +190,7 @@ PAIR_PEAK_BIAS = PeakBias(
 #: pass this threshold on noise alone; without the rule, 10 dB was 0.174 / 0.148 deg at 90 /
 #: 270 deg with the pair detector at 40/16, with it 0.082 / 0.081).
 BOTH_PEAK_BIAS = PeakBias(
-    u_min=0.7, noise_report=1.15, noise_predicted=1.8,
+    u_min=0.7, noise_report=1.15, noise_predicted=1.8, confirmed=BOTH_CONFIRMED_PEAK_BIAS,
     u=(0.45, 0.55, 0.65, 0.75, 0.85, 0.95, 1.05, 1.15, 1.25, 1.35, 1.45, 1.5, 1.75, 2.0, 2.25,
        2.5, 2.75, 3.0, 3.25, 3.5, 3.75, 4.0, 4.25, 4.5, 4.75, 5.0),
     beta=(0.6123, 0.5294, 0.4474, 0.3809, 0.297, 0.2312, 0.1723, 0.1289, 0.0889, 0.0581,

@@ -20,7 +20,7 @@ from .scoring import REF_MAIN
 from .kalman import EnvelopeKalman
 from .kalman_config import KalmanConfig, KalmanFixedConfig
 from .standard import F15, F135
-from .pairsource import choose_pairs
+from .pairsource import choose_pairs, pair_centres
 from .peakbias import PeakBias
 from .standard import SOURCE_PAIR, SOURCE_PULSE, burst_offsets, pair_spacing_s
 
@@ -252,9 +252,10 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         which one reported each peak (``SOURCE_PULSE`` / ``SOURCE_PAIR``; each search's
         peaks ascending, the two interleaved in any order). The single pulses are decoded
         (references, acquisition, the mode check, which needs the pairs' partners); the
-        pair reports, taken as their two pulses (:func:`expand_pairs`), are the amplitude
-        measurements -- near the noise floor those outside the reference bursts -- with
-        ``cfg.peak_bias`` estimated on them. Not with ``cfg.pair_reports``.
+        pair reports, each at its pair's centre (:func:`dsp.tacan.pairsource.pair_centres`),
+        are the amplitude measurements -- near the noise floor those outside the reference
+        bursts -- with ``cfg.peak_bias`` (its ``confirmed`` model on the confirmed ones)
+        estimated on them. Not with ``cfg.pair_reports``.
     """
     cfg = cfg or ReceiverConfig()
     t = np.asarray(times_s, dtype=np.float64)
@@ -277,6 +278,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     dcfg = cfg.decoder or DecoderConfig(mode=cfg.mode)
     n_peaks = int(t.size)
     paired, measured_on = None, "pairs" if cfg.pair_reports else "pulses"
+    bias = cfg.peak_bias         # the bias model of the reports measured on
     if source is not None:
         src = np.asarray(source)
         if src.shape != t.shape or src.dtype.kind not in "iu" \
@@ -290,16 +292,20 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         pm = src == SOURCE_PAIR
         keep, paired, measured_on = choose_pairs(t[pm], t[src == SOURCE_PULSE], cfg.mode,
                                                  dcfg.tol_s, cfg.confirm_pairs_above)
+        if measured_on == "confirmed pairs" and bias is not None and bias.confirmed is not None:
+            bias = bias.confirmed      # the confirmed reports' own bias (PeakBias.confirmed)
         # the threshold from every pair report (the noise pairs make its low quantile)
-        thr = cfg.peak_bias.threshold(amps[:, pm]) if cfg.peak_bias is not None else None
+        thr = bias.threshold(amps[:, pm]) if bias is not None else None
         pm[pm] = keep
         t, amps = t[pm], amps[:, pm]
         ticks = ticks[pm] if ticks is not None else None
     else:
-        thr = cfg.peak_bias.threshold(amps) if cfg.peak_bias is not None else None
-    if cfg.pair_reports or source is not None:
+        thr = bias.threshold(amps) if bias is not None else None
+    if cfg.pair_reports:
         t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks,
                                       tick_hz=cfg.kalman.tick_hz, tol_s=dcfg.tol_s)
+    elif source is not None:   # one measurement per pair report, at the pair's centre
+        t, amps, ticks = pair_centres(t, amps, cfg.mode, ticks=ticks, tick_hz=cfg.kalman.tick_hz)
     if source is None:
         dec = decode(t, cfg.mode, dcfg)
         sel = np.flatnonzero(dec.measurement_mask)
@@ -319,7 +325,7 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
     kf = state.kf
     if thr is not None:      # amplitude codes: their threshold in signal units
         thr = math.ldexp(thr, -cfg.kalman.y.frac) if amps.dtype.kind == "i" else thr
-        kf.set_peak_bias(*cfg.peak_bias.table(thr), noise=cfg.peak_bias.noise_rule(thr))
+        kf.set_peak_bias(*bias.table(thr), noise=bias.noise_rule(thr))
 
     n_ref = dec.ref_times_s.size
     out_t, out_k, out_b, out_c = [], [], [], []

@@ -57,3 +57,10 @@ def test_pooling_and_the_checks():
     for bad in (dict(slip=True), dict(misleading=1), dict(locked=False)):
         worse = recs[1:] + [_rec("X", 0.0, 0.0, 0, (0.3, 0.1), (1.0, 0.5), **bad)]
         assert not checks(pool(worse, g), worse, g)["at_0db_ok"]
+
+
+def test_every_record_of_the_grid_has_its_own_noise():
+    from cosim.tacan.bench_accuracy import AccuracyGrid
+    g = AccuracyGrid(bearing_step_deg=60.0, snrs_db=(3.0,), modes=("X",), records=2)
+    seeds = [it["seed"] for it in g.items()]
+    assert seeds == list(range(100, 112))

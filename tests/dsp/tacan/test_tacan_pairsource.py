@@ -80,3 +80,71 @@ def test_noise_pairs_are_left_out_above_the_threshold_and_measured_below():
     assert every.n_measurements > clean.n_measurements
     single = process_peaks(ticks / 20e6, amps, ReceiverConfig(), ticks=ticks)
     assert single.measured_on == "pulses" and single.paired_fraction is None
+
+
+def test_pair_centres():
+    from dsp.tacan.pairsource import pair_centres
+    a = np.array([[1.0, 2.0]])
+    t, got, tk = pair_centres(np.array([1e-3, 2e-3]), a, "Y", ticks=np.array([20000, 40000]),
+                              tick_hz=20e6)
+    np.testing.assert_array_equal(tk, [20000 - 300, 40000 - 300])
+    np.testing.assert_allclose(t, tk / 20e6)
+    assert got is a or np.array_equal(got, a)
+    t, _, tk = pair_centres(np.array([1e-3]), a[:, :1], "X")
+    assert tk is None and t[0] == pytest.approx(1e-3 - 6e-6)
+
+
+@pytest.mark.parametrize("mode", ["X", "Y"])
+def test_pair_reports_in_the_reference_bursts_give_no_bearing_bias(mode):
+    """An ideal front end with both searches (every pair reported at its second pulse with
+    the mean of its pulses, 0.2 % amplitude noise): the bearing agrees with the single-pulse
+    DSP's on the same pulses. The reference bursts are trains of pulses one pair spacing
+    apart; taken as the pairs' two pulses, each train pulse carried the envelope half a
+    spacing before it, at the bursts' fixed rotation phases: +0.003 (X) / +0.007 (Y) deg
+    here, on every bearing."""
+    from dsp.tacan.frontend import merge_sources
+    from dsp.tacan.standard import pair_spacing_s
+    bearings = [20.0, 140.0, 260.0]
+    t, amps, _ = pulse_observations(TacanSignalConfig(mode=mode, duration_s=1.5, seed=4),
+                                    bearings, rel_sigma=0.002)
+    ticks = np.round(t * 20e6).astype(np.int64)
+    d = int(round(pair_spacing_s(mode) * 20e6))
+    second = np.flatnonzero(np.isin(ticks - d, ticks))
+    first = np.searchsorted(ticks, ticks[second] - d)
+    cfg = ReceiverConfig(mode=mode)
+    single = process_peaks(ticks / 20e6, amps, cfg, ticks=ticks)
+    both_b = []
+    for b in range(len(bearings)):     # one trial per call: the sources interleave per row
+        tk, a, src = merge_sources(ticks, amps[b], ticks[second],
+                                   (amps[b, first] + amps[b, second]) / 2)
+        got = process_peaks(tk / 20e6, a, cfg, ticks=tk, source=src)
+        assert got.measured_on == "confirmed pairs"
+        np.testing.assert_array_equal(got.times_s, single.times_s)
+        both_b.append(got.bearing_deg[0])
+    keep = single.times_s >= 0.7
+    err = lambda x: ((np.asarray(x)[:, keep] - np.array(bearings)[:, None] + 180) % 360) - 180
+    e_single, e_both = err(single.bearing_deg).mean(axis=1), err(both_b).mean(axis=1)
+    np.testing.assert_allclose(e_both, e_single, atol=1.5e-3)
+
+
+def test_the_confirmed_reports_are_expected_with_their_own_bias():
+    """``PeakBias.confirmed`` is the model the filter uses when it measures on the confirmed
+    pair reports, and only then."""
+    from dsp.tacan.frontend import merge_sources
+    from dsp.tacan.peakbias import BOTH_PEAK_BIAS, PeakBias
+    with pytest.raises(ValueError, match="confirmed"):
+        PeakBias(u=(1.0, 2.0), beta=(0.1, 0.0), confirmed=0.3)
+    t, amps, _ = pulse_observations(TacanSignalConfig(duration_s=1.2, snr_db=3, seed=2), [50.0])
+    ticks = np.round(t * 20e6).astype(np.int64)
+    second = np.flatnonzero(np.isin(ticks - 240, ticks))
+    first = np.searchsorted(ticks, ticks[second] - 240)
+    tk, a, src = merge_sources(ticks, amps[0], ticks[second],
+                               (amps[0, first] + amps[0, second]) / 2)
+    other = PeakBias(u=(0.5, 1.0, 2.0), beta=(0.6, 0.4, 0.1), u_min=0.7)
+    run = lambda pb, **kw: process_peaks(tk / 20e6, a, ReceiverConfig(peak_bias=pb, **kw),
+                                         ticks=tk, source=src).bearing_deg
+    with_own = PeakBias(**{**BOTH_PEAK_BIAS.__dict__, "confirmed": other})
+    np.testing.assert_array_equal(run(with_own), run(other))
+    assert not np.array_equal(run(with_own), run(BOTH_PEAK_BIAS))
+    np.testing.assert_array_equal(run(with_own, confirm_pairs_above=None),
+                                  run(BOTH_PEAK_BIAS, confirm_pairs_above=None))
