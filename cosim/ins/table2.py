@@ -109,14 +109,15 @@ class Table2Config:
     pli_epochs: int = 20
     #: Monte Carlo runs per task of the engine (:mod:`cosim.studies.engine`)
     chunk_runs: int = 10
-    #: the bit-exact IF run: the first ``if_window_s`` of the scenario (0: none)
-    if_window_s: float = 12.0
+    #: the bit-exact IF run: the first ``if_window_s`` of the scenario (0: none; 35 s
+    #: holds the whole manoeuvre, 5-32 s)
+    if_window_s: float = 35.0
     #: the C/N0 threshold search: runs, scenario length, bracket and resolution (dB-Hz)
-    threshold_runs: int = 2
-    threshold_duration_s: float = 25.0
+    threshold_runs: int = 4
+    threshold_duration_s: float = 40.0
     threshold_lo_dbhz: float = 24.0
     threshold_hi_dbhz: float = 44.0
-    threshold_step_db: float = 2.0
+    threshold_step_db: float = 1.0
 
     def __post_init__(self):
         check_float("cn0_dbhz", self.cn0_dbhz, 20.0, 60.0, unit="dB-Hz")
