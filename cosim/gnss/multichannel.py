@@ -358,7 +358,13 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
     ``{"aiding": aiding}``: :mod:`cosim.ins.table2_if`), ``t_first_s`` the start of its
     first tracked epoch (the received code epoch after the slew's, to the hand-over's code
     phase error); the trackers that need an aiding source run only with it."""
+    from dsp.gnss.trackers import needs_aiding
+
     from ..core.pipeline import Pipeline
+    if needs_aiding(run.tracker) and tracker_setup is None:
+        raise ValueError(f"tracker {run.tracker} needs an aiding source: give tracker_setup")
+    if tracker_setup is not None and not callable(tracker_setup):
+        raise ValueError("tracker_setup must be a callable (prn, t_first_s) -> (ctx, options)")
     if run.backend == "golden":
         raise ValueError("--backend golden has no channel array: use model or verilator")
     n = f.n_samples if n_samples is None else int(n_samples)
@@ -367,11 +373,6 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
                          f"{f.n_samples}")
     p = array_channel_params(channel_params_for(f, hdl_changes), cfg.channels)
     cands = sorted(candidates, key=lambda c: -c.cn0_dbhz)
-    from dsp.gnss.trackers import needs_aiding
-    if needs_aiding(run.tracker) and tracker_setup is None:
-        raise ValueError(f"tracker {run.tracker} needs an aiding source: give tracker_setup")
-    if tracker_setup is not None and not callable(tracker_setup):
-        raise ValueError("tracker_setup must be a callable (prn, t_first_s) -> (ctx, options)")
     alloc = _Allocator(f, p, run, cfg, cands[cfg.channels:], tracker_setup)
     alloc.slots = [ChannelSlot(alloc, ch) for ch in range(cfg.channels)]
     # the service reads what the array writes: every channel's record each 1 ms (twice over)
