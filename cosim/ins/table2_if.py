@@ -107,12 +107,13 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
              for j in cols]
     aid = ChannelAiding(sig, cols, 1, cfg.seed, step_s=cfg.ins_step_s) \
         if loop != "unaided-kf" else None
-    given = {}
+    given = []                  # per assignment (track_file makes one per setup call)
 
     def setup(prn, t_first_s):
         ctx = {}
         if aid is not None:
-            given[prn] = ctx["aiding"] = aid.channel(prns.index(prn), t_first_s)
+            ctx["aiding"] = aid.channel(prns.index(prn), t_first_s)
+        given.append(ctx.get("aiding"))
         return ctx, tracker_options(loop, cfg)
 
     f = SampleFile(rec["file"], "int8", rec["fs_hz"], rec["if_hz"])
@@ -133,12 +134,14 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
            ("code_chips", "doppler_hz", "cn0_dbhz", "carrier_cycles")}
     ser["locked"] = np.zeros((M, 1, S), bool)
     offset = 0.0
-    for a in m.assignments:
+    if len(given) != len(m.assignments):
+        raise RuntimeError("internal: the tracker setups and the assignments do not pair")
+    for a, g in zip(m.assignments, given):
         if a.prn not in prns:
             continue
         j = prns.index(a.prn)
-        if a.prn in given and a.t:       # the first tracked epoch against the aiding's
-            offset = max(offset, abs(a.t[0] - given[a.prn].mid_s[0] - CODE_PERIOD_S / 2))
+        if g is not None and a.t:        # the first tracked epoch against the aiding's
+            offset = max(offset, abs(a.t[0] - g.mid_s[0] - CODE_PERIOD_S / 2))
         nav = channel_navigation(a, m, p, reference_week=sig.cfg.week, inverted=False,
                                  if_hz=f.if_hz)
         if nav.g.size < 3:
@@ -146,15 +149,15 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
         k, chips, inside = nav.record_at(N)
         ct = chi_true[:, sig.prns.index(a.prn)]
         d = np.mod(chips - ct + CODE_LENGTH / 2, CODE_LENGTH) - CODE_LENGTH / 2
-        ser["code_chips"][:, 0, j] = np.where(inside, ct + d, np.nan)
-        ser["doppler_hz"][:, 0, j] = np.where(inside & (k >= 2),
-                                              _doppler_at(nav, k, t_m, a.doppler_offset_epochs),
-                                              np.nan)
-        ser["cn0_dbhz"][:, 0, j] = nav.cn0_at(N)
-        ser["carrier_cycles"][:, 0, j] = -nav.carrier_cycles(N)
+        # (a PRN assigned again after a loss: each assignment's epochs are its own)
+        ser["code_chips"][inside, 0, j] = (ct + d)[inside]
+        ser["doppler_hz"][inside, 0, j] = np.where(
+            k >= 2, _doppler_at(nav, k, t_m, a.doppler_offset_epochs), np.nan)[inside]
+        ser["cn0_dbhz"][inside, 0, j] = nav.cn0_at(N)[inside]
+        ser["carrier_cycles"][inside, 0, j] = -nav.carrier_cycles(N)[inside]
         wi = np.searchsorted(nav.win_t, t_m, side="right") - 1
-        ser["locked"][:, 0, j] = (wi >= 0) & nav.win_ok[np.clip(wi, 0, None)] \
-            if nav.win_t.size else False
+        if nav.win_t.size:
+            ser["locked"][inside, 0, j] = ((wi >= 0) & nav.win_ok[np.clip(wi, 0, None)])[inside]
     if offset * 1e6 > 50.0:
         raise RuntimeError(f"internal: a channel's first tracked epoch is {offset * 1e6:.1f} us "
                            f"off the aiding's epochs")
@@ -169,7 +172,7 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
             "channel_epochs": int(lk.size),
             "fixes_missing": int(np.sum(~np.isfinite(err[t_m >= cfg.settle_s, 0])))}
     return {"loop": loop, "t_s": t_m, "err": err, "lock": lock,
-            "aiding_epoch_offset_us": offset * 1e6 if given else None,
+            "aiding_epoch_offset_us": offset * 1e6 if any(g is not None for g in given) else None,
             "assignments": [{"prn": a.prn, "channel": a.channel, "status": a.status,
                              "end_reason": a.end_reason} for a in m.assignments],
             "digest": m.pipeline.digest if hasattr(m.pipeline, "digest") else None,
