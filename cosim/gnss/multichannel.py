@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S
+from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 
 from ..core.validate import check_float, check_int
 from .config import GnssRunConfig
@@ -145,6 +145,8 @@ class Assignment:
     end_reason: str = ""
     lock_sample: int | None = None
     end_sample: int | None = None
+    #: the tracker's Doppler report stands for its record's end plus this many epochs
+    doppler_offset_epochs: float = 0.0
     t: list = field(default_factory=list)
     doppler: list = field(default_factory=list)
     code_phase: list = field(default_factory=list)
@@ -171,16 +173,28 @@ class ChannelSlot:
         self.misses = self.hits = 0
         self.release = ""              # reason, while a re-hand-over waits for its boundary
 
-    def assign(self, cand: Candidate, start_sample: int) -> None:
+    def assign(self, cand: Candidate, start_sample: int, prompt_start: int | None = None) -> None:
+        """Start tracking ``cand``; ``prompt_start``: the sample where the prompt starts its
+        first code period after the hand-over (the slew record's), from which the first
+        tracked epoch starts one code period later (the ``tracker_setup`` hook's time)."""
         from dsp.gnss.loops import LockDetector
         o = self.owner
+        extra = None
+        if o.setup is not None:
+            rate = CHIP_RATE_HZ * (1 + cand.doppler_hz / L1_HZ)
+            t_first = (prompt_start if prompt_start is not None else start_sample) / o.p.fs_hz \
+                + CODE_LENGTH / rate
+            extra = o.setup(cand.prn, t_first)
         tracker, arith = make_tracker_for(o.run, o.p.fs_hz, o.p.if_hz, o.inverted,
-                                          cand.cn0_dbhz, cand.doppler_hz, o.spacing, o.run.dsp)
+                                          cand.cn0_dbhz, cand.doppler_hz, o.spacing, o.run.dsp,
+                                          extra)
         self.track = Tracking(tracker, arith, o.p, SKIP_RECORDS)
         c = o.cfg
         self.det = LockDetector(CODE_PERIOD_S, window=c.lock_window_ms, m=c.pli_block_ms,
                                 pli_min=c.pli_min, cn0_min_dbhz=c.cn0_min_dbhz)
-        self.asg = Assignment(cand.prn, self.ch, cand, start_sample)
+        self.asg = Assignment(cand.prn, self.ch, cand, start_sample,
+                              doppler_offset_epochs=float(getattr(tracker,
+                                                                  "doppler_offset_epochs", 0.0)))
         o.assignments.append(self.asg)
         self.misses, self.hits, self.release = 0, 0, ""
 
@@ -256,15 +270,16 @@ class ChannelSlot:
                               cand.n_ref, o.inverted)
         # the new PRN's records: the one closing at n_next is the old PRN's, the next holds
         # the slew (SKIP_RECORDS)
-        self.assign(cand, n_next + 1 + o.p.half_spacing)
+        self.assign(cand, n_next + 1 + o.p.half_spacing,
+                    n_next + 1 + dict(w)["slew"] + o.p.half_spacing)
         return [(o.name(self.ch, "prn"), cand.prn)] + [(o.name(self.ch, r), v) for r, v in w]
 
 
 class _Allocator:
     """The channels' shared state: the candidate queue, re-acquisition, the assignments."""
 
-    def __init__(self, f, p, run, cfg, queue):
-        self.f, self.p, self.run, self.cfg = f, p, run, cfg
+    def __init__(self, f, p, run, cfg, queue, setup=None):
+        self.f, self.p, self.run, self.cfg, self.setup = f, p, run, cfg, setup
         self.inverted = f.doppler_sign_inverted
         self.n_ms = f.samples_per_ms
         self.spacing = p.el_spacing_samples * CHIP_RATE_HZ / p.fs_hz
@@ -332,14 +347,24 @@ class MultiTrack:
 def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig(), *,
                n_samples: int | None = None, block_samples: int = 1 << 17,
                progress: bool = False, hdl_changes: tuple = (),
-               keep_words: bool = False) -> MultiTrack:
+               keep_words: bool = False, tracker_setup=None) -> MultiTrack:
     """Track the ``candidates`` (acquired on ``f``, a :class:`cosim.gnss.files.SampleFile`;
     code phases at sample 0) on ``cfg.channels`` channels of the array on ``run.backend``
     (``model`` or ``verilator``/``pysim``) with ``run``'s tracker, arithmetic and DSP service,
     over the first ``n_samples`` samples (default all), streamed in blocks. ``keep_words``:
     the result's pipeline keeps every FIFO word read and its read cycle (else only their
-    digest)."""
+    digest). ``tracker_setup(prn, t_first_s) -> (TrackerContext changes, tracker options)``:
+    per assignment, what the tracker is built with beyond the run's (e.g. the INS aiding,
+    ``{"aiding": aiding}``: :mod:`cosim.ins.table2_if`), ``t_first_s`` the start of its
+    first tracked epoch (the received code epoch after the slew's, to the hand-over's code
+    phase error); the trackers that need an aiding source run only with it."""
+    from dsp.gnss.trackers import needs_aiding
+
     from ..core.pipeline import Pipeline
+    if needs_aiding(run.tracker) and tracker_setup is None:
+        raise ValueError(f"tracker {run.tracker} needs an aiding source: give tracker_setup")
+    if tracker_setup is not None and not callable(tracker_setup):
+        raise ValueError("tracker_setup must be a callable (prn, t_first_s) -> (ctx, options)")
     if run.backend == "golden":
         raise ValueError("--backend golden has no channel array: use model or verilator")
     n = f.n_samples if n_samples is None else int(n_samples)
@@ -348,7 +373,7 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
                          f"{f.n_samples}")
     p = array_channel_params(channel_params_for(f, hdl_changes), cfg.channels)
     cands = sorted(candidates, key=lambda c: -c.cn0_dbhz)
-    alloc = _Allocator(f, p, run, cfg, cands[cfg.channels:])
+    alloc = _Allocator(f, p, run, cfg, cands[cfg.channels:], tracker_setup)
     alloc.slots = [ChannelSlot(alloc, ch) for ch in range(cfg.channels)]
     # the service reads what the array writes: every channel's record each 1 ms (twice over)
     need = math.ceil(2 * cfg.channels * p.fifo.record_words * run.service_period_us / 1e3)
@@ -368,9 +393,11 @@ def track_file(f, candidates, run: GnssRunConfig, cfg: TrackConfig = TrackConfig
         init = []
         for ch, c in enumerate(cands[:cfg.channels]):
             init.append((0, alloc.name(ch, "prn"), c.prn))
-            init += [(cyc, alloc.name(ch, r), v) for cyc, r, v in
-                     handover_writes(p, c.doppler_hz, c.code_phase_chips, alloc.inverted)]
-            alloc.slots[ch].assign(c, 0)
+            hw = handover_writes(p, c.doppler_hz, c.code_phase_chips, alloc.inverted)
+            init += [(cyc, alloc.name(ch, r), v) for cyc, r, v in hw]
+            # the reset word's first boundary, then the slew: the prompt's first code period
+            n1 = alloc.slots[ch].epochs.next_boundary()[0]
+            alloc.slots[ch].assign(c, 0, n1 + 1 + hw[2][2] + p.half_spacing)
         pipe.schedule(sorted(init, key=lambda w: w[0]))
         for a in range(0, n, block_samples):
             x = f.words(a, min(block_samples, n - a))

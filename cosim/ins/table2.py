@@ -57,12 +57,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pymap3d
 
+from dsp.gnss.ca_code import CODE_PERIOD_S
+
 from ..core.validate import check_float, check_int
 from .ins_error import InsErrors, acceleration_error_enu, integrate_errors
 from .trajectory import G_MPS2, doppler_rate_hz_s
 
 __all__ = ["Table2Config", "PAPER_TABLE2", "CLAIMS", "table2_signal", "ChannelAiding",
-           "run_loop", "error_table", "judge_claims", "LOOPS", "AXES"]
+           "run_loop", "tracker_options", "EpochRates", "error_table", "judge_claims", "LOOPS", "AXES"]
 
 LOOPS = ("unaided-kf", "aided-pll", "aided-kf")
 AXES = ("x", "y", "z", "vx", "vy", "vz")
@@ -105,6 +107,17 @@ class Table2Config:
     dsp: str = "float"
     ins_step_s: float = 0.01
     pli_epochs: int = 20
+    #: Monte Carlo runs per task of the engine (:mod:`cosim.studies.engine`)
+    chunk_runs: int = 10
+    #: the bit-exact IF run: the first ``if_window_s`` of the scenario (0: none; 35 s
+    #: holds the whole manoeuvre, 5-32 s)
+    if_window_s: float = 35.0
+    #: the C/N0 threshold search: runs, scenario length, bracket and resolution (dB-Hz)
+    threshold_runs: int = 4
+    threshold_duration_s: float = 40.0
+    threshold_lo_dbhz: float = 24.0
+    threshold_hi_dbhz: float = 44.0
+    threshold_step_db: float = 1.0
 
     def __post_init__(self):
         check_float("cn0_dbhz", self.cn0_dbhz, 20.0, 60.0, unit="dB-Hz")
@@ -115,6 +128,19 @@ class Table2Config:
         check_float("rate_hz", self.rate_hz, 0.0, 50.0, lo_open=True, unit="Hz")
         check_float("settle_s", self.settle_s, 0.0, self.duration_s, unit="s")
         check_float("ins_step_s", self.ins_step_s, 0.0, 0.1, lo_open=True, unit="s")
+        check_int("chunk_runs", self.chunk_runs, 1, 100_000)
+        check_float("if_window_s", self.if_window_s, 0.0, 150.0, unit="s")
+        if 0 < self.if_window_s <= self.settle_s + 1:
+            raise ValueError(f"if_window_s {self.if_window_s:g} s holds no fix after settle_s "
+                             f"{self.settle_s:g} s (0: no IF run)")
+        check_int("threshold_runs", self.threshold_runs, 0, 100_000)
+        check_float("threshold_duration_s", self.threshold_duration_s, self.settle_s + 1,
+                    150.0, unit="s")
+        check_float("threshold_lo_dbhz", self.threshold_lo_dbhz, 20.0, 60.0, unit="dB-Hz")
+        check_float("threshold_hi_dbhz", self.threshold_hi_dbhz, self.threshold_lo_dbhz, 60.0,
+                    lo_open=True, unit="dB-Hz")
+        check_float("threshold_step_db", self.threshold_step_db, 0.0, 20.0, lo_open=True,
+                    unit="dB")
         if self.oscillator not in (None, "tcxo", "ocxo"):
             raise ValueError(f"oscillator must be tcxo, ocxo or None, not {self.oscillator!r}")
         if self.dsp not in ("float", "fixed"):
@@ -158,7 +184,7 @@ class ChannelAiding:
     (run, channel) at the midpoint of the channel's epoch ``k``, shape (runs, S)."""
 
     def __init__(self, sig, cols, runs: int, seed: int, errors: InsErrors | None = None,
-                 step_s: float = 0.01):
+                 step_s: float = 0.01, first_run: int = 0):
         from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH
         from dsp.gnss.ephemeris import satellite_position_velocity, select_ephemeris
 
@@ -194,8 +220,8 @@ class ChannelAiding:
         As = (Vs1 - Vs0) / (2 * d)
         self.delta = np.empty((n, runs, S))
         for r in range(runs):
-            da = np.einsum("nji,jn->in", C, acceleration_error_enu(f_enu, h, err,
-                                                                   _run_seed(seed, r)))
+            da = np.einsum("nji,jn->in", C, acceleration_error_enu(
+                f_enu, h, err, _run_seed(seed, first_run + r)))
             dv, dp = integrate_errors(da, h)
             for j in range(S):
                 rs, vs, as_ = Rs[:, j].T, Vs[:, j].T, As[:, j].T
@@ -219,6 +245,22 @@ class ChannelAiding:
         tab, c = self.tab, self._cols
         return (tab[i, :, c] * (1 - w)[:, None] + tab[i + 1, :, c] * w[:, None]).T
 
+    def channel(self, j: int, t_first_s: float, run: int = 0):
+        """``aiding(k)`` of one channel of the IF path (column ``j``, Monte Carlo run
+        ``run``) whose first tracked epoch starts at ``t_first_s`` (s; within a quarter of
+        an epoch): the rate of :meth:`rate` at the midpoints of the received code epochs
+        from that one on, the same table and formula as the fast path's."""
+        T = CODE_PERIOD_S
+        i0 = int(np.argmin(np.abs(self.mid[:, j] - T / 2 - t_first_s)))
+        if abs(self.mid[i0, j] - T / 2 - t_first_s) > T / 4:
+            raise ValueError(f"no received code epoch starts near {t_first_s:.6f} s "
+                             f"(channel {j}): outside the aiding's table")
+        u = self.mid[i0:, j] / self.h
+        i = np.clip(np.floor(u).astype(np.int64), 0, self.n - 2)
+        w = u - i
+        rates = self.tab[i, run, j] * (1 - w) + self.tab[i + 1, run, j] * w
+        return EpochRates(rates, self.mid[i0:, j])
+
     def __call__(self, k):
         if not 0 <= k < self.mid.shape[0]:
             raise ValueError(f"aiding asked for epoch {k}: the run holds epochs "
@@ -226,14 +268,30 @@ class ChannelAiding:
         return self.rate(self.mid[k])
 
 
+class EpochRates:
+    """``aiding(k)``: the Doppler rate (Hz/s) of a channel's tracked epoch ``k`` from a
+    table (:meth:`ChannelAiding.channel`); ``mid_s`` the epochs' midpoints (s)."""
+
+    def __init__(self, rates, mid_s):
+        self.rates, self.mid_s = np.asarray(rates, float), np.asarray(mid_s, float)
+
+    def __call__(self, k):
+        if not 0 <= k < self.rates.size:
+            raise ValueError(f"aiding asked for epoch {k}: the channel's table holds epochs "
+                             f"0..{self.rates.size - 1}")
+        return float(self.rates[k])
+
+
 def _run_seed(seed: int, r: int) -> int:
     return int(np.random.SeedSequence((int(seed), int(r))).generate_state(1)[0])
 
 
-def run_loop(cfg: Table2Config, loop: str, sig, cols, aiding: ChannelAiding):
-    """One loop's Monte Carlo (``cfg.runs`` batched trials of :func:`run_fast`, trial noise
-    from ``cfg.seed``): ``(FastGpsRun, errors)``, errors (M, runs, 6) of the fixes on ECEF
-    x, y, z, vx, vy, vz (NaN: no fix)."""
+def run_loop(cfg: Table2Config, loop: str, sig, cols, aiding: ChannelAiding, *,
+             runs: int | None = None, seed: int | None = None, cn0_min_dbhz: float = 30.0):
+    """One loop's Monte Carlo (``runs`` batched trials of :func:`run_fast`, default
+    ``cfg.runs``; trial noise from ``seed``, default ``cfg.seed``; the lock detector's C/N0
+    criterion ``cn0_min_dbhz``): ``(FastGpsRun, errors)``, errors (M, runs, 6) of the fixes
+    on ECEF x, y, z, vx, vy, vz (NaN: no fix)."""
     from ..gnss.config import GnssRunConfig
     from ..gnss.gps_fast import run_fast
     from ..gnss.gps_receiver import GpsConfig
@@ -241,15 +299,19 @@ def run_loop(cfg: Table2Config, loop: str, sig, cols, aiding: ChannelAiding):
     if loop not in LOOPS:
         raise ValueError(f"loop must be one of {LOOPS}, not {loop!r}")
     r = run_fast(sig.cfg, signal=sig, run=GnssRunConfig(tracker=loop, dsp=cfg.dsp),
-                 gps=GpsConfig(rate_hz=cfg.rate_hz), track=TrackConfig(channels=cols.size),
-                 trials=cfg.runs, seed=cfg.seed, aiding=aiding if loop != "unaided-kf" else None,
-                 tracker_options=_options(loop, cfg), doppler_instant=True)
+                 gps=GpsConfig(rate_hz=cfg.rate_hz),
+                 track=TrackConfig(channels=cols.size, cn0_min_dbhz=cn0_min_dbhz),
+                 trials=cfg.runs if runs is None else runs,
+                 seed=cfg.seed if seed is None else seed,
+                 aiding=aiding if loop != "unaided-kf" else None,
+                 tracker_options=tracker_options(loop, cfg), doppler_instant=True)
     if r.prns != tuple(sig.prns[j] for j in cols):
         raise ValueError("internal: run_fast tracked other satellites than the table's")
     return r, fix_errors(r)
 
 
-def _options(loop, cfg):
+def tracker_options(loop, cfg):
+    """The loop's options (both paths): PLI epochs; the Kalman loops' oscillator model."""
     o = {"pli_epochs": cfg.pli_epochs}
     if loop != "aided-pll":
         o["oscillator"] = cfg.oscillator

@@ -43,6 +43,7 @@ import numpy as np
 
 from cosim.core.validate import check_jobs, dumps
 
+from .engine import run_tasks
 from .proposal import aggregate, confirms, propose, shortfall, widen_one
 from .report import plot, proposal_record, report_md
 from .shown import FIGURE_KEYS
@@ -190,45 +191,12 @@ def run_sweep(cfg: SweepConfig, out: str | Path, *, jobs: int | None = None,
     bar = tqdm(total=len(tasks), desc=f"sweep ({cfg.n_points} points)", file=sys.stderr,
                disable=not progress)
     results = []
-    if scheduler == "local":
-        if jobs <= 1:
-            for t in tasks:
-                results.extend(_task_entry(t))
-                bar.update()
-        else:
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-            with ProcessPoolExecutor(max_workers=jobs) as ex:
-                futs = [ex.submit(_task_entry, t) for t in tasks]
-                for fu in as_completed(futs):
-                    results.extend(fu.result())
-                    bar.update()
-    else:
-        results = _run_dask(tasks, jobs, scheduler, bar)
+    for r in run_tasks(_task_entry, tasks, jobs=jobs, scheduler=scheduler,
+                       on_done=bar.update):
+        results.extend(r)
     bar.close()
     elapsed = time.perf_counter() - t0
     return write_report(cfg, results, out, elapsed=elapsed)
-
-
-def _run_dask(tasks, jobs, scheduler, bar):
-    from distributed import Client, LocalCluster, as_completed
-    cluster = None
-    if scheduler == "dask":
-        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
-    results = []
-    try:
-        futs = client.map(_task_entry, tasks, pure=False)
-        for fu in as_completed(futs):
-            results.extend(fu.result())
-            bar.update()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    return results
 
 
 def _cfg_dict(cfg: SweepConfig) -> dict:

@@ -227,6 +227,20 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
             f"{c['runs']} runs x {fmt(c['duration_s'])} s", "paper's claims held per axis: "
             "position 2-3 %, velocity 4-72 % (aided KF vs aided PLL)",
             f"{v.get('claim 1', 0)}/3, {v.get('claim 2', 0)}/3", "ins_table2")
+        ip = d.get("if_path")
+        if ip:
+            q = ip["loops"]
+            add(f"INS paper Table 2: one bit-exact IF run per loop (fixed point, first "
+                f"{fmt(ip['window_s'])} s) against the fast path's {c['runs']} runs",
+                "IF per-axis mean and std inside the fast path's distribution (|z| <= 3)",
+                ", ".join(f"{lp} {q[lp]['check']['inside']}/{q[lp]['check']['tests']}"
+                          for lp in q), "ins_table2")
+        th = d.get("threshold")
+        if th:
+            add(f"INS paper Table 2 loops: C/N0 tracking threshold on the multi-satellite "
+                f"fast path (first {fmt(c['threshold_duration_s'])} s, phase lock on every "
+                f"channel)", "lowest C/N0 keeping lock (dB-Hz)",
+                ", ".join(f"{lp} {th[lp]['text']}" for lp in th), "ins_table2")
     d = _get(results, "aukf")
     if d:
         q0 = min(p["q_true"] for p in d["points"]) * 10  # points at 0.1, 1 and 10 q0

@@ -146,3 +146,54 @@ def test_a_short_run_of_the_three_loops(short):
         assert max(tab["std"][:3]) < 10.0 and max(tab["std"][3:]) < 1.0
         out[loop] = tab
     assert max(out["aided-kf"]["std"][3:]) < max(out["unaided-kf"]["std"][3:])
+
+
+def test_one_channels_aiding_is_the_fast_paths_table(short):
+    """The IF path's per-channel aiding (:meth:`ChannelAiding.channel`) is the fast path's
+    table at the same epochs: from the epoch starting at ``t_first`` on, for the run asked;
+    a table started at run 1 holds the runs 1.. of a table started at run 0; a start
+    between two epochs is refused."""
+    cfg, sig, cols, _ = short
+    aid = ChannelAiding(sig, cols, 2, cfg.seed)
+    j, k0 = 2, 4000
+    t_first = aid.mid[k0, j] - 0.5e-3 + 2e-6               # within the code tracking error
+    ch = aid.channel(j, t_first, run=1)
+    for k in (0, 1, 2500):
+        assert ch(k) == pytest.approx(aid(k0 + k)[1, j], rel=0, abs=1e-9)
+    np.testing.assert_allclose(ch.mid_s[:3], aid.mid[k0:k0 + 3, j])
+    with pytest.raises(ValueError, match="epoch"):
+        ch(ch.rates.size)
+    with pytest.raises(ValueError, match="no received code epoch"):
+        aid.channel(j, t_first + 0.5e-3)
+    later = ChannelAiding(sig, cols, 1, cfg.seed, first_run=1)
+    np.testing.assert_array_equal(later.delta, aid.delta[:, 1:])
+
+
+def test_track_file_refuses_an_aided_loop_without_its_aiding(tmp_path):
+    from cosim.gnss.config import GnssRunConfig
+    from cosim.gnss.files import SampleFile
+    from cosim.gnss.multichannel import Candidate, TrackConfig, track_file
+    from cosim.gnss.synthetic_file import write_synthetic
+    path = tmp_path / "r.bin"
+    write_synthetic(path, "int8", 4e6, 1.25e6, 0.005, [], seed=1)
+    f = SampleFile(path, "int8", 4e6, 1.25e6)
+    c = [Candidate(3, 0.0, 0.0, 45.0), Candidate(5, 0.0, 0.0, 45.0)]
+    with pytest.raises(ValueError, match="aided-kf needs an aiding source"):
+        track_file(f, c, GnssRunConfig(tracker="aided-kf"), TrackConfig(channels=2))
+    with pytest.raises(ValueError, match="tracker_setup must be a callable"):
+        track_file(f, c, GnssRunConfig(), TrackConfig(channels=2), tracker_setup=3)
+
+
+@pytest.mark.slow
+def test_the_if_path_runs_the_aided_loop_with_the_fast_paths_aiding(tmp_path):
+    """3 s of the scenario on the bit-exact array, the aided Kalman loop in fixed point:
+    every channel's first tracked epoch is the aiding's (< 1 us), lock held, a fix at every
+    epoch after 1 s within metres and a metre per second of the truth."""
+    from cosim.ins.table2_if import run_if_loop, write_if_scenario
+    cfg = Table2Config(settle_s=1.0, if_window_s=3.0, runs=1)
+    rec = write_if_scenario(cfg, tmp_path)
+    r = run_if_loop(cfg, "aided-kf", rec)
+    assert r["aiding_epoch_offset_us"] < 1.0 and r["dsp"] == "fixed"
+    assert r["lock"]["losses"] == 0 and r["lock"]["fixes_missing"] == 0
+    e = r["err"][r["t_s"] >= 1.0]
+    assert e.shape[0] == 2 and np.all(np.abs(e[:, :3]) < 10) and np.all(np.abs(e[:, 3:]) < 1)
