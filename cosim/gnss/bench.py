@@ -117,20 +117,23 @@ def tracking_verdicts(jitter: list[dict], jerk: list[dict]) -> dict:
 #: The code loop's dead-zone figure (:func:`code_dead_zone`): a rate of 16 samples per chip
 #: (16 x 1.023 MHz, the MAX2769 reference design's 16.368 MS/s) beside the default rate.
 COMMENSURATE_FS_HZ = 16.368e6
-#: Its criterion: at the default rate the code RMSE stays within this multiple of the
-#: DLL's thermal noise (:func:`dsp.gnss.budget.betz_dll_sigma_chips`).
-DEAD_ZONE_TOL = 2.0
+#: Its criterion: at the default rate no run's mean code error (the bias a dead zone
+#: leaves; the noise averages out) exceeds this multiple of the DLL's thermal noise
+#: (:func:`dsp.gnss.budget.betz_dll_sigma_chips`). The RMSE is reported, not judged: the
+#: 1 Hz DLL's correlation time (1 / 4 Bn = 0.25 s) leaves about 6 independent errors in
+#: 1.5 s scored, too few for a tight bound on one run's RMSE.
+DEAD_ZONE_TOL = 1.0
 
 
 def dead_zone_verdict(dz: dict) -> dict:
-    """The default rate's code RMSE (every run's) within :data:`DEAD_ZONE_TOL` x the DLL's
-    thermal noise."""
+    """At the default rate every run's mean code error within :data:`DEAD_ZONE_TOL` x the
+    DLL's thermal noise."""
     d = next((r for r in dz["rates"] if r["fs_hz"] == DEFAULT_FS_HZ), None)
-    ok = d is not None and d["max_chips"] <= DEAD_ZONE_TOL * d["dll_sigma_chips"]
-    return {"code_rmse_default_rate_within_2x_dll_noise": bool(ok)}
+    ok = d is not None and d["max_abs_bias_chips"] <= DEAD_ZONE_TOL * d["dll_sigma_chips"]
+    return {"code_bias_default_rate_within_dll_noise": bool(ok)}
 
 
-def code_dead_zone(rates=None, offsets_chips=(0.37, 0.53, 0.81), seeds=(1, 2),
+def code_dead_zone(rates=None, offsets_chips=(0.37, 0.53, 0.70), seeds=(1, 2),
                    duration_s: float = 2.0, cn0_dbhz: float = 45.0,
                    backend: str = "model") -> dict:
     """Code tracking of a static signal (no code Doppler) whose code phase sits between
@@ -138,8 +141,9 @@ def code_dead_zone(rates=None, offsets_chips=(0.37, 0.53, 0.81), seeds=(1, 2),
     :data:`COMMENSURATE_FS_HZ`): the whole run (:func:`cosim.gnss.run.run_gnss`: acquisition,
     hand-over, the bit-exact channel and the fixed-point 3rd-order PLL with its 1 Hz DLL),
     scored after 0.5 s. Per rate: the code-phase step the rate resolves
-    (:func:`hdl.gnss.params.code_phase_step_chips`), each run's code RMSE, their rms and
-    maximum, beside the DLL's thermal noise."""
+    (:func:`hdl.gnss.params.code_phase_step_chips`), each run's code RMSE and mean error
+    (bias), their rms and largest, beside the DLL's thermal noise. The default offsets sit
+    0.92, 0.48 and 0.20 of a sample past a sample at 16.368 MS/s."""
     from dsp.gnss.budget import betz_dll_sigma_chips
     from dsp.gnss.ca_code import CHIP_RATE_HZ
     from hdl.gnss.params import code_phase_step_chips
@@ -158,9 +162,11 @@ def code_dead_zone(rates=None, offsets_chips=(0.37, 0.53, 0.81), seeds=(1, 2),
                 r = run_gnss(sig, run)
                 runs.append({"code_phase_chips": off, "seed": seed,
                              "code_rmse_chips": r["code_rmse_chips"],
+                             "code_bias_chips": r["code_bias_chips"],
                              "code_found_chips": r["acquired"]["code_phase_found_chips"],
                              "digest": r["digest"]["all"]})
         e = np.array([x["code_rmse_chips"] for x in runs])
+        b = np.array([x["code_bias_chips"] for x in runs])
         spacing = GnssRunConfig().hdl_params(GnssSignalConfig(fs_hz=fs)).el_spacing_samples \
             * CHIP_RATE_HZ / fs
         out.append({"fs_hz": fs, "step_chips": code_phase_step_chips(fs),
@@ -168,7 +174,7 @@ def code_dead_zone(rates=None, offsets_chips=(0.37, 0.53, 0.81), seeds=(1, 2),
                     "dll_sigma_chips": float(betz_dll_sigma_chips(cn0_dbhz, run.dll_bn_hz,
                                                                   spacing, 1e-3)),
                     "rms_chips": float(np.sqrt(np.mean(e ** 2))), "max_chips": float(e.max()),
-                    "runs": runs})
+                    "max_abs_bias_chips": float(np.abs(b).max()), "runs": runs})
     return {"cn0_dbhz": cn0_dbhz, "duration_s": duration_s, "settle_s": run.settle_s,
             "backend": backend, "tracker": run.tracker, "dll_bn_hz": run.dll_bn_hz,
             "rates": out}
@@ -287,10 +293,10 @@ def _tracking_markdown(r: dict) -> str:
               f"{'PASS' if v['jitter_within_10pct_above_35dbhz'] else 'FAIL'}",
               f"- Jerk stress within 5 % of 0.4828 J / Bn^3: "
               f"{'PASS' if v['jerk_stress_within_5pct'] else 'FAIL'}"]
-    if "code_rmse_default_rate_within_2x_dll_noise" in v:
-        lines.append(f"- Code RMSE at the default rate within {DEAD_ZONE_TOL:g} x the DLL's "
-                     f"thermal noise (no dead zone): "
-                     f"{'PASS' if v['code_rmse_default_rate_within_2x_dll_noise'] else 'FAIL'}")
+    if "code_bias_default_rate_within_dll_noise" in v:
+        lines.append(f"- Mean code error of every run at the default rate within "
+                     f"{DEAD_ZONE_TOL:g} x the DLL's thermal noise (no dead zone): "
+                     f"{'PASS' if v['code_bias_default_rate_within_dll_noise'] else 'FAIL'}")
     lines += ["", f"Elapsed {r['elapsed_s']:.1f} s."]
     return "\n".join(lines) + "\n"
 
@@ -306,24 +312,29 @@ def _dead_zone_markdown(dz: dict) -> list[str]:
              f"with its {dz['dll_bn_hz']:g} Hz DLL), scored after {dz['settle_s']:g} s. "
              "Step: the finest code-phase step the rate resolves without code Doppler "
              "(`hdl.gnss.params.code_phase_step_chips`); DLL noise: Betz & Kolodziejski's "
-             "thermal noise at this C/N0 and spacing.", "",
+             "thermal noise at this C/N0 and spacing. Bias: a run's mean code error (true "
+             "minus prompt).", "",
              "| rate (MS/s) | samples/chip | step (chip) | step (m) | E-L (chip) | "
-             "DLL noise (chip) | code RMSE, rms of runs (chip) | max (chip) | max (m) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "DLL noise (chip) | code RMSE, rms of runs (chip) | largest RMSE (chip) | "
+             "largest bias (chip) | largest bias (m) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     m_per_chip = 299_792_458.0 / 1.023e6
     for d in dz["rates"]:
         lines.append(f"| {d['fs_hz'] / 1e6:g} | {d['fs_hz'] / 1.023e6:.4f} | "
                      f"1/{round(1 / d['step_chips'])} | {d['step_chips'] * m_per_chip:.3f} | "
                      f"{d['spacing_chips']:.4f} | {d['dll_sigma_chips']:.4f} | "
                      f"{d['rms_chips']:.4f} | {d['max_chips']:.4f} | "
-                     f"{d['max_chips'] * m_per_chip:.1f} |")
-    lines += ["", "Per run (code RMSE, chips; the acquisition's code phase in brackets):", "",
+                     f"{d['max_abs_bias_chips']:.4f} | "
+                     f"{d['max_abs_bias_chips'] * m_per_chip:.1f} |")
+    lines += ["", "Per run (code RMSE / bias, chips; the acquisition's code phase in "
+              "brackets):", "",
               "| rate (MS/s) | " + " | ".join(f"{o:g} chip, seed {s}" for o in offs
                                                for s in seeds) + " |",
               "|---|" + "---|" * (len(offs) * len(seeds))]
     for d in dz["rates"]:
         by = {(x["code_phase_chips"], x["seed"]): x for x in d["runs"]}
         lines.append(f"| {d['fs_hz'] / 1e6:g} | " + " | ".join(
-            f"{by[(o, s)]['code_rmse_chips']:.4f} ({by[(o, s)]['code_found_chips']:.3f})"
+            f"{by[(o, s)]['code_rmse_chips']:.4f} / {by[(o, s)]['code_bias_chips']:+.4f} "
+            f"({by[(o, s)]['code_found_chips']:.3f})"
             for o in offs for s in seeds) + " |")
     return lines
