@@ -134,7 +134,8 @@ class GnssSignalConfig:
         Satellite PRN, 1-32.
     if_hz, fs_hz : float
         IF (Hz) and ADC sample rate (S/s): by default the channel's frequency plan,
-        4.092 MHz at 16.384 MS/s (:data:`hdl.gnss.params.DEFAULT_FS_HZ`).
+        4.1304 MHz at 16.384 MS/s (:data:`hdl.gnss.params.DEFAULT_FS_HZ`,
+        :data:`~hdl.gnss.params.DEFAULT_IF_HZ`).
     bandpass : bool
         Allow an IF above fs/2 (bandpass sampling); the main lobe must still sit in one
         Nyquist zone.

@@ -32,10 +32,13 @@ from hdl.model.nco import NcoParams, nco_freq_word
 #: every sample at the same k offsets within a chip: a dead zone of 1/k chip,
 #: :func:`code_phase_step_chips`).
 DEFAULT_FS_HZ = 16.384e6
-#: Default IF (Hz): the MAX2769-class front end's 4.092 MHz; near, not at, fs/4 (4.096
-#: MHz), so the carrier's sample phases also cycle and a zero Doppler keeps no fixed
-#: quantisation pattern.
-DEFAULT_IF_HZ = 4.092e6
+#: Default IF (Hz): the SiGe SE4110L front end's 4.1304 MHz. Commensurate with neither the
+#: chip rate nor the sample rate: an IF of 4 x 1.023 MHz (4.092 MHz) puts the carrier at the
+#: same phase on every chip edge, and the real mixer's double-frequency product then biases
+#: the early-minus-late discriminator by up to 0.015 chip (measured at 16.384 MS/s, 0.02 at
+#: 20 MS/s) where the edges fall; an IF of exactly fs / 4 repeats four carrier phases, so a
+#: zero Doppler pins the ADC's and the LO's quantisation to the carrier.
+DEFAULT_IF_HZ = 4.1304e6
 #: Register addresses (per channel; an array adds ``4 * channel``).
 REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW = range(4)
 #: Signal bandwidth of C/A (main lobe, null to null), Hz: the lowest sample rate accepted.
