@@ -61,7 +61,8 @@ def test_static_code_tracking_dead_zone_only_at_the_commensurate_rate():
     noise). The benchmark's verdict and section follow the figures."""
     import copy
     from cosim.gnss.bench import _dead_zone_markdown, code_dead_zone, dead_zone_verdict
-    dz = code_dead_zone(offsets_chips=(0.37,), seeds=(1,), duration_s=0.8, backend="golden")
+    dz = code_dead_zone(offsets_chips=(0.37,), seeds=(1,), duration_s=0.8, settle_s=0.5,
+                        backend="golden")
     d, c = dz["rates"]
     assert (d["fs_hz"], c["fs_hz"]) == (DEFAULT_FS_HZ, 16.368e6)
     assert d["max_abs_bias_chips"] < d["dll_sigma_chips"] < c["step_chips"] / 4 \
