@@ -20,7 +20,8 @@ from .signal import GnssSignalConfig
 
 __all__ = ["GnssRunConfig", "DynamicsChoice", "BACKENDS", "DSP_MODES", "SCENARIOS", "DYNAMICS",
            "WORD_BITS", "check_run_size", "run_memory_bytes", "JERK_DEFAULTS",
-           "CONTROL_LATENCY_CYCLES", "TRACKER_RUN_OPTIONS"]
+           "CONTROL_LATENCY_CYCLES", "TRACKER_RUN_OPTIONS", "frequency_plan_warning",
+           "CODE_DEAD_ZONE_WARN_M"]
 
 BACKENDS = ("golden", "model", "pysim", "verilator")
 DSP_MODES = ("float", "fixed")
@@ -31,6 +32,35 @@ CYCLES_PER_S = {"pysim": 2e3, "verilator": 2e6}
 MAX_WALL_S = 3600.0
 #: NCO word width the trackers write (dsp.gnss.loops_fixed.WORD_BITS).
 WORD_BITS = 32
+
+
+#: Largest code-phase dead zone (m of pseudorange, :func:`frequency_plan_warning`) a sample
+#: rate may leave without a warning: about the code loop's own noise at a strong signal
+#: (45 dB-Hz, DLL Bn 1 Hz, half-chip spacing: 0.003 chip, 0.8 m).
+CODE_DEAD_ZONE_WARN_M = 1.0
+
+
+def frequency_plan_warning(fs_hz: float) -> str | None:
+    """One line (for :func:`cosim.core.validate.warn`) when the sample rate ``fs_hz`` leaves
+    the code loop a dead zone wider than :data:`CODE_DEAD_ZONE_WARN_M`
+    (:func:`hdl.gnss.params.code_phase_step_chips`: a rate commensurate with the 1.023 MHz
+    chip rate, such as 16.368 MS/s = 16 samples per chip), else None. A warning, not a
+    refusal: a recording at such a rate is still tracked, and a code Doppler sweeps the
+    samples across the chip (the dead zone holds where the code Doppler is near zero)."""
+    from dsp.gnss.ca_code import CHIP_RATE_HZ
+    from hdl.gnss.params import DEFAULT_FS_HZ, code_phase_step_chips
+    step = code_phase_step_chips(fs_hz)
+    metres = step * 299_792_458.0 / CHIP_RATE_HZ
+    if metres <= CODE_DEAD_ZONE_WARN_M:
+        return None
+    k = round(1 / step)
+    q = round(k * CHIP_RATE_HZ / fs_hz)
+    ratio = f"{k}" if q == 1 else f"{k}/{q}"
+    return (f"--fs-hz {fs_hz / 1e6:g} MS/s = {ratio} x 1.023 MHz puts the samples at only "
+            f"{k} offsets within a chip: without code Doppler the code loop has a dead zone "
+            f"of 1/{k} chip ({metres:.1f} m); a rate incommensurate with the chip rate, such "
+            f"as the default {DEFAULT_FS_HZ / 1e6:g} MS/s "
+            f"(1/{round(1 / code_phase_step_chips(DEFAULT_FS_HZ))} chip), has none")
 
 
 #: The jerk segment of ``--dynamics aukf-patent-jerk`` when its options are not given.

@@ -16,6 +16,7 @@ import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ
 from dsp.gnss.loops import TrackingChannel, jerk_stress_deg, kaplan_jitter_deg
+from hdl.gnss.params import DEFAULT_FS_HZ
 
 from .dynamics import L1_WAVELENGTH_M, aukf_patent_dynamics
 from .fastpath import correlate_fast
@@ -42,7 +43,7 @@ def track_fast(truth_at, cn0_dbhz, n_epochs: int, T_s: float = 1e-3, order: int 
                bn_hz: float = 15.0, dll_bn_hz: float = 1.0, spacing_chips: float = 0.5,
                latency: int = 0, costas: bool = True, fll_bn_hz: float | None = None,
                shape=(), seed: int = 0, phase0_err_cycles=0.0, freq0_err_hz=0.0,
-               code0_err_chips=0.0, arith=None, fs_hz: float = 16.368e6,
+               code0_err_chips=0.0, arith=None, fs_hz: float = DEFAULT_FS_HZ,
                tracker=None, adc_bits: int | None = None) -> FastTrackResult:
     """Run the channel closed loop on the fast path; batch shape = broadcast of
     ``cn0_dbhz`` and ``shape``. Starts on the truth (plus the given initial errors), with

@@ -67,7 +67,7 @@ def channel_params_for(f, hdl_changes: tuple = ()):
     if bits is None:
         raise ValueError(f"--adc-map {f.adc_map} has no ADC word length: the channel takes "
                          f"ADC words (give float:B to quantise)")
-    # early-minus-late about half a chip (even, >= 2 samples): 8 at 16.368 MS/s, 6 at 12
+    # early-minus-late about half a chip (even, >= 2 samples): 8 at 16.384 MS/s, 6 at 12
     el = max(2, 2 * round(f.fs_hz / CHIP_RATE_HZ / 4))
     # odd-level words (a sign/magnitude ADC's +-1, +-3, ...) enter the mixer as 2q+1
     kw = dict(fs_hz=f.fs_hz, if_hz=f.if_hz, adc_bits=int(bits), el_spacing_samples=el,

@@ -7,10 +7,10 @@ from __future__ import annotations
 from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
                               config_kwargs, parse_int, register)
 from ..studies.spec import SweepConfig
-from ..core.validate import check_jobs, check_out_dir, dumps
+from ..core.validate import check_jobs, check_out_dir, dumps, warn
 from .study import SWEEP_MODEL
 from .acq_options import ACQ_OPTIONS
-from .config import SCENARIOS, DynamicsChoice, GnssRunConfig
+from .config import SCENARIOS, DynamicsChoice, GnssRunConfig, frequency_plan_warning
 from .run import run_gnss
 from .signal import GnssSignalConfig, check_cn0
 
@@ -41,13 +41,16 @@ OPTIONS = (
 
 def build_configs(a) -> tuple[GnssSignalConfig, GnssRunConfig]:
     """The signal and run configurations of parsed options (ValueError if refused); a
-    ``--scenario`` fills the options left unset."""
+    ``--scenario`` fills the options left unset. A sample rate that leaves the code loop a
+    dead zone is warned about (:func:`~cosim.gnss.config.frequency_plan_warning`)."""
     if getattr(a, "scenario", None):
         for k, v in SCENARIOS[a.scenario]["options"].items():
             if getattr(a, k) is None:
                 setattr(a, k, v)
     from .handover import acquisition_span_ms
     sig = _SIG(**config_kwargs(a, OPTIONS, _SIG))
+    if (msg := frequency_plan_warning(sig.fs_hz)) is not None:
+        warn(msg)
     dyn = _DYN(**config_kwargs(a, OPTIONS, _DYN))
     run = config_kwargs(a, OPTIONS, _RUN)
     if getattr(a, "scenario", None):

@@ -19,7 +19,7 @@ Scoring (per record, against the generator's truth at the record's dump boundary
 records; ``cycle_slips`` = changes of its nearest Costas lock point (half cycles,
 :func:`cosim.gnss.loopsim.cycle_slips`); ``phase_rmse_deg`` = rms of the error about its lock
 point; ``doppler_rmse_hz`` = the tracker's Doppler minus the true one; ``code_rmse_chips`` =
-true code phase minus the prompt's; ``lock_fraction`` = share of 100-record windows in
+true code phase minus the prompt's, ``code_bias_chips`` its mean; ``lock_fraction`` = share of 100-record windows in
 phase lock (narrowband PLI >= 0.8, :class:`dsp.gnss.loops.LockDetector`; the windows start
 on a data-bit edge, so its 10-record sums do not straddle one); ``cn0_est_dbhz``
 (M2M4 on the prompts).
@@ -71,6 +71,7 @@ def _score(gen, track: Tracking, n_b, settle_s):
     out["cycle_slips"] = int(cycle_slips(es, costas=True))
     out["doppler_rmse_hz"] = float(np.sqrt(np.mean((dop[keep] - tr["doppler_hz"][keep]) ** 2)))
     out["code_rmse_chips"] = float(np.sqrt(np.mean(code[keep] ** 2)))
+    out["code_bias_chips"] = float(np.mean(code[keep]))
     prompt = obs[keep, 2] + 1j * obs[keep, 3]
     ld = LockDetector(CODE_PERIOD_S, window=100, m=10)
     locks = []

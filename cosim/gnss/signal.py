@@ -59,6 +59,7 @@ from dsp.jit import njit_cached
 from dsp.sampling import fold_frequency
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
+from hdl.gnss.params import DEFAULT_FS_HZ, DEFAULT_IF_HZ
 
 from .dynamics import CsvProfile, JerkProcess, PolynomialProfile
 from ..core.validate import check_float
@@ -146,7 +147,9 @@ class GnssSignalConfig:
     prn : int
         Satellite PRN, 1-32.
     if_hz, fs_hz : float
-        IF (Hz) and ADC sample rate (S/s): 4.092 MHz at 16.368 MS/s by default.
+        IF (Hz) and ADC sample rate (S/s): by default the channel's frequency plan,
+        4.1304 MHz at 16.384 MS/s (:data:`hdl.gnss.params.DEFAULT_FS_HZ`,
+        :data:`~hdl.gnss.params.DEFAULT_IF_HZ`).
     bandpass : bool
         Allow an IF above fs/2 (bandpass sampling); the main lobe must still sit in one
         Nyquist zone.
@@ -177,8 +180,8 @@ class GnssSignalConfig:
     """
 
     prn: int = 1
-    if_hz: float = 4.092e6
-    fs_hz: float = 16.368e6
+    if_hz: float = DEFAULT_IF_HZ
+    fs_hz: float = DEFAULT_FS_HZ
     bandpass: bool = False
     adc_bits: int = 2
     cn0_dbhz: float | None = 45.0

@@ -27,6 +27,8 @@ from dataclasses import fields, replace
 
 import numpy as np
 
+from hdl.gnss.params import DEFAULT_FS_HZ
+
 from ..core.receivers import SweepModel
 
 __all__ = ["FORMATS", "check_param", "formats_of", "check_point", "GnssSweepRecord", "SWEEP_MODEL"]
@@ -79,7 +81,7 @@ def _truth_and_ctx(cfg, cn0_dbhz: float, trial: int):
     seed = int(np.random.default_rng([cfg.seed, trial, int(round(cn0_dbhz * 1000))]).integers(1 << 31))
     truth = truth_for(aukf_patent_dynamics(q=Q_TRUE), cfg.duration_s + 0.01, seed=seed)
     a0 = truth(np.array([0.0]))
-    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][:1],
+    ctx = TrackerContext(fs_hz=DEFAULT_FS_HZ, doppler0_hz=a0["doppler_hz"][:1],
                          doppler_rate0_hz_s=a0["doppler_rate_hz_s"][:1], cn0_dbhz=float(cn0_dbhz))
     return truth, ctx, seed
 
@@ -88,7 +90,7 @@ def _build(cfg, combo: tuple) -> None:
     from dsp.gnss.trackers import TrackerContext, make_tracker
     from dsp.gnss.aukf import PATENT_X0
     fm = formats_of(combo)
-    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=np.array([PATENT_X0[1] / (2 * np.pi)]),
+    ctx = TrackerContext(fs_hz=DEFAULT_FS_HZ, doppler0_hz=np.array([PATENT_X0[1] / (2 * np.pi)]),
                          doppler_rate0_hz_s=np.array([PATENT_X0[2] / (2 * np.pi)]),
                          cn0_dbhz=float(cfg.snr_db[0]))
     make_tracker("aukf", ctx, fm)

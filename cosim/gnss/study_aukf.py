@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hdl.gnss.params import DEFAULT_FS_HZ
+
 from .dynamics import aukf_patent_dynamics
 from .loopsim import cycle_slips, track_fast, truth_for
 
@@ -68,7 +70,7 @@ def run_point(q_true: float, cn0_dbhz: float, trackers=("aukf", "ukf", "pll3"), 
                            for i in range(n_runs)])
     a0 = truth(np.array([0.0]))
     out = {"q_true": q_true, "cn0_dbhz": cn0_dbhz, "n_runs": n_runs, "duration_s": duration_s}
-    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][0],
+    ctx = TrackerContext(fs_hz=DEFAULT_FS_HZ, doppler0_hz=a0["doppler_hz"][0],
                          doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
     for t in trackers:
         opts = (tracker_opts or {}) if t in ("aukf", "ukf") else {}
@@ -117,7 +119,7 @@ def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_r
                                      seed=seed * 100003 + i)
                            for i in range(n_runs)])
     a0 = truth(np.array([0.0]))
-    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=a0["doppler_hz"][0],
+    ctx = TrackerContext(fs_hz=DEFAULT_FS_HZ, doppler0_hz=a0["doppler_hz"][0],
                          doppler_rate0_hz_s=a0["doppler_rate_hz_s"][0], cn0_dbhz=cn0_dbhz)
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for t in ("ukf", "aukf"):
@@ -146,7 +148,7 @@ def step_rate(tracker: str, arith, batch: int = 1, n_steps: int = 2000, cn0_dbhz
     from dsp.gnss.trackers import TrackerContext, make_tracker
     rng = np.random.default_rng(seed)
     A = np.sqrt(2e-3 * 10 ** (cn0_dbhz / 10))
-    ctx = TrackerContext(fs_hz=16.368e6, doppler0_hz=np.zeros(batch), doppler_rate0_hz_s=np.zeros(batch),
+    ctx = TrackerContext(fs_hz=DEFAULT_FS_HZ, doppler0_hz=np.zeros(batch), doppler_rate0_hz_s=np.zeros(batch),
                          cn0_dbhz=cn0_dbhz)
     w = A * np.exp(0.3j) + rng.normal(size=(n_steps, 3, batch)) + 1j * rng.normal(size=(n_steps, 3, batch))
 

@@ -27,6 +27,7 @@ from cosim.gnss.loopsim import cycle_slips, track_fast
 from dsp.gnss.ca_code import CHIP_RATE_HZ
 from dsp.gnss.loops_fixed import FLOAT, FixedArith
 from dsp.gnss.trackers import TrackerContext, make_tracker
+from hdl.gnss.params import DEFAULT_FS_HZ
 
 from .ins_error import InsAiding, InsErrors
 from .trajectory import Geometry, Scenario, PaperTrajectory, L1_WAVELENGTH_M
@@ -102,7 +103,7 @@ def run_loop(loop: str, cfg: InsStudyConfig, scenario=None, keep: bool = False, 
     t0 = sc.truth_at(np.zeros(1))
     shape = (cfg.trials,)
     ones = np.ones(shape)
-    ctx = TrackerContext(fs_hz=16.368e6, T_s=T, doppler0_hz=t0["doppler_hz"][0] * ones,
+    ctx = TrackerContext(fs_hz=DEFAULT_FS_HZ, T_s=T, doppler0_hz=t0["doppler_hz"][0] * ones,
                          doppler_rate0_hz_s=t0["doppler_rate_hz_s"][0] * ones,
                          cn0_dbhz=cfg.cn0_dbhz, aiding=ins)
     arith = FLOAT if cfg.dsp == "float" else FixedArith()

@@ -10,7 +10,7 @@ table entry ``code[prn][chip]``; a PRN register outside 1-32 gives G1 alone). Th
 replica is the generator's current chip; *prompt* and *late* are the same chip stream
 delayed by ``d`` and ``2 d`` samples, ``d = el_spacing_samples / 2`` (spacing counted in
 samples, so early-minus-late = ``el_spacing_samples / samples_per_chip`` chips: 8 samples =
-0.5 chip at 16.368 MS/s). Logic 0 is the +1 replica, logic 1 is -1.
+0.4995 chip at 16.384 MS/s). Logic 0 is the +1 replica, logic 1 is -1.
 
 *Code NCO.* A ``code_phase_bits`` accumulator: after the sample, unless a slew hold is
 running (then ``hold -= 1`` and nothing moves), ``acc += code_freq``; a carry advances the

@@ -2,6 +2,10 @@
 register map (:attr:`GnssChannelParams.registers`), record layout (:attr:`GnssChannelParams.record`) and the
 register words (:func:`code_freq_word`, :meth:`GnssChannelParams.carr_word`). What each
 register and field means is specified with the model, :mod:`hdl.gnss.model`.
+
+The default frequency plan (:data:`DEFAULT_FS_HZ`, :data:`DEFAULT_IF_HZ`) is the one home of
+the rate every GNSS default, study and benchmark uses; :func:`code_phase_step_chips` is the
+code-phase resolution a rate gives a signal without code Doppler.
 """
 from __future__ import annotations
 
@@ -20,6 +24,21 @@ from hdl.model.fifo import FifoParams
 from hdl.model.mixer import MixerParams
 from hdl.model.nco import NcoParams, nco_freq_word
 
+#: Default ADC sample rate = channel clock (S/s): 16384 samples per 1 ms code period (a
+#: power of two: radix-2 FFTs for the acquisition), 16.0156 samples per chip. Not a whole
+#: number of samples per chip: 16384 and 1023 have no common factor, so over a code period
+#: the samples fall at every 1/16384 chip of the chip edges and the code loop resolves the
+#: code phase (a rate of k samples per chip, such as 16.368 MS/s = 16 x 1.023 MHz, puts
+#: every sample at the same k offsets within a chip: a dead zone of 1/k chip,
+#: :func:`code_phase_step_chips`).
+DEFAULT_FS_HZ = 16.384e6
+#: Default IF (Hz): the SiGe SE4110L front end's 4.1304 MHz. Commensurate with neither the
+#: chip rate nor the sample rate: an IF of 4 x 1.023 MHz (4.092 MHz) puts the carrier at the
+#: same phase on every chip edge, and the real mixer's double-frequency product then biases
+#: the early-minus-late discriminator by up to 0.015 chip (measured at 16.384 MS/s, 0.02 at
+#: 20 MS/s) where the edges fall; an IF of exactly fs / 4 repeats four carrier phases, so a
+#: zero Doppler pins the ADC's and the LO's quantisation to the carrier.
+DEFAULT_IF_HZ = 4.1304e6
 #: Register addresses (per channel; an array adds ``4 * channel``).
 REG_CARR_FREQ, REG_CODE_FREQ, REG_PRN, REG_SLEW = range(4)
 #: Signal bandwidth of C/A (main lobe, null to null), Hz: the lowest sample rate accepted.
@@ -61,6 +80,20 @@ def code_freq_word(chip_rate_hz: float, *, fs_hz: float, code_phase_bits: int) -
     return CodeWord(int(n), actual, actual - r)
 
 
+def code_phase_step_chips(fs_hz: float) -> float:
+    """The finest code-phase step (chips) the correlations resolve for a signal whose code
+    keeps a fixed phase to the sample clock (no code Doppler): with ``fs_hz / 1.023 MHz =
+    p / q`` in lowest terms (the rate to the mHz), the samples fall at only ``p`` offsets
+    within a chip, so the early-minus-late discriminator is a staircase of ``1 / p`` chip
+    steps and the code loop stops where it enters a step: a dead zone of ``1 / p`` chip. 16.368
+    MS/s (16 x 1.023 MHz) gives 1/16 chip (18 m), the default 16.384 MS/s 1/16384 chip."""
+    fs = _number("fs_hz", fs_hz)
+    if fs <= 0:
+        raise ValueError(f"fs_hz must be > 0, not {fs_hz!r}")
+    ratio = Fraction(round(fs * 1000), round(CHIP_RATE_HZ * 1000))
+    return 1.0 / ratio.numerator
+
+
 def dump_epochs_for(dump_s: float) -> int:
     """Code periods in a dump of ``dump_s`` seconds; ``ValueError`` unless it is a whole
     number (>= 1) of 1 ms code periods."""
@@ -79,7 +112,8 @@ class GnssChannelParams:
     Parameters
     ----------
     fs_hz : float
-        ADC sample rate = clock rate, Hz (>= 2.046 MHz, the C/A main-lobe bandwidth).
+        ADC sample rate = clock rate, Hz (>= 2.046 MHz, the C/A main-lobe bandwidth);
+        default :data:`DEFAULT_FS_HZ`.
     if_hz : float
         Nominal IF, Hz: the reset carrier word. Real input: in the first Nyquist zone
         ``[0, fs_hz / 2)``; complex input: in ``(-fs_hz / 2, fs_hz / 2)`` (0: zero IF).
@@ -129,8 +163,8 @@ class GnssChannelParams:
         by :class:`GnssChannelArray`).
     """
 
-    fs_hz: float = 16.368e6
-    if_hz: float = 4.092e6
+    fs_hz: float = DEFAULT_FS_HZ
+    if_hz: float = DEFAULT_IF_HZ
     adc_bits: int = 2
     carr_phase_bits: int = 32
     carr_table_bits: int = 8

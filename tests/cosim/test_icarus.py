@@ -232,7 +232,7 @@ def test_gnss_channel_default_equivalence_record():
 
 @pytest.mark.slow
 def test_gnss_channel_default_parameters():
-    """The registered gnss_channel top (default parameters: 16.368 MS/s, 1 ms dumps)."""
+    """The registered gnss_channel top (default parameters: 16.384 MS/s, 1 ms dumps)."""
     from hdl.gnss.channel import GnssChannel
     from hdl.gnss.model import GnssArrayModel
     from hdl.gnss.params import GnssChannelParams

@@ -21,7 +21,7 @@ def test_record_from_is_the_record_later():
     assert np.array_equal(a["t_s"], t) and np.allclose(a["code_phase_chips"], b["code_phase_chips"])
     # the IF phase the mixer has run through by n0 is in the view's carrier truth
     d = (a["carrier_phase_cycles"] - b["carrier_phase_cycles"]) % 1.0
-    assert np.allclose(d, (v.n0 * 0.25) % 1.0)
+    assert np.allclose(d, (v.n0 * sig.digital_if_hz / sig.fs_hz) % 1.0)
     with pytest.raises(ValueError, match="the record holds"):
         RecordFrom(full, 16368 * 60, sig)
 

@@ -16,7 +16,7 @@ from dsp.gnss.correlator import correlate
     (dict(prn=33), r"PRN must be an integer in \[1, 32\], not 33"),
     (dict(fs_hz=2.0e6), "sample rate must be >= the C/A main-lobe bandwidth 2.046 MHz, not 2 MS/s"),
     (dict(if_hz=7.5e6), r"IF must keep the C/A main lobe \(IF \+- 1.023 MHz\) inside the first "
-                        r"Nyquist zone \(0, fs/2 = 8.184 MHz\), not IF = 7.5 MHz \(sampled as it is, "
+                        r"Nyquist zone \(0, fs/2 = 8.192 MHz\), not IF = 7.5 MHz \(sampled as it is, "
                         r"without bandpass sampling\)"),
     (dict(if_hz=20.46e6), "inside the first Nyquist zone .* not IF = 20.46 MHz"),
     (dict(if_hz=16.368e6, bandpass=True), "must lie inside one Nyquist zone .* not straddle an edge "
@@ -38,10 +38,12 @@ def test_bad_config_is_refused_with_the_rule_and_the_value(kw, msg):
 
 
 def test_bandpass_sampling_is_allowed_when_asked_and_folds():
-    c = GnssSignalConfig(if_hz=20.46e6, bandpass=True)
+    c = GnssSignalConfig(if_hz=20.46e6, bandpass=True, fs_hz=16.368e6)
     assert c.digital_if_hz == pytest.approx(4.092e6) and not c.spectrum_inverted
-    c = GnssSignalConfig(if_hz=12.276e6, bandpass=True)
+    c = GnssSignalConfig(if_hz=12.276e6, bandpass=True, fs_hz=16.368e6)
     assert c.digital_if_hz == pytest.approx(4.092e6) and c.spectrum_inverted
+    c = GnssSignalConfig(if_hz=12.276e6, bandpass=True)            # 16.384 MS/s
+    assert c.digital_if_hz == pytest.approx(4.108e6) and c.spectrum_inverted
 
 
 def _cfg(**kw):
@@ -179,7 +181,7 @@ def test_truth_per_epoch_layout():
 
 
 def test_inverted_spectrum_after_bandpass_sampling_correlates_with_the_mirrored_replica():
-    # 12.276 MHz at 16.368 MS/s lands at 4.092 MHz inverted: Doppler and phase change sign.
+    # 12.276 MHz at 16.384 MS/s lands at 4.108 MHz inverted: Doppler and phase change sign.
     D = 2000.0
     cfg = GnssSignalConfig(prn=4, if_hz=12.276e6, bandpass=True, cn0_dbhz=None, duration_s=0.05,
                            dynamics=dy.from_doppler(D), nav_data=False, adc_bits=16,

@@ -10,19 +10,19 @@ from cosim.cli import main
 
 def test_sweep_gnss_proposes_and_confirms(tmp_path, capsys):
     out = tmp_path / "sw"
-    assert main(["sweep", "gnss", "--param", "dsp.trig=6,12", "--trials", "2", "--duration-s", "1.0",
+    assert main(["sweep", "gnss", "--param", "dsp.trig=4,12", "--trials", "2", "--duration-s", "1.0",
                  "--jobs", "1", "--out", str(out), "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
     assert r["n_points"] == 4 and set(r["proposal"]) == {"dsp.trig"}
     assert r["confirmed"] in (True, False) and r["confirmed_params"] is not None
     s = json.loads((out / "summary.json").read_text())
     rows = {row["dsp.trig"]: row for row in s["rows"]}
-    assert set(rows) == {6, 12}
+    assert set(rows) == {4, 12}
     for row in rows.values():
         assert row["golden_phase_rmse_deg"] > 0 and row["ratio_to_golden"] > 0
         assert row["locked"] == row["golden_locked"] == 2
-    # 6-bit sin/cos (4 fraction bits) is coarser than 12-bit: farther from the golden run
-    assert abs(rows[6]["ratio_to_golden"] - 1) > abs(rows[12]["ratio_to_golden"] - 1)
+    # 4-bit sin/cos (2 fraction bits) is coarser than 12-bit: farther from the golden run
+    assert abs(rows[4]["ratio_to_golden"] - 1) > abs(rows[12]["ratio_to_golden"] - 1)
     assert (out / "report.md").read_text().startswith("# GNSS AUKF core word-length sweep")
 
 

@@ -7,9 +7,10 @@ from cosim.gnss.dynamics import constant, aukf_patent_dynamics
 from cosim.gnss.signal import GnssSignalConfig, GnssSignalGenerator
 from dsp.gnss.acquisition import acquire, threshold
 from dsp.gnss.ca_code import CODE_LENGTH
+from hdl.gnss.params import DEFAULT_FS_HZ
 
-FS = 16.368e6
-N = 16368
+FS = DEFAULT_FS_HZ           # the signal generator's default rate
+N = round(FS * 1e-3)         # samples per 1 ms code period
 
 
 def _snapshot(ms, **kw):
@@ -80,7 +81,7 @@ def test_bad_input():
         acquire(x, FS, 33, 4.092e6)
     with pytest.raises(ValueError, match="whole number of samples per 1 ms"):
         acquire(x, 16.3681e6, 7, 4.092e6)
-    with pytest.raises(ValueError, match="snapshot needs 81840 samples"):
+    with pytest.raises(ValueError, match=f"snapshot needs {5 * N} samples"):
         acquire(x, FS, 7, 4.092e6, n_noncoherent=5)
     with pytest.raises(ValueError, match="pfa must be in"):
         acquire(x, FS, 7, 4.092e6, n_noncoherent=2, pfa=0.0)

@@ -57,16 +57,17 @@ def test_correlation_peak_and_register_effects():
     replica correlates E > P > L; after a PRN write the dumps decorrelate; a slew of
     d samples moves the peak onto the prompt; the epoch counter counts."""
     p = GnssChannelParams()
-    fs, n = p.fs_hz, 16368 * 7
+    per = round(p.fs_hz * 1e-3)                     # samples per 1 ms code period
+    fs, n = p.fs_hz, per * 7
     t = np.arange(n)
     code = ca_code_levels(3)
-    sig = code[(t // 16) % 1023] * np.cos(2 * np.pi * p.if_hz * t / fs + 0.3)
+    sig = code[(t * 1023 // per) % 1023] * np.cos(2 * np.pi * p.if_hz * t / fs + 0.3)
     x = np.clip(np.floor(sig * 1.5 + 0.5), -2, 1).astype(np.int64)
     m = GnssChannelModel(replace_prn(p, 3))
     # Boundary 1 (end of epoch 1): a slew of a period minus d samples advances the replica
     # by d, putting the prompt on the signal (epoch 2 is the long one); the PRN-4 write
     # lands after boundary 3, so epoch 5 is the first with the wrong code.
-    writes = [(100, REG_SLEW, 16368 - p.half_spacing), (16368 * 4 + 100, REG_PRN, 4)]
+    writes = [(100, REG_SLEW, per - p.half_spacing), (per * 4 + 100, REG_PRN, 4)]
     recs = [p.record.unpack(v) for v in m.step(x, writes).values(p)]
     mag = [{a: abs(r["i" + a]) + abs(r["q" + a]) for a in "epl"} for r in recs]
     assert [r["epoch"] for r in recs] == list(range(1, len(recs) + 1))
@@ -93,7 +94,7 @@ def replace_prn(p, prn):
     (dict(adc_bits=17), r"GNSS adc_bits must be an integer in \[1, 16\], not 17"),
     (dict(fs_hz=1e6), r"sample rate fs_hz must be >= the C/A signal bandwidth 2.046e\+06 Hz, "
                       r"not 1000000.0"),
-    (dict(if_hz=9e6), r"IF must lie in the first Nyquist zone \[0, fs_hz/2 = 8.184e\+06\) Hz, "
+    (dict(if_hz=9e6), r"IF must lie in the first Nyquist zone \[0, fs_hz/2 = 8.192e\+06\) Hz, "
                       r"not 9000000.0"),
     (dict(fs_hz=float("nan")), r"fs_hz must be a finite number, not nan"),
     (dict(el_spacing_samples=3), r"el_spacing_samples .* must be an even integer in "
@@ -129,7 +130,7 @@ def test_dump_length_and_write_errors():
 def test_widths_are_derived():
     p = GnssChannelParams()
     assert p.iq_width == 5                       # 2-bit ADC x 4-bit LO, full precision
-    assert p.max_dump_samples == 16370 + 65535   # 1 ms at 1.023 Mcps - 100 Hz, max slew
+    assert p.max_dump_samples == 16386 + 65535   # 1 ms at 1.023 Mcps - 100 Hz, max slew
     assert p.acc_width == 5 + 17
     assert p.record_bits == 6 * 22 + 16 + 32 + 32
     assert p.fifo.record_words == 5
@@ -182,7 +183,7 @@ def test_verilator_small_with_adc_gaps_matches_model():
 
 @needs_verilator
 def test_verilator_default_front_end_matches_model():
-    """Default parameters (16.368 MS/s, 2-bit ADC, 1 ms dumps): 8 epochs, writes of every
+    """Default parameters (16.384 MS/s, 2-bit ADC, 1 ms dumps): 8 epochs, writes of every
     register mid-run, a DSP that stalls."""
     p = GnssChannelParams()
     n = 8 * 16368

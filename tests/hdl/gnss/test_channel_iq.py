@@ -100,7 +100,7 @@ def test_pack_unpack_round_trip_and_shape_errors():
                        r"stream, or I and Q\), not 'iq'"),
     (dict(input=None), r"GNSS channel input must be one of real, complex .*not None"),
     (dict(input="complex", if_hz=9e6), r"IF of a complex input must lie in \(-fs_hz/2, "
-                                       r"fs_hz/2\) = \(-8.184e\+06, 8.184e\+06\) Hz, not 9000000.0"),
+                                       r"fs_hz/2\) = \(-8.192e\+06, 8.192e\+06\) Hz, not 9000000.0"),
     (dict(if_hz=-1e6), r"IF must lie in the first Nyquist zone"),
 ])
 def test_parameter_errors(kw, msg):
