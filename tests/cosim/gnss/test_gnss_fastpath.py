@@ -111,10 +111,12 @@ def test_adc_bits_scale_the_signal_not_the_noise():
 # --- against the IF path ------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def agree():
-    # 2 s of IF (2000 epochs) + 1 s noise-only at the generator's default 2-bit ADC (the
+    # 4 s of IF (4000 epochs) + 1 s noise-only at the generator's default 2-bit ADC (the
     # fast path told the same word length: 0.549 dB), 40 dB-Hz, tau 0.125 chip, 0.05 cycle,
-    # Doppler 1250 Hz; ~10-15 s on a loaded 2-core machine.
-    return agreement.compare()
+    # Doppler 1250 Hz; ~10-15 s on a loaded 2-core machine. One IF record's M2M4 C/N0
+    # scatters 0.16 dB (1 sigma, 12 seeds measured) over 2 s, so 2 s put the 0.5 dB test
+    # at ~3 sigma; over 4 s it is ~4.5 sigma.
+    return agreement.compare(duration_s=4.0)
 
 
 def test_if_vs_fast_cn0_within_half_a_db(agree):
@@ -127,7 +129,7 @@ def test_if_vs_fast_cn0_within_half_a_db(agree):
 
 
 def test_if_vs_fast_discriminator_variance_within_10_percent(agree):
-    # 2000 IF epochs: the variance ratio's own spread is ~3 % (1 sigma).
+    # 4000 IF epochs: the variance ratio's own spread is ~2 % (1 sigma).
     assert abs(agree["dll_var_ratio"] - 1) < 0.10, agree["dll_var_ratio"]
     assert abs(agree["atan_var_ratio"] - 1) < 0.10, agree["atan_var_ratio"]
 

@@ -108,7 +108,7 @@ def test_a_latency_past_the_next_dump_is_refused_with_the_limit(capsys):
     assert main(["gnss", "--latency", "1000000000"]) == 2
     assert _err(capsys).startswith(
         "error: --latency 1000000000 cycles: the DSP's writes would reach the channel up to "
-        "1,000,008,498 cycles after a record's dump, later than the next dump (16,368 cycles")
+        "1,000,008,506 cycles after a record's dump, later than the next dump (16,384 cycles")
     assert main(["ins", "--latency", "9000"]) == 2
     assert _err(capsys).startswith("error: --latency 9000 cycles: the DSP's writes would reach")
     from cosim.gnss.config import GnssRunConfig
