@@ -161,6 +161,9 @@ def _add_hdl(sub):
                    help="every registered top (each receiver's tops: channel counts and input "
                         "kinds) at every --seeds, --jobs runs at a time; --results DIR writes "
                         "DIR/synth.json")
+    p.add_argument("--tops", default=None,
+                   help="with --all: only these tops (comma-separated Verilog names); "
+                        "--results merges them into DIR/synth.json, the other tops' rows kept")
     p.add_argument("--seeds", default="1,2,3",
                    help="nextpnr seeds of --all (comma-separated)")
     p.add_argument("--jobs", type=parse_int, default=None,

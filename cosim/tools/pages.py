@@ -167,17 +167,21 @@ def render_synth(data: dict) -> str:
            f"**{fmt(data.get('all_met_at_median'))}**.", "",
            f"Tools: {data.get('tools', {}).get('yosys')}; "
            f"{data.get('tools', {}).get('nextpnr-ecp5')}.", "",
+           *([f"Rows of {', '.join(data['merged'])} are from an earlier run (`--tops` "
+               f"merges a run of some tops into the file; each row names its commit).", ""]
+             if data.get("merged") else []),
            "## Tops", "",
            "| top | LUT4 | FF | MULT18 | DP16KD | " +
            " | ".join(f"Fmax seed {s} (MHz)" for s in seeds) +
-           " | min | median | met at every seed | critical path at the worst seed |",
-           "|---|" + "---:|" * (4 + len(seeds) + 2) + "---|---|"]
+           " | min | median | met at every seed | critical path at the worst seed | commit |",
+           "|---|" + "---:|" * (4 + len(seeds) + 2) + "---|---|---|"]
     for t in data["tops"]:
         f = list(t.get("fmax_mhz", [])) + [None] * (len(seeds) - len(t.get("fmax_mhz", [])))
         out.append(f"| {t['top']} | {t['lut4']} | {t['ff']} | {t['mult18']} | {t['bram']} | "
                    + " | ".join(mhz(x) for x in f) + f" | {mhz(t['fmax_min'])} | "
                    f"{mhz(t['fmax_median'])} | {fmt(t['met_all_seeds'])} | "
-                   f"`{fmt(t['critical_from'])}` -> `{fmt(t['critical_to'])}` |")
+                   f"`{fmt(t['critical_from'])}` -> `{fmt(t['critical_to'])}` | "
+                   f"{fmt(t.get('commit'))} |")
     out += ["", "## Critical paths", "",
             "Per top and seed: the register-to-register path that sets Fmax (nextpnr's "
             "report), its delay and how much of it is routing.", "",

@@ -452,12 +452,20 @@ def run_all(a, receivers) -> int:
     from ..core.validate import check_jobs
     jobs = check_jobs(a.jobs)
     tops = all_tops(receivers)
+    if a.tops is not None:
+        names = [n.strip() for n in a.tops.split(",") if n.strip()]
+        unknown = [n for n in names if n not in tops]
+        if unknown or not names:
+            raise ValueError(f"--tops takes names among {', '.join(tops)}, not {a.tops!r}")
+        tops = {n: tops[n] for n in tops if n in names}
     machine = machine_info()            # date and commit of the code the run starts with
     say = (lambda msg: None) if a.json else \
         (lambda msg: print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True))
     r = synth_all(tops, seeds=seeds, jobs=jobs, out_dir=Path(a.out), device=a.device,
                   target_mhz=a.target_mhz, timeout_s=60 * a.timeout_min, router=a.router,
                   tmg_ripup=not a.no_tmg_ripup, progress=say)
+    for row in r["tops"] + r["runs"]:
+        row["commit"] = machine["commit"]
     rec = {"benchmark": "synthesis of every top", "device": a.device,
            "target_mhz": a.target_mhz, "router": a.router, "tmg_ripup": not a.no_tmg_ripup,
            "seeds": r["seeds"], "jobs": r["jobs"], "wall_s": r["wall_s"],
@@ -473,7 +481,11 @@ def run_all(a, receivers) -> int:
     (Path(a.out) / "synth.json").write_text(text)
     if a.results:
         Path(a.results).mkdir(parents=True, exist_ok=True)
-        (Path(a.results) / "synth.json").write_text(text)
+        dest = Path(a.results) / "synth.json"
+        if a.tops is not None and dest.exists():
+            rec = merge(json.loads(dest.read_text()), rec, all_tops(receivers))
+            text = json.dumps(rec, indent=1) + "\n"
+        dest.write_text(text)
     if a.json:
         print(json.dumps(rec))
     else:
@@ -492,3 +504,28 @@ def run_all(a, receivers) -> int:
               f"every top >= {a.target_mhz:g} MHz at every seed: "
               f"{'yes' if rec['all_met_all_seeds'] else 'NO'}")
     return 0 if rec["all_met_all_seeds"] and not r["failures"] else 1
+
+
+def merge(old: dict, new: dict, order) -> dict:
+    """``new`` (a ``synth --all --tops`` run) with the rows of ``old`` for the tops it did
+    not build; each row keeps the ``commit`` it was built from. Refused when the two runs
+    differ in device, target, seeds, router or rip-up (their rows would not compare)."""
+    keys = ("device", "target_mhz", "seeds", "router", "tmg_ripup")
+    if any(old.get(k) != new.get(k) for k in keys):
+        raise ValueError(f"--tops: {', '.join(keys)} differ from the existing synth.json's "
+                         f"({[old.get(k) for k in keys]} vs {[new.get(k) for k in keys]}): "
+                         f"run every top, or write elsewhere (--results)")
+    built = {t["top"] for t in new["tops"]} | {k.split(" seed ")[0] for k in new["failures"]}
+    rank = {n: i for i, n in enumerate(order)}
+    tops = [t for t in old.get("tops", []) if t["top"] not in built] + new["tops"]
+    runs = [r for r in old.get("runs", []) if r["top"] not in built] + new["runs"]
+    fails = {k: v for k, v in old.get("failures", {}).items()
+             if k.split(" seed ")[0] not in built}
+    tops.sort(key=lambda t: rank.get(t["top"], len(rank)))
+    runs.sort(key=lambda r: (rank.get(r["top"], len(rank)), r["seed"]))
+    out = dict(new, tops=tops, runs=runs, failures={**fails, **new["failures"]})
+    n = len(order)
+    out["all_met_at_median"] = len(tops) == n and all(t["met_at_median"] for t in tops)
+    out["all_met_all_seeds"] = len(tops) == n and all(t["met_all_seeds"] for t in tops)
+    out["merged"] = sorted({t["top"] for t in tops} - built, key=lambda x: rank.get(x, n))
+    return out

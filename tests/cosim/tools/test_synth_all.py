@@ -113,3 +113,28 @@ def test_every_top_meets_100mhz_at_its_median_seed(tmp_path, capsys):
     missed = {t["top"]: t["fmax_mhz"] for t in rec["tops"] if not t["fmax_median"] >= 100}
     assert not missed, f"below 100 MHz at the median seed: {missed}"
     assert rc in (0, 1)         # 1: a top misses 100 MHz at one seed (not its median)
+
+
+def test_tops_merges_into_the_existing_json(monkeypatch, tmp_path):
+    """``--tops`` re-runs some tops; ``--results`` keeps the other tops' rows (each names its
+    commit) and refuses to merge runs made with other settings."""
+    monkeypatch.setattr(synth_mod, "tool_versions", lambda: {"yosys": "y", "nextpnr-ecp5": "n"})
+    fmax = {"v": (99.0, 100.5, 104.0)}
+    monkeypatch.setattr(synth_mod, "synth_all",
+                        lambda tops, *, seeds, **kw: _fake_run(tops, seeds=seeds,
+                                                               fmax=fmax["v"]))
+    base = ["synth", "--all", "--jobs", "1", "--out", str(tmp_path / "b"),
+            "--results", str(tmp_path / "r")]
+    assert main(base) == 1
+    fmax["v"] = (101.0, 102.0, 103.0)
+    assert main(base + ["--tops", "gnss_channel,monopulse_frontend"]) == 1
+    rec = json.loads((tmp_path / "r" / "synth.json").read_text())
+    got = {t["top"]: t["fmax_min"] for t in rec["tops"]}
+    assert list(got) == list(all_tops(receivers()))
+    assert got["gnss_channel"] == got["monopulse_frontend"] == 101.0
+    assert got["tacan_frontend"] == 99.0 and "tacan_frontend" in rec["merged"]
+    assert len(rec["runs"]) == 3 * len(got) and all(t["commit"] for t in rec["tops"])
+    assert not rec["all_met_all_seeds"]
+    assert "earlier run" in pages.render_page("synth", rec)
+    assert main(base + ["--tops", "gnss_channel", "--seeds", "1,2"]) == 2
+    assert main(base + ["--tops", "nope"]) == 2
