@@ -286,8 +286,10 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
     once and place it at every seed of ``seeds``, up to ``jobs`` tool runs at a time
     (default: the cores).
 
-    The yosys runs go first (in the order of ``tops``); then the place-and-route runs, the
-    largest netlist first, so the longest runs do not start last. A top whose yosys run
+    The yosys runs go first (in the order of ``tops``); then the place-and-route runs, seed
+    by seed (every top's first seed before any second one, so a run stopped early still has
+    every top) and within a seed the largest netlist first, so the longest runs do not
+    start last. A top whose yosys run
     fails, or a seed whose nextpnr run fails, is reported in ``failures`` (name -> message)
     and the others go on.
 
@@ -358,8 +360,8 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
             except (OSError, ValueError, AttributeError):
                 size = 0
             say(f"{name}: synthesised ({yosys_s[name]:.0f} s, {size} cells)")
-            for seed in seeds:
-                push((1, -size, seed), place_task(name, work, seed))
+            for k, seed in enumerate(seeds):
+                push((1, k, -size), place_task(name, work, seed))
         return run
 
     def worker():

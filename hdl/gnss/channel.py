@@ -206,7 +206,12 @@ class GnssCorrelator(wiring.Component):
                 m.d.sync += s.eq(s_keep)
             with m.If(advance):
                 m.d.sync += [chip.eq(Mux(chip_last, 0, chip + 1)), chip_last.eq(chip == 1021)]
-        m.d.comb += [ca.step.eq(advance), ca.restart.eq(wrap)]
+        # No restart at the code epoch: G1 and G2 are maximal-length 10-stage LFSRs (period
+        # 1023 = the code length), so the step out of chip 1022 returns both to all ones,
+        # the state the restart would load, and they always hold the state of ``chip``. The
+        # restart (``wrap`` into 20 register enables and D inputs) was the 12-channel array's
+        # critical path (chip advance -> C/A restart); the chips are the same.
+        m.d.comb += ca.step.eq(advance)
         with m.If(boundary):
             m.d.sync += [cf.eq(sh_code), prn.eq(sh_prn), hold.eq(Mux(slew_pend, sh_slew, 0)),
                          hold_zero.eq(~slew_pend | (sh_slew == 0)), s.eq(s_new),
