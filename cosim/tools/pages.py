@@ -167,6 +167,8 @@ def render_synth(data: dict) -> str:
            f"**{fmt(data.get('all_met_at_median'))}**.", "",
            f"Tools: {data.get('tools', {}).get('yosys')}; "
            f"{data.get('tools', {}).get('nextpnr-ecp5')}.", "",
+           *(["**Incomplete**: the run was stopped before every seed was placed ('-': a "
+               "seed not placed).", ""] if data.get("complete") is False else []),
            *([f"Rows of {', '.join(data['merged'])} are from an earlier run (`--tops` "
                f"merges a run of some tops into the file; each row names its commit).", ""]
              if data.get("merged") else []),

@@ -281,7 +281,7 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
               out_dir: str | Path = REPO_ROOT / "build" / "synth_all",
               device: str = "LFE5U-85F", package: str = "CABGA381", target_mhz: float = 100,
               timeout_s: float = 3600, router: str = "router2", tmg_ripup: bool = True,
-              progress=None) -> dict:
+              progress=None, checkpoint=None) -> dict:
     """Synthesise every top of ``tops`` (Verilog name -> a function building the component)
     once and place it at every seed of ``seeds``, up to ``jobs`` tool runs at a time
     (default: the cores).
@@ -301,7 +301,10 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
         ``fmax_median``, ``met_all_seeds``, ``met_at_median``, the worst seed's critical path
         ``critical_from`` / ``critical_to``, ``yosys_s``); ``runs``: one row per top and
         seed (``fmax_mhz``, resources, :func:`critical_path`'s fields, ``nextpnr_s``);
-        ``failures``; ``wall_s`` (the whole run) and ``tool_cpu_s`` (the tools' CPU time).
+        ``failures``; ``wall_s`` (the whole run) and ``tool_cpu_s`` (the tools' CPU time);
+        ``complete`` (True). ``checkpoint``, if given, is called with the same dict of the
+        runs done so far (``complete`` False) after every tool run, so a long run on a
+        shared machine can be written as it goes.
     """
     _check(device, target_mhz, router)
     seeds = [int(s) for s in seeds]
@@ -378,10 +381,22 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
                 with cond:
                     open_tasks[0] -= 1
                     cond.notify_all()
+                if checkpoint is not None:
+                    checkpoint(summary(done=False))
 
     import resource
     cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.time()
+
+    def summary(done: bool = True) -> dict:
+        with cond:
+            rows, runs = _summarise(tops, seeds, results, yosys_s, target_mhz)
+            cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            return {"tops": rows, "runs": runs, "failures": dict(failures), "seeds": seeds,
+                    "jobs": jobs, "wall_s": round(time.time() - t0, 1),
+                    "tool_cpu_s": round(cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime
+                                        - cpu0.ru_stime, 1), "complete": done}
+
     for i, (name, make) in enumerate(tops.items()):
         push((0, i, 0), yosys_task(name, make))
     threads = [threading.Thread(target=worker, daemon=True) for _ in range(jobs)]
@@ -389,9 +404,11 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
         t.start()
     for t in threads:
         t.join()
-    wall = time.time() - t0
-    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return summary()
 
+
+def _summarise(tops, seeds, results, yosys_s, target_mhz) -> tuple[list, list]:
+    """(rows per top, rows per run) of the runs done so far."""
     rows, runs = [], []
     for name in tops:
         placed = [(s, results[(name, s)]) for s in seeds if (name, s) in results]
@@ -406,7 +423,8 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
         if not placed:
             continue
         first = placed[0][1]
-        fmax = [r["fmax_mhz"] for _, r in placed]
+        fmax = [results[(name, s)]["fmax_mhz"] if (name, s) in results else None
+                for s in seeds]                 # None: a seed not placed (failed, or not yet)
         worst = min(placed, key=lambda sr: sr[1]["fmax_mhz"] or 0.0)[1]["critical_path"] or {}
         known = [f for f in fmax if f is not None]
         med = statistics.median(known) if known else None
@@ -415,14 +433,11 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
                      "fmax_mhz": [_round(f) for f in fmax],
                      "fmax_min": _round(min(known)) if known else None,
                      "fmax_median": _round(med),
-                     "met_all_seeds": len(placed) == len(seeds) and len(known) == len(fmax)
-                     and min(known) >= target_mhz,
+                     "met_all_seeds": len(known) == len(seeds) and min(known) >= target_mhz,
                      "met_at_median": med is not None and med >= target_mhz,
                      "critical_from": worst.get("from"), "critical_to": worst.get("to"),
                      "yosys_s": yosys_s.get(name)})
-    return {"tops": rows, "runs": runs, "failures": failures, "seeds": seeds, "jobs": jobs,
-            "wall_s": round(wall, 1),
-            "tool_cpu_s": round(cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime - cpu0.ru_stime, 1)}
+    return rows, runs
 
 
 def _round(v):
@@ -463,24 +478,36 @@ def run_all(a, receivers) -> int:
     machine = machine_info()            # date and commit of the code the run starts with
     say = (lambda msg: None) if a.json else \
         (lambda msg: print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True))
+    versions = tool_versions()
+
+    def record(r: dict) -> dict:
+        for row in r["tops"] + r["runs"]:
+            row["commit"] = machine["commit"]
+        n = len(tops)
+        return {"benchmark": "synthesis of every top", "device": a.device,
+                "target_mhz": a.target_mhz, "router": a.router,
+                "tmg_ripup": not a.no_tmg_ripup, "seeds": r["seeds"], "jobs": r["jobs"],
+                "wall_s": r["wall_s"], "tool_cpu_s": r["tool_cpu_s"],
+                "complete": r["complete"],
+                "all_met_at_median": len(r["tops"]) == n and
+                all(t["met_at_median"] for t in r["tops"]),
+                "all_met_all_seeds": len(r["tops"]) == n and
+                all(t["met_all_seeds"] for t in r["tops"]),
+                "tools": versions, "tops": r["tops"], "runs": r["runs"],
+                "failures": r["failures"], "machine": machine}
+
+    Path(a.out).mkdir(parents=True, exist_ok=True)
+    partial = Path(a.out) / "synth.json"
+
+    def checkpoint(r: dict) -> None:     # the runs so far, in case the run is stopped
+        partial.write_text(json.dumps(record(r), indent=1) + "\n")
+
     r = synth_all(tops, seeds=seeds, jobs=jobs, out_dir=Path(a.out), device=a.device,
                   target_mhz=a.target_mhz, timeout_s=60 * a.timeout_min, router=a.router,
-                  tmg_ripup=not a.no_tmg_ripup, progress=say)
-    for row in r["tops"] + r["runs"]:
-        row["commit"] = machine["commit"]
-    rec = {"benchmark": "synthesis of every top", "device": a.device,
-           "target_mhz": a.target_mhz, "router": a.router, "tmg_ripup": not a.no_tmg_ripup,
-           "seeds": r["seeds"], "jobs": r["jobs"], "wall_s": r["wall_s"],
-           "tool_cpu_s": r["tool_cpu_s"],
-           "all_met_at_median": len(r["tops"]) == len(tops) and
-           all(t["met_at_median"] for t in r["tops"]),
-           "all_met_all_seeds": len(r["tops"]) == len(tops) and
-           all(t["met_all_seeds"] for t in r["tops"]),
-           "tools": tool_versions(), "tops": r["tops"], "runs": r["runs"],
-           "failures": r["failures"], "machine": machine}
+                  tmg_ripup=not a.no_tmg_ripup, progress=say, checkpoint=checkpoint)
+    rec = record(r)
     text = json.dumps(rec, indent=1) + "\n"
-    Path(a.out).mkdir(parents=True, exist_ok=True)
-    (Path(a.out) / "synth.json").write_text(text)
+    partial.write_text(text)
     if a.results:
         Path(a.results).mkdir(parents=True, exist_ok=True)
         dest = Path(a.results) / "synth.json"
@@ -497,8 +524,8 @@ def run_all(a, receivers) -> int:
         for t in r["tops"]:
             print(f"{t['top']:<26} {t['lut4']:>6} {t['ff']:>6} {t['mult18']:>6} {t['bram']:>6}  "
                   + " ".join(f"{f:>6.1f}" if f is not None else f"{'-':>6}"
-                             for f in t["fmax_mhz"])
-                  + f" {t['fmax_min']:>6.1f} {t['fmax_median']:>6.1f}  "
+                             for f in t["fmax_mhz"] + [t["fmax_min"], t["fmax_median"]])
+                  + "  "
                   f"{t['critical_from']} -> {t['critical_to']}")
         for what, why in r["failures"].items():
             print(f"FAILED {what}: {why.splitlines()[0]}")

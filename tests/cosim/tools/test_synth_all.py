@@ -73,7 +73,7 @@ def _fake_run(tops, *, seeds, fmax):
              "routing_ns": 6.9, "logic_cells": 4, "nextpnr_s": 2.0}
             for n in tops for s, f in zip(seeds, fmax)]
     return {"tops": rows, "runs": runs, "failures": {}, "seeds": list(seeds), "jobs": 2,
-            "wall_s": 3.0, "tool_cpu_s": 5.0}
+            "wall_s": 3.0, "tool_cpu_s": 5.0, "complete": True}
 
 
 @pytest.mark.parametrize("fmax, rc", [((101.0, 100.5, 104.0), 0), ((99.0, 100.5, 104.0), 1)])
@@ -138,3 +138,42 @@ def test_tops_merges_into_the_existing_json(monkeypatch, tmp_path):
     assert "earlier run" in pages.render_page("synth", rec)
     assert main(base + ["--tops", "gnss_channel", "--seeds", "1,2"]) == 2
     assert main(base + ["--tops", "nope"]) == 2
+
+
+def test_scheduler_seed_by_seed_with_checkpoints_and_failures(monkeypatch, tmp_path):
+    """synth_all with the tools replaced: one yosys run per top, then the seeds in order
+    (largest netlist first within a seed); a failed run is reported and the rest go on;
+    every finished run is checkpointed."""
+    order, lock = [], __import__("threading").Lock()
+    sizes = {"small": 10, "big": 99, "broken": 50}
+
+    def synthesise(component, *, name, out_dir, timeout_s):
+        work = tmp_path / name
+        work.mkdir()
+        (work / "yosys_stat.json").write_text(json.dumps(
+            {"design": {"num_cells_by_type": {"LUT4": sizes[name]}}}))
+        return work
+
+    def place(work, *, name, seed, run_dir, **kw):
+        with lock:
+            order.append((name, seed))
+        if name == "broken" and seed == 2:
+            raise RuntimeError("nextpnr failed (exit 1)")
+        f = 90.0 + sizes[name] / 10 + seed
+        return {"lut4": sizes[name], "ff": 1, "mult18": 0, "bram": 0, "fmax_mhz": f,
+                "timing_met": f >= 100, "critical_path": {"from": "a", "to": "b", "ns": 1.0}}
+
+    monkeypatch.setattr(synth_mod, "synthesise", synthesise)
+    monkeypatch.setattr(synth_mod, "place", place)
+    monkeypatch.setattr(synth_mod, "_check", lambda *a: ("y", "n"))
+    seen = []
+    r = synth_mod.synth_all({n: object for n in sizes}, seeds=(1, 2, 3), jobs=1,
+                            out_dir=tmp_path, checkpoint=seen.append)
+    assert order == [(n, s) for s in (1, 2, 3) for n in ("big", "broken", "small")]
+    assert list(r["failures"]) == ["broken seed 2"] and r["complete"]
+    assert len(seen) == 3 + 9 and not seen[-1]["complete"]
+    rows = {t["top"]: t for t in r["tops"]}
+    assert rows["broken"]["fmax_mhz"] == [96.0, None, 98.0]
+    assert not rows["broken"]["met_all_seeds"] and rows["big"]["met_all_seeds"]
+    assert rows["big"]["fmax_median"] == 101.9 and rows["small"]["fmax_min"] == 92.0
+    assert len(r["runs"]) == 8
