@@ -335,6 +335,17 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
         add("TACAN front end simulation", "Verilator / Amaranth sim, model x real time",
             f"{d['ratios']['verilator_over_pysim']:.0f}x, "
             f"{d['real_time']['model_samples_per_s']:.1f}x", "sim_speed")
+    # Single-seed runs of one top (``synth --results``), kept while ``synth --all``'s
+    # results/synth.json lacks their top.
+    for name, label in (("synth_tacan", "TACAN front end"), ("synth_gnss", "GNSS channel"),
+                        ("synth_gnss_iq", "GNSS channel, complex (I/Q) input"),
+                        ("synth_gnss_12ch", "GNSS, 12 channels"),
+                        ("synth_monopulse", "monopulse front end")):
+        d = _get(results, name)
+        if d:
+            add(f"{label}, {d['device']}", f"Fmax (target {fmt(d['target_mhz'])} MHz), LUT4",
+                f"{d['fmax_mhz']:.1f} MHz ({'met' if d['timing_met'] else 'missed'}), "
+                f"{d['lut4']}", name)
     d = _get(results, "synth")
     if d:
         for t in d.get("tops", []):
