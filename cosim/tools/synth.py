@@ -168,15 +168,17 @@ def _check(device: str, target_mhz: float, router: str) -> tuple[str, str]:
 
 
 def synthesise(component, *, name: str, out_dir: str | Path = REPO_ROOT / "build" / "synth",
-               timeout_s: float = 1800) -> Path:
-    """Export ``component`` to ``<out_dir>/<name>/<name>.v`` and run yosys (``synth_ecp5``)
-    on it; returns that directory (with the netlist ``<name>.json`` that :func:`place`
-    places). The netlist does not depend on the placement seed, so a multi-seed run
-    synthesises once."""
+               timeout_s: float = 1800, verilog: str | None = None) -> Path:
+    """Export ``component`` to ``<out_dir>/<name>/<name>.v`` (or write the text
+    ``verilog`` there) and run yosys (``synth_ecp5``) on it; returns that directory (with the
+    netlist ``<name>.json`` that :func:`place` places). The netlist does not depend on the
+    placement seed, so a multi-seed run synthesises once."""
     yosys, _ = _check("LFE5U-85F", 1, "router2")
     work = Path(out_dir) / name
     work.mkdir(parents=True, exist_ok=True)
-    (work / f"{name}.v").write_text(verilog_text(component, name=name, emit_src=False))
+    if verilog is None:
+        verilog = verilog_text(component, name=name, emit_src=False)
+    (work / f"{name}.v").write_text(verilog)
     script = (f"read_verilog {name}.v\n"
               f"synth_ecp5 -top {name} -json {name}.json\n"
               f"tee -q -o yosys_stat.json stat -json\n")
@@ -350,8 +352,9 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
             t0 = time.time()
             try:
                 with _ELABORATE:
-                    component = make()
-                work = synthesise(component, name=name, out_dir=out_dir, timeout_s=timeout_s)
+                    text = verilog_text(make(), name=name, emit_src=False)
+                work = synthesise(None, name=name, out_dir=out_dir, timeout_s=timeout_s,
+                                  verilog=text)
             except (RuntimeError, OSError, ValueError) as e:
                 failures[name] = str(e)
                 say(f"{name}: yosys FAILED ({str(e).splitlines()[0]})")

@@ -147,7 +147,7 @@ def test_scheduler_seed_by_seed_with_checkpoints_and_failures(monkeypatch, tmp_p
     order, lock = [], __import__("threading").Lock()
     sizes = {"small": 10, "big": 99, "broken": 50}
 
-    def synthesise(component, *, name, out_dir, timeout_s):
+    def synthesise(component, *, name, out_dir, timeout_s, verilog):
         work = tmp_path / name
         work.mkdir()
         (work / "yosys_stat.json").write_text(json.dumps(
@@ -166,6 +166,7 @@ def test_scheduler_seed_by_seed_with_checkpoints_and_failures(monkeypatch, tmp_p
     monkeypatch.setattr(synth_mod, "synthesise", synthesise)
     monkeypatch.setattr(synth_mod, "place", place)
     monkeypatch.setattr(synth_mod, "_check", lambda *a: ("y", "n"))
+    monkeypatch.setattr(synth_mod, "verilog_text", lambda c, name, emit_src: name)
     seen = []
     r = synth_mod.synth_all({n: object for n in sizes}, seeds=(1, 2, 3), jobs=1,
                             out_dir=tmp_path, checkpoint=seen.append)
