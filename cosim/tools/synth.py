@@ -172,18 +172,26 @@ def synthesise(component, *, name: str, out_dir: str | Path = REPO_ROOT / "build
     """Export ``component`` to ``<out_dir>/<name>/<name>.v`` (or write the text
     ``verilog`` there) and run yosys (``synth_ecp5``) on it; returns that directory (with the
     netlist ``<name>.json`` that :func:`place` places). The netlist does not depend on the
-    placement seed, so a multi-seed run synthesises once."""
+    placement seed, so a multi-seed run synthesises once; a directory whose netlist was
+    made from the same Verilog text (a re-run into the same ``out_dir``) is reused without
+    running yosys."""
     yosys, _ = _check("LFE5U-85F", 1, "router2")
     work = Path(out_dir) / name
     work.mkdir(parents=True, exist_ok=True)
     if verilog is None:
         verilog = verilog_text(component, name=name, emit_src=False)
-    (work / f"{name}.v").write_text(verilog)
     script = (f"read_verilog {name}.v\n"
               f"synth_ecp5 -top {name} -json {name}.json\n"
               f"tee -q -o yosys_stat.json stat -json\n")
+    done = work / "yosys.done"          # the script and Verilog the netlist was made from
+    key = f"{script}\n{verilog}"
+    if done.exists() and (work / f"{name}.json").exists() and done.read_text() == key:
+        return work                     # same input: the netlist is reused
+    done.unlink(missing_ok=True)
+    (work / f"{name}.v").write_text(verilog)
     (work / "synth.ys").write_text(script)
     _run([yosys, "-q", "-l", "yosys.log", "synth.ys"], work / "yosys.out", work, timeout_s)
+    done.write_text(key)
     return work
 
 

@@ -178,3 +178,17 @@ def test_scheduler_seed_by_seed_with_checkpoints_and_failures(monkeypatch, tmp_p
     assert not rows["broken"]["met_all_seeds"] and rows["big"]["met_all_seeds"]
     assert rows["big"]["fmax_median"] == 101.9 and rows["small"]["fmax_min"] == 92.0
     assert len(r["runs"]) == 8
+
+
+def test_netlist_reused_for_the_same_verilog(monkeypatch, tmp_path):
+    calls = []
+    monkeypatch.setattr(synth_mod, "_check", lambda *a: ("yosys", "nextpnr"))
+
+    def run(cmd, log, cwd, timeout):
+        calls.append(cmd[0])
+        (cwd / "t.json").write_text("{}")
+    monkeypatch.setattr(synth_mod, "_run", run)
+    for text in ("module t; endmodule", "module t; endmodule", "module t(); endmodule"):
+        synth_mod.synthesise(None, name="t", out_dir=tmp_path, verilog=text)
+    assert calls == ["yosys", "yosys"]
+    assert (tmp_path / "t" / "t.v").read_text() == "module t(); endmodule"
