@@ -81,15 +81,18 @@ class CaCodeGenerator(wiring.Component):
         Advance one chip at the clock edge.
     restart : In(1)
         Set both registers to all ones at the clock edge (the code epoch; overrides
-        ``step``).
+        ``step``). Only with ``restart=True``: G1 and G2 have period 1023, the code length,
+        so a generator stepped once per chip from all ones is back at all ones after the
+        last chip without it.
     chip : Out(1)
         The current chip, logic level (0 = +1): G1 stage 10 XOR the PRN's two G2 stages.
     """
 
-    def __init__(self):
+    def __init__(self, restart: bool = True):
+        self.has_restart = bool(restart)
         # Explicit members: this module's annotations are strings (``from __future__``).
-        super().__init__({"prn": In(unsigned(6)), "step": In(1), "restart": In(1),
-                          "chip": Out(1)})
+        super().__init__({"prn": In(unsigned(6)), "step": In(1), "chip": Out(1),
+                          **({"restart": In(1)} if restart else {})})
 
     def elaborate(self, platform):
         m = Module()
@@ -103,10 +106,11 @@ class CaCodeGenerator(wiring.Component):
             with m.Default():
                 m.d.comb += g2i.eq(0)
         m.d.comb += self.chip.eq(g1[9] ^ g2i)
-        with m.If(self.restart):
-            m.d.sync += [g1.eq(0x3FF), g2.eq(0x3FF)]
-        with m.Elif(self.step):
+        with m.If(self.step):
             m.d.sync += [g1.eq(_lfsr_step(g1, G1_FEEDBACK)), g2.eq(_lfsr_step(g2, G2_FEEDBACK))]
+        if self.has_restart:
+            with m.If(self.restart):        # overrides step (the later assignment wins)
+                m.d.sync += [g1.eq(0x3FF), g2.eq(0x3FF)]
         return m
 
 
@@ -176,7 +180,7 @@ class GnssCorrelator(wiring.Component):
         gen_ep = Signal()
         gen_first = Signal()
         code_epoch = Signal(CB)
-        m.submodules.ca = ca = CaCodeGenerator()
+        m.submodules.ca = ca = CaCodeGenerator(restart=False)
         bit_e = ca.chip
         m.d.comb += ca.prn.eq(prn)
 

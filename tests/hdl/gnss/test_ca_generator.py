@@ -23,11 +23,12 @@ class _Bench(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.gen = gen = CaCodeGenerator()
+        m.submodules.gen = gen = CaCodeGenerator(restart=self.with_restart)
         k = Signal(range(CODE_LENGTH))
         last = k == CODE_LENGTH - 1
-        m.d.comb += [gen.prn.eq(self.prn), gen.step.eq(self.i.valid),
-                     gen.restart.eq(self.i.valid & last if self.with_restart else 0)]
+        m.d.comb += [gen.prn.eq(self.prn), gen.step.eq(self.i.valid)]
+        if self.with_restart:
+            m.d.comb += gen.restart.eq(self.i.valid & last)
         with m.If(self.i.valid):
             m.d.sync += k.eq(Mux(last, 0, k + 1))
         m.d.sync += [self.o.valid.eq(self.i.valid), self.o.payload.eq(gen.chip)]
