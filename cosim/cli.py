@@ -327,8 +327,10 @@ def _cmd_synth(a) -> int:
         raise ValueError(f"--timeout-min must be in (0, 1440] minutes, not {a.timeout_min:g}")
     if a.all:
         return _cmd_synth_all(a)
-    if a.jobs is not None:
-        raise ValueError("--jobs goes with --all")
+    for flag, given in (("--jobs", a.jobs is not None), ("--tops", a.tops is not None),
+                        ("--seeds", a.seeds != "1,2,3")):
+        if given:
+            raise ValueError(f"{flag} goes with --all (one top: --top, --seed)")
     a.top = a.top or [r.name for r in receivers() if r.tops][0]
     a.seed = 1 if a.seed is None else a.seed
     a.channels = 1 if a.channels is None else a.channels

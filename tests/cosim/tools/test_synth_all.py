@@ -30,7 +30,9 @@ def test_all_tops_are_every_registered_top():
     (["--all", "--seeds", "1,1"], "--seeds takes distinct seeds >= 0, not '1,1'"),
     (["--all", "--seeds", "1,x"], "--seeds takes comma-separated integers, not '1,x'"),
     (["--all", "--jobs", "0"], "--jobs must be an integer in [1,"),
-    (["--jobs", "2"], "--jobs goes with --all"),
+    (["--jobs", "2"], "--jobs goes with --all (one top: --top, --seed)"),
+    (["--tops", "gnss_channel"], "--tops goes with --all"),
+    (["--seeds", "4,5"], "--seeds goes with --all"),
 ])
 def test_bad_arguments_refused_before_work(argv, msg, capsys, monkeypatch, tmp_path):
     def never(*a, **k):
