@@ -8,7 +8,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
 .DEFAULT_GOAL := help
-.PHONY: help setup tools run test test-all docs pages bench study study-wordlength faults verilog synth clean
+.PHONY: help setup tools run test test-all docs pages bench study study-wordlength faults verilog synth synth-all clean
 
 help:  ## show this help
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -127,6 +127,9 @@ verilog: setup  ## export every HDL block and the TACAN top to build/verilog and
 
 synth: setup  ## synthesise the TACAN front end for LFE5U-85F (yosys + nextpnr) and print resources/Fmax
 	$(PY) -m cosim synth --top tacan --results results --json
+
+synth-all: setup  ## every top at nextpnr seeds 1-3 (about an hour of one core): results/synth.json
+	$(PY) -m cosim synth --all --timeout-min 120 --results results
 
 clean:  ## remove generated files (build/, caches); keeps .venv and results/
 	rm -rf build .pytest_cache

@@ -167,16 +167,28 @@ def _add_hdl(sub):
 
     p = _parser(sub, "synth", help="synthesise and place-and-route a top for ECP5 (YoWASP)")
     tops = [r.name for r in receivers() if r.tops]
-    p.add_argument("--top", type=str.lower, default=tops[0], choices=tops, help="design")
+    p.add_argument("--top", type=str.lower, default=None, choices=tops,
+                   help=f"design (default {tops[0]})")
+    p.add_argument("--all", action="store_true",
+                   help="every registered top (each receiver's tops: channel counts and input "
+                        "kinds) at every --seeds, --jobs runs at a time; --results DIR writes "
+                        "DIR/synth.json")
+    p.add_argument("--tops", default=None,
+                   help="with --all: only these tops (comma-separated Verilog names); "
+                        "--results merges them into DIR/synth.json, the other tops' rows kept")
+    p.add_argument("--seeds", default="1,2,3",
+                   help="nextpnr seeds of --all (comma-separated)")
+    p.add_argument("--jobs", type=parse_int, default=None,
+                   help="tool runs at a time with --all (default: the cores)")
     p.add_argument("--device", default="LFE5U-85F", help="ECP5 part")
     p.add_argument("--target-mhz", type=parse_finite, default=100.0, help="clock target (MHz)")
     p.add_argument("--out", default="build/synth", help="output directory")
-    p.add_argument("--seed", type=int, default=1, help="nextpnr seed")
+    p.add_argument("--seed", type=int, default=None, help="nextpnr seed (default 1)")
     p.add_argument("--router", default="router2", choices=("router2", "router1"),
                    help="nextpnr router (router1: nextpnr-ecp5's default, slow when congested)")
     p.add_argument("--no-tmg-ripup", action="store_true",
                    help="without nextpnr's timing-driven rip-up in the router (--tmg-ripup)")
-    p.add_argument("--channels", type=parse_int, default=1,
+    p.add_argument("--channels", type=parse_int, default=None,
                    help="channels on one input stream (receivers with an array top: gnss)")
     p.add_argument("--timeout-min", type=parse_finite, default=30.0,
                    help="limit for each tool run (yosys, nextpnr) in minutes")
@@ -339,6 +351,15 @@ def _cmd_synth(a) -> int:
         raise ValueError(f"--target-mhz must be in (0, 1000] MHz, not {a.target_mhz:g}")
     if not 0 < a.timeout_min <= 24 * 60:
         raise ValueError(f"--timeout-min must be in (0, 1440] minutes, not {a.timeout_min:g}")
+    if a.all:
+        return _cmd_synth_all(a)
+    for flag, given in (("--jobs", a.jobs is not None), ("--tops", a.tops is not None),
+                        ("--seeds", a.seeds != "1,2,3")):
+        if given:
+            raise ValueError(f"{flag} goes with --all (one top: --top, --seed)")
+    a.top = a.top or [r.name for r in receivers() if r.tops][0]
+    a.seed = 1 if a.seed is None else a.seed
+    a.channels = 1 if a.channels is None else a.channels
     rx = get(a.top)
     name, make = next(iter(rx.tops.items()))
     if a.variant is not None:
@@ -386,6 +407,11 @@ def _cmd_synth(a) -> int:
               f"{r['bram']} DP16KD, Fmax {r['fmax_mhz']:.1f} MHz "
               f"(target {r['target_mhz']:g}: {'met' if r['timing_met'] else 'MISSED'})")
     return 0
+
+
+def _cmd_synth_all(a) -> int:
+    from .tools.synth import run_all
+    return run_all(a, receivers())
 
 
 def build_parser() -> argparse.ArgumentParser:

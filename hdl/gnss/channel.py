@@ -81,15 +81,18 @@ class CaCodeGenerator(wiring.Component):
         Advance one chip at the clock edge.
     restart : In(1)
         Set both registers to all ones at the clock edge (the code epoch; overrides
-        ``step``).
+        ``step``). Only with ``restart=True``: G1 and G2 have period 1023, the code length,
+        so a generator stepped once per chip from all ones is back at all ones after the
+        last chip without it.
     chip : Out(1)
         The current chip, logic level (0 = +1): G1 stage 10 XOR the PRN's two G2 stages.
     """
 
-    def __init__(self):
+    def __init__(self, restart: bool = True):
+        self.has_restart = bool(restart)
         # Explicit members: this module's annotations are strings (``from __future__``).
-        super().__init__({"prn": In(unsigned(6)), "step": In(1), "restart": In(1),
-                          "chip": Out(1)})
+        super().__init__({"prn": In(unsigned(6)), "step": In(1), "chip": Out(1),
+                          **({"restart": In(1)} if restart else {})})
 
     def elaborate(self, platform):
         m = Module()
@@ -103,10 +106,11 @@ class CaCodeGenerator(wiring.Component):
             with m.Default():
                 m.d.comb += g2i.eq(0)
         m.d.comb += self.chip.eq(g1[9] ^ g2i)
-        with m.If(self.restart):
-            m.d.sync += [g1.eq(0x3FF), g2.eq(0x3FF)]
-        with m.Elif(self.step):
+        with m.If(self.step):
             m.d.sync += [g1.eq(_lfsr_step(g1, G1_FEEDBACK)), g2.eq(_lfsr_step(g2, G2_FEEDBACK))]
+        if self.has_restart:
+            with m.If(self.restart):        # overrides step (the later assignment wins)
+                m.d.sync += [g1.eq(0x3FF), g2.eq(0x3FF)]
         return m
 
 
@@ -176,7 +180,7 @@ class GnssCorrelator(wiring.Component):
         gen_ep = Signal()
         gen_first = Signal()
         code_epoch = Signal(CB)
-        m.submodules.ca = ca = CaCodeGenerator()
+        m.submodules.ca = ca = CaCodeGenerator(restart=False)
         bit_e = ca.chip
         m.d.comb += ca.prn.eq(prn)
 
@@ -206,7 +210,12 @@ class GnssCorrelator(wiring.Component):
                 m.d.sync += s.eq(s_keep)
             with m.If(advance):
                 m.d.sync += [chip.eq(Mux(chip_last, 0, chip + 1)), chip_last.eq(chip == 1021)]
-        m.d.comb += [ca.step.eq(advance), ca.restart.eq(wrap)]
+        # No restart at the code epoch: G1 and G2 are maximal-length 10-stage LFSRs (period
+        # 1023 = the code length), so the step out of chip 1022 returns both to all ones,
+        # the state the restart would load, and they always hold the state of ``chip``. The
+        # restart (``wrap`` into 20 register enables and D inputs) was the 12-channel array's
+        # critical path (chip advance -> C/A restart); the chips are the same.
+        m.d.comb += ca.step.eq(advance)
         with m.If(boundary):
             m.d.sync += [cf.eq(sh_code), prn.eq(sh_prn), hold.eq(Mux(slew_pend, sh_slew, 0)),
                          hold_zero.eq(~slew_pend | (sh_slew == 0)), s.eq(s_new),
@@ -407,34 +416,46 @@ class GnssChannelArray(wiring.Component):
                          core.reg_addr.eq(self.reg_addr[:2]), core.reg_data.eq(self.reg_data)]
             cores.append(core)
         pend = Signal(self.channels)
-        # Two stages for 100 MHz with 12 channels: (1) pick the lowest pending channel into
-        # a one-hot register, (2) AND-OR multiplex its record (the core's record register
-        # holds until its next dump, a code period later) into the FIFO input register.
-        sel = Signal(self.channels)
+        # Grant: the lowest pending channel, at most one every record_words cycles (the FIFO
+        # writes one word per cycle); the granted record reaches the FIFO input register two
+        # cycles later. For 100 MHz with 12 channels the record multiplexer is two register
+        # stages (channel groups, then their OR), fed by a one-hot select decided a cycle
+        # ahead of the grant (``sel_next``: the lowest channel of the next cycle's pending
+        # flags), so that the grant's timing is unchanged. The single-stage multiplexer's
+        # select register was the critical path (6 ns of routing in one net).
         sel_valid = Signal()
         out = Signal(p.record_bits)
         out_valid = Signal()
         m.d.sync += sel_valid.eq(0)
-        # The FIFO writes one word per cycle: a record every record_words cycles at most.
         n = self.fifo_params.record_words
         gap = Signal(range(max(n, 2)))
         with m.If(gap != 0):
             m.d.sync += gap.eq(gap - 1)
-        # Grant first (lowest pending channel), then new records set their flags.
-        with m.If(pend.any() & (gap == 0)):
+        grant = Signal(self.channels)       # one-hot: the channel granted in this cycle
+        m.d.comb += grant.eq(Mux(pend.any() & (gap == 0), pend & -pend, 0))
+        with m.If(grant.any()):
             m.d.sync += [sel_valid.eq(1), gap.eq(n - 1)]
-            for ch in range(self.channels):
-                cond = pend[ch] if ch == 0 else (pend[ch] & ~pend[:ch].any())
-                with m.If(cond):
-                    m.d.sync += [pend[ch].eq(0), sel.eq(1 << ch)]
-        for ch, core in enumerate(cores):
-            with m.If(core.rec.valid):
-                m.d.sync += pend[ch].eq(1)
-        mux = Const(0, p.record_bits)
-        for ch, core in enumerate(cores):
-            rec = Cat(Value.cast(core.rec.payload), Const(ch, p.channel_bits))
-            mux = mux | (rec & sel[ch].replicate(p.record_bits))
-        m.d.sync += [out_valid.eq(sel_valid), out.eq(mux)]
+        recv = Cat(core.rec.valid for core in cores)
+        # New records set their flags after the grant clears its own.
+        m.d.sync += pend.eq((pend & ~grant) | recv)
+        # sel_next == the one-hot select of a grant in the next cycle (it is not used
+        # otherwise). A grant sets the gap, so with record_words > 1 no grant follows one and
+        # the next cycle's pending flags are ``pend | recv`` whenever a grant can follow.
+        nxt = (pend | recv) if n > 1 else ((pend & ~grant) | recv)
+        sel_next = Signal(self.channels)
+        m.d.sync += sel_next.eq(nxt & -nxt)
+        # The record of a granted channel holds until its next dump, a code period later.
+        group = 4
+        parts = []
+        for g0 in range(0, self.channels, group):
+            mux = Const(0, p.record_bits)
+            for ch in range(g0, min(g0 + group, self.channels)):
+                rec = Cat(Value.cast(cores[ch].rec.payload), Const(ch, p.channel_bits))
+                mux = mux | (rec & sel_next[ch].replicate(p.record_bits))
+            part = Signal(p.record_bits, name=f"rec_group{g0 // group}")
+            m.d.sync += part.eq(mux)
+            parts.append(part)
+        m.d.sync += [out_valid.eq(sel_valid), out.eq(_or_all(parts))]
         # The drop counter leaves through a register of its own, so that the FIFO's counter
         # is placed by the FIFO's logic and not pulled towards the output (at 12 channels the
         # FIFO's fit logic -> counter enable was the critical path, 95.6 MHz, 3.8 ns of it
@@ -445,6 +466,13 @@ class GnssChannelArray(wiring.Component):
                      self.overflow_count.eq(ovf)]
         wiring.connect(m, wiring.flipped(self.o), fifo.o)
         return m
+
+
+def _or_all(values):
+    acc = values[0]
+    for v in values[1:]:
+        acc = acc | v
+    return acc
 
 
 def gnss_top(channels: int = 1, params: GnssChannelParams | None = None, *,

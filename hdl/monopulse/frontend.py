@@ -139,11 +139,14 @@ class MonopulseFrontEnd(wiring.Component):
         # -- snapshot count and block boundary (at the correction input) ------------------
         N = p.snapshots
         cnt = Signal(range(max(N, 2)))
-        first = Signal()
-        last = Signal()
-        m.d.comb += [first.eq(cnt == 0), last.eq(cnt == N - 1)]
+        # first == (cnt == 0) and last == (cnt == N - 1) at every cycle, kept in registers
+        # (no latency): last enables ~250 coefficient and steering bits, and through the
+        # counter's compare it was the critical path at nextpnr seed 2 (99.9 MHz).
+        first = Signal(init=1)
+        last = Signal(init=N == 1)
         with m.If(dec_valid):
-            m.d.sync += cnt.eq(Mux(last, 0, cnt + 1))
+            m.d.sync += [cnt.eq(Mux(last, 0, cnt + 1)), first.eq(last),
+                         last.eq(Mux(last, N == 1, cnt == N - 2) if N >= 2 else 1)]
             with m.If(last):
                 m.d.sync += [a.eq(s) for a, s in zip(ac_re + ac_im, sh_re + sh_im)]
                 m.d.sync += [ac_u0.eq(sh_u0), ac_v0.eq(sh_v0), rec_u0.eq(ac_u0),

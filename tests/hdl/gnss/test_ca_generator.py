@@ -17,13 +17,18 @@ class _Bench(wiring.Component):
     prn: In(unsigned(6))
     o: Out(stream.Signature(unsigned(1), always_ready=True))
 
+    def __init__(self, restart: bool = True):
+        self.with_restart = restart
+        super().__init__()
+
     def elaborate(self, platform):
         m = Module()
-        m.submodules.gen = gen = CaCodeGenerator()
+        m.submodules.gen = gen = CaCodeGenerator(restart=self.with_restart)
         k = Signal(range(CODE_LENGTH))
         last = k == CODE_LENGTH - 1
-        m.d.comb += [gen.prn.eq(self.prn), gen.step.eq(self.i.valid),
-                     gen.restart.eq(self.i.valid & last)]
+        m.d.comb += [gen.prn.eq(self.prn), gen.step.eq(self.i.valid)]
+        if self.with_restart:
+            m.d.comb += gen.restart.eq(self.i.valid & last)
         with m.If(self.i.valid):
             m.d.sync += k.eq(Mux(last, 0, k + 1))
         m.d.sync += [self.o.valid.eq(self.i.valid), self.o.payload.eq(gen.chip)]
@@ -42,6 +47,14 @@ def test_generator_pysim_prn_7_two_periods_and_first_chips():
                      backends=("pysim",))
     first = int("".join(str(int(b)) for b in r.words[:10]), 2)
     assert first == FIRST_10_CHIPS_OCTAL[7]
+
+
+def test_without_restart_the_registers_repeat_the_code():
+    """G1 and G2 have period 1023: stepped on without the restart (as the correlator does,
+    hdl.gnss.channel) the generator gives the same chips, period after period."""
+    n = 2 * CODE_LENGTH + 5
+    check_stream(_Bench(restart=False), _expected(19, n), np.zeros(n, np.int64),
+                 inputs={"prn": 19}, backends=("pysim",))
 
 
 @needs_verilator
