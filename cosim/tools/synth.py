@@ -5,7 +5,9 @@ The Verilog is the same text the Verilator backend simulates
 The tools are the YoWASP (WebAssembly) builds installed in the venv (``pip install -e .[synth]``),
 so no system install is needed.
 
-IO: the design's ports are left unconstrained and nextpnr places them on free pins. That works
+IO: the clock input is locked to a pin of a primary clock input (:data:`CLOCK_PINS`: without
+it nextpnr may place ``clk`` on a pin with no route to the global clock network and fail);
+the other ports are left unconstrained and nextpnr places them on free pins. That works
 while the ports fit the package (CABGA381: 365 user IO on the 85F); a top level with wider ports
 needs a wrapper that registers/serialises them before it can be placed (not done here).
 ``fmax_mhz`` is nextpnr's achieved frequency of the ``sync`` clock (register to register; paths
@@ -74,6 +76,10 @@ def tool_versions() -> dict:
         out[key] = text.splitlines()[0] if text else None
     return out
 
+
+#: Per package, a pin of a primary clock input (PCLK) the ``clk`` port is locked to: CABGA381's
+#: G2 is PCLKT6_0 (the 25 MHz clock pin of the ULX3S board, on the 12F to 85F).
+CLOCK_PINS = {"CABGA381": "G2"}
 
 #: nextpnr routers :func:`synth` accepts.
 ROUTERS = ("router2", "router1")
@@ -213,7 +219,11 @@ def place(work: str | Path, *, name: str, device: str = "LFE5U-85F",
             os.link(work / netlist, run / netlist)
         except OSError:
             shutil.copyfile(work / netlist, run / netlist)
-    _run([nextpnr, DEVICES[device], "--package", package, "--json", netlist,
+    lpf = []
+    if package in CLOCK_PINS:
+        (run / "clock.lpf").write_text(f'LOCATE COMP "clk" SITE "{CLOCK_PINS[package]}";\n')
+        lpf = ["--lpf", "clock.lpf", "--lpf-allow-unconstrained"]
+    _run([nextpnr, DEVICES[device], "--package", package, "--json", netlist, *lpf,
           "--report", "report.json", "--freq", f"{target_mhz:g}", "--seed", str(seed),
           "--timing-allow-fail", "--router", router] + (["--tmg-ripup"] if tmg_ripup else []),
          run / "nextpnr.log", run, timeout_s)
