@@ -350,27 +350,30 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
             f"{d['ratios']['verilator_over_pysim']:.0f}x, "
             f"{d['real_time']['model_samples_per_s']:.1f}x", "sim_speed")
     # Single-seed runs of one top (``synth --results``), kept while ``synth --all``'s
-    # results/synth.json lacks their top.
-    for name, label in (("synth_tacan", "TACAN front end"), ("synth_gnss", "GNSS channel"),
-                        ("synth_gnss_iq", "GNSS channel, complex (I/Q) input"),
-                        ("synth_gnss_12ch", "GNSS, 12 channels"),
-                        ("synth_monopulse", "monopulse front end")):
-        d = _get(results, name)
-        if d:
-            add(f"{label}, {d['device']}", f"Fmax (target {fmt(d['target_mhz'])} MHz), LUT4",
-                f"{d['fmax_mhz']:.1f} MHz ({'met' if d['timing_met'] else 'missed'}), "
-                f"{d['lut4']}", name)
-    d = _get(results, "synth")
-    if d:
-        for t in d.get("tops", []):
-            if t.get("fmax_min") is None:
-                continue
-            add(f"FPGA top {t['top']}, {d['device']}",
-                f"Fmax min / median over nextpnr seeds {fmt(d['seeds'])} (target "
-                f"{fmt(d['target_mhz'])} MHz), LUT4",
-                f"{t['fmax_min']:.1f} / {t['fmax_median']:.1f} MHz "
-                f"({'met at every seed' if t['met_all_seeds'] else 'MISSED at a seed'}), "
-                f"{t['lut4']}", "synth")
+    # results/synth.json has not placed their top.
+    d = _get(results, "synth") or {}
+    placed = {t["top"] for t in d.get("tops", []) if t.get("fmax_min") is not None}
+    for name, top, label in (
+            ("synth_tacan", "tacan_frontend", "TACAN front end"),
+            ("synth_gnss", "gnss_channel", "GNSS channel"),
+            ("synth_gnss_iq", "gnss_channel_iq", "GNSS channel, complex (I/Q) input"),
+            ("synth_gnss_12ch", "gnss_channel_array12", "GNSS, 12 channels"),
+            ("synth_monopulse", "monopulse_frontend", "monopulse front end")):
+        r = _get(results, name)
+        if r and top not in placed:
+            add(f"{label}, {r['device']}", f"Fmax (target {fmt(r['target_mhz'])} MHz), LUT4",
+                f"{r['fmax_mhz']:.1f} MHz ({'met' if r['timing_met'] else 'missed'}), "
+                f"{r['lut4']}", name)
+    for t in d.get("tops", []):
+        if t.get("fmax_min") is None:
+            continue
+        n = sum(f is not None for f in t.get("fmax_mhz", []))
+        met = ("met at every seed" if t["met_all_seeds"] else "MISSED at a seed") \
+            if n == len(d["seeds"]) else f"{n} of {len(d['seeds'])} seeds placed"
+        add(f"FPGA top {t['top']}, {d['device']}",
+            f"Fmax min / median over nextpnr seeds {fmt(d['seeds'])} (target "
+            f"{fmt(d['target_mhz'])} MHz), LUT4",
+            f"{t['fmax_min']:.1f} / {t['fmax_median']:.1f} MHz ({met}), {t['lut4']}", "synth")
     return rows
 
 
