@@ -48,9 +48,10 @@ def frequency_plan_warning(fs_hz: float) -> str | None:
     refusal: a recording at such a rate is still tracked, and a code Doppler sweeps the
     samples across the chip (the dead zone holds where the code Doppler is near zero)."""
     from dsp.gnss.ca_code import CHIP_RATE_HZ
+    from dsp.gnss.ephemeris import C_LIGHT
     from hdl.gnss.params import DEFAULT_FS_HZ, code_phase_step_chips
     step = code_phase_step_chips(fs_hz)
-    metres = step * 299_792_458.0 / CHIP_RATE_HZ
+    metres = step * C_LIGHT / CHIP_RATE_HZ
     if metres <= CODE_DEAD_ZONE_WARN_M:
         return None
     k = round(1 / step)

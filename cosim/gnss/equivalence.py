@@ -30,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
+from dsp.gnss.ephemeris import C_LIGHT
 from hdl.gnss.params import GnssChannelParams
 
 from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
@@ -65,7 +66,7 @@ def gnss_equivalence_stimulus(params: GnssChannelParams, samples: int, seed: int
     from .signal import GnssSignalConfig, generate
     rng = np.random.default_rng(seed)
     code0 = float(rng.uniform(0, 1023))
-    doppler = 900.0 * L1_HZ / 299_792_458.0
+    doppler = 900.0 * L1_HZ / C_LIGHT
     if not signal:
         lo = -(1 << (params.adc_bits - 1))
         x = rng.integers(lo, -lo, (samples, 2) if params.complex_input else samples)
