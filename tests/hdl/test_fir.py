@@ -2,7 +2,6 @@
 the exported Verilog (Verilator) == Amaranth simulation == model."""
 from __future__ import annotations
 
-import shutil
 
 import numpy as np
 import pytest
@@ -13,6 +12,7 @@ from dsp.design import design_pulse_fir
 from hdl.fir import Fir
 from hdl.model.fir import (FirParams, default_fir_taps, fir_float_reference, fir_init_state,
                            fir_model)
+from cosim.core.executables import find_executable
 
 from _util import (WithClear, accepted_cycles, assert_same_stream, channel_layout, needs_verilator,
                    pack_channels, random_samples, unpack_channels, verilator_sim)
@@ -335,7 +335,7 @@ def test_bad_model_inputs():
 
 # -- Verilog ---------------------------------------------------------------------------------
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 @pytest.mark.parametrize("name,p", [("fir_tacan", TACAN), ("fir_d3", CONFIGS[0]),
                                     ("fir_lowpass_wrap", CONFIGS[1]), ("fir_3tap", CONFIGS[3]),
                                     ("fir_shared4", SHARED[0]), ("fir_shared_one", SHARED[3])])

@@ -3,7 +3,6 @@ simulation and Verilator on one record with register writes (cosim/gnss/equivale
 from __future__ import annotations
 
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -13,6 +12,7 @@ from cosim.cli import main
 from cosim.gnss.equivalence import (EQUIV_PARAMS, EQUIV_PARAMS_IQ, EQUIV_PRN,
                                     check_gnss_equivalence, gnss_equivalence_stimulus)
 from hdl.model.fifo import unpack_word
+from cosim.core.executables import find_executable
 
 
 def _records(words, p):
@@ -48,7 +48,7 @@ def test_stimulus_correlates_and_writes_every_register():
 
 
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 def test_cli_three_backends_agree(capsys):
     rc = main(["check-equivalence", "--top", "gnss", "--samples", "20000", "--backends",
                "model,pysim,verilator", "--json"])
@@ -60,7 +60,7 @@ def test_cli_three_backends_agree(capsys):
 
 
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 def test_stall_drops_records_identically():
     r = check_gnss_equivalence(40_000, backends=("model", "verilator"), stall=True)
     assert r["equivalent"] and r["mismatches"] == 0, r["verdict"]
@@ -132,7 +132,7 @@ def test_iq_stimulus_correlates_on_the_complex_channel():
 
 
 @pytest.mark.verilator
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not on PATH")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not on PATH")
 def test_iq_three_backends_agree():
     r = check_gnss_equivalence(20_000, params=EQUIV_PARAMS_IQ,
                                backends=("model", "pysim", "verilator"))

@@ -1,11 +1,11 @@
 """check-equivalence --top monopulse: model == pysim == Verilator on a record with register
 writes (and drops under --stall); an empty record is not called equivalent."""
-import shutil
 
 import pytest
 
 from cosim.cli import build_parser
 from cosim.monopulse.equivalence import check_monopulse_equivalence
+from cosim.core.executables import find_executable
 
 
 def test_cli_lists_monopulse():
@@ -20,7 +20,7 @@ def test_model_equals_pysim_with_writes():
     assert r["backends"] == ["model", "pysim"] and r["peaks"] >= 30
 
 
-@pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not installed")
+@pytest.mark.skipif(find_executable("verilator") is None, reason="verilator not installed")
 def test_model_equals_verilator_under_stall_with_drops():
     r = check_monopulse_equivalence(20_000, backends=("model", "verilator"), seed=1, stall=True)
     assert r["equivalent"] and r["mismatches"] == 0, r["verdict"]

@@ -3,7 +3,6 @@
 parameters, the Verilator marker, and the pulse-pair and both-searches configurations."""
 from __future__ import annotations
 
-import shutil
 from dataclasses import replace
 
 import pytest
@@ -12,9 +11,10 @@ from cosim.tacan.signal import TacanSignalConfig
 from dsp.tacan.frontend import PAIR_DETECTOR, FrontendConfig, pair_detector
 from dsp.tacan.peak_params import PeakParams
 from hdl.tacan.params import TacanFrontendParams
+from cosim.core.executables import find_executable
 
 P = TacanFrontendParams()
-HAVE_VERILATOR = shutil.which("verilator") is not None
+HAVE_VERILATOR = find_executable("verilator") is not None
 verilator = pytest.mark.skipif(not HAVE_VERILATOR, reason="verilator not on PATH")
 
 
