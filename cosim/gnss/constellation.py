@@ -8,7 +8,7 @@ the derivation, the interpolation error and the figures are in
 Satellites
 ----------
 From broadcast ephemerides (a RINEX file through :mod:`cosim.gnss.rinex_nav`, or
-:func:`dsp.gnss.constellation.nominal_constellation`): per PRN the healthy ephemeris valid at
+:func:`dsp.gnss.nominal_orbits.nominal_constellation`): per PRN the healthy ephemeris valid at
 the start (:func:`dsp.gnss.ephemeris.select_ephemeris`), *quantised* to its LNAV grid, is used
 for the whole record (it must stay valid to the record's end, at most
 :data:`MAX_DURATION_S`), both for the orbit and clock and for the message, so a receiver that

@@ -16,7 +16,7 @@ and its delay is the 3 deg value). ``bit_error_rate`` flips LNAV bits in the gen
 (:class:`cosim.gnss.constellation.ConstellationConfig`); the truth lists the flipped bits'
 transmit times per PRN.
 
-Defaults: the nominal 24-satellite constellation (:func:`dsp.gnss.constellation.
+Defaults: the nominal 24-satellite constellation (:func:`dsp.gnss.nominal_orbits.
 nominal_constellation`, toe at the start of day 4 of ``week``) or a RINEX navigation file's
 ephemerides; C/N0 the same for every satellite (``Cn0Model(cn0, 0)``); Saastamoinen's
 troposphere at the receiver's height in the signal (the receiver applies the same model;
@@ -126,7 +126,7 @@ def _receiver(spec: ScenarioSpec):
 def scenario_config(spec: ScenarioSpec):
     """``(ConstellationConfig, KlobucharParameters)`` of the scenario ``spec`` (module doc);
     the coefficients are those broadcast and in the signal."""
-    from dsp.gnss.constellation import nominal_constellation
+    from dsp.gnss.nominal_orbits import nominal_constellation
 
     from .constellation import ConstellationConfig
     from .constellation_geometry import Cn0Model, ReceiverClock

@@ -17,7 +17,7 @@ from cosim.gnss.files import AdcMap, SampleFile
 from cosim.gnss.rinex_nav import read_rinex_nav
 from cosim.ins.trajectory import PaperTrajectory
 from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ, ca_code_levels
-from dsp.gnss.constellation import nominal_constellation
+from dsp.gnss.nominal_orbits import nominal_constellation
 from dsp.gnss.ephemeris import C_LIGHT, OMEGA_E_DOT, WEEK_S
 from dsp.gnss.lnav_decode import decode_lnav
 

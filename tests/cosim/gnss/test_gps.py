@@ -13,7 +13,7 @@ import pytest
 from cosim.cli import main
 from cosim.gnss.gps_outputs import summarise, table, write_outputs
 from cosim.gnss.gps_receiver import GpsConfig, navigate
-from dsp.gnss.constellation import nominal_constellation
+from dsp.gnss.nominal_orbits import nominal_constellation
 from dsp.gnss.pvt import PvtStatus
 
 from test_navigation import F, FS, IF, P, WEEK, TOE, records

@@ -21,7 +21,7 @@ import pytest
 from cosim.gnss.constellation import ConstellationConfig, ConstellationSignal
 from cosim.gnss.constellation_geometry import StaticReceiver
 from cosim.gnss.fix_integrity import fix_jumps, navigation_counts
-from dsp.gnss.constellation import nominal_constellation
+from dsp.gnss.nominal_orbits import nominal_constellation
 from dsp.gnss.ephemeris import WEEK_S
 from dsp.gnss.lnav import SUBFRAME_BITS, WORD_BITS
 from dsp.gnss.lnav_decode import decode_lnav

@@ -11,7 +11,7 @@ import pytest
 from cosim.gnss.multichannel import Assignment, Candidate
 from cosim.gnss.navigation import channel_navigation
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, L1_HZ
-from dsp.gnss.constellation import nominal_constellation
+from dsp.gnss.nominal_orbits import nominal_constellation
 from dsp.gnss.ephemeris import C_LIGHT, KlobucharParameters
 from dsp.gnss.lnav import encode_frames
 from dsp.gnss.observables import pseudoranges_from_channels, transmit_time

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dsp.gnss.bitsync import CODES_PER_BIT, bit_sync, nav_bits
-from dsp.gnss.constellation import nominal_constellation
+from dsp.gnss.nominal_orbits import nominal_constellation
 from dsp.gnss.ephemeris import KlobucharParameters
 from dsp.gnss.lnav import encode_frames
 from dsp.gnss.lnav_decode import decode_lnav

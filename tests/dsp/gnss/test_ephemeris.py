@@ -13,7 +13,7 @@ import pytest
 
 from cosim.gnss.rinex_nav import read_rinex_nav, ura_index
 from dsp.gnss import ephemeris as E
-from dsp.gnss.constellation import SLOT_NAMES, SLOTS, EPOCH_GHA_DEG, EPOCH_GPS_S, \
+from dsp.gnss.nominal_orbits import SLOT_NAMES, SLOTS, EPOCH_GHA_DEG, EPOCH_GPS_S, \
     nominal_constellation, nodal_rate
 from dsp.gnss.lnav_fields import EPHEMERIS_FIELDS
 
