@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.session import BusModelSession, RegisterSession, fifo_step
+from ..core.session import RegisterSession
+from .session import GnssModelSessionBase, check_channel_params, open_gnss
 
 __all__ = ["GnssArrayModelSession", "array_registers", "register_name", "open_gnss_array",
            "array_channel_params", "check_parallel"]
@@ -54,7 +55,7 @@ def array_registers(params, channels: int):
     return RegisterMap(f"GNSS array of {channels}", tuple(regs))
 
 
-class GnssArrayModelSession(BusModelSession):
+class GnssArrayModelSession(GnssModelSessionBase):
     """The bit-exact :class:`hdl.gnss.channel.GnssChannelArray` as a session (module doc).
 
     Parameters
@@ -68,30 +69,21 @@ class GnssArrayModelSession(BusModelSession):
         bits).
     """
 
-    backend = "model"
     what = "GNSS channel array model"
+    sort_records = True
 
     def __init__(self, params, channels: int, parallel: bool = False):
         from hdl.gnss.model import GnssArrayModel
-        from hdl.gnss.params import GnssChannelParams
-        if not isinstance(params, GnssChannelParams):
-            raise ValueError(f"params must be a GnssChannelParams, not {type(params).__name__}")
+        check_channel_params(params)
         if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) \
                 or not 2 <= channels <= 64 or (1 << params.channel_bits) < channels:
             raise ValueError(f"an array session needs 2..64 channels that its channel_bits "
                              f"({params.channel_bits}) can number, not {channels!r}")
-        super().__init__()
-        self.params, self.channels = params, int(channels)
-        self.model = GnssArrayModel(params, self.channels, parallel=bool(parallel))
-        addr_bits = 2 + max(1, (self.channels - 1).bit_length())
-        self._widths = {"reg_we": 1, "reg_addr": addr_bits, "reg_data": params.reg_data_width}
-        self._fifo = params.fifo
-        rw = self._fifo.record_words
-        self._carry_wc = np.zeros(0, np.int64)
-        self._carry_w = np.zeros((0, rw), np.int64)
+        channels = int(channels)
+        super().__init__(params, GnssArrayModel(params, channels, parallel=bool(parallel)),
+                         2 + max(1, (channels - 1).bit_length()))
+        self.channels = channels
         self._ended = False
-        self.bus_writes: list[tuple[int, int, int]] = []
-        self.n_records = 0
 
     def end_input(self) -> None:
         """No sample follows: the records still waiting for the arbiter are granted (their
@@ -101,30 +93,15 @@ class GnssArrayModelSession(BusModelSession):
             self._ended = True
             self._add(*self.model.flush_words())
 
-    def _add(self, rc, new) -> None:
-        self.n_records += new.shape[0]
-        wc = np.concatenate([self._carry_wc, np.asarray(rc, np.int64)])
-        w = np.concatenate([self._carry_w, new])
-        order = np.argsort(wc, kind="stable")
-        self._carry_wc, self._carry_w = wc[order], w[order]
-
-    def _step(self, queue, ready, n, writes):
-        start, stop = self.cycle, self.cycle + n
-        x = self.params.unpack_samples(queue[:n])   # payload words -> samples (I/Q if complex)
+    def _check_step(self, x) -> None:
         if x.size and self._ended:
             raise ValueError("the array's input was declared ended (end_input): no more "
                              "samples")
-        bus = self._bus_cycles(writes, start, stop)
-        self.bus_writes += bus
+
+    def _records(self, x, bus, cycles):
         if x.size or bus:
-            cyc = np.arange(start, start + len(x), dtype=np.int64)
-            self._add(*self.model.step_words(x, bus, cycles=cyc))
-        now = self._carry_wc < stop
-        wc, w = self._carry_wc[now], self._carry_w[now]
-        self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
-        words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, self._fifo,
-                                                    self._fifo_state)
-        return words, cycles, len(x)
+            return self.model.step_words(x, bus, cycles=cycles)
+        return None
 
 
 class GnssArrayRegisterSession(RegisterSession):
@@ -155,7 +132,6 @@ def open_gnss_array(backend: str, params, channels: int, parallel: bool = False)
     (:func:`array_channel_params`); ``parallel``: the model's channels on numba's threads
     (the model backend only; a single channel has nothing to share)."""
     from ..backends.factory import BACKENDS, open_stream_session
-    from .session import open_gnss
     if backend not in BACKENDS:
         raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
     check_parallel(parallel, backend)

@@ -30,10 +30,79 @@ import numpy as np
 from ..backends.factory import open_frontend
 from ..core.session import BusModelSession, FrontendSession, RegisterSession, fifo_step
 
-__all__ = ["GnssModelSession", "GnssRegisterSession", "open_gnss"]
+__all__ = ["GnssModelSessionBase", "GnssModelSession", "GnssRegisterSession", "open_gnss",
+           "check_channel_params"]
 
 
-class GnssModelSession(BusModelSession):
+class GnssModelSessionBase(BusModelSession):
+    """What the bit-exact channel and array sessions share: the parameters and the model,
+    the bus ports' widths, the bus writes given (:attr:`bus_writes`), and the records the
+    model has made that have not yet reached the FIFO's input (carried from step to step)
+    before they go through the FIFO (:func:`~cosim.core.session.fifo_step`, its state
+    carried). A subclass gives :meth:`_records`: the records of one step's samples and bus
+    writes.
+
+    Parameters
+    ----------
+    params : GnssChannelParams
+    model
+        The bit-exact model (its state carried from step to step).
+    addr_bits : int
+        Width of ``reg_addr``.
+    """
+
+    backend = "model"
+    #: Order the records by their FIFO input cycle (the array's channels make them out of
+    #: order; a single channel makes them in order).
+    sort_records = False
+
+    def __init__(self, params, model, addr_bits: int):
+        super().__init__()
+        self.params, self.model = params, model
+        self._widths = {"reg_we": 1, "reg_addr": addr_bits, "reg_data": params.reg_data_width}
+        self._fifo = params.fifo        # derived properties: computed once, not per step
+        self._carry_wc = np.zeros(0, np.int64)
+        self._carry_w = np.zeros((0, self._fifo.record_words), np.int64)
+        #: Bus writes ``(cycle, reg, value)`` the model has been given.
+        self.bus_writes: list[tuple[int, int, int]] = []
+        self.n_records = 0
+
+    def _records(self, x, bus, cycles):
+        """``(cycles, words)``: the FIFO input cycles and the words of the records the model
+        makes from the samples ``x`` (input at ``cycles``) and the bus writes ``bus``."""
+        raise NotImplementedError
+
+    def _add(self, rc, new) -> None:
+        """Records ``(cycles, words)`` to the ones carried to the FIFO's input."""
+        self.n_records += new.shape[0]
+        wc = np.concatenate([self._carry_wc, np.asarray(rc, np.int64)])
+        w = np.concatenate([self._carry_w, new])
+        if self.sort_records:
+            order = np.argsort(wc, kind="stable")
+            wc, w = wc[order], w[order]
+        self._carry_wc, self._carry_w = wc, w
+
+    def _step(self, queue, ready, n, writes):
+        start, stop = self.cycle, self.cycle + n
+        x = self.params.unpack_samples(queue[:n])   # payload words -> samples (I/Q if complex)
+        self._check_step(x)
+        bus = self._bus_cycles(writes, start, stop)
+        self.bus_writes += bus
+        rec = self._records(x, bus, np.arange(start, start + len(x), dtype=np.int64))
+        if rec is not None:
+            self._add(*rec)
+        now = self._carry_wc < stop
+        wc, w = self._carry_wc[now], self._carry_w[now]
+        self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
+        words, cycles, self._fifo_state = fifo_step(wc, w, ready, n, start, self._fifo,
+                                                    self._fifo_state)
+        return words, cycles, len(x)
+
+    def _check_step(self, x) -> None:
+        """Refuse a step's samples ``x`` the session cannot take (default: none refused)."""
+
+
+class GnssModelSession(GnssModelSessionBase):
     """The bit-exact model of :class:`hdl.gnss.channel.GnssChannel` as a session (module
     doc). Samples are offered one per cycle while queued; cycles without a queued sample
     have ``i.valid`` low. The input words are the ``i`` port's payloads, as for the HDL
@@ -49,47 +118,28 @@ class GnssModelSession(BusModelSession):
         (its accumulators are sized never to overflow), so it must be False.
     """
 
-    backend = "model"
     what = "GNSS channel model"
 
     def __init__(self, params, *, log_ranges: bool = False):
         from hdl.gnss.model import GnssChannelModel
-        from hdl.gnss.params import GnssChannelParams
-        if not isinstance(params, GnssChannelParams):
-            raise ValueError(f"params must be a GnssChannelParams, not {type(params).__name__}")
+        check_channel_params(params)
         if params.channel_bits:
             raise ValueError(f"GnssModelSession models one channel (channel_bits 0), not "
                              f"channel_bits {params.channel_bits}")
         if log_ranges:
             raise ValueError("the GNSS channel model keeps no range log (log_ranges=False)")
-        super().__init__()
-        self.params = params
-        self.model = GnssChannelModel(params)
-        self._widths = {"reg_we": 1, "reg_addr": 2, "reg_data": params.reg_data_width}
-        self._fifo = params.fifo        # derived properties: computed once, not per step
-        rw = self._fifo.record_words
-        self._carry_wc = np.zeros(0, np.int64)
-        self._carry_w = np.zeros((0, rw), np.int64)
-        #: Bus writes ``(cycle, reg, value)`` the model has been given.
-        self.bus_writes: list[tuple[int, int, int]] = []
-        self.n_records = 0
+        super().__init__(params, GnssChannelModel(params), 2)
 
-    def _step(self, queue, ready, n, writes):
-        p, fp = self.params, self._fifo
-        start, stop = self.cycle, self.cycle + n
-        x = p.unpack_samples(queue[:n])     # the input port's payload words -> samples
-        bus = self._bus_cycles(writes, start, stop)
-        self.bus_writes += bus
-        r = self.model.step(x, bus, cycles=np.arange(start, start + len(x), dtype=np.int64))
-        new = r.words(p)
-        self.n_records += new.shape[0]
-        wc = np.concatenate([self._carry_wc, r.cycles])
-        w = np.concatenate([self._carry_w, new])
-        now = wc < stop
-        self._carry_wc, self._carry_w = wc[~now], w[~now]
-        words, cycles, self._fifo_state = fifo_step(wc[now], w[now], ready, n, start, fp,
-                                                    self._fifo_state)
-        return words, cycles, len(x)
+    def _records(self, x, bus, cycles):
+        r = self.model.step(x, bus, cycles=cycles)
+        return r.cycles, r.words(self.params)
+
+
+def check_channel_params(params) -> None:
+    """``params`` must be a :class:`hdl.gnss.params.GnssChannelParams`."""
+    from hdl.gnss.params import GnssChannelParams
+    if not isinstance(params, GnssChannelParams):
+        raise ValueError(f"params must be a GnssChannelParams, not {type(params).__name__}")
 
 
 class GnssRegisterSession(RegisterSession):
