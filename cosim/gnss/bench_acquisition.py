@@ -229,9 +229,8 @@ def _markdown(r: dict) -> str:
 
 def _plot(r: dict, path: Path) -> None:
     try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from ..tools.plots import pyplot, save_figure
+        plt = pyplot()
     except ImportError:
         return
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -243,9 +242,7 @@ def _plot(r: dict, path: Path) -> None:
     ax.set_ylabel(f"detection probability (pfa {r['pfa_per_search']:g} per search)")
     ax.legend()
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 __all__ = ["gnss_acquisition", "trial", "summarise", "CN0_DBHZ", "FIXED", "PFA"]

@@ -148,9 +148,8 @@ def _leap_seconds(run) -> int:
 
 
 def _plots(run, rows, truth, out: Path) -> list[str]:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     paths = []
     valid = [r for r in rows if r["status"].startswith("fix")]
     if truth is not None and valid:
@@ -162,10 +161,7 @@ def _plots(run, rows, truth, out: Path) -> list[str]:
         ax.set_ylabel("position error (m)")
         ax.legend()
         ax.grid(alpha=0.3)
-        fig.tight_layout()
-        paths.append(str(out / "position_error.png"))
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        paths.append(save_figure(fig, out / "position_error.png"))
     fig = plt.figure(figsize=(5, 5))
     ax = fig.add_subplot(projection="polar")
     ax.set_theta_zero_location("N")
@@ -179,10 +175,7 @@ def _plots(run, rows, truth, out: Path) -> list[str]:
     ax.set_rlim(0, 90)
     ax.set_yticks([0, 30, 60, 90], ["90", "60", "30", "0"])
     ax.set_title("sky plot (elevation, azimuth)")
-    fig.tight_layout()
-    paths.append(str(out / "skyplot.png"))
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out / "skyplot.png"))
     fig, ax = plt.subplots(figsize=(7, 4))
     for c in run.channels:
         if c.win_t.size:
@@ -190,10 +183,7 @@ def _plots(run, rows, truth, out: Path) -> list[str]:
     ax.set_xlabel("recording time (s)")
     ax.set_ylabel("C/N0 (dB-Hz)")
     ax.legend(fontsize=6, ncol=3)
-    fig.tight_layout()
-    paths.append(str(out / "cn0.png"))
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out / "cn0.png"))
     return paths
 
 

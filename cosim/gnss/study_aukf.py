@@ -109,9 +109,8 @@ def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_r
                        duration_s: float = 10.0, seed: int = 1):
     """The patent's figure 3 as a plot: RMS over runs of the Doppler-estimate error vs time,
     UKF (fixed q0) and AUKF, truth with ``q_true = q_factor q0``."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     from dsp.gnss.loops_fixed import FLOAT
     from dsp.gnss.trackers import TrackerContext, make_tracker
     n = int(round(duration_s / 1e-3))
@@ -133,9 +132,7 @@ def plot_doppler_error(path, q_factor: float = 10.0, cn0_dbhz: float = 32.0, n_r
     ax.set_ylabel("Doppler error RMS (Hz)")
     ax.set_title(f"q_true = {q_factor:g} q0, {cn0_dbhz:g} dB-Hz, {n_runs} runs")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 # -- the benchmark: python -m cosim bench aukf ------------------------------------------------

@@ -168,9 +168,8 @@ def table(s: dict) -> str:
 def write_plots(m, out_dir) -> list[str]:
     """Doppler and C/N0 against time per PRN and the prompt I/Q scatter, as PNG files in
     ``out_dir``; returns their paths."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     asg = [a for a in m.assignments if a.t]
@@ -186,10 +185,7 @@ def write_plots(m, out_dir) -> list[str]:
         x.set_xlabel("t (s)", fontsize=7)
         x.set_ylabel("Doppler (Hz)", fontsize=7)
         x.tick_params(labelsize=6)
-    fig.tight_layout()
-    paths.append(str(out / "doppler.png"))
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out / "doppler.png"))
     fig, x = plt.subplots(figsize=(7, 4))
     for a in asg:
         if a.win_t:
@@ -197,10 +193,7 @@ def write_plots(m, out_dir) -> list[str]:
     x.set_xlabel("t (s)")
     x.set_ylabel("C/N0 (dB-Hz, M2M4 per lock window)")
     x.legend(fontsize=6, ncol=3)
-    fig.tight_layout()
-    paths.append(str(out / "cn0.png"))
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out / "cn0.png"))
     fig, ax = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.6 * rows), squeeze=False)
     for k, a in enumerate(asg):
         x = ax[k // cols][k % cols]
@@ -208,8 +201,5 @@ def write_plots(m, out_dir) -> list[str]:
         x.set_title(f"PRN {a.prn} prompt I/Q", fontsize=8)
         x.set_aspect("equal", "datalim")
         x.tick_params(labelsize=6)
-    fig.tight_layout()
-    paths.append(str(out / "prompt_iq.png"))
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out / "prompt_iq.png"))
     return paths

@@ -127,9 +127,8 @@ def _plot(path, series, segments=None):
     """Seed figures 6-7: discriminator output (20 ms means: the 1 ms values' thermal spread,
     ~13 deg rms at 40 dB-Hz, hides the dynamic stress) and PLI (100 ms means of the 10 ms
     values) vs time, the three loops, OCXO and TCXO; jerk segments shaded."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     from .trajectory import PaperTrajectory
     segs = PaperTrajectory().jerk_segments() if segments is None else segments
     fig, ax = plt.subplots(2, 2, figsize=(13, 6.5), sharex=True)
@@ -153,9 +152,7 @@ def _plot(path, series, segments=None):
             a.grid(alpha=0.3)
             if a.lines:
                 a.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def figures(out: Path, duration_s: float = 150.0, seed: int = 1) -> Path:

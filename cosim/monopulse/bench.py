@@ -34,9 +34,8 @@ def _row(cfg):
 
 
 def _plot(path, seed=1):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     from dsp.monopulse.angles import angles
     r = run_monopulse(MonopulseRunConfig(seed=seed), keep_series=True)
     s = r["series"]
@@ -55,9 +54,7 @@ def _plot(path, seed=1):
         ax.legend(loc="upper right")
     axes[1].set_xlabel("time (s)")
     fig.suptitle("Monopulse, SNR -8 dB, N = 8192, adaptive alpha-beta (seed figs. 6-7)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 def _hdl_cost(duration_s):

@@ -431,9 +431,8 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
                          f"{'PASS' if c['pass_0p1db'] else 'FAIL'}")
     paths["md"].write_text("\n".join(lines) + "\n")
 
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
     for bref, ref in REFERENCE_LOSS_DB.items():
@@ -476,9 +475,7 @@ def write_report(rows: list[dict], out_dir, *, elapsed_s: float | None = None) -
     ax2.set_title(f"{meta['trials']} trials x {meta['n_samples']} samples, seed {meta['seed']}",
                   fontsize=10)
     ax2.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(paths["png"], dpi=110)
-    plt.close(fig)
+    save_figure(fig, paths["png"])
     return paths
 
 

@@ -362,9 +362,8 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
         w.writeheader()
         for r in s["rows"]:
             w.writerow({**r, **{f"shown_{k}": (r.get("shown") or {}).get(k) for k in shown}})
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4))
     rows = [r for r in s["rows"] if r["ber"] > 0 and r["rmse_deg"] is not None]
     base = next((r for r in s["rows"] if r["ber"] == 0), None)
@@ -379,9 +378,7 @@ def _write(fc: FaultConfig, s: dict, out: Path) -> None:
     ax.set_title(f"{model.plot_title} vs bit errors in {fc.target} (SNR {fc.snr_db:g} dB)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / f"{stem}.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / f"{stem}.png")
     m = s["machine"]
     f_ = lambda v, fmt: "-" if v is None else format(v, fmt)
     lines = [f"# Bit errors in {fc.target}", "",

@@ -28,9 +28,8 @@ def plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
     """One figure per swept parameter (the others at their reference): accuracy (RMSE of
     the valid estimates; dashed the golden chain's, dotted the CRB), availability and the
     misleading estimates, per SNR."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     from cosim.core.receivers import get
     P, fig_m = primary_key(cfg.receiver), get(cfg.receiver).primary
     names = [n for n, _ in cfg.params]
@@ -80,10 +79,8 @@ def plot(cfg: SweepConfig, rows, out: Path) -> list[str]:
         for a in (ax, av, mi):
             a.grid(True, which="both", alpha=0.3)
         ax.legend(title="SNR", fontsize=8)
-        fig.tight_layout()
         fn = f"rmse_vs_{n.replace('.', '_')}.png"
-        fig.savefig(out / fn, dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / fn)
         files.append(fn)
     return files
 

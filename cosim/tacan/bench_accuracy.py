@@ -292,9 +292,8 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None,
 
 
 def _plot(path: Path, rows: list, records: list, grid: AccuracyGrid) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..tools.plots import pyplot, save_figure
+    plt = pyplot()
     fig, axes = plt.subplots(1, 1 + len(grid.modes), figsize=(5 + 5 * len(grid.modes), 4))
     a1 = axes[0]
     for m, ls in zip(grid.modes, ("-", "--")):
@@ -326,9 +325,7 @@ def _plot(path: Path, rows: list, records: list, grid: AccuracyGrid) -> None:
         ax.set_title(f"{m} mode, per bearing")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _markdown(s: dict) -> str:
