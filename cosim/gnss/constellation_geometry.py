@@ -48,6 +48,7 @@ import pymap3d
 
 from dsp.gnss.ephemeris import C_LIGHT, OMEGA_E_DOT, sagnac_rotate, satellite_states
 
+from ..core.csv_table import read_csv_table
 from .oscillator import clock_error_s
 from dsp.gnss.oscillator import oscillator as oscillator_model
 
@@ -156,11 +157,16 @@ def along_track_receiver(profile, lat_deg: float, lon_deg: float, h_m: float,
                               f"({lat_deg:g}, {lon_deg:g}, {h_m:g} m) az {azimuth_deg:g} deg")
 
 
+#: The columns of a trajectory CSV (:func:`csv_receiver`; the velocities optional).
+TRAJECTORY_COLUMNS = ("t", "x", "y", "z", "vx", "vy", "vz")
+
+
 def csv_receiver(path, name: str = "trajectory") -> TrajectoryReceiver:
     """A :class:`TrajectoryReceiver` from the CSV file ``path``: rows ``t, x, y, z`` or ``t,
     x, y, z, vx, vy, vz`` (``t`` seconds of GPS time since the record's nominal start,
     strictly increasing; ECEF metres and m/s), ``#`` comments and one header line allowed,
-    at least 2 rows (4 without velocities). With velocities the motion is the cubic Hermite
+    at least 2 rows (4 without velocities), read by
+    :func:`cosim.core.csv_table.read_csv_table`. With velocities the motion is the cubic Hermite
     interpolant of the rows (position and velocity met at every row), without them the
     cubic spline through the positions (velocity its derivative); beyond the table the end
     pieces continue. Errors name ``name`` (the option) and the row. A position step that
@@ -168,34 +174,8 @@ def csv_receiver(path, name: str = "trajectory") -> TrajectoryReceiver:
     :func:`check_motion` refuses."""
     from scipy.interpolate import CubicHermiteSpline, CubicSpline
     p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"{name} {str(path)!r} is not a file")
-    rows, header = [], False
-    for k, ln in enumerate(p.read_text().splitlines(), 1):
-        if not ln.strip() or ln.lstrip().startswith("#"):
-            continue
-        try:
-            rows.append([float(v) for v in ln.split(",")])
-        except ValueError:
-            if rows or header:
-                raise ValueError(f"{name} {str(path)!r} line {k}: not numbers: "
-                                 f"{ln.strip()[:60]!r}") from None
-            header = True
-    a = np.array(rows, dtype=np.float64) if rows and len({len(r) for r in rows}) == 1 \
-        else None
-    if a is None or a.shape[1] not in (4, 7):
-        raise ValueError(f"{name} {str(path)!r} needs rows of 4 (t, x, y, z) or 7 (t, x, y, "
-                         f"z, vx, vy, vz) comma-separated numbers, all rows alike")
-    if a.shape[0] < (2 if a.shape[1] == 7 else 4):
-        raise ValueError(f"{name} {str(path)!r} needs at least {2 if a.shape[1] == 7 else 4} "
-                         f"rows, not {a.shape[0]}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} {str(path)!r} has values that are not finite")
-    bad = np.flatnonzero(np.diff(a[:, 0]) <= 0)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(f"{name} {str(path)!r}: time must increase strictly; row {i + 2} "
-                         f"({a[i + 1, 0]:g} s) does not follow row {i + 1} ({a[i, 0]:g} s)")
+    a = read_csv_table(p, f"{name} {str(path)!r}", [TRAJECTORY_COLUMNS[:4], TRAJECTORY_COLUMNS],
+                       min_rows=(4, 2), header=True, rows_need="the interpolation").values
     t = a[:, 0]
     sp = CubicHermiteSpline(t, a[:, 1:4], a[:, 4:7], axis=0) if a.shape[1] == 7 else \
         CubicSpline(t, a[:, 1:4], axis=0)

@@ -32,12 +32,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from dsp.gnss.ca_code import L1_HZ
 from dsp.gnss.jerk import phi_b, jerk_phi, jerk_q  # noqa: F401  (the model lives with the DSP)
+
+from ..core.csv_table import read_csv_table
 
 #: Speed of light (m/s), IS-GPS-200.
 C_MPS = 299792458.0
@@ -311,8 +312,9 @@ class _HermiteTrajectory(Trajectory):
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CsvProfile:
-    """A user table of time (s) and range (m): a CSV file with two columns (``#`` comments and
-    a non-numeric header line allowed), or the arrays directly.
+    """A user table of time (s) and range (m): a CSV file with two columns (``,`` or ``;``
+    separated, further columns ignored; ``#`` comments and a non-numeric header line
+    allowed; read by :func:`cosim.core.csv_table.read_csv_table`), or the arrays directly.
 
     The times must be strictly increasing, start at or before 0 and cover the record; at
     least 4 rows.
@@ -340,22 +342,10 @@ class CsvProfile:
 
     def _table(self):
         if self.path is not None:
-            p = Path(self.path)
-            if not p.is_file():
-                raise ValueError(f"range table {str(p)!r} does not exist")
-            lines = [ln for ln in p.read_text().splitlines()
-                     if ln.strip() and not ln.lstrip().startswith("#")]
-            try:
-                float(lines[0].replace(";", ",").split(",")[0])
-            except (ValueError, IndexError):
-                lines = lines[1:]     # a header
-            try:
-                a = np.array([[float(v) for v in ln.replace(";", ",").split(",")[:2]]
-                              for ln in lines], dtype=np.float64)
-            except ValueError as e:
-                raise ValueError(f"range table {str(p)!r}: {e}") from None
-            if a.ndim != 2 or a.shape[1] != 2:
-                raise ValueError(f"range table {str(p)!r} needs two columns (time, range)")
+            a = read_csv_table(self.path, f"range table {str(self.path)!r}",
+                               [("time_s", "range_m")], min_rows=4, header=True,
+                               separators=",;", extra_columns=True,
+                               rows_need="the spline").values
             return a[:, 0], a[:, 1]
         return np.asarray(self.t_s, dtype=np.float64), np.asarray(self.range_m, dtype=np.float64)
 

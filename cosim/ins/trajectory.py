@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.core.csv_table import read_csv_table
 from cosim.gnss.dynamics import L1_WAVELENGTH_M
 from cosim.gnss.oscillator import OscillatorPhase
 from dsp.gnss.oscillator import oscillator
@@ -60,44 +61,16 @@ CSV_MAX_ACCEL_G = 100.0
 
 @functools.lru_cache(maxsize=8)
 def read_trajectory_csv(path: str, mtime_ns: int = 0, size: int = 0) -> np.ndarray:
-    """The ``(n, 2)`` table (time s, along-track distance m) of a trajectory CSV, checked
-    row by row (``#`` comments and blank lines skipped): two numeric columns, at least 4
-    rows, finite values, time strictly increasing, and motion within
+    """The ``(n, 2)`` table (time s, along-track distance m, read only) of a trajectory CSV,
+    read by :func:`cosim.core.csv_table.read_csv_table` (two numeric columns, no header, at
+    least 4 rows, time strictly increasing) and checked for motion within
     :data:`CSV_MAX_SPEED_MPS` and :data:`CSV_MAX_ACCEL_G`; a refusal names the file, its line
     and column. ``mtime_ns``, ``size``: the cache's key (a changed file is read again)."""
     name = f"--trajectory-csv {path!r}"
-    rows, lines = [], []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for ln, text in enumerate(fh, 1):
-            text = text.split("#", 1)[0].strip()
-            if not text:
-                continue
-            cells = [c.strip() for c in text.split(",")]
-            if len(cells) != 2:
-                raise ValueError(f"{name} line {ln}: {len(cells)} columns; a row is "
-                                 f"time_s, distance_m (2 columns)")
-            row = []
-            for col, c in enumerate(cells, 1):
-                try:
-                    v = float(c)
-                except ValueError:
-                    v = math.nan
-                if not math.isfinite(v):
-                    raise ValueError(f"{name} line {ln}, column {col}: {c!r} is not a finite "
-                                     f"number")
-                row.append(v)
-            rows.append(row)
-            lines.append(ln)
-    if len(rows) < 4:
-        raise ValueError(f"{name} has {len(rows)} rows of (time_s, distance_m); the spline "
-                         f"needs at least 4")
-    a = np.array(rows, np.float64)
+    table = read_csv_table(path, name, [("time_s", "distance_m")], min_rows=4,
+                           rows_need="the spline")
+    a, lines = table.values, table.lines
     dt = np.diff(a[:, 0])
-    bad = np.nonzero(dt <= 0)[0]
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(f"{name} line {lines[i + 1]}, column 1: time must increase strictly; "
-                         f"{a[i + 1, 0]:g} s does not follow {a[i, 0]:g} s (line {lines[i]})")
     v = np.diff(a[:, 1]) / dt
     bad = np.nonzero(np.abs(v) > CSV_MAX_SPEED_MPS)[0]
     if bad.size:
@@ -114,7 +87,6 @@ def read_trajectory_csv(path: str, mtime_ns: int = 0, size: int = 0) -> np.ndarr
                          f"{v[i - 1]:.4g} to {v[i]:.4g} m/s around {a[i, 0]:g} s, "
                          f"{abs(acc[i - 1]) / G_MPS2:.3g} g, more than {CSV_MAX_ACCEL_G:g} g: "
                          f"a position step?")
-    a.setflags(write=False)
     return a
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.csv_table import read_csv_table
 from .array import check_visible
 
 
@@ -124,18 +125,10 @@ class CsvTrajectory:
 
     @classmethod
     def from_csv(cls, path):
-        """Columns ``time_s,u,v`` (comma separated, one optional header line)."""
-        with open(path) as f:
-            first = f.readline()
-        try:
-            float(first.split(",")[0])
-            skip = 0
-        except ValueError:
-            skip = 1  # a header line
-        data = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
-        if data.shape[1] != 3:
-            raise ValueError(f"trajectory CSV {path} must have 3 columns time_s,u,v, not "
-                             f"{data.shape[1]}")
+        """Columns ``time_s,u,v`` (comma separated, ``#`` comments and one optional header
+        line; read by :func:`cosim.core.csv_table.read_csv_table`)."""
+        data = read_csv_table(path, f"trajectory CSV {str(path)!r}", [("time_s", "u", "v")],
+                              min_rows=2, header=True, rows_need="the interpolation").values
         return cls(data[:, 0], data[:, 1], data[:, 2])
 
     def __call__(self, t_s):

@@ -114,7 +114,7 @@ def test_csv_profile_reproduces_a_cubic(tmp_path):
     (dict(t_s=(0, 1, 1, 2), range_m=(1, 2, 3, 4)), "strictly increasing, not 1.0 then 1.0"),
     (dict(t_s=(1, 2, 3, 4), range_m=(1, 2, 3, 4)), "must start at t <= 0 s, not 1.0"),
     (dict(t_s=(0, 1), range_m=(1, 2)), ">= 4 rows"),
-    (dict(path="/nonexistent/los.csv"), "does not exist"),
+    (dict(path="/nonexistent/los.csv"), "range table '/nonexistent/los.csv' is not a file"),
 ])
 def test_csv_profile_errors(kw, msg):
     with pytest.raises(ValueError, match=msg):

@@ -98,11 +98,12 @@ def test_a_trajectory_that_does_not_parse_is_refused(capsys, tmp_path):
     t = np.arange(0.0, 8.01, 1.0)
     cases = [
         (_csv(tmp_path, [r[:5] for r in _line(t)], name="five.csv"), "4 (t, x, y, z) or 7"),
-        (_csv(tmp_path, _line(t[::-1]), name="back.csv"), "time must increase strictly; row 2"),
+        (_csv(tmp_path, _line(t[::-1]), name="back.csv"),
+         "line 3, column 1: time must increase strictly; 7 s does not follow 8 s (line 2)"),
         (tmp_path / "none.csv", "is not a file"),
         (_csv(tmp_path, [[0.0, 1.0, 2.0, 3.0]], header="t,x,y,z\nx,y", name="two.csv"),
-         "line 2: not numbers"),
-        (_csv(tmp_path, _line(t)[:1], name="one.csv"), "at least 2 rows"),
+         "line 2: 2 columns; a row is 4 (t, x, y, z) or 7"),
+        (_csv(tmp_path, _line(t)[:1], name="one.csv"), "the interpolation needs at least 2"),
     ]
     for p, match in cases:
         err = _refused(capsys, tmp_path, "--trajectory", p)
