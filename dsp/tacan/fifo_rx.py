@@ -27,8 +27,10 @@ Nothing is taken on trust, because the link may carry bit errors:
 * marker payloads add to ``dropped_reported``; a marker claiming more drops than the link
   can produce (``max_marker``) is counted as ``bad_markers`` instead.
 
-Parity, tags and markers are the generic receiver's (:func:`dsp.records.receive_records`,
-one-word records); this module adds the timestamp checks on the data words it hands over.
+The data word's fields are :func:`peak_record`, the front end's record layout (the model
+packs its words with it, :attr:`hdl.tacan.params.TacanFrontendParams.record`). Parity, tags
+and markers are the generic receiver's (:func:`dsp.records.receive_records`, one-word
+records); this module adds the timestamp checks on the data words it hands over.
 The loops are compiled (numba): a word costs a few nanoseconds.
 """
 from __future__ import annotations
@@ -37,8 +39,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dsp.records import receive_records
 from dsp.jit import njit_cached
+from dsp.record_layout import RecordLayout
+from dsp.records import receive_records
+
+def peak_record(amp_width: int, ts_bits: int, source_bits: int = 0) -> RecordLayout:
+    """The TACAN front end's FIFO record, LSB first: ``amplitude`` (``amp_width`` bits),
+    ``timestamp`` (``ts_bits``: the ADC tick mod ``2**ts_bits``) and, with two searches
+    (``source_bits = 1``), ``source`` (:data:`dsp.tacan.standard.SOURCE_PULSE` or
+    ``SOURCE_PAIR``)."""
+    f = [("amplitude", int(amp_width), False), ("timestamp", int(ts_bits), False)]
+    if source_bits:
+        f.append(("source", int(source_bits), False))
+    return RecordLayout(tuple(f))
+
 
 STAT_NAMES = ("words", "data", "markers", "dropped_reported", "bad_tags", "ts_rejected",
               "ts_resyncs", "bad_markers", "parity_errors")
@@ -161,24 +175,23 @@ def _decide(st, s, n_ts, last, tmask, max_gap, resync_after, out_t, out_a, out_i
 
 
 @njit_cached(nogil=True)
-def _rx(data, src, seq0, amp_width, ts_bits, max_gap, resync_after, final, st, out_t, out_a,
+def _rx(amp, ts, src, seq0, ts_bits, max_gap, resync_after, final, st, out_t, out_a,
         out_i, out_s, stats):
-    """``data``: the payloads of the data words, in order (parity, tags and markers already
-    handled), ``src`` their sources (track numbers), ``seq0`` the number of the first; ``st``
+    """``amp``, ``ts``: the amplitudes and (wrapped) timestamps of the data words, in order
+    (parity, tags and markers already handled), ``src`` their sources (track numbers),
+    ``seq0`` the number of the first; ``st``
     one row per track (the ``_LAST_W`` ... ``_C_SEQ`` columns); see :func:`receive_words`
     for the rules. Outputs in the order decided, with the word numbers in ``out_i`` and the
     tracks in ``out_s``."""
-    amask = (np.int64(1) << amp_width) - 1
     tmask = (np.int64(1) << ts_bits) - 1
     n = 0
-    for k in range(data.size):
-        pay = data[k]
+    for k in range(ts.size):
         s = src[k]
-        n_ts = (pay >> amp_width) & tmask
+        n_ts = ts[k]
         if st[s, _HAVE_C] != 0:
             n = _decide(st, s, n_ts, False, tmask, max_gap, resync_after, out_t, out_a, out_i,
                         out_s, n, stats)
-        st[s, _HAVE_C], st[s, _C_TS], st[s, _C_AMP] = 1, n_ts, pay & amask
+        st[s, _HAVE_C], st[s, _C_TS], st[s, _C_AMP] = 1, n_ts, amp[k]
         st[s, _C_SEQ] = seq0 + k
     if final:                   # end of the stream: decide the pending words alone
         for s in range(st.shape[0]):
@@ -279,7 +292,9 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
         raise ValueError(f"with parity the payload width must be <= 60, not {width}")
     w = np.ascontiguousarray(np.asarray(words, dtype=np.int64))
     link = receive_records(w, width=int(width), parity=bool(parity), max_marker=int(max_marker))
-    data = np.ascontiguousarray(link.records[:, 0])
+    rec = peak_record(amp_width, ts_bits, source_bits).from_word_array(link.records[:, :1],
+                                                                     int(width))
+    amp, ts = np.ascontiguousarray(rec[:, 0]), np.ascontiguousarray(rec[:, 1])
     state = state or RxState()
     n_tracks = 1 << source_bits
     if len(state.tracks) != n_tracks:
@@ -287,17 +302,14 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
             raise ValueError(f"state has {len(state.tracks)} source timelines, not "
                              f"{n_tracks} (source_bits={source_bits})")
         state.tracks = [RxTrack() for _ in range(n_tracks)]
-    if source_bits:
-        src = ((data >> np.int64(amp_width + ts_bits)) & np.int64(1)).astype(np.int64)
-    else:
-        src = np.zeros(data.size, np.int64)
+    src = np.ascontiguousarray(rec[:, 2]) if source_bits else np.zeros(ts.size, np.int64)
     st = np.array([[t.last_wrapped, t.last_tick, t.rejects, t.pending is not None,
                     *(t.pending if t.pending is not None else (0, 0, 0)), t.emitted_tick]
                    for t in state.tracks], np.int64)
-    cap = data.size + n_tracks
+    cap = ts.size + n_tracks
     out_t, out_a, out_i, out_s = (np.empty(cap, np.int64) for _ in range(4))
     stats = np.zeros(len(STAT_NAMES), np.int64)
-    n = _rx(data, src, np.int64(state.n_data), int(amp_width), int(ts_bits), int(max_gap_ticks),
+    n = _rx(amp, ts, src, np.int64(state.n_data), int(ts_bits), int(max_gap_ticks),
             int(resync_after), bool(final), st, out_t, out_a, out_i, out_s, stats)
     ls = link.state.stats
     for name, generic in (("words", "words"), ("data", "records"), ("markers", "markers"),
@@ -308,7 +320,7 @@ def receive_words(words, *, width: int, amp_width: int, ts_bits: int,
         t.last_wrapped, t.last_tick, t.rejects = (int(v) for v in row[:3])
         t.pending = tuple(int(v) for v in row[_C_TS:_EMIT_T]) if row[_HAVE_C] else None
         t.emitted_tick = int(row[_EMIT_T])
-    state.n_data += int(data.size)
+    state.n_data += int(ts.size)
     for name, v in zip(STAT_NAMES, stats):
         state.stats[name] += int(v)
     # decided in track order per word; the word numbers restore the stream order

@@ -374,15 +374,16 @@ class TacanFrontendModel:
                              "searches (config.pair_peak)")
 
     def words(self, peaks: FrontendPeaks) -> np.ndarray:
-        """Packed FIFO input payloads ``amplitude | (timestamp mod 2**ts_bits) << amp_width``,
-        with two searches ``| source << (amp_width + ts_bits)``."""
+        """Packed FIFO input payloads (:attr:`~TacanFrontendParams.record`): ``amplitude |
+        (timestamp mod 2**ts_bits) << amp_width``, with two searches ``| source <<
+        (amp_width + ts_bits)``."""
         self._check_source(peaks)
-        p = self.params.peak
-        ts = peaks.timestamps & np.int64((1 << p.ts_bits) - 1)
-        w = peaks.amplitudes | (ts << np.int64(p.amp_width))
+        p = self.params
+        cols = [peaks.amplitudes, peaks.timestamps]
         if peaks.source is not None:
-            w = w | (peaks.source.astype(np.int64) << np.int64(p.amp_width + p.ts_bits))
-        return w
+            cols.append(peaks.source)
+        values = np.stack([np.asarray(c, np.int64) for c in cols], axis=1)
+        return p.record.to_word_array(values, p.fifo.width)[:, 0]
 
     def unpack(self, fifo_words) -> dict[str, np.ndarray]:
         """Split FIFO output words into ``amplitude``, ``timestamp`` (wrapped), ``tag`` and,
@@ -390,13 +391,11 @@ class TacanFrontendModel:
         of the drop count)."""
         p = self.params
         w = np.asarray(fifo_words, dtype=np.int64)
-        aw, tb, sb = p.peak.amp_width, p.peak.ts_bits, p.source_bits
-        out = {"amplitude": w & np.int64((1 << aw) - 1),
-               "timestamp": (w >> np.int64(aw)) & np.int64((1 << tb) - 1),
-               "tag": (w >> np.int64(aw + tb + sb)) & np.int64(3)}
-        if sb:
-            out["source"] = (w >> np.int64(aw + tb)) & np.int64(1)
-        return out
+        width = p.fifo.width
+        rec = p.record.from_word_array(w.reshape(-1, 1) & np.int64((1 << width) - 1), width)
+        out = {name: rec[:, k].reshape(w.shape) for k, name in enumerate(p.record.names)}
+        out["tag"] = (w >> np.int64(width)) & np.int64(3)
+        return {k: out[k] for k in ("amplitude", "timestamp", "tag", *p.record.names[2:])}
 
     def emit_cycles(self, peaks: FrontendPeaks, in_valid=None, *, adc_cycles=None) -> np.ndarray:
         """Clock cycle (from reset, as :func:`cosim.pysim.run_stream` counts) at which each

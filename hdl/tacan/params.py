@@ -13,6 +13,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dsp.fixed import ROUNDINGS, check_width
+from dsp.record_layout import RecordLayout
+from dsp.tacan.fifo_rx import peak_record
 from dsp.tacan.frontend import FrontendConfig
 from dsp.tacan.peak_params import PeakParams
 
@@ -170,7 +172,8 @@ class TacanFrontendParams:
             b[name] = replace(search, amp_width=env.out_width, ts_bits=self.ts_bits,
                               ts_step=cfg.decimation,
                               thr_min=min(thr_min, (1 << env.out_width) - 1))
-        b["fifo"] = FifoParams(width=env.out_width + self.ts_bits + self.source_bits,
+        b["fifo"] = FifoParams(width=peak_record(env.out_width, self.ts_bits,
+                                                 self.source_bits).bits,
                                depth=self.fifo_depth, count_width=self.fifo_count_bits,
                                parity=self.fifo_parity)
         if self.check_headroom:
@@ -239,6 +242,13 @@ class TacanFrontendParams:
         """Bits of the source field at the top of the FIFO payload: 1 with
         :attr:`pair_peak` (0 = :attr:`peak`, 1 = :attr:`pair_peak`), else 0."""
         return 0 if self.config.pair_peak is None else 1
+
+    @property
+    def record(self) -> RecordLayout:
+        """The FIFO record (:func:`dsp.tacan.fifo_rx.peak_record`): ``amplitude``
+        (envelope width), ``timestamp`` (``ts_bits``) and, with :attr:`pair_peak`,
+        ``source``; one FIFO word (:attr:`fifo` is as wide)."""
+        return peak_record(self.peak.amp_width, self.ts_bits, self.source_bits)
 
     @property
     def fifo(self) -> FifoParams:
