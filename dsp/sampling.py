@@ -20,3 +20,16 @@ def fold_frequency(f_hz: float, fs_hz: float) -> FoldedIf:
     if r <= fs_hz / 2:
         return FoldedIf(r, False)
     return FoldedIf(fs_hz - r, True)
+
+
+class SampledIf:
+    """Where a signal configuration's IF lands after sampling: for a class with ``if_hz``
+    and ``fs_hz`` (:func:`fold_frequency`)."""
+
+    @property
+    def digital_if_hz(self) -> float:
+        return fold_frequency(self.if_hz, self.fs_hz).digital_if_hz
+
+    @property
+    def spectrum_inverted(self) -> bool:
+        return fold_frequency(self.if_hz, self.fs_hz).inverted

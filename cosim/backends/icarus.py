@@ -52,7 +52,7 @@ from ..core.session import FrontendSession, ready_window
 from .build_cache import cached_build
 from .pysim import StreamResult, input_items
 from .verilator_harness import as_value
-from .verilog import PortInfo, component_ports, verilog_text
+from .verilog import PortInfo, stream_ports, verilog_text
 
 __all__ = ["IcarusStreamSim", "IcarusSession", "UnknownValueError", "icarus_available",
            "icarus_missing_message", "icarus_version"]
@@ -141,15 +141,9 @@ class IcarusStreamSim:
     def __init__(self, component, name: str = "dut", *, build_dir: str | Path | None = None):
         self.component = component
         self.name = name
-        self.ports: list[PortInfo] = component_ports(component)
+        self.ports: list[PortInfo] = stream_ports(component)
         self._by_name = {p.name: p for p in self.ports}
         self._by_id = {id(p.value): p for p in self.ports}
-        for required in ("o__valid", "o__payload"):
-            if required not in self._by_name:
-                raise ValueError(f"component must have an output stream `o` (no {required} port)")
-        for p in self.ports:
-            if p.name in ("clk", "rst"):
-                raise ValueError(f"port name {p.name!r} clashes with the sync domain's clock/reset")
         self.verilog = verilog_text(component, name=name, emit_src=False)
         if not icarus_available():   # after the export: the component is elaborated either way
             raise RuntimeError(icarus_missing_message())

@@ -53,7 +53,7 @@ from ..core.session import FrontendSession, ready_window
 from . import verilator_harness as _harness
 from .build_cache import cached_build, publish, temp_dir_beside
 from .pysim import StreamResult, input_items
-from .verilog import PortInfo, component_ports, verilator_missing_message, verilog_text
+from .verilog import PortInfo, stream_ports, verilator_missing_message, verilog_text
 from .verilator_harness import (CFLAGS, HARNESS_TEMPLATE, MAKE_OPTS, HARNESS_VERSION, as_value,
                                 limbs, parse_header_ports, payload_get_code, payload_set_code,
                                 RunArgs, verilator_source, verilator_version)
@@ -108,15 +108,9 @@ class VerilatorStreamSim:
                  jobs: int | None = None):
         self.component = component
         self.name = name
-        self.ports: list[PortInfo] = component_ports(component)
+        self.ports: list[PortInfo] = stream_ports(component)
         self._by_name = {p.name: i for i, p in enumerate(self.ports)}
         self._by_id = {id(p.value): i for i, p in enumerate(self.ports)}
-        for required in ("o__valid", "o__payload"):
-            if required not in self._by_name:
-                raise ValueError(f"component must have an output stream `o` (no {required} port)")
-        for p in self.ports:
-            if p.name in ("clk", "rst"):
-                raise ValueError(f"port name {p.name!r} clashes with the sync domain's clock/reset")
         self.verilog = verilog_text(component, name=name, emit_src=False)
         # Checked after the export so that the component is elaborated either way (no
         # UnusedElaboratable warning when the tool is missing).

@@ -14,7 +14,8 @@ from amaranth.hdl import Const, Value, ValueCastable
 from amaranth.hdl import _ir
 from amaranth.lib import wiring
 
-__all__ = ["PortInfo", "component_ports", "verilog_text", "verilator_missing_message"]
+__all__ = ["PortInfo", "component_ports", "stream_ports", "verilog_text",
+           "verilator_missing_message"]
 
 def verilator_missing_message() -> str:
     return ("Verilator not found on PATH: install it with `make setup` (apt-get install "
@@ -65,6 +66,21 @@ def component_ports(component: wiring.Component) -> list[PortInfo]:
         ports.append(PortInfo(name="__".join(map(str, path)), value=value,
                               direction="in" if member.flow == wiring.In else "out",
                               width=len(value), signed=shape.signed))
+    return ports
+
+
+def stream_ports(component: wiring.Component) -> list[PortInfo]:
+    """The ports of a component a stream simulator runs (:func:`component_ports`): it must
+    have an output stream ``o``, and no port may be named ``clk`` or ``rst`` (the sync
+    domain's)."""
+    ports = component_ports(component)
+    names = {p.name for p in ports}
+    for required in ("o__valid", "o__payload"):
+        if required not in names:
+            raise ValueError(f"component must have an output stream `o` (no {required} port)")
+    for p in ports:
+        if p.name in ("clk", "rst"):
+            raise ValueError(f"port name {p.name!r} clashes with the sync domain's clock/reset")
     return ports
 
 

@@ -56,7 +56,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from dsp.jit import njit_cached
-from dsp.sampling import fold_frequency
+from dsp.sampling import SampledIf
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
 from hdl.gnss.params import DEFAULT_FS_HZ, DEFAULT_IF_HZ
@@ -139,7 +139,7 @@ def check_cn0(name: str, value) -> float:
 
 
 @dataclass(frozen=True)
-class GnssSignalConfig:
+class GnssSignalConfig(SampledIf):
     """A GPS L1 C/A scenario at a digital IF.
 
     Parameters
@@ -248,14 +248,6 @@ class GnssSignalConfig:
             raise ValueError(f"seed must be an integer >= 0, not {self.seed!r}")
 
     # -- derived ---------------------------------------------------------------------------
-    @property
-    def digital_if_hz(self) -> float:
-        return fold_frequency(self.if_hz, self.fs_hz).digital_if_hz
-
-    @property
-    def spectrum_inverted(self) -> bool:
-        return fold_frequency(self.if_hz, self.fs_hz).inverted
-
     @property
     def n_samples(self) -> int:
         return int(round(self.duration_s * self.fs_hz))

@@ -49,7 +49,7 @@ import numpy as np
 from scipy import signal as sps
 
 from dsp.jit import njit_cached
-from dsp.sampling import fold_frequency
+from dsp.sampling import SampledIf
 # The standard (frequencies, pulse width, burst codes) is the DSP's: imported, not restated.
 from dsp.tacan.standard import F15, F135, PULSE_WIDTH_S, burst_offsets, pair_spacing_s  # noqa: F401
 
@@ -83,7 +83,7 @@ class Multipath:
 
 
 @dataclass(frozen=True)
-class TacanSignalConfig:
+class TacanSignalConfig(SampledIf):
     """Everything that defines a TACAN IF scenario. Defaults: docs/explanation/tacan.md.
 
     Parameters
@@ -211,14 +211,6 @@ class TacanSignalConfig:
                 f"Nyquist zone edge (multiple of fs/2 = {self.fs_hz / 2e6:g} MHz)")
 
     # -- derived ---------------------------------------------------------------------------
-    @property
-    def digital_if_hz(self) -> float:
-        return fold_frequency(self.if_hz, self.fs_hz).digital_if_hz
-
-    @property
-    def spectrum_inverted(self) -> bool:
-        return fold_frequency(self.if_hz, self.fs_hz).inverted
-
     @property
     def pulse_sigma_s(self) -> float:
         return self.pulse_width_s * FWHM_TO_SIGMA
