@@ -170,3 +170,22 @@ class Arithmetic:
         f = getattr(self.formats, signal)
         flim = min(f.max_value, -f.min_value)
         return flim if limit is None else min(limit, flim)
+
+    def measurements(self, z, m: int, trials: int, z_limit: float | None):
+        """A batch of measurements for ``trials`` filters of ``m`` measurements: ``z`` of
+        shape ``(T, m)`` or ``(trials, T, m)`` (``(T,)`` for ``m = 1``) -> ``(zc, ok, T)``:
+        ``zc`` ``(trials, T, m)`` float64 with the implausible vectors zeroed, ``ok`` which
+        are plausible (finite, within :meth:`limit` of ``z_limit``), ``T`` the steps."""
+        z = np.asarray(z, dtype=np.float64)
+        shape = z.shape
+        if z.ndim == 1 and m == 1:
+            z = z[:, None]
+        if z.ndim == 2:
+            z = np.broadcast_to(z, (trials,) + z.shape)
+        if z.ndim != 3 or z.shape[0] != trials or z.shape[2] != m:
+            raise ValueError(f"z must have shape (T, {m}) or ({trials}, T, {m}), not {shape}")
+        ok = np.all(np.isfinite(z), axis=2)
+        lim = self.limit(z_limit, "z")
+        if lim is not None:
+            ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
+        return np.where(ok[..., None], z, 0.0), ok, z.shape[1]

@@ -405,21 +405,8 @@ class KalmanFilter:
         return EVENTS.counts(self.ev)
 
     def _inputs(self, z, u):
-        m, p = self.model.m, self.model.p
-        z = np.asarray(z, dtype=np.float64)
-        shape = z.shape
-        if z.ndim == 1 and m == 1:
-            z = z[:, None]
-        if z.ndim == 2:
-            z = np.broadcast_to(z, (self.trials,) + z.shape)
-        if z.ndim != 3 or z.shape[0] != self.trials or z.shape[2] != m:
-            raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
-        T = z.shape[1]
-        ok = np.all(np.isfinite(z), axis=2)
-        lim = self.ar.limit(self.z_limit, "z")
-        if lim is not None:
-            ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
-        zc = np.where(ok[..., None], z, 0.0)
+        p = self.model.p
+        zc, ok, T = self.ar.measurements(z, self.model.m, self.trials, self.z_limit)
         if u is None:
             if p:
                 raise ValueError(f"the model has a control input (p = {p}): give u")

@@ -445,22 +445,9 @@ class UnscentedKalmanFilter:
 
     def run(self, z, *, keep_P: bool = False) -> UKFRun:
         """Filter ``T`` steps; ``z`` ``(T, m)`` or ``(B, T, m)`` (``(T,)`` for m = 1)."""
-        m, n = self.model.m, self.model.n
-        z = np.asarray(z, np.float64)
-        shape = z.shape
-        if z.ndim == 1 and m == 1:
-            z = z[:, None]
-        if z.ndim == 2:
-            z = np.broadcast_to(z, (self.trials,) + z.shape)
-        if z.ndim != 3 or z.shape[0] != self.trials or z.shape[2] != m:
-            raise ValueError(f"z must have shape (T, {m}) or ({self.trials}, T, {m}), not {shape}")
-        ok = np.all(np.isfinite(z), axis=2)
-        lim = self.ar.limit(self.z_limit, "z")
-        if lim is not None:
-            ok &= np.all(np.abs(np.where(np.isfinite(z), z, 0.0)) <= lim, axis=2)
-        zc = np.where(ok[..., None], z, 0.0)
+        n = self.model.n
+        zc, ok, T = self.ar.measurements(z, self.model.m, self.trials, self.z_limit)
         zc = self.ar.words(zc, "z")
-        T = z.shape[1]
         xs = np.empty((self.trials, T, n), self.x.dtype)
         Ps = np.empty((self.trials, T if keep_P else 0, n, n), self.x.dtype)
         Q, R, Lq, Lr, pf, ph = self._mats
