@@ -234,3 +234,24 @@ def wrap(v, width: int, signed: bool = True) -> np.ndarray:
     if signed:
         v = np.where(v >= (np.int64(1) << np.int64(width - 1)), v - (mask + 1), v)
     return v
+
+
+def check_samples(what: str, x, width: int, sample_shape: tuple = (),
+                  shape_note: str = "") -> np.ndarray:
+    """Input samples of a block: integers of shape ``(n, *sample_shape)`` that fit in
+    ``width`` signed bits, as int64; else a ``ValueError`` naming ``what`` (the block's
+    input; ``shape_note`` follows the shape wanted, e.g. ``" for channels=2"``)."""
+    x = np.asarray(x)
+    if x.dtype.kind not in "iu":
+        raise ValueError(f"{what} must be integers, not dtype {x.dtype}")
+    x = x.astype(np.int64, copy=False)
+    if x.ndim < 1 or x.shape[1:] != tuple(sample_shape):
+        raise ValueError(f"{what} must have shape (n, *{sample_shape}){shape_note}, not "
+                         f"{x.shape}")
+    if x.size:
+        lo, hi = -(1 << (width - 1)), (1 << (width - 1)) - 1
+        xmin, xmax = x.min(), x.max()
+        if xmin < lo or xmax > hi:
+            raise ValueError(f"{what} must fit in {width} signed bits [{lo}, {hi}], not "
+                             f"range [{xmin}, {xmax}]")
+    return x

@@ -50,7 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, check_width, shift_right
+from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, check_samples, check_width, \
+    shift_right
 
 __all__ = ["CicParams", "CicState", "cic_init_state", "cic_model", "cic_float_gain",
            "hogenauer_f2"]
@@ -287,20 +288,8 @@ def cic_init_state(params: CicParams) -> CicState:
 
 
 def _check_input(params: CicParams, x) -> np.ndarray:
-    x = np.asarray(x)
-    if x.dtype.kind not in "iu":
-        raise ValueError(f"CIC input must be integers, not dtype {x.dtype}")
-    x = x.astype(np.int64, copy=False)
-    if x.ndim < 1 or x.shape[1:] != params.sample_shape:
-        raise ValueError(f"CIC input must have shape (n, *{params.sample_shape}) for "
-                         f"channels={params.channels}, not {x.shape}")
-    if x.size:
-        lo, hi = -(1 << (params.in_width - 1)), (1 << (params.in_width - 1)) - 1
-        xmin, xmax = x.min(), x.max()
-        if xmin < lo or xmax > hi:
-            raise ValueError(f"CIC input must fit in {params.in_width} signed bits "
-                             f"[{lo}, {hi}], not range [{xmin}, {xmax}]")
-    return x
+    return check_samples("CIC input", x, params.in_width, params.sample_shape,
+                         f" for channels={params.channels}")
 
 
 def _wrap(v: np.ndarray, width: int) -> np.ndarray:

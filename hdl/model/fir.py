@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, check_width, shift_right
+from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, check_samples, check_width, \
+    shift_right
 from dsp.jit import njit_cached
 
 from .rounding import rnd, round_consts
@@ -330,20 +331,8 @@ def fir_init_state(params: FirParams) -> FirState:
 
 
 def _check_input(params: FirParams, x) -> np.ndarray:
-    x = np.asarray(x)
-    if x.dtype.kind not in "iu":
-        raise ValueError(f"FIR input must be integers, not dtype {x.dtype}")
-    x = x.astype(np.int64, copy=False)
-    if x.ndim < 1 or x.shape[1:] != params.sample_shape:
-        raise ValueError(f"FIR input must have shape (n, *{params.sample_shape}) for "
-                         f"channels={params.channels}, not {x.shape}")
-    if x.size:
-        lo, hi = -(1 << (params.in_width - 1)), (1 << (params.in_width - 1)) - 1
-        xmin, xmax = x.min(), x.max()
-        if xmin < lo or xmax > hi:
-            raise ValueError(f"FIR input must fit in {params.in_width} signed bits "
-                             f"[{lo}, {hi}], not range [{xmin}, {xmax}]")
-    return x
+    return check_samples("FIR input", x, params.in_width, params.sample_shape,
+                         f" for channels={params.channels}")
 
 
 def _accumulate(p: FirParams, x: np.ndarray, st: FirState):
