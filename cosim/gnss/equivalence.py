@@ -33,7 +33,8 @@ from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
 from dsp.gnss.ephemeris import C_LIGHT
 from hdl.gnss.params import GnssChannelParams
 
-from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
+from ..tools.equivalence import (BACKENDS, PYSIM_MAX_SAMPLES, check_samples_backends,
+                                 compare_backends, stall_pattern)
 
 __all__ = ["check_gnss_equivalence", "gnss_equivalence_stimulus", "EQUIV_PARAMS",
            "EQUIV_PARAMS_IQ", "EQUIV_PRN"]
@@ -122,11 +123,7 @@ def check_gnss_equivalence(samples: int = 20_000, *, backends=BACKENDS, seed: in
     """The keys of :func:`cosim.tacan.equivalence.check_equivalence` (``peaks``: the model's
     records; ``dropped``: its overflow count) for the GNSS channel (module doc)."""
     from .session import open_gnss
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
-        raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
-    unknown = [b for b in backends if b not in BACKENDS]
-    if unknown:
-        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
+    check_samples_backends(samples, backends)
     if params is None:
         params = EQUIV_PARAMS
         if stall:

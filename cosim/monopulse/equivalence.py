@@ -20,7 +20,8 @@ from hdl.monopulse.params import (REG_COEF, REG_U0, REG_V0, MonopulseFrontendPar
                                   dc_word, pack_input)
 
 from ..core.session import write_register
-from ..tools.equivalence import BACKENDS, PYSIM_MAX_SAMPLES, compare_backends, stall_pattern
+from ..tools.equivalence import (BACKENDS, PYSIM_MAX_SAMPLES, check_samples_backends,
+                                 compare_backends, stall_pattern)
 
 __all__ = ["check_monopulse_equivalence", "stimulus", "EQUIV_PARAMS"]
 
@@ -57,11 +58,7 @@ def check_monopulse_equivalence(samples: int = 20_000, *, backends=BACKENDS, see
     of the model; ``markers``: 0, the monopulse FIFO drops whole records and counts them in
     ``overflow_count``, which is compared; ``dropped``: the model's overflow count)."""
     from ..backends.factory import open_frontend
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
-        raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
-    unknown = [b for b in backends if b not in BACKENDS]
-    if unknown:
-        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
+    check_samples_backends(samples, backends)
     if params is None:
         params = (replace(EQUIV_PARAMS, fifo_depth=EQUIV_PARAMS.record_words + 2) if stall
                   else EQUIV_PARAMS)

@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from ..tools.equivalence import (BACKENDS, ICARUS_MAX_SAMPLES, PYSIM_MAX_SAMPLES,
+                                 check_samples_backends,
                                  simulators_line, skip_reason, stall_pattern)
 from .signal import TacanSignalConfig, generate
 
@@ -75,11 +76,7 @@ def check_equivalence(top: str = "tacan", samples: int = 20_000, *,
     from hdl.tacan.model import TacanFrontendModel
     if top not in TOPS:
         raise ValueError(f"top must be one of {TOPS}, not {top!r}")
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
-        raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
-    unknown = [b for b in backends if b not in BACKENDS]
-    if unknown:
-        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
+    check_samples_backends(samples, backends)
     if params is None:      # the default receiver's front end
         from dataclasses import replace
         from .config import TacanRunConfig

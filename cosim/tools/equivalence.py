@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_record_size", "compare_backends", "count_differences", "stall_pattern",
+__all__ = ["check_record_size", "check_samples_backends", "compare_backends", "count_differences", "stall_pattern",
            "skip_reason", "simulators_line", "PYSIM_MAX_SAMPLES", "ICARUS_MAX_SAMPLES",
            "BACKENDS"]
 
@@ -40,6 +40,15 @@ def check_record_size(samples) -> int:
     n = check_int("--samples", samples, 1)
     check_memory(n * BYTES_PER_SAMPLE, f"--samples {n:,}", "--samples")
     return n
+
+
+def check_samples_backends(samples, backends) -> None:
+    """A check's record length (an integer >= 1) and backends (among :data:`BACKENDS`)."""
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise ValueError(f"samples must be an integer >= 1, not {samples!r}")
+    unknown = [b for b in backends if b not in BACKENDS]
+    if unknown:
+        raise ValueError(f"backends must be among {BACKENDS}, not {unknown}")
 
 
 def stall_pattern(n_cycles: int, seed: int, *, p_ready: float = 0.5,
