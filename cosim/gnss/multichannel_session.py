@@ -92,6 +92,25 @@ class GnssArrayModelSession(BusModelSession):
         self._ended = False
         self.bus_writes: list[tuple[int, int, int]] = []
         self.n_records = 0
+        self._direct: list[tuple[int, int, int]] = []     # bus writes not on the ports
+        self._we_cycle = -1                                 # cycle of the last of them
+
+    def bus_write(self, cycle: int, addr: int, value: int) -> None:
+        """A register write on the bus at ``cycle`` without its four port writes (the
+        pulse of :func:`cosim.core.session.write_register`: ``reg_we`` high in ``cycle``
+        only), ``value`` already checked by the register map
+        (:class:`GnssArrayRegisterSession`'s path on the model). Writes come in cycle
+        order, one per cycle, none in a cycle already run; the ports read as the pulse
+        leaves them."""
+        if cycle < self.cycle or (self._direct and cycle <= self._direct[-1][0]):
+            raise ValueError(f"internal: bus write at cycle {cycle} out of order (session "
+                             f"at {self.cycle})")
+        self._direct.append((int(cycle), int(addr), int(value)))
+
+    def _read(self, port):
+        if port == "reg_we" and self._we_cycle == self.cycle - 1:
+            return 1
+        return super()._read(port)
 
     def end_input(self) -> None:
         """No sample follows: the records still waiting for the arbiter are granted (their
@@ -115,10 +134,20 @@ class GnssArrayModelSession(BusModelSession):
             raise ValueError("the array's input was declared ended (end_input): no more "
                              "samples")
         bus = self._bus_cycles(writes, start, stop)
+        checked = False
+        if self._direct and self._direct[0][0] < stop:
+            k = 0
+            while k < len(self._direct) and self._direct[k][0] < stop:
+                k += 1
+            now, self._direct = self._direct[:k], self._direct[k:]
+            _, self._bus["reg_addr"], self._bus["reg_data"] = now[-1]
+            self._we_cycle = now[-1][0]
+            checked = not bus
+            bus = sorted(bus + now, key=lambda w: w[0]) if bus else now
         self.bus_writes += bus
         if x.size or bus:
             cyc = np.arange(start, start + len(x), dtype=np.int64)
-            self._add(*self.model.step_words(x, bus, cycles=cyc))
+            self._add(*self.model.step_words(x, bus, cycles=cyc, checked=checked))
         now = self._carry_wc < stop
         wc, w = self._carry_wc[now], self._carry_w[now]
         self._carry_wc, self._carry_w = self._carry_wc[~now], self._carry_w[~now]
@@ -134,6 +163,17 @@ class GnssArrayRegisterSession(RegisterSession):
     def __init__(self, inner, params, channels: int):
         super().__init__(inner, array_registers(params, channels))
         self.channels = channels
+        self._direct = isinstance(inner, GnssArrayModelSession)
+
+    def _bus_write(self, b: int, a: int, v: int) -> None:
+        """On the model, each register write goes to the bus as one
+        :meth:`GnssArrayModelSession.bus_write` (the same cycle and value as the four port
+        writes of :func:`~cosim.core.session.write_register`, without them); on the HDL
+        backends as port writes."""
+        if self._direct:
+            self.inner.bus_write(b, a, v)
+        else:
+            super()._bus_write(b, a, v)
 
     def end_input(self) -> None:
         """The input has ended (:meth:`GnssArrayModelSession.end_input`; the HDL backends
