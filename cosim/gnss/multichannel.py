@@ -167,6 +167,7 @@ class ChannelSlot:
 
     def __init__(self, owner: "_Allocator", ch: int):
         self.owner, self.ch = owner, ch
+        self.regs = (owner.name(ch, "carr_freq"), owner.name(ch, "code_freq"))
         self.epochs = CodeEpochs(owner.p)
         self.track: Tracking | None = None
         self.asg: Assignment | None = None
@@ -220,7 +221,7 @@ class ChannelSlot:
                             % CODE_LENGTH)
         a.ip.append(float(iq6[2]))
         a.qp.append(float(iq6[3]))
-        writes = [(o.name(self.ch, "carr_freq"), r[0]), (o.name(self.ch, "code_freq"), r[1])]
+        writes = [(self.regs[0], r[0]), (self.regs[1], r[1])]
         if self.det.update(complex(iq6[2], iq6[3])):
             self._window(n_p)
             if self.release:
