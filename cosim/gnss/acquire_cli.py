@@ -95,8 +95,8 @@ def add_parser(sub, make_parser) -> None:
     add_search_options(p)
     p.add_argument("--search", type=str.lower, default="sequential", choices=SEARCHES,
                    help="sequential (default; the search of gnss and ins): each PRN's dwell "
-                        "extends, " + ", ".join(str(d) for d in DEFAULT_SCHEDULE) +
-                        " ms, until detected or --acq-limit-ms is used (--coherent-ms T "
+                        "extends (" + "; ".join(str(d) for d in DEFAULT_SCHEDULE) +
+                        ") until detected or --acq-limit-ms is used (--coherent-ms T "
                         "--noncoherent K: that one dwell); verified: the fixed --stages, "
                         "each detection checked by a second dwell (the first search of "
                         "gnss-track and gps)")
