@@ -13,6 +13,7 @@ is what to compare on a shared machine (measured in one run).
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -137,11 +138,12 @@ def loop_mean_standard_error(x, T_s: float) -> dict:
     mean to be 0 (a bias is what is looked for): the mean square of the epoch-to-epoch
     differences is ``2 sigma^2 (1 - a)`` whatever the mean, the variance about each run's
     own mean is ``sigma^2 (1 - 1/n)``; the two, pooled over the runs, are solved for
-    ``sigma^2`` and ``a`` (a fixed point). Returns ``sigma_chips``, ``n_eff``,
-    ``correlation_time_s``, ``se_run`` (one run's mean) and ``se_pooled`` (the mean over the
-    S runs, independent: each has its own noise). A window of fewer than ~4 correlation
-    times leaves too few independent epochs to estimate the two (the fixed point runs away):
-    refused."""
+    ``sigma^2`` and ``n`` (``n^2 - c n + c = 0``, ``c = M d2 / (4 s2)``, its larger root).
+    Returns ``sigma_chips``, ``n_eff``, ``correlation_time_s``, ``se_run_chips`` (one run's
+    mean) and ``se_pooled_chips`` (the mean over the S runs, independent: each has its own
+    noise). An error that wanders too slowly for the window to average it (``c < 4``: fewer
+    than ~4 correlation times; a loop with no restoring force, e.g. in a dead zone, does)
+    has no standard error: those four are None."""
     x = np.asarray(x, np.float64)
     M, S = x.shape
     if M < 10 or S < 1 or not np.all(np.isfinite(x)):
@@ -150,28 +152,26 @@ def loop_mean_standard_error(x, T_s: float) -> dict:
     z = x - x.mean(axis=0)
     s2 = float(np.mean(z * z))
     d2 = float(np.mean(np.diff(x, axis=0) ** 2))
-    n, sig2 = float(M), s2
-    for _ in range(200):
-        sig2 = s2 / (1.0 - 1.0 / n)
-        oma = min(d2 / (2.0 * sig2), 1.0)
-        n_new = M * oma / (2.0 - oma)
-        if n_new < 2.0:
-            raise ValueError(f"a window of {M} epochs holds fewer than 2 independent ones of "
-                             f"the loop's error: lengthen it (duration_s - settle_s)")
-        if abs(n_new - n) <= 1e-9 * n:
-            n = n_new
-            break
-        n = n_new
-    a = 1.0 - oma
+    c = M * d2 / (4.0 * s2) if s2 > 0 else math.inf
+    if not c >= 4.0:
+        return {"sigma_chips": float(np.sqrt(s2)), "n_eff": None, "correlation_time_s": None,
+                "se_run_chips": None, "se_pooled_chips": None}
+    n = (c + math.sqrt(c * c - 4.0 * c)) / 2.0
+    sig2 = s2 / (1.0 - 1.0 / n) if math.isfinite(n) else s2
+    oma = min(d2 / (2.0 * sig2), 1.0)
+    n = M * oma / (2.0 - oma)
     se_run = float(np.sqrt(sig2 / n))
     return {"sigma_chips": float(np.sqrt(sig2)), "n_eff": float(n),
-            "correlation_time_s": float(T_s * (1 + a) / (2 * oma)),
+            "correlation_time_s": float(T_s * (2.0 - oma) / (2.0 * oma)),
             "se_run_chips": se_run, "se_pooled_chips": float(se_run / np.sqrt(S))}
 
 
 def dead_zone_rule(rate: dict) -> bool:
     """One rate's figures (:func:`code_dead_zone`) pass the dead-zone rule
-    (:data:`DEAD_ZONE_POOLED_SE`, :data:`DEAD_ZONE_RUN_SE`)."""
+    (:data:`DEAD_ZONE_POOLED_SE`, :data:`DEAD_ZONE_RUN_SE`); an error without a standard
+    error (it does not average out in the window) does not."""
+    if rate["se_run_chips"] is None:
+        return False
     return bool(abs(rate["pooled_bias_chips"]) <= DEAD_ZONE_POOLED_SE * rate["se_pooled_chips"]
                 and rate["max_abs_bias_chips"] <= DEAD_ZONE_RUN_SE * rate["se_run_chips"])
 
@@ -416,6 +416,11 @@ def _dead_zone_markdown(dz: dict) -> list[str]:
               "(chip) | mean / pooled SE | largest bias / run SE | rule |",
               "|---|---|---|---|---|---|---|---|---|---|"]
     for d in dz["rates"]:
+        if d["se_run_chips"] is None:       # the error did not average out in the window
+            se = "n/a (does not average out) | " * 3
+            lines.append(f"| {d['fs_hz'] / 1e6:g} | {d['sigma_chips']:.4f} | {se}"
+                         f"{d['pooled_bias_chips']:+.4f} | n/a | n/a | n/a | fails |")
+            continue
         lines.append(f"| {d['fs_hz'] / 1e6:g} | {d['sigma_chips']:.4f} | "
                      f"{d['correlation_time_s']:.3f} | {d['n_eff']:.1f} | "
                      f"{d['se_run_chips']:.4f} | {d['pooled_bias_chips']:+.4f} | "
