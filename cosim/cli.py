@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .core.receivers import add_options, get, parse_finite, parse_int, receivers
+from .core.receivers import GIVEN_ATTR, add_options, get, parse_finite, parse_int, receivers
 from .core.validate import check_jobs, check_out_dir, dumps
 
 #: Errors a user can cause (bad input, a full disk, a run too big): one line on stderr and
@@ -24,10 +24,50 @@ class _Help(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
+#: Namespace attribute naming the innermost (sub)command's parser of a parse
+#: (:meth:`OneLineParser.parse_known_args`).
+_PROG_ATTR = "_prog"
+_MARKING: dict = {}
+
+
+def _marking(cls):
+    """``cls`` (an argparse action class) that also records its ``dest`` in the namespace's
+    :data:`~cosim.core.receivers.GIVEN_ATTR` set when its option is on the command line
+    (argparse calls an action only for what was given)."""
+    if cls not in _MARKING:
+        def __call__(self, parser, namespace, values, option_string=None):
+            vars(namespace).setdefault(GIVEN_ATTR, set()).add(self.dest)
+            return cls.__call__(self, parser, namespace, values, option_string)
+        _MARKING[cls] = type(cls.__name__, (cls,), {"__call__": __call__})
+    return _MARKING[cls]
+
+
 class OneLineParser(argparse.ArgumentParser):
-    """argparse's own errors (a bad type, an unknown choice, a missing argument) as one line
-    on stderr and exit 2, like every other error of the command line, instead of the usage
-    block. Subcommands inherit it (``add_subparsers`` makes parsers of the parent's class)."""
+    """argparse's own errors (a bad type, an unknown choice, a missing argument, an
+    unrecognised argument) as one line on stderr and exit 2, like every other error of the
+    command line, instead of the usage block, pointing at the help of the (sub)command that
+    was parsed. Subcommands inherit it (``add_subparsers`` makes parsers of the parent's
+    class). Every option records, when given on the command line, its ``dest`` in the
+    namespace (:func:`cosim.core.receivers.given_options`): an option given at its default
+    value is told from one left out."""
+
+    def add_argument(self, *args, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        if action.option_strings and not isinstance(action, argparse._HelpAction):
+            action.__class__ = _marking(type(action))
+        return action
+
+    def parse_known_args(self, args=None, namespace=None):
+        ns, extras = super().parse_known_args(args, namespace)
+        vars(ns).setdefault(_PROG_ATTR, self.prog)      # a subcommand's parser sets it first
+        return ns, extras
+
+    def parse_args(self, args=None, namespace=None):
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self.exit(2, f"error: unrecognized arguments: {' '.join(extras)} "
+                         f"(see {getattr(ns, _PROG_ATTR, self.prog)} --help)\n")
+        return ns
 
     def error(self, message):
         text = " ".join(str(message).split())

@@ -7,7 +7,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy import signal
 
 
 def cic_response(f_hz, fs_in_hz: float, stages: int, rate: int, diff_delay: int = 1) -> np.ndarray:
@@ -74,7 +73,8 @@ def _design_pulse_fir(fs_in_hz, cic_stages, cic_rate, cic_delay, numtaps, pulse_
     freq = np.linspace(0.0, fs / 2, 513)
     hcic = cic_response(freq, fs_in_hz, cic_stages, cic_rate, cic_delay)
     gain = gaussian_pulse_spectrum(freq, pulse_sigma_s) / np.maximum(hcic, 1e-3)
-    taps = signal.firwin2(numtaps, freq, gain, fs=fs, window=window)
+    from scipy.signal import firwin2
+    taps = firwin2(numtaps, freq, gain, fs=fs, window=window)
     return taps / pulse_peak_gain(taps, fs_in_hz=fs_in_hz, cic_stages=cic_stages,
                                   cic_rate=cic_rate, cic_delay=cic_delay,
                                   pulse_sigma_s=pulse_sigma_s)

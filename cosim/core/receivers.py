@@ -31,7 +31,8 @@ from typing import Any, Callable
 
 __all__ = ["Receiver", "Study", "Figure", "Frontend", "SweepModel", "FaultModel",
            "Option", "Arg", "register", "unregister",
-           "get", "receivers", "frontend_for", "add_options", "config_kwargs", "BUILTIN"]
+           "get", "receivers", "frontend_for", "add_options", "config_kwargs", "given_options",
+           "given_fields", "GIVEN_ATTR", "BUILTIN"]
 
 #: Entry modules of the receivers shipped with the toolkit (importing one registers it).
 BUILTIN = ("cosim.tacan.receiver", "cosim.gnss.receiver", "cosim.monopulse.receiver",
@@ -39,6 +40,9 @@ BUILTIN = ("cosim.tacan.receiver", "cosim.gnss.receiver", "cosim.monopulse.recei
 
 _REGISTRY: dict[str, "Receiver"] = {}
 _MISSING = dataclasses.MISSING
+#: Attribute of a parsed namespace: the set of the ``dest`` of every option given on the
+#: command line (``cosim.cli.OneLineParser`` records it; :func:`given_options`).
+GIVEN_ATTR = "_given"
 #: Option.default when the dataclass's default is the option's default.
 FROM_FIELD = type("FromField", (), {"__repr__": lambda self: "FROM_FIELD"})()
 
@@ -496,6 +500,21 @@ def config_kwargs(args: argparse.Namespace, options, config: type) -> dict:
                 continue
             out[o.name] = v
     return out
+
+
+def given_options(args: argparse.Namespace) -> frozenset:
+    """The ``dest`` of every option given on the command line (at its default value too);
+    empty for a namespace not parsed by ``cosim.cli.OneLineParser``."""
+    return frozenset(getattr(args, GIVEN_ATTR, ()))
+
+
+def given_fields(args: argparse.Namespace, options, config: type) -> frozenset:
+    """The fields of ``config`` whose option (of ``options``) was given on the command line:
+    what a configuration's "ignored option" rules check, so that an option given at its
+    default value is refused like any other where it changes nothing."""
+    given = given_options(args)
+    return frozenset(o.name for o in options
+                     if isinstance(o, Option) and o.config is config and o.dest in given)
 
 
 def _field(cls, name):

@@ -293,14 +293,16 @@ class RegisterSession(FrontendSession):
         self.registers.check_write(self.registers.address(port), value)
         return super().write(port, value, cycle)
 
+    def _bus_write(self, b: int, a: int, v: int) -> None:
+        """Register write ``a = v`` on the inner session's bus at cycle ``b``: its port
+        writes (a subclass may hand the inner session the write whole)."""
+        write_register(self.inner, a, v, b)
+
     def _step(self, queue, ready, n, writes):
         for c, reg, v in writes:
             b = max(int(c), self._next_bus)
             a = self.registers.address(reg)
-            self.inner.write("reg_addr", a, cycle=b)
-            self.inner.write("reg_data", int(v), cycle=b)
-            self.inner.write("reg_we", 1, cycle=b)
-            self.inner.write("reg_we", 0, cycle=b + 1)
+            self._bus_write(b, a, int(v))
             self.bus_writes.append((b, a, int(v)))
             self._next_bus = b + 1
         x = queue[:n]

@@ -29,7 +29,7 @@ import numpy as np
 
 __all__ = ["check_int", "check_float", "check_choice", "check_jobs", "check_memory",
            "check_budget", "check_out_dir", "check_out_file", "json_safe", "dumps", "warn",
-           "cores", "memory_bytes", "MAX_LIST_VALUES", "MAX_RUN_S", "NOTE_RUN_S"]
+           "cores", "memory_bytes", "MAX_LIST_VALUES", "MAX_RUN_S", "MAX_STUDY_S", "NOTE_RUN_S"]
 
 #: Most values a range or list option (``--snr-db a:b:s``, ``--param``) may expand to.
 MAX_LIST_VALUES = 1000
@@ -37,6 +37,9 @@ MAX_LIST_VALUES = 1000
 MEMORY_SHARE = 0.5
 #: Longest run a command starts (s of estimated wall time on this machine).
 MAX_RUN_S = 2 * 3600.0
+#: Longest study (a sweep's points, a fault study's runs) started (s of estimated CPU time
+#: spread over the cores): studies are meant to run for hours.
+MAX_STUDY_S = 48 * 3600.0
 #: A run estimated to take longer than this says so on stderr before it starts
 #: (:func:`check_budget` with ``note=True``).
 NOTE_RUN_S = 60.0
@@ -141,7 +144,8 @@ def check_budget(what: str, options: str, *, memory_bytes: float = 0.0,
         Estimated peak memory (bytes): refused above :data:`MEMORY_SHARE` of the machine's
         memory (:func:`check_memory`).
     seconds : float
-        Estimated wall time (s): refused above ``max_seconds`` (default :data:`MAX_RUN_S`).
+        Estimated wall time (s): refused above ``max_seconds`` (default :data:`MAX_RUN_S`;
+        the studies give :data:`MAX_STUDY_S`).
     note : bool
         Also say on stderr (:func:`warn`) how long an accepted run estimated above
         :data:`NOTE_RUN_S` will take (the command line does; studies building many runs

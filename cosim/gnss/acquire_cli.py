@@ -1,17 +1,28 @@
 """``python -m cosim gnss-acquire``: every GPS L1 C/A satellite in a sample file.
 
 Opens the recording (:class:`cosim.gnss.files.SampleFile`: format, rate, IF, spectrum,
-ADC map, all checked before any work), runs :func:`dsp.gnss.search.search_all` and prints
-the satellites found (PRN, Doppler, code phase, C/N0, metric = first-dwell peak /
-threshold), the first-dwell detections the verification refused, and the search's
-settings; ``--json`` prints the same as one JSON object.
+ADC map, all checked before any work; a sample rate commensurate with the chip rate is
+warned about, :func:`cosim.gnss.config.frequency_plan_warning`), searches it and prints the
+satellites found (PRN, Doppler, code phase, C/N0, metric = deciding peak / threshold), the
+detections refused, and the search's settings; ``--json`` prints the same as one JSON
+object.
+
+``--search sequential`` (the default) is the search of ``gnss`` and ``ins``: each PRN's dwell
+extends until it is detected or ``--acq-limit-ms`` of signal is used
+(:func:`dsp.gnss.search_sequential.sequential_search_all`; ``--coherent-ms`` /
+``--noncoherent``: one fixed dwell instead). ``--search verified`` is the fixed stages of
+``--stages``, every first-dwell detection checked by a second dwell
+(:func:`dsp.gnss.search.search_all`, the search ``gnss-track`` and ``gps`` run first).
 """
 from __future__ import annotations
 
 import time
 
-from ..core.validate import check_float, dumps
-from .acq_options import add_dwell_arguments
+from dataclasses import replace
+
+from ..core.validate import check_float, check_int, dumps
+from .acq_options import ACQ_OPTIONS, add_dwell_arguments
+from .config import GnssRunConfig
 from .files import DEFAULT_ADC_MAP, FORMATS, SampleFile
 
 
@@ -56,8 +67,15 @@ def add_search_options(p) -> None:
 
 
 def open_file(a) -> SampleFile:
-    """The recording of parsed :func:`add_file_options` (every check before any work)."""
-    return SampleFile(a.file, a.format, a.fs_hz, a.if_hz, a.invert_spectrum, a.adc_map)
+    """The recording of parsed :func:`add_file_options` (every check before any work); a
+    sample rate that leaves the code loop a dead zone is warned about
+    (:func:`cosim.gnss.config.frequency_plan_warning`)."""
+    from ..core.validate import warn
+    from .config import frequency_plan_warning
+    f = SampleFile(a.file, a.format, a.fs_hz, a.if_hz, a.invert_spectrum, a.adc_map)
+    if (msg := frequency_plan_warning(f.fs_hz)) is not None:
+        warn(msg)
+    return f
 
 
 def parse_prns(text: str) -> list[int]:
@@ -72,17 +90,38 @@ def add_parser(sub, make_parser) -> None:
                     help="acquire every GPS L1 C/A PRN in a sample file (int8, int8-iq, "
                          "int16-iq, cf32): the satellites found with Doppler, code phase, "
                          "C/N0")
+    from dsp.gnss.dwell import DEFAULT_SCHEDULE
     add_file_options(p)
     add_search_options(p)
+    p.add_argument("--search", type=str.lower, default="sequential", choices=SEARCHES,
+                   help="sequential (default; the search of gnss and ins): each PRN's dwell "
+                        "extends (" + "; ".join(str(d) for d in DEFAULT_SCHEDULE) +
+                        ") until detected or --acq-limit-ms is used (--coherent-ms T "
+                        "--noncoherent K: that one dwell); verified: the fixed --stages, "
+                        "each detection checked by a second dwell (the first search of "
+                        "gnss-track and gps)")
+    flags, kw = replace(ACQ_OPTIONS[-1], default=None).argparse_kwargs()
+    kw["help"] = (f"--search sequential: signal a PRN's search may use (ms; default "
+                  f"{GnssRunConfig.acq_limit_ms}, at most the recording)")
+    p.add_argument(*flags, **kw)
     p.add_argument("--stages", default=None,
-                   help="dwell schedule, comma-separated TxK[@a/b] (coherent ms x sums @ "
-                        "offsets ms), e.g. 1x10,5x6@0/2,10x4@0/3/6 (default: 1x10,5x6@0/2; "
-                        "--coherent-ms T --noncoherent K: the one stage TxK at the bit-edge "
-                        "offsets of dsp.gnss.dwell.Dwell)")
+                   help="--search verified: dwell schedule, comma-separated TxK[@a/b] "
+                        "(coherent ms x sums @ offsets ms), e.g. 1x10,5x6@0/2,10x4@0/3/6 "
+                        "(default: 1x10,5x6@0/2; --coherent-ms T --noncoherent K: the one "
+                        "stage TxK at the bit-edge offsets of dsp.gnss.dwell.Dwell)")
     p.add_argument("--min-rate-hz", type=float, default=2.046e6,
                    help="lowest decimated complex rate of the search (S/s)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
+
+
+def _fixed_dwell(a) -> tuple:
+    """``(--coherent-ms, --noncoherent)``, both given or both None."""
+    t, k = a.acq_coherent_ms, a.acq_noncoherent
+    if (t is None) != (k is None):
+        raise ValueError("--coherent-ms and --noncoherent go together (a fixed dwell of "
+                         "T ms x K sums): give both, or neither")
+    return t, k
 
 
 def stages_of(a) -> tuple:
@@ -91,10 +130,7 @@ def stages_of(a) -> tuple:
     :class:`dsp.gnss.dwell.Dwell`), or the default; ValueError naming the option."""
     from dsp.gnss.dwell import Dwell
     from dsp.gnss.search import DEFAULT_STAGES, Stage
-    t, k = a.acq_coherent_ms, a.acq_noncoherent
-    if (t is None) != (k is None):
-        raise ValueError("--coherent-ms and --noncoherent go together (a fixed dwell of "
-                         "T ms x K sums): give both, or neither")
+    t, k = _fixed_dwell(a)
     if t is not None:
         if getattr(a, "stages", None) is not None:
             raise ValueError("give --stages or --coherent-ms / --noncoherent, not both")
@@ -129,6 +165,34 @@ def search_file(f: SampleFile, a, prns, **kw):
                       a.acq_pfa, a.max_doppler_hz, stages_of(a), **kw)
 
 
+#: ``gnss-acquire --search`` choices (module docstring).
+SEARCHES = ("sequential", "verified")
+
+
+def check_acquire_search(a):
+    """The sequential search's schedule and limit of parsed ``gnss-acquire`` options
+    (``None`` for ``--search verified``); an option of the other search is refused
+    (ValueError naming it)."""
+    from dsp.gnss.dwell import DEFAULT_SCHEDULE, fixed_schedule
+    if a.search == "verified":
+        if a.acq_limit_ms is not None:
+            raise ValueError("--acq-limit-ms limits the sequential search: --search "
+                             "verified reads what its --stages need")
+        stages_of(a)
+        return None
+    if a.stages is not None:
+        raise ValueError("--stages is the schedule of --search verified; the sequential "
+                         "search takes --coherent-ms / --noncoherent or extends its own")
+    limit = GnssRunConfig.acq_limit_ms if a.acq_limit_ms is None else a.acq_limit_ms
+    check_int("--acq-limit-ms", limit, 1)
+    t, k = _fixed_dwell(a)
+    sched = DEFAULT_SCHEDULE if t is None else fixed_schedule(t, k)
+    if sched[0].span_ms() > limit:
+        raise ValueError(f"--acq-limit-ms {limit} is shorter than the first dwell "
+                         f"({sched[0]}: {sched[0].span_ms()} ms of signal)")
+    return sched, limit
+
+
 #: ``status`` of a search that found no satellite: a result (exit 1), not bad input.
 NOT_FOUND = "no satellite found"
 
@@ -144,12 +208,19 @@ def run(a) -> int:
     signal is a result), 2 for bad input (before any work)."""
     prns = check_search_options(a)
     check_float("--min-rate-hz", a.min_rate_hz, 0, lo_open=True, unit="S/s")
-    stages_of(a)                        # the dwell options checked before the file opens
+    seq = check_acquire_search(a)       # the dwell options checked before the file opens
     f = open_file(a)
     t0 = time.time()
-    rep = search_file(f, a, prns, min_rate_hz=a.min_rate_hz)
-    out = {"status": search_status(rep), "recording": f.describe(), **rep.as_dict(),
-           "wall_s": round(time.time() - t0, 1)}
+    if seq is None:
+        rep = search_file(f, a, prns, min_rate_hz=a.min_rate_hz)
+    else:
+        from dsp.gnss.search_sequential import sequential_search_all
+        rep = sequential_search_all(f.read, f.n_samples, f.fs_hz, f.if_hz,
+                                    f.doppler_sign_inverted, prns, a.acq_pfa,
+                                    a.max_doppler_hz, seq[0], seq[1],
+                                    min_rate_hz=a.min_rate_hz)
+    out = {"status": search_status(rep), "recording": f.describe(), "search": a.search,
+           **rep.as_dict(), "wall_s": round(time.time() - t0, 1)}
     rc = 0 if rep.detections else 1
     if a.json:
         print(dumps(out))
@@ -158,11 +229,13 @@ def run(a) -> int:
     print(f"{d['file']}: {d['format']}, {d['fs_hz'] / 1e6:g} MS/s, IF {d['if_hz'] / 1e6:g} MHz"
           f"{', spectrum inverted' if f.inverted else ''}, ADC map {d['adc_map']}, "
           f"{d['duration_s'] * 1e3:.1f} ms")
-    print(f"search at {rep.fs_hz / rep.decimation / 1e6:g} MS/s (decimation {rep.decimation}), "
-          f"Doppler +-{rep.max_doppler_hz:g} Hz, pfa {rep.pfa:g} per PRN before verification; "
-          f"stages run: {'; '.join(rep.stages_run)}"
-          + (f"; skipped (recording too short): {'; '.join(rep.stages_skipped)}"
-             if rep.stages_skipped else ""))
+    what = ("per PRN's search (--pfa over all PRNs); dwells within the limit"
+            if seq is not None else "per PRN before verification; stages run")
+    print(f"{a.search} search at {rep.fs_hz / rep.decimation / 1e6:g} MS/s (decimation "
+          f"{rep.decimation}), Doppler +-{rep.max_doppler_hz:g} Hz, pfa {rep.pfa:g} {what}: "
+          f"{'; '.join(rep.stages_run)}"
+          + (f"; not run (beyond the limit or the recording): "
+             f"{'; '.join(rep.stages_skipped)}" if rep.stages_skipped else ""))
     print(f"{'PRN':>4} {'Doppler Hz':>11} {'code chips':>11} {'C/N0 dB-Hz':>11} "
           f"{'metric':>7}  stage")
     for x in rep.detections:

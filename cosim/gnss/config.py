@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from dsp.gnss.ca_code import CODE_PERIOD_S
 from dsp.gnss.trackers import tracker_names
 
-from ..core.validate import check_float, check_int, check_memory
+from ..core.validate import check_budget, check_float, check_int
 from .signal import GnssSignalConfig
 
 __all__ = ["GnssRunConfig", "DynamicsChoice", "BACKENDS", "DSP_MODES", "SCENARIOS", "DYNAMICS",
@@ -27,9 +27,8 @@ BACKENDS = ("golden", "model", "pysim", "verilator")
 DSP_MODES = ("float", "fixed")
 DYNAMICS = ("static", "aukf-patent", "aukf-patent-jerk", "aukf-patent-process")
 #: Simulation speed of the cycle-accurate backends (cycles/s, one channel, this machine's
-#: order of magnitude) and the longest run started on them (s of wall time).
+#: order of magnitude; the longest run started is :data:`cosim.core.validate.MAX_RUN_S`).
 CYCLES_PER_S = {"pysim": 2e3, "verilator": 2e6}
-MAX_WALL_S = 3600.0
 #: NCO word width the trackers write (dsp.gnss.loops_fixed.WORD_BITS).
 WORD_BITS = 32
 
@@ -454,13 +453,13 @@ def run_memory_bytes(sig: GnssSignalConfig, run: GnssRunConfig) -> float:
 def check_run_size(sig: GnssSignalConfig, run: GnssRunConfig) -> None:
     """Refuse, before work, a run whose per-epoch records and block buffers
     (:func:`run_memory_bytes`) the machine cannot hold, or a cycle-accurate run that would
-    take hours (the message names the option)."""
+    take hours (:data:`CYCLES_PER_S`), by :func:`cosim.core.validate.check_budget` (the
+    message names the option)."""
     n = sig.n_samples
-    check_memory(run_memory_bytes(sig, run),
-                 f"{sig.duration_s:g} s of tracking ({sig.n_epochs:,} epochs of records)",
-                 "--duration-s")
-    if run.backend in CYCLES_PER_S and n / CYCLES_PER_S[run.backend] > MAX_WALL_S:
-        raise ValueError(f"{run.backend} simulates about {CYCLES_PER_S[run.backend]:.0e} "
-                         f"cycles/s: {n:,} cycles would take "
-                         f"~{n / CYCLES_PER_S[run.backend] / 3600:.1f} h (limit "
-                         f"{MAX_WALL_S / 3600:g} h): reduce --duration-s")
+    check_budget(f"{sig.duration_s:g} s of tracking ({sig.n_epochs:,} epochs of records)",
+                 "--duration-s", memory_bytes=run_memory_bytes(sig, run))
+    if run.backend in CYCLES_PER_S:
+        rate = CYCLES_PER_S[run.backend]
+        check_budget(f"{n:,} cycles on the {run.backend} backend (about {rate:.0e} "
+                     f"cycles/s; --duration-s {sig.duration_s:g})", "--duration-s",
+                     seconds=n / rate)

@@ -159,6 +159,13 @@ class AdcMap:
                 out |= np.mod(v, 2) != 1
         return out
 
+    @property
+    def odd_levels(self) -> bool:
+        """Whether the values handed on are the odd levels ``2q + 1`` of the ADC word ``q``
+        (``odd:B`` and ``float:B``): a channel must take the word as ``2q + 1``, the
+        two's-complement reading ``q`` leaving a DC of -1/2 LSB beside the signal."""
+        return self.kind == "odd" or (self.kind == "float" and self.bits is not None)
+
     def quantise(self, x: np.ndarray, step: float) -> np.ndarray:
         """``float:B``: midrise codes ``2q + 1`` of ``x`` with step ``step``."""
         b = self.bits

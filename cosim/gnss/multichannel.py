@@ -69,9 +69,10 @@ def channel_params_for(f, hdl_changes: tuple = ()):
                          f"ADC words (give float:B to quantise)")
     # early-minus-late about half a chip (even, >= 2 samples): 8 at 16.384 MS/s, 6 at 12
     el = max(2, 2 * round(f.fs_hz / CHIP_RATE_HZ / 4))
-    # odd-level words (a sign/magnitude ADC's +-1, +-3, ...) enter the mixer as 2q+1
+    # odd-level words (a sign/magnitude ADC's +-1, +-3, ..., and a float:B map's midrise
+    # levels) enter the mixer as 2q+1
     kw = dict(fs_hz=f.fs_hz, if_hz=f.if_hz, adc_bits=int(bits), el_spacing_samples=el,
-              adc_levels="odd" if f.adc_map.kind == "odd" else "twos")
+              adc_levels="odd" if f.adc_map.odd_levels else "twos")
     kw.update(dict(hdl_changes))
     if f.is_complex:
         kw["input"] = "complex"
@@ -166,6 +167,7 @@ class ChannelSlot:
 
     def __init__(self, owner: "_Allocator", ch: int):
         self.owner, self.ch = owner, ch
+        self.regs = (owner.name(ch, "carr_freq"), owner.name(ch, "code_freq"))
         self.epochs = CodeEpochs(owner.p)
         self.track: Tracking | None = None
         self.asg: Assignment | None = None
@@ -219,7 +221,7 @@ class ChannelSlot:
                             % CODE_LENGTH)
         a.ip.append(float(iq6[2]))
         a.qp.append(float(iq6[3]))
-        writes = [(o.name(self.ch, "carr_freq"), r[0]), (o.name(self.ch, "code_freq"), r[1])]
+        writes = [(self.regs[0], r[0]), (self.regs[1], r[1])]
         if self.det.update(complex(iq6[2], iq6[3])):
             self._window(n_p)
             if self.release:

@@ -84,6 +84,26 @@ class GnssArrayModelSession(GnssModelSessionBase):
                          2 + max(1, (channels - 1).bit_length()))
         self.channels = channels
         self._ended = False
+        self._direct: list[tuple[int, int, int]] = []     # bus writes not on the ports
+        self._we_cycle = -1                                 # cycle of the last of them
+        self._checked = False                               # this step's writes all direct
+
+    def bus_write(self, cycle: int, addr: int, value: int) -> None:
+        """A register write on the bus at ``cycle`` without its four port writes (the
+        pulse of :func:`cosim.core.session.write_register`: ``reg_we`` high in ``cycle``
+        only), ``value`` already checked by the register map
+        (:class:`GnssArrayRegisterSession`'s path on the model). Writes come in cycle
+        order, one per cycle, none in a cycle already run; the ports read as the pulse
+        leaves them."""
+        if cycle < self.cycle or (self._direct and cycle <= self._direct[-1][0]):
+            raise ValueError(f"internal: bus write at cycle {cycle} out of order (session "
+                             f"at {self.cycle})")
+        self._direct.append((int(cycle), int(addr), int(value)))
+
+    def _read(self, port):
+        if port == "reg_we" and self._we_cycle == self.cycle - 1:
+            return 1
+        return super()._read(port)
 
     def end_input(self) -> None:
         """No sample follows: the records still waiting for the arbiter are granted (their
@@ -98,9 +118,25 @@ class GnssArrayModelSession(GnssModelSessionBase):
             raise ValueError("the array's input was declared ended (end_input): no more "
                              "samples")
 
+    def _step_bus(self, writes, start, stop):
+        """The port writes' bus writes and the direct ones (:meth:`bus_write`) of the step,
+        in cycle order; a step whose writes are all direct needs no second value check."""
+        bus = self._bus_cycles(writes, start, stop)
+        self._checked = False
+        if self._direct and self._direct[0][0] < stop:
+            k = 0
+            while k < len(self._direct) and self._direct[k][0] < stop:
+                k += 1
+            now, self._direct = self._direct[:k], self._direct[k:]
+            _, self._bus["reg_addr"], self._bus["reg_data"] = now[-1]
+            self._we_cycle = now[-1][0]
+            self._checked = not bus
+            bus = sorted(bus + now, key=lambda w: w[0]) if bus else now
+        return bus
+
     def _records(self, x, bus, cycles):
         if x.size or bus:
-            return self.model.step_words(x, bus, cycles=cycles)
+            return self.model.step_words(x, bus, cycles=cycles, checked=self._checked)
         return None
 
 
@@ -111,6 +147,17 @@ class GnssArrayRegisterSession(RegisterSession):
     def __init__(self, inner, params, channels: int):
         super().__init__(inner, array_registers(params, channels))
         self.channels = channels
+        self._direct = isinstance(inner, GnssArrayModelSession)
+
+    def _bus_write(self, b: int, a: int, v: int) -> None:
+        """On the model, each register write goes to the bus as one
+        :meth:`GnssArrayModelSession.bus_write` (the same cycle and value as the four port
+        writes of :func:`~cosim.core.session.write_register`, without them); on the HDL
+        backends as port writes."""
+        if self._direct:
+            self.inner.bus_write(b, a, v)
+        else:
+            super()._bus_write(b, a, v)
 
     def end_input(self) -> None:
         """The input has ended (:meth:`GnssArrayModelSession.end_input`; the HDL backends

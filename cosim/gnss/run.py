@@ -84,7 +84,7 @@ def _score(gen, track: Tracking, n_b, settle_s):
             locks.append(bool(ld.phase_lock))
     out["lock_fraction"] = float(np.mean(locks)) if locks else None
     out["cn0_est_dbhz"] = float(cn0_m2m4(prompt, CODE_PERIOD_S))
-    out["_series"] = (t, e, dop)
+    out["_series"] = (t, e, dop, code)
     return out
 
 
@@ -156,6 +156,8 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
              keep_words: bool = False, tracker_setup=None, keep_track: bool = False) -> dict:
     """One GNSS run end to end (module doc); returns the JSON-safe result. With
     ``keep_words`` the result's ``_pipeline`` holds the :class:`PipelineResult` (tests).
+    ``_series`` holds the per-record ``(t_s, phase_err_cycles, doppler_hz, code_err_chips)``
+    (unscored records included; times from tracking's start).
     ``tracker_setup(gen, p, hand, backend) -> (ctx_changes, options)``, called after the
     acquisition, adds to the tracker's :class:`~dsp.gnss.trackers.TrackerContext` (e.g. an
     INS ``aiding``) and options (the INS-aided loops, :mod:`cosim.ins.run`); with
@@ -199,8 +201,8 @@ def run_gnss(signal_cfg: GnssSignalConfig, run_cfg: GnssRunConfig, *,
     result["digest"] = digest
     if run.compare == "golden":
         g = run_gnss(sig, replace(run, backend="golden", dsp="float", compare=None))
-        gt, ge, gd = g.pop("_series")
-        t, e, d = series
+        gt, ge, gd, _ = g.pop("_series")
+        t, e, d, _ = series
         keep = t >= run.settle_s
         result["golden"] = {k: g[k] for k in ("doppler_rmse_hz", "phase_rmse_deg",
                                               "code_rmse_chips", "cycle_slips",

@@ -86,7 +86,7 @@ class GnssModelSessionBase(BusModelSession):
         start, stop = self.cycle, self.cycle + n
         x = self.params.unpack_samples(queue[:n])   # payload words -> samples (I/Q if complex)
         self._check_step(x)
-        bus = self._bus_cycles(writes, start, stop)
+        bus = self._step_bus(writes, start, stop)
         self.bus_writes += bus
         rec = self._records(x, bus, np.arange(start, start + len(x), dtype=np.int64))
         if rec is not None:
@@ -100,6 +100,11 @@ class GnssModelSessionBase(BusModelSession):
 
     def _check_step(self, x) -> None:
         """Refuse a step's samples ``x`` the session cannot take (default: none refused)."""
+
+    def _step_bus(self, writes, start: int, stop: int) -> list:
+        """The bus writes ``(cycle, reg, value)`` of the step over cycles ``start .. stop``
+        (default: those of the port writes ``writes``)."""
+        return self._bus_cycles(writes, start, stop)
 
 
 class GnssModelSession(GnssModelSessionBase):

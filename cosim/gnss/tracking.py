@@ -35,6 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_PERIOD_S, L1_HZ
+from hdl.gnss.params import ACC_FIELDS
 
 from .config import REPLAY_BLOCK, WORD_BITS, GnssRunConfig
 from .handover import acquire_handover, handover_writes
@@ -106,7 +107,6 @@ class Tracking:
 def record_observables(p, d: dict):
     """A record's observables for :meth:`Tracking.record`: the carrier NCO phase (cycles),
     the prompt's code phase at its boundary (chips) and the six correlations."""
-    from hdl.gnss.params import ACC_FIELDS
     return (d["carr_phase"] / 2.0 ** p.carr_phase_bits,
             d["code_phase"] / 2.0 ** p.code_phase_bits, [d[k] for k in ACC_FIELDS])
 

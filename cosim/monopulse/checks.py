@@ -204,12 +204,14 @@ _ONLY_WITH = (
 )
 
 
-def check_ignored(run) -> None:
-    """Refuse an option given a value other than its default where it changes nothing."""
+def check_ignored(run, given=frozenset()) -> None:
+    """Refuse an option where it changes nothing: set to a value other than its default, or
+    named in ``given`` (the fields given on the command line,
+    :func:`cosim.core.receivers.given_fields`: at their default value too)."""
     default = {f.name: f.default for f in dataclasses.fields(run)}
     for names, acts, why in _ONLY_WITH:
-        given = [n for n in names if getattr(run, n) != default[n]]
-        if given and not acts(run):
-            flags = ", ".join("--" + n.replace("_", "-") for n in given)
+        given_ = [n for n in names if n in given or getattr(run, n) != default[n]]
+        if given_ and not acts(run):
+            flags = ", ".join("--" + n.replace("_", "-") for n in given_)
             why = why.format(backend=run.backend)
-            raise ValueError(f"{flags} {why if len(given) > 1 else why.replace('set ', 'sets ', 1)}")
+            raise ValueError(f"{flags} {why if len(given_) > 1 else why.replace('set ', 'sets ', 1)}")

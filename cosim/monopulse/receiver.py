@@ -11,7 +11,8 @@ import dataclasses
 import sys
 
 from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
-                              config_kwargs, parse_finite, parse_int, register)
+                              config_kwargs, given_fields, given_options, parse_finite,
+                              parse_int, register)
 from ..studies.faults import FaultConfig
 from ..studies.spec import SweepConfig
 from ..core.validate import check_out_dir, dumps
@@ -29,8 +30,9 @@ def _f(v, spec=".4f"):
 
 
 def cmd_monopulse(a) -> int:
-    from .checks import check_run_size
+    from .checks import check_ignored, check_run_size
     run = MonopulseRunConfig(**config_kwargs(a, OPTIONS, MonopulseRunConfig))
+    check_ignored(run, given_fields(a, OPTIONS, MonopulseRunConfig))   # at the default too
     check_run_size(run, note=True)      # accepted (the configuration checked it): how long
     r = run_monopulse(run)
     if a.json:
@@ -100,7 +102,7 @@ SWEEP_OPTIONS = (
 
 
 def cmd_sweep(a) -> int:
-    from ..studies.spec import parse_param, parse_values
+    from ..studies.spec import check_recheck, parse_param, parse_values
     from ..studies.sweep import check_points, study
     from ..core.validate import check_jobs
     if a.recheck < 0:
@@ -117,9 +119,7 @@ def cmd_sweep(a) -> int:
     cfg = SweepConfig(receiver="monopulse", snr_db=tuple(float(v) for v in snrs),
                       recheck=a.recheck, **({"params": params} if params else {}),
                       **_record_kwargs(a), **kw)
-    if a.recheck > len(cfg.combos):
-        raise ValueError(f"--recheck {a.recheck} is more than the {len(cfg.combos)} points it "
-                         f"picks from (the combinations of the swept values)")
+    check_recheck(cfg, "recheck" in given_options(a))
     check_points(cfg)
     s = study(cfg, a.out, jobs=jobs, confirm_proposal=not a.no_confirm, progress=not a.json)
     if a.json:

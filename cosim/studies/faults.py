@@ -206,14 +206,12 @@ class FaultConfig:
                                  f"words ({w} bits), not {list(self.bits)}")
         # Every trial's record is built (and its front end validated) before the first point,
         # and the study must fit the machine (memory of a record, total time).
-        from cosim.studies.sweep import MAX_STUDY_H
+        from cosim.core.validate import MAX_STUDY_S, check_budget
         model.check_size(self)
         n = self.trials * (len(set(self.ber) | {0.0}))
-        hours = n * self.duration_s * model.cpu_s_per_record_s / 3600
-        if hours > MAX_STUDY_H:
-            raise ValueError(f"{n:,} runs of {self.duration_s:g} s would take about "
-                             f"{hours:,.0f} h (limit {MAX_STUDY_H:g} h): reduce --trials, "
-                             f"--ber or --duration-s")
+        check_budget(f"{n:,} runs of {self.duration_s:g} s", "--trials, --ber or --duration-s",
+                     seconds=n * self.duration_s * model.cpu_s_per_record_s,
+                     max_seconds=MAX_STUDY_S)
 
     def word_width(self) -> int:
         """Width (bits) of the words the target's flips hit (the receiver's

@@ -9,7 +9,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
-__all__ = ["SweepConfig", "parse_values", "parse_param", "check_param", "sweep_model",
+__all__ = ["SweepConfig", "parse_values", "parse_param", "check_param", "check_recheck", "sweep_model",
            "primary_key"]
 
 
@@ -82,6 +82,17 @@ def parse_param(text: str, receiver: str = "tacan") -> tuple[str, tuple]:
     name = name.strip()
     check_param(name, receiver)
     return name, parse_values(spec, f"--param {name}")
+
+
+def check_recheck(cfg: "SweepConfig", given: bool) -> None:
+    """``--recheck`` (``given`` on the command line, at its default value too) asks for no
+    more points than the sweep has (the re-checks pick among its combinations); left at
+    its default, the sweep re-checks at most that many (all of a smaller sweep)."""
+    n = len(cfg.combos)
+    if given and cfg.recheck > n:
+        raise ValueError(f"--recheck {cfg.recheck} is more than the {n} point"
+                         f"{'s' if n != 1 else ''} it picks from (the combinations of the "
+                         f"swept values)")
 
 
 def check_param(name: str, receiver: str = "tacan") -> None:

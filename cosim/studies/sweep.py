@@ -51,9 +51,9 @@ from .spec import SweepConfig, primary_key, sweep_model
 
 #: CPU seconds one point costs per second of record (TACAN's: model front end, FIFO, fixed
 #: DSP and its share of the golden chain; measured ~1 s, with margin; a receiver gives its
-#: own in ``SweepModel.cpu_s_per_record_s``) and the longest study started.
+#: own in ``SweepModel.cpu_s_per_record_s``; the longest study started is
+#: :data:`cosim.core.validate.MAX_STUDY_S`).
 CPU_S_PER_RECORD_S = 1.5
-MAX_STUDY_H = 48.0
 
 
 # ---------------------------------------------------------------------------------------
@@ -65,7 +65,7 @@ def check_points(cfg: SweepConfig) -> None:
     word too narrow for its signal) stops the study here, with the message, instead of
     ending up as an "invalid" row of the report. Also refuses a study too big to start
     (points x record length)."""
-    from cosim.core.validate import check_memory
+    from cosim.core.validate import MAX_STUDY_S, check_budget, cores
     model = sweep_model(cfg.receiver)
     for combo in cfg.combos:
         try:
@@ -73,15 +73,13 @@ def check_points(cfg: SweepConfig) -> None:
         except ValueError as e:
             raise ValueError(f"sweep point {', '.join(f'{n}={v}' for n, v in combo)}: {e}") \
                 from None
-    # the summary holds every point (a few kB each with its range log)
-    check_memory(cfg.n_points * 20e3, f"{cfg.n_points:,} points", "the swept values, "
-                 "--snr-db or --trials")
-    from cosim.core.validate import cores
-    hours = cfg.n_points * cfg.duration_s * model.cpu_s_per_record_s / cores() / 3600
-    if hours > MAX_STUDY_H:
-        raise ValueError(f"{cfg.n_points:,} points of {cfg.duration_s:g} s would take about "
-                         f"{hours:,.0f} h on {cores()} cores (limit {MAX_STUDY_H:g} h): reduce "
-                         f"the swept values, --snr-db, --trials or --duration-s")
+    # the summary holds every point (a few kB each with its range log); the points are
+    # spread over the cores
+    check_budget(f"{cfg.n_points:,} points of {cfg.duration_s:g} s",
+                 "the swept values, --snr-db, --trials or --duration-s",
+                 memory_bytes=cfg.n_points * 20e3,
+                 seconds=cfg.n_points * cfg.duration_s * model.cpu_s_per_record_s / cores(),
+                 max_seconds=MAX_STUDY_S)
 
 
 def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:

@@ -13,7 +13,7 @@ from dsp.tacan.kalman_config import KalmanConfig
 
 from ..core.link import DspServiceConfig
 from ..core.receivers import (Arg, Benchmark, Figure, Frontend, Option, Receiver, Study,
-                              config_kwargs, parse_int, register)
+                              config_kwargs, given_options, parse_int, register)
 from ..studies.faults import FaultConfig
 from ..studies.spec import SweepConfig
 from ..core.validate import check_jobs, check_out_dir, check_out_file, dumps, warn
@@ -257,7 +257,7 @@ SWEEP_OPTIONS = (
 
 def cmd_sweep(a) -> int:
     import re
-    from ..studies.spec import parse_param, parse_values
+    from ..studies.spec import check_recheck, parse_param, parse_values
     from ..studies.sweep import check_points, study
     if a.seed < 0:
         raise ValueError(f"--seed must be >= 0, not {a.seed}")
@@ -281,6 +281,7 @@ def cmd_sweep(a) -> int:
     check_out_dir(a.out, "--out")
     cfg = SweepConfig(params=params, snr_db=tuple(float(v) for v in snrs),
                       **config_kwargs(a, SWEEP_OPTIONS, SweepConfig))
+    check_recheck(cfg, "recheck" in given_options(a))
     check_points(cfg)
     s = study(cfg, a.out, jobs=jobs, scheduler=a.scheduler, confirm_proposal=not a.no_confirm,
               progress=not a.json)

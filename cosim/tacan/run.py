@@ -34,10 +34,9 @@ from .signal import generate
 #: Memory a run holds per ADC sample (bytes; measured ~14 on the model backend: the IF
 #: record, the ADC codes and the front end's working arrays), with margin.
 BYTES_PER_SAMPLE = {"golden": 32, "model": 32, "pysim": 48, "verilator": 48, "icarus": 48}
-#: Simulation speed of the cycle-accurate backends (cycles/s, whole TACAN top) and the
-#: longest run they are started for (s of wall time).
+#: Simulation speed of the cycle-accurate backends (cycles/s, whole TACAN top; the longest
+#: run they are started for is :data:`cosim.core.validate.MAX_RUN_S`).
 CYCLES_PER_S = {"pysim": 3e3, "verilator": 5e6, "icarus": 1.5e3}
-MAX_WALL_S = 3600.0
 
 
 # ---------------------------------------------------------------------------------------
@@ -82,25 +81,26 @@ def _digest(*arrays) -> str:
 
 
 def check_run_size(run: TacanRunConfig) -> None:
-    """Refuse, before any work, a run that cannot fit this machine: the memory its record
-    needs (:data:`BYTES_PER_SAMPLE`) and, on a cycle-accurate backend, the simulation time
-    (:data:`CYCLES_PER_S`, at most :data:`MAX_WALL_S`). The message names the option."""
-    from ..core.validate import check_memory
+    """Refuse, before any work, a run that cannot fit this machine
+    (:func:`cosim.core.validate.check_budget`): the memory its record needs
+    (:data:`BYTES_PER_SAMPLE`) and, on a cycle-accurate backend (the run's, the
+    ``--recheck``'s), the simulation time (:data:`CYCLES_PER_S`). The message names the
+    option."""
+    from ..core.validate import check_budget
     sig = run.signal
     n = sig.duration_s * sig.fs_hz
     per = BYTES_PER_SAMPLE[run.backend] + (16 if run.compare else 0)
-    check_memory(n * per, f"{n:.3g} ADC samples (--duration-s {sig.duration_s:g} x --fs-hz "
-                          f"{sig.fs_hz:g})", "--duration-s or --fs-hz")
+    check_budget(f"{n:.3g} ADC samples (--duration-s {sig.duration_s:g} x --fs-hz "
+                 f"{sig.fs_hz:g})", "--duration-s or --fs-hz", memory_bytes=n * per)
     for be, cycles in ((run.backend, n), (run.recheck, run.recheck_samples or 0)):
-        if be in CYCLES_PER_S and cycles / CYCLES_PER_S[be] > MAX_WALL_S:
+        if be in CYCLES_PER_S:
             opt = "--duration-s" if be == run.backend else "--recheck-samples"
-            raise ValueError(
-                f"{be} simulates about {CYCLES_PER_S[be]:.0e} cycles/s: {cycles:,.0f} cycles "
-                f"would take ~{cycles / CYCLES_PER_S[be] / 3600:.1f} h (limit "
-                f"{MAX_WALL_S / 3600:g} h, {CYCLES_PER_S[be] * MAX_WALL_S:,.0f} cycles): "
-                f"reduce {opt}" + ("; long records run on --backend model (with --recheck "
-                                   "for the cycle-accurate proof of its start)"
-                                   if be in ("pysim", "icarus") else ""))
+            check_budget(f"{cycles:,.0f} cycles on the {be} backend (about "
+                         f"{CYCLES_PER_S[be]:.0e} cycles/s)",
+                         opt + ("; long records run on --backend model (with --recheck for "
+                                "the cycle-accurate proof of its start)"
+                                if be == run.backend and be in ("pysim", "icarus") else ""),
+                         seconds=cycles / CYCLES_PER_S[be])
 
 
 #: The display epoch of the studies' availability: one antenna revolution (15 Hz).

@@ -46,7 +46,6 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
-from scipy import signal as sps
 
 from dsp.jit import njit_cached
 from dsp.sampling import SampledIf
@@ -407,6 +406,7 @@ def _adc_codes(x, full, out) -> int:
 
 
 def _noise_filter(cfg: TacanSignalConfig):
+    from scipy import signal as sps
     f0 = cfg.digital_if_hz
     lo, hi = f0 - cfg.noise_bw_hz / 2, f0 + cfg.noise_bw_hz / 2
     sos = sps.butter(4, [lo, hi], btype="bandpass", fs=cfg.fs_hz, output="sos")
@@ -415,6 +415,7 @@ def _noise_filter(cfg: TacanSignalConfig):
 
 def noise_enbw_hz(cfg: TacanSignalConfig) -> float:
     """Noise-equivalent bandwidth of the noise filter (Hz), normalised to its centre gain."""
+    from scipy import signal as sps
     sos = _noise_filter(cfg)
     imp = np.zeros(1 << 16)
     imp[0] = 1.0
@@ -482,6 +483,7 @@ def generate_adc_variants(cfg: TacanSignalConfig, adc_bits) -> dict:
     outs = {b: np.empty(n, dtype=np.int16 if b <= 16 else np.int32) for b in bits_list}
     n_clips = dict.fromkeys(bits_list, 0)
 
+    from scipy import signal as sps
     sos = _noise_filter(cfg) if snr is not None else None
     zi = None
     if sos is not None:

@@ -275,7 +275,8 @@ def _dwell_looks(read_ms, start, fs_d, prn, dwell, data_bits, max_doppler_hz):
 def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
                       limit_ms: int = DEFAULT_LIMIT_MS, pfa: float = 1e-3,
                       max_doppler_hz: float = 7000.0, data_bits: bool = True,
-                      stop: bool = True) -> SearchOutcome:
+                      stop: bool = True, first: int = 0, last: int | None = None
+                      ) -> SearchOutcome:
     """Search ``prn`` on a stream (module docstring).
 
     Parameters
@@ -298,6 +299,12 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
     stop : bool
         Stop at the first detection (False: run every test, for a noise Monte Carlo's
         ``p_min``).
+    first, last : int
+        Run only the dwells ``first .. last - 1`` of the schedule within the limit (default
+        all), each at its place in the stream and with the threshold of the whole schedule:
+        two calls that split the schedule make the tests of one search
+        (:func:`dsp.gnss.search_sequential.sequential_search_all` changes the signal in
+        between).
     """
     prn = check_prn(prn)
     if not (isinstance(pfa, (int, float)) and 0 < pfa < 1):
@@ -310,10 +317,18 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
                          f"per 1 ms")
     sched = schedule_within(schedule, limit_ms, data_bits)
     n_tests = sum(len(d.looks) * len(d.alignments(data_bits)) for d in sched)
+    last = len(sched) if last is None else last
+    if not (isinstance(first, int) and isinstance(last, int) and 0 <= first < last
+            <= len(sched)):
+        raise ValueError(f"first, last must pick dwells of the {len(sched)} within the limit, "
+                         f"not {first!r}, {last!r}")
     pt = pfa / n_tests
     start, out, p_min, looks = 0, None, math.inf, []
-    for si, d in enumerate(sched):
+    for si, d in enumerate(sched[:last]):
         W = d.span_ms(data_bits)
+        if si < first:
+            start += W
+            continue
         looks_it = _dwell_looks(read_ms, start, fs_d, prn, d, data_bits, max_doppler_hz)
         for k, (best, where, tot, cells) in zip(d.looks, looks_it):
             th = threshold(pt, cells, k)
@@ -340,11 +355,11 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
         if out is not None and stop:
             break
     if out is None:
-        last = looks[-1]
-        out = SearchOutcome(prn, False, math.nan, math.nan, len(sched) - 1, str(sched[-1]),
-                            sched[-1].coherent_ms, sched[-1].noncoherent, 0, start - W,
-                            start, last["metric"], math.nan, math.nan,
-                            sched[-1].bin_width_hz, float(pfa), n_tests, math.inf)
+        ld = sched[last - 1]
+        out = SearchOutcome(prn, False, math.nan, math.nan, last - 1, str(ld),
+                            ld.coherent_ms, ld.noncoherent, 0, start - W,
+                            start, looks[-1]["metric"], math.nan, math.nan,
+                            ld.bin_width_hz, float(pfa), n_tests, math.inf)
     out.p_min = p_min
     out.looks = looks
     return out

@@ -159,9 +159,11 @@ DEEP_STAGES = DEFAULT_STAGES + (Stage(10, 4, (0, 3, 6)),)
 
 @dataclass
 class Detection:
-    """A verified satellite. Doppler (Hz) and code phase (chips, at the recording's first
+    """A satellite found. Doppler (Hz) and code phase (chips, at the recording's first
     sample, ``[0, 1023)``) refined at the full rate; ``metric`` = first-dwell peak /
-    threshold; ``dwell_*`` / ``verify_*`` the two dwells' raw results."""
+    threshold; ``dwell_*`` / ``verify_*`` the two dwells' raw results (:func:`search_all`;
+    the sequential search of :mod:`dsp.gnss.search_sequential` has no verification dwell:
+    ``verify_metric`` None, ``stage_text`` its deciding look and when it was made)."""
 
     prn: int
     doppler_hz: float
@@ -174,7 +176,7 @@ class Detection:
     dwell_code_phase_chips: float
     dwell_peak: float
     dwell_threshold: float
-    verify_metric: float
+    verify_metric: float | None
     alignment_ms: int
     bin_width_hz: float
 
@@ -375,8 +377,10 @@ def _prompts(y, fs, prn, f, cp, n_ms, epochs=False):
     return z.reshape(n_ms, N).sum(axis=1)
 
 
-def _refine(xf, fs, prn, fd, cp, cell_chips, refine_ms, bin_width_hz):
-    """Full-rate Doppler, code phase and C/N0 (module docstring)."""
+def refine_detection(xf, fs, prn, fd, cp, cell_chips, refine_ms, bin_width_hz):
+    """Full-rate Doppler, code phase and C/N0 of a detection at Doppler ``fd`` and code
+    phase ``cp`` (chips at ``xf[0]``) on zero-IF samples ``xf`` (module docstring):
+    ``(doppler_hz, code_phase_chips, cn0_dbhz)``."""
     N = int(round(fs * CODE_PERIOD_S))
     n_ms = min(refine_ms, xf.size // N)
     f = refine_doppler(xf, fs, prn, 0.0, fd, cp, n_ms=n_ms) if n_ms >= 2 else fd
@@ -453,6 +457,66 @@ def cross_correlation_suspects(dets, margin_db: float = XCORR_MARGIN_DB) -> dict
     return out
 
 
+def check_search_args(prns, pfa, max_doppler_hz, refine_ms, fs_hz) -> tuple:
+    """The shared arguments checked (ValueError naming the option): ``(prns, samples/ms)``."""
+    prns = [check_prn(p) for p in prns]
+    if not prns:
+        raise ValueError("prns must name at least one PRN")
+    if not (isinstance(pfa, (int, float)) and 0 < pfa < 1):
+        raise ValueError(f"--pfa must be in (0, 1), not {pfa!r}")
+    if not (isinstance(max_doppler_hz, (int, float)) and 0 < max_doppler_hz <= 50e3):
+        raise ValueError(f"--max-doppler-hz must be in (0, 50000] Hz, not {max_doppler_hz!r}")
+    if isinstance(refine_ms, bool) or not isinstance(refine_ms, (int, np.integer)) \
+            or refine_ms < 2:
+        raise ValueError(f"refine_ms must be an integer >= 2 (ms), not {refine_ms!r}")
+    N = int(round(fs_hz * CODE_PERIOD_S))
+    if abs(N - fs_hz * CODE_PERIOD_S) > 1e-6 * N:
+        raise ValueError(f"--fs-hz {fs_hz:g} gives no whole number of samples per 1 ms")
+    return prns, N
+
+
+def front_end(read, n: int, fs_hz: float, if_hz: float, inverted: bool, excise_db):
+    """Front-end steps 1-3 (module docstring) on the recording's first ``n`` samples:
+    ``(zero-IF samples at the full rate, periodic interference ratio, excised Hz)``."""
+    raw, periodic = remove_periodic(read(0, n), fs_hz)
+    xf = to_baseband(raw, fs_hz, if_hz, inverted, 1)
+    xf, excised = excise(xf, fs_hz) if excise_db is not None else (xf, [])
+    return xf, periodic, excised
+
+
+def two_pass_search(prns, xf, fs_hz: float, need_ms: int, D: int, first, later, rej: list
+                    ) -> list:
+    """The two passes (module docstring) on full-rate zero-IF ``xf``: ``first(prn, xb)``
+    for every PRN, then, the satellites found cancelled from ``xf`` in place, ``later(prn,
+    xb)`` (None: no pass 2) for the rest; ``xb``: ``need_ms`` ms decimated by ``D``; each
+    gives a :class:`Detection` or None. Cross-correlation suspects go to ``rej``; returns
+    the other detections by PRN."""
+    N = int(round(fs_hz * CODE_PERIOD_S))
+    dets = []
+    xb = to_baseband(xf[:need_ms * N], fs_hz, 0.0, False, D)
+    for prn in prns:
+        d = first(prn, xb)
+        if d is not None:
+            dets.append(d)
+    rest = [p for p in prns if p not in {d.prn for d in dets}]
+    if later is not None and rest:
+        for d in dets:
+            cancel(xf, fs_hz, d.prn, d.doppler_hz, d.code_phase_chips)
+        xb = to_baseband(xf[:need_ms * N], fs_hz, 0.0, False, D)
+        for prn in rest:
+            d = later(prn, xb)
+            if d is not None:
+                dets.append(d)
+    xc = cross_correlation_suspects(dets)
+    for d in [d for d in dets if d.prn in xc]:
+        dets.remove(d)
+        rej.append({"prn": d.prn, "stage": d.stage, "doppler_hz": d.doppler_hz,
+                    "code_phase_chips": d.code_phase_chips, "metric": d.metric,
+                    "cn0_dbhz": d.cn0_dbhz, "cross_correlation_of": xc[d.prn]})
+    dets.sort(key=lambda d: d.prn)
+    return dets
+
+
 def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool = False,
                prns=range(1, 33), pfa: float = 1e-3, max_doppler_hz: float = 5000.0,
                stages=DEFAULT_STAGES, min_rate_hz: float = MIN_RATE_HZ,
@@ -486,22 +550,10 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
     excise_db : float or None
         Threshold of the narrowband interference excision (:func:`excise`); None: off.
     """
-    prns = [check_prn(p) for p in prns]
-    if not prns:
-        raise ValueError("prns must name at least one PRN")
-    if not (isinstance(pfa, (int, float)) and 0 < pfa < 1):
-        raise ValueError(f"--pfa must be in (0, 1), not {pfa!r}")
-    if not (isinstance(max_doppler_hz, (int, float)) and 0 < max_doppler_hz <= 50e3):
-        raise ValueError(f"--max-doppler-hz must be in (0, 50000] Hz, not {max_doppler_hz!r}")
+    prns, N = check_search_args(prns, pfa, max_doppler_hz, refine_ms, fs_hz)
     stages = _check_stages(stages)
     if not (isinstance(verify_pfa, (int, float)) and 0 < verify_pfa < 1):
         raise ValueError(f"verify_pfa must be in (0, 1), not {verify_pfa!r}")
-    if isinstance(refine_ms, bool) or not isinstance(refine_ms, (int, np.integer)) \
-            or refine_ms < 2:
-        raise ValueError(f"refine_ms must be an integer >= 2 (ms), not {refine_ms!r}")
-    N = int(round(fs_hz * CODE_PERIOD_S))
-    if abs(N - fs_hz * CODE_PERIOD_S) > 1e-6 * N:
-        raise ValueError(f"--fs-hz {fs_hz:g} gives no whole number of samples per 1 ms")
     n_ms = n_samples // N
     run = [s for s in stages if 2 * s.span_ms <= n_ms]
     skipped = [str(s) for s in stages if 2 * s.span_ms > n_ms]
@@ -513,13 +565,11 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
     Nd = N // D
     need_ms = 2 * max(s.span_ms for s in run)
     rf_ms = max(2, min(int(refine_ms), n_ms))
-    raw, periodic = remove_periodic(read(0, max(need_ms, rf_ms) * N), fs_hz)
-    xf = to_baseband(raw, fs_hz, if_hz, inverted, 1)
-    del raw
-    xf, excised = excise(xf, fs_hz) if excise_db is not None else (xf, [])
+    xf, periodic, excised = front_end(read, max(need_ms, rf_ms) * N, fs_hz, if_hz, inverted,
+                                      excise_db)
     n_alarms = sum(len(s.alignments_ms) for s in run)
     pfa_each = pfa / n_alarms
-    dets, rej = [], []
+    rej = []
 
     def one(prn, si, st, xb):
         r1, a1 = _dwell(xb[:st.span_ms * Nd], fs_d, prn, st, pfa_each, max_doppler_hz)
@@ -534,37 +584,21 @@ def search_all(read, n_samples: int, fs_hz: float, if_hz: float, inverted: bool 
                         "code_phase_chips": r1.code_phase_chips,
                         "metric": r1.peak / r1.threshold, "verify_metric": m2})
             return None
-        f, cp, cn0 = _refine(xf, fs_hz, prn, r1.doppler_hz, r1.code_phase_chips,
-                             CHIP_RATE_HZ / fs_d, rf_ms, st.bin_width_hz)
+        f, cp, cn0 = refine_detection(xf, fs_hz, prn, r1.doppler_hz, r1.code_phase_chips,
+                                      CHIP_RATE_HZ / fs_d, rf_ms, st.bin_width_hz)
         return Detection(prn, float(f), cp, cn0, r1.peak / r1.threshold, si, str(st),
                          r1.doppler_hz, r1.code_phase_chips, r1.peak, r1.threshold,
                          m2, a1, st.bin_width_hz)
 
-    # pass 1: the first stage for every PRN
-    xb = to_baseband(xf[:need_ms * N], fs_hz, 0.0, False, D)
-    for prn in prns:
-        d = one(prn, 0, run[0], xb)
-        if d is not None:
-            dets.append(d)
-    # pass 2: the longer dwells for the rest, the satellites found so far cancelled
-    rest = [p for p in prns if p not in {d.prn for d in dets}]
-    if len(run) > 1 and rest:
-        for d in dets:
-            cancel(xf, fs_hz, d.prn, d.doppler_hz, d.code_phase_chips)
-        xb = to_baseband(xf[:need_ms * N], fs_hz, 0.0, False, D)
-        for prn in rest:
-            for si in range(1, len(run)):
-                d = one(prn, si, run[si], xb)
-                if d is not None:
-                    dets.append(d)
-                    break
-    xc = cross_correlation_suspects(dets)
-    for d in [d for d in dets if d.prn in xc]:
-        dets.remove(d)
-        rej.append({"prn": d.prn, "stage": d.stage, "doppler_hz": d.doppler_hz,
-                    "code_phase_chips": d.code_phase_chips, "metric": d.metric,
-                    "cn0_dbhz": d.cn0_dbhz, "cross_correlation_of": xc[d.prn]})
-    dets.sort(key=lambda d: d.prn)
+    def later(prn, xb):
+        for si in range(1, len(run)):
+            d = one(prn, si, run[si], xb)
+            if d is not None:
+                return d
+        return None
+
+    dets = two_pass_search(prns, xf, fs_hz, need_ms, D, lambda prn, xb: one(prn, 0, run[0], xb),
+                           later if len(run) > 1 else None, rej)
     return SearchReport(dets, rej, [str(s) for s in run], skipped, float(fs_hz), D, float(pfa),
                         float(max_doppler_hz), prns, int(n_samples), excised,
                         periodic if periodic > PERIODIC_RATIO else None)

@@ -22,7 +22,6 @@ from fractions import Fraction
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import signal as sps
 
 from dsp.design import cic_taps, design_pulse_fir
 from dsp.tacan.peak import peak_search_float
@@ -220,7 +219,8 @@ class _DecimatingFir:
             raise ValueError("chunk length must be a multiple of the decimation")
         buf = np.concatenate([self.hist, x])
         # upfirdn output m: sum_k h[k] buf[m*down - k]; keep outputs at buf index >= hist_len.
-        y = sps.upfirdn(self.h, buf, up=1, down=self.down)
+        from scipy.signal import upfirdn
+        y = upfirdn(self.h, buf, up=1, down=self.down)
         m0 = self.hist_len // self.down
         y = y[m0:m0 + len(x) // self.down]
         self.hist = buf[len(buf) - self.hist_len:] if self.hist_len else self.hist

@@ -195,11 +195,16 @@ class ChannelBank:
                              f"not shape {scyc.shape}")
         return x, xq, scyc
 
-    def add_writes(self, writes) -> None:
+    def add_writes(self, writes, checked: bool = False) -> None:
         """Bus writes ``(channel, cycle, reg, value)`` (each value checked by the register
-        map), pending until their dump boundary."""
+        map unless ``checked``: already checked by the caller), pending until their dump
+        boundary."""
         _, _, regs, _ = _layout(self.params)
-        w = [(int(ch), int(c), int(a), regs.check_write(int(a), v)) for ch, c, a, v in writes]
+        if checked:
+            w = [(int(ch), int(c), int(a), int(v)) for ch, c, a, v in writes]
+        else:
+            w = [(int(ch), int(c), int(a), regs.check_write(int(a), v))
+                 for ch, c, a, v in writes]
         if not w:
             return
         allw = np.concatenate([self._writes, np.array(w, np.int64)])
@@ -384,8 +389,9 @@ class GnssArrayModel:
         rc, words = self.step_words(samples, writes, cycles=cycles)
         return rc, words_to_values(self.params, words)
 
-    def step_words(self, samples, writes=(), *, cycles=None):
-        """:meth:`step` with the records as FIFO words, ``(n, record_words)`` int64."""
+    def step_words(self, samples, writes=(), *, cycles=None, checked: bool = False):
+        """:meth:`step` with the records as FIFO words, ``(n, record_words)`` int64;
+        ``checked``: the writes' values were checked by the register map already."""
         w = []
         for c, a, v in writes:
             ch, reg = divmod(int(a), 4)
@@ -395,7 +401,7 @@ class GnssArrayModel:
             w.append((ch, c, reg, v))
         # the samples are checked once for every channel (all at the same cycle)
         x, xq, scyc = self.bank.prepare(samples, cycles)
-        self.bank.add_writes(w)
+        self.bank.add_writes(w, checked)
         cyc, fields, chans = self.bank.advance(x, xq, scyc)
         words = record_words(self.params, fields, chans)
         if self.arbiter:

@@ -183,7 +183,8 @@ def test_adc_loss_bad_input(capsys, tmp_path):
     (["sweep", "tacan", "--snr-db", "0:1000000:0.001"],
      "--snr-db '0:1000000:0.001' gives 1,000,000,001 values; at most 1000"),
     (["tacan", "--backend", "pysim", "--duration-s", "1.2"],
-     "pysim simulates about 3e+03 cycles/s: 24,000,000 cycles would take ~2.2 h"),
+     "24,000,000 cycles on the pysim backend (about 3e+03 cycles/s) would take about 2.22 h "
+     "on this machine (limit 2 h): reduce --duration-s; long records run on --backend model"),
     (["tacan", "--backend", "model", "--recheck", "pysim", "--recheck-samples", "1e8"],
      "reduce --recheck-samples"),
     (["sweep", "tacan", "--snr-db", "0:100", "--trials", "100", "--duration-s", "10"],

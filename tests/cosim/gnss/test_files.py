@@ -141,14 +141,15 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
                "--format", "int8", "--fs-hz", "12e6", "--if-hz", "3e6", "--prns", "0-3"])
     assert rc == 2 and "--prns must name PRNs in 1-32" in capsys.readouterr().err
     rc = main(["gnss-acquire", "--file", str(DATA / "L1_20211125_004000_12MHz_I_70ms.bin"),
-               "--format", "int8", "--fs-hz", "12e6", "--if-hz", "3e6", "--stages", "1y10"])
+               "--format", "int8", "--fs-hz", "12e6", "--if-hz", "3e6", "--search", "verified",
+               "--stages", "1y10"])
     assert rc == 2 and "--stages entries must be TxK" in capsys.readouterr().err
 
 
 def test_cli_table_and_json(capsys):
     args = ["gnss-acquire", "--file", str(DATA / "L1_20211125_004000_12MHz_I_70ms.bin"),
             "--format", "int8", "--fs-hz", "12e6", "--if-hz", "3e6", "--prns", "5,6,13",
-            "--stages", "1x10"]
+            "--search", "verified", "--stages", "1x10"]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert re.search(r"^\s+5\s+\S+\s+\S+\s+\S+\s+\S+\s+1ms x 10", out, re.M)
@@ -157,3 +158,25 @@ def test_cli_table_and_json(capsys):
     d = json.loads(capsys.readouterr().out)
     assert [x["prn"] for x in d["detections"]] == [5, 13]
     assert d["recording"]["n_samples"] == 840000 and d["decimation"] == 5
+
+
+def test_cli_sequential_search_by_default_and_the_frequency_plan_warning(tmp_path, capsys):
+    """gnss-acquire searches sequentially unless told --search verified (21 ms hold its first
+    dwell only); a rate commensurate with the chip rate (2.046 MS/s, 2 samples per chip) is
+    warned about on stderr, by gnss-acquire and gnss-track alike."""
+    path = tmp_path / "two.bin"
+    write_synthetic(path, "int8-iq", 2.046e6, 0.0, 0.021,
+                    [SatelliteSpec(4, 1200.0, 100.0, 50.0), SatelliteSpec(9, -2100.0, 700.0, 48.0)],
+                    seed=2)
+    args = ["--file", str(path), "--format", "int8-iq", "--fs-hz", "2.046e6"]
+    assert main(["gnss-acquire", *args, "--prns", "4,9,12", "--json"]) == 0
+    out = capsys.readouterr()
+    d = json.loads(out.out)
+    assert d["search"] == "sequential" and [x["prn"] for x in d["detections"]] == [4, 9]
+    assert d["stages_run"] == ["1 ms x 5/10"] and d["pfa_per_prn"] == pytest.approx(1e-3 / 3)
+    for x in d["detections"]:
+        assert x["verify_metric"] is None and x["stage_text"] == "1 ms x 5 at 5 ms"
+    warning = "warning: --fs-hz 2.046 MS/s = 2 x 1.023 MHz puts the samples at only 2 offsets"
+    assert out.err.startswith(warning)
+    assert main(["gnss-track", *args, "--prns", "12", "--json"]) == 1      # nothing found
+    assert capsys.readouterr().err.startswith(warning)

@@ -44,7 +44,7 @@ def _check(out, settle_s):
         assert r["cycle_slips"] == 0, d
         assert r["fifo_dropped"] == 0 and r["dropped_reported"] == 0
         assert r["code_rmse_chips"] < 0.02
-    (t, e1, d1), (_, e2, d2) = out["fixed"]["_series"], out["float"]["_series"]
+    (t, e1, d1, _), (_, e2, d2, _) = out["fixed"]["_series"], out["float"]["_series"]
     k = t >= settle_s
     de = 360 * (_wrap(e1) - _wrap(e2))[k]
     assert np.sqrt(np.mean(de ** 2)) < FIXED_PHASE_RMS_DEG
@@ -67,7 +67,7 @@ def test_jerk_run_10s_no_slip_fixed_near_float_and_kaplan_stress():
         assert r["lock_fraction"] >= 0.95
         assert r["phase_rmse_deg"] < 10.0
     # steady state of the jerk (its second second): mean error vs 0.4828 J / Bn^3
-    t, e, _ = out["fixed"]["_series"]
+    t, e, _, _ = out["fixed"]["_series"]
     k = (t >= 3.0) & (t < 4.0)
     want = jerk_stress_deg(jerk_cycles_s3(5.0) * 360.0, 15.0)
     got = abs(np.mean(360 * _wrap(e)[k]))

@@ -99,7 +99,9 @@ def _csv(tmp_path, monotonic):
     (["--duration-s", "20"], "error: duration_s must cover the manoeuvre (start_s + 26.93 s), not 20.0"),
     (["--jerk-g-s", "-5"], "error: jerk_g_s must be a finite number > 0, not -5.0"),
     (["--pli-epochs", "0"], "error: pli_epochs must be an integer in [1, 1000], not 0"),
-    (["--backend", "pysim", "--duration-s", "150"], "error: pysim simulates about 2e+03 cycles/s"),
+    (["--backend", "pysim", "--duration-s", "150"], "error: 2,469,068,800 cycles on the pysim "
+     "backend (about 2e+03 cycles/s; --duration-s 150.7) would take about 343 h on this machine "
+     "(limit 2 h): reduce --duration-s"),
     (["--trajectory-csv", "NONMONO"], "error: --trajectory-csv '{csv}' line 10, column 1: time "
                                       "must increase strictly"),
     (["--trajectory-csv", "GOOD", "--duration-s", "5"], "error: trajectory_csv '{good}' ends at 2 s: "
