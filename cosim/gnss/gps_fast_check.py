@@ -36,6 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from .config import GnssRunConfig
+from .constellation import CHIP_M
 from .gps_fast import fixes_from_series, run_fast, select_channels
 from .gps_receiver import GpsConfig
 from .multichannel import TrackConfig
@@ -75,7 +76,7 @@ def if_path(spec, out_dir, run: GnssRunConfig = GnssRunConfig(),
     t_m = t_m[t_m < spec.duration_s]
     N = np.round(t_m * fs).astype(np.int64)
     tr = sig.truth_at(t_m)
-    chi_true = sig.chi0 + 1.023e6 * t_m[:, None] - tr.pseudorange_m / (299792458.0 / 1.023e6)
+    chi_true = sig.chi0 + 1.023e6 * t_m[:, None] - tr.pseudorange_m / CHIP_M
     M, S = t_m.size, len(prns)
     ser = {k: np.full((M, 1, S), np.nan) for k in
            ("code_chips", "doppler_hz", "cn0_dbhz", "carrier_cycles")}
@@ -188,7 +189,6 @@ def compare(spec, out_dir, run: GnssRunConfig = GnssRunConfig(),
         raise RuntimeError("internal: the two paths did not track the same channels/epochs")
     tr = fast.truth
     chi_t = fast.truth_chips()
-    from .constellation import CHIP_M
     rerr_if = (chi_t[:, None, :] - ser_if["code_chips"]) * CHIP_M
     derr_if = ser_if["doppler_hz"] - tr.doppler_hz[:, None, :]
     pos_if = _pos_components(runs_if, tr.rx_position_m)

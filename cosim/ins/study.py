@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.gnss.loopsim import cycle_slips, track_fast
-from dsp.gnss.ca_code import CHIP_RATE_HZ
+from dsp.gnss.budget import CHIP_M
 from dsp.gnss.loops_fixed import FLOAT, FixedArith
 from dsp.gnss.trackers import TrackerContext, make_tracker
 from hdl.gnss.params import DEFAULT_FS_HZ
@@ -33,7 +33,6 @@ from .ins_error import InsAiding, InsErrors
 from .trajectory import Geometry, Scenario, PaperTrajectory, L1_WAVELENGTH_M
 
 LOOPS = ("aided-kf", "aided-pll", "unaided-kf")
-CHIP_M = 299792458.0 / CHIP_RATE_HZ
 
 
 @dataclass(frozen=True)
