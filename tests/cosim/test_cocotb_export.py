@@ -18,6 +18,7 @@ import pytest
 
 from cosim.backends.icarus import icarus_available, icarus_missing_message
 from cosim.cli import main
+from hdl.gnss.params import DEFAULT_FS_HZ
 
 needs_icarus = pytest.mark.skipif(not icarus_available(), reason=icarus_missing_message())
 
@@ -115,8 +116,9 @@ def test_gnss_benches_with_register_writes(tmp_path, capsys):
         addr = {v for c, p, v in case["writes"] if p == "reg_addr"}
         channels = 12 if "array" in name else 1
         assert len(addr) == 4 * channels, (name, sorted(addr))     # every register of each
-        late = [c for c, p, v in case["writes"] if p == "reg_we" and v and c > 16368]
-        assert late and b["words"] > 0 and b["cycles"] == 3 * 16368 + 700
+        period = round(DEFAULT_FS_HZ * 1e-3)                        # samples per code period
+        late = [c for c, p, v in case["writes"] if p == "reg_we" and v and c > period]
+        assert late and b["words"] > 0 and b["cycles"] == 3 * period + 700
     bench = tmp_path / "clean"
     shutil.copytree(benches["gnss_channel_iq"]["path"], bench)
     r = _run(bench, os.environ.get("KFNAV_CLEAN_PYTHON", sys.executable))
