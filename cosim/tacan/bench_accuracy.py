@@ -10,7 +10,11 @@ k``) the front end runs once with both searches, and the DSP measures on it as t
 pair reports the DSP chooses at run time, :mod:`dsp.tacan.pairsource`) and as ``--detector
 pulse`` (the single-pulse search's reports of the same run -- the same search, bit for bit,
 as long as the FIFO drops nothing, counted per record); ``--detector pair`` (the pair search
-alone) runs its own front end. Pooled per mode, SNR and detector: RMSE / Cramer-Rao bound
+alone) runs its own front end, on the envelope the first computed
+(:class:`~hdl.tacan.envelope_memo.EnvelopeMemo`). The records of one seed -- its modes and
+SNRs -- run together (:func:`run_records`), their IF noise drawn and filtered once
+(:func:`cosim.tacan.signal.unit_noise`); both are the same bits as computing them again
+(``python -m cosim bench tacan-record`` times the two ways and compares the records). Pooled per mode, SNR and detector: RMSE / Cramer-Rao bound
 with a 95 % bootstrap interval over the records, the worst bearing, the mean error, sector
 slips and misleading bearings, and the issue-41 checks (:func:`checks`).
 
@@ -19,7 +23,8 @@ slips and misleading bearings, and the issue-41 checks (:func:`checks`).
 one (the grid is written into the results). ``--frontend-cache DIR`` keeps each record's
 front-end output in ``DIR`` (keyed by the run's front-end key, the detector and a digest of
 the front end's sources, :data:`FRONTEND_SOURCES`) and reads it back: a DSP change is judged
-again without running the FPGA model (~1 CPU-min per record) again; the JSON says so.
+again without running the FPGA model again (its two front ends are ~40 % of a record's
+CPU time); the JSON says so.
 """
 from __future__ import annotations
 
