@@ -10,8 +10,10 @@
   GNSS: a cycle slip or a Doppler error over its bound; monopulse: a pointing error beyond
   the unambiguous half-width).
 
-:func:`shown_figures` computes them for one record from the receiver's estimates (when each
-became available, its error against the truth, its valid flag); :func:`pool` sums them
+:func:`shown_figures` (in :mod:`dsp.shown`, with :func:`dsp.shown.valid_figures`, the
+accuracy and integrity part that the receivers' own statistics use) computes them for one
+record from the receiver's estimates (when each became available, its error against the
+truth, its valid flag); :func:`pool` sums them
 over the trials of a study point; :func:`paired` sets a point beside the float golden chain
 on the same records (the accuracy ratio, the availability difference, the misleading
 estimates the golden chain does not also make, with their intervals). The sweep
@@ -26,94 +28,9 @@ import math
 
 import numpy as np
 
+from dsp.shown import FIGURE_KEYS, shown_figures
+
 __all__ = ["shown_figures", "pool", "paired", "wilson_ci", "FIGURE_KEYS"]
-
-#: The keys of :func:`shown_figures`.
-FIGURE_KEYS = ("n_estimates", "n_valid", "rmse", "mean_error", "max_abs_error", "n_epochs",
-               "available_epochs", "availability", "first_valid_s", "misleading",
-               "misleading_rate", "bound", "epoch_s")
-
-
-def _f(v):
-    v = float(v)
-    return v if math.isfinite(v) else None
-
-
-def shown_figures(t_s, err, valid, *, settle_s: float, end_s: float, epoch_s: float,
-                  bound: float | None = None, misleading=None) -> dict:
-    """The three figures of one record.
-
-    Parameters
-    ----------
-    t_s : array (M,)
-        When each estimate became available to the user (s from the record's start),
-        non-decreasing.
-    err : array (M,)
-        Each estimate's error against the truth (NaN: no estimate, counted as not valid).
-    valid : array of bool (M,)
-        The receiver shows the estimate as valid (not flagged).
-    settle_s, end_s : float
-        The scored window: estimates from ``settle_s`` (the filter's settling) to ``end_s``
-        (the record's end); none after settling: no epoch, availability None.
-    epoch_s : float
-        The display epoch: the window is cut into ``floor((end_s - settle_s) / epoch_s)``
-        epochs; an epoch is *available* when the latest estimate produced within it is
-        valid (no estimate in it: not available).
-    bound : float, optional
-        An estimate shown valid with ``|err| > bound`` is misleading.
-    misleading : array of bool (M,), optional
-        The receiver's own misleading test per estimate (e.g. a cycle slip); OR-ed with
-        the bound's. Only estimates shown valid after settling count.
-
-    Returns a dict (:data:`FIGURE_KEYS`): ``rmse``, ``mean_error``, ``max_abs_error`` over
-    the valid estimates after settling (None without any), ``availability`` =
-    ``available_epochs / n_epochs``, ``first_valid_s`` (None: never valid), ``misleading``
-    (count) and ``misleading_rate`` (per valid estimate; None without any)."""
-    t = np.asarray(t_s, dtype=np.float64).ravel()
-    e = np.asarray(err, dtype=np.float64).ravel()
-    v = np.asarray(valid, dtype=bool).ravel()
-    if not (t.size == e.size == v.size):
-        raise ValueError(f"t_s, err and valid must have one value per estimate, not "
-                         f"{t.size}, {e.size}, {v.size}")
-    if not (epoch_s > 0 and math.isfinite(epoch_s)):
-        raise ValueError(f"epoch_s must be > 0, not {epoch_s}")
-    if t.size > 1 and np.any(np.diff(t) < 0):
-        raise ValueError("t_s must be non-decreasing (the order the estimates were shown)")
-    v = v & np.isfinite(e)
-    scored = (t >= settle_s) & (t <= end_s)
-    sv = scored & v
-    ev = e[sv]
-    bad = np.zeros(e.size, bool)
-    if bound is not None:
-        bad |= np.abs(np.where(np.isfinite(e), e, 0.0)) > bound
-    if misleading is not None:
-        m = np.asarray(misleading, dtype=bool).ravel()
-        if m.size != e.size:
-            raise ValueError(f"misleading must have one value per estimate ({e.size}), "
-                             f"not {m.size}")
-        bad |= m
-    n_mis = int(np.count_nonzero(sv & bad))
-    # availability: the latest estimate of each display epoch
-    n_ep = max(0, int(math.floor((end_s - settle_s) / epoch_s + 1e-9)))
-    avail = 0
-    if n_ep > 0 and scored.any():
-        idx = np.flatnonzero(scored)
-        k = np.floor((t[idx] - settle_s) / epoch_s + 1e-12).astype(np.int64)
-        inside = k < n_ep
-        idx, k = idx[inside], k[inside]
-        if idx.size:
-            last = np.r_[k[1:] != k[:-1], True]        # the last estimate of its epoch
-            avail = int(np.count_nonzero(v[idx[last]]))
-    first = np.flatnonzero(v)
-    return {"n_estimates": int(np.count_nonzero(scored)), "n_valid": int(ev.size),
-            "rmse": _f(np.sqrt(np.mean(ev ** 2))) if ev.size else None,
-            "mean_error": _f(np.mean(ev)) if ev.size else None,
-            "max_abs_error": _f(np.max(np.abs(ev))) if ev.size else None,
-            "n_epochs": n_ep, "available_epochs": avail,
-            "availability": avail / n_ep if n_ep else None,
-            "first_valid_s": _f(t[first[0]]) if first.size else None,
-            "misleading": n_mis, "misleading_rate": n_mis / ev.size if ev.size else None,
-            "bound": bound, "epoch_s": float(epoch_s)}
 
 
 def wilson_ci(k: int, n: int, z: float = 1.96) -> list[float] | None:

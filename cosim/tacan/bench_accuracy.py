@@ -10,7 +10,11 @@ k``) the front end runs once with both searches, and the DSP measures on it as t
 pair reports the DSP chooses at run time, :mod:`dsp.tacan.pairsource`) and as ``--detector
 pulse`` (the single-pulse search's reports of the same run -- the same search, bit for bit,
 as long as the FIFO drops nothing, counted per record); ``--detector pair`` (the pair search
-alone) runs its own front end. Pooled per mode, SNR and detector: RMSE / Cramer-Rao bound
+alone) runs its own front end, on the envelope the first computed
+(:class:`~hdl.tacan.envelope_memo.EnvelopeMemo`). The records of one seed -- its modes and
+SNRs -- run together (:func:`run_records`), their IF noise drawn and filtered once
+(:func:`cosim.tacan.signal.unit_noise`); both are the same bits as computing them again
+(``python -m cosim bench tacan-record`` times the two ways and compares the records). Pooled per mode, SNR and detector: RMSE / Cramer-Rao bound
 with a 95 % bootstrap interval over the records, the worst bearing, the mean error, sector
 slips and misleading bearings, and the issue-41 checks (:func:`checks`).
 
@@ -19,7 +23,8 @@ slips and misleading bearings, and the issue-41 checks (:func:`checks`).
 one (the grid is written into the results). ``--frontend-cache DIR`` keeps each record's
 front-end output in ``DIR`` (keyed by the run's front-end key, the detector and a digest of
 the front end's sources, :data:`FRONTEND_SOURCES`) and reads it back: a DSP change is judged
-again without running the FPGA model (~1 CPU-min per record) again; the JSON says so.
+again without running the FPGA model again (its two front ends are ~40 % of a record's
+CPU time); the JSON says so.
 """
 from __future__ import annotations
 
@@ -125,21 +130,22 @@ def frontend_sources_digest(root: Path | None = None) -> str:
     return h.hexdigest()[:16]
 
 
-def _frontend(samples, run, cache_dir: str | None):
+def _frontend(samples, run, cache_dir: str | None, memo=None):
     """The model front end's output on ``run`` -- from ``cache_dir`` when it holds it (one
-    pickle per front-end key, detector and source digest), else run and stored there."""
+    pickle per front-end key, detector and source digest), else run (with the record's
+    :class:`~hdl.tacan.envelope_memo.EnvelopeMemo` ``memo``) and stored there."""
     import hashlib
     import pickle
-    from .frontends import FRONTENDS, frontend_key
+    from .frontends import frontend_key, model_frontend
     if cache_dir is None:
-        return FRONTENDS["model"](samples(), run)
+        return model_frontend(samples(), run, memo)
     key = repr((frontend_key(run), run.detector, frontend_sources_digest()))
     path = Path(cache_dir) / (hashlib.sha256(key.encode()).hexdigest()[:24] + ".pkl")
     if path.exists():
         k, fo = pickle.loads(path.read_bytes())
         if k == key:
             return fo
-    fo = FRONTENDS["model"](samples(), run)
+    fo = model_frontend(samples(), run, memo)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_bytes(pickle.dumps((key, fo)))
@@ -147,27 +153,39 @@ def _frontend(samples, run, cache_dir: str | None):
     return fo
 
 
-def one_record(it: dict) -> dict:
+def _signal(it: dict):
+    from .signal import TacanSignalConfig
+    return TacanSignalConfig(mode=it["mode"], snr_db=it["snr_db"], bearing_deg=it["bearing_deg"],
+                             duration_s=it["duration_s"], seed=it["seed"])
+
+
+def one_record(it: dict, noise=None, share_envelope: bool = True) -> dict:
     """One record of the grid: the model front end (both searches; the pair search alone for
-    ``pair``) and the fixed-point DSP as each detector (a worker of ``map_jobs``). With
-    ``it["frontend_cache"]`` (a directory) the front ends' outputs are kept there and read
-    back (:func:`_frontend`): the DSP re-scored without running the FPGA model again."""
+    ``pair``) and the fixed-point DSP as each detector. With ``it["frontend_cache"]`` (a
+    directory) the front ends' outputs are kept there and read back (:func:`_frontend`):
+    the DSP re-scored without running the FPGA model again. ``noise``: a callable giving
+    the record's :class:`~cosim.tacan.signal.UnitNoise` (shared by the records of one
+    seed, :func:`one_seed`), called only when the samples are generated. With
+    ``share_envelope`` the pair search alone takes the default front end's envelope back
+    (:class:`~hdl.tacan.envelope_memo.EnvelopeMemo`) instead of computing it again."""
     from dsp.tacan.standard import SOURCE_PULSE
+    from hdl.tacan.envelope_memo import EnvelopeMemo
     from .config import TacanRunConfig
     from .run import run_dsp
-    from .signal import TacanSignalConfig, generate
-    sig = TacanSignalConfig(mode=it["mode"], snr_db=it["snr_db"], bearing_deg=it["bearing_deg"],
-                            duration_s=it["duration_s"], seed=it["seed"])
+    from .signal import generate
+    sig = _signal(it)
     cache = it.get("frontend_cache")
     held = []
 
     def samples():
         if not held:
-            held.append(generate(sig).samples)
+            held.append(generate(sig, None if noise is None else noise()).samples)
         return held[0]
     out = {k: it[k] for k in ("mode", "snr_db", "bearing_deg", "seed")}
     run = TacanRunConfig(signal=sig, backend="model", dsp="fixed", detector="both")
-    fo = _frontend(samples, run, cache)
+    # the pair search alone runs on the same envelope: computed once
+    memo = EnvelopeMemo() if share_envelope and "pair" in it["variants"] else None
+    fo = _frontend(samples, run, cache, memo)
     out["fifo_dropped"] = int(fo.fifo_dropped)
     out["both"] = _scores(run_dsp(fo, run), sig.bearing_deg, run.settle)
     if "pulse" in it["variants"]:
@@ -178,8 +196,41 @@ def one_record(it: dict) -> dict:
                                run.settle)
     if "pair" in it["variants"]:
         rp = replace(run, detector="pair")
-        out["pair"] = _scores(run_dsp(_frontend(samples, rp, cache), rp), sig.bearing_deg,
-                              run.settle)
+        out["pair"] = _scores(run_dsp(_frontend(samples, rp, cache, memo), rp),
+                              sig.bearing_deg, run.settle)
+    return out
+
+
+def one_seed(items: list) -> list:
+    """:func:`one_record` of each of ``items`` (records of one :func:`noise key
+    <cosim.tacan.signal.noise_key>`: one seed, every mode and SNR), the IF noise drawn and
+    filtered once, when the first record needs samples (a worker of ``map_jobs``)."""
+    from .signal import noise_key, unit_noise
+    keys = {noise_key(_signal(it)) for it in items}
+    if len(keys) != 1:
+        raise ValueError(f"one_seed takes the records of one noise key, not {sorted(keys)}")
+    held = []
+
+    def noise():
+        if not held:
+            held.append(unit_noise(_signal(items[0])))
+        return held[0]
+    return [one_record(it, noise if len(items) > 1 else None) for it in items]
+
+
+def run_records(items: list, jobs: int | None) -> list:
+    """:func:`one_record` of every item, in the order given, the items that share a seed's
+    noise run together (:func:`one_seed`) on ``jobs`` processes."""
+    from .signal import noise_key
+    groups: dict = {}
+    for i, it in enumerate(items):
+        groups.setdefault(noise_key(_signal(it)), []).append(i)
+    idx = list(groups.values())
+    done = map_jobs(jobs, one_seed, [[items[i] for i in g] for g in idx], "tacan-accuracy seeds")
+    out = [None] * len(items)
+    for g, recs in zip(idx, done):
+        for i, r in zip(g, recs):
+            out[i] = r
     return out
 
 
@@ -273,7 +324,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None,
     grid = grid or (QUICK if quick else FULL)
     t_start = time.perf_counter()
     items = [it | {"frontend_cache": frontend_cache} for it in grid.items()]
-    records = map_jobs(jobs, one_record, items, "tacan-accuracy records")
+    records = run_records(items, jobs)
     rows = pool(records, grid)
     summary = {"benchmark": "tacan-accuracy", "machine": machine_info(), "quick": quick,
                "elapsed_s": time.perf_counter() - t_start,

@@ -94,11 +94,13 @@ def dsp_receive(words, cycles, params, n_cycles, ovf_count) -> FrontendOutput:
                           source=out[2] if params.source_bits else None)
 
 
-def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOutput:
+def _session_frontend(samples, run: TacanRunConfig, backend: str,
+                      envelope_memo=None) -> FrontendOutput:
     """An HDL backend's output for one record, on the streaming pipeline: a front-end
     session (:func:`cosim.backends.factory.open_frontend`) fed the record and ``_n_cycles - len``
     idle cycles to flush the last peak, the DSP reading with ``run.service``, the
-    ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after)."""
+    ``control_writes`` scheduled at their effect cycles (open loop: the DSP runs after).
+    ``envelope_memo`` (model): the model's :class:`~hdl.tacan.envelope_memo.EnvelopeMemo`."""
     from ..core.pipeline import Pipeline
     from ..backends.factory import open_frontend
     p = run.hdl_params
@@ -109,6 +111,8 @@ def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOut
     writes = [(c, "freq", v) for c, _, v in ctl.writes()]
     with open_frontend(backend, p, log_ranges=backend == "model",
                        vcd=run.trace if backend == "pysim" else None) as fe:
+        if envelope_memo is not None:
+            fe.model.envelope_memo = envelope_memo
         pipe = Pipeline(fe, run.service)
         pipe.schedule(writes)
         pipe.feed(samples)
@@ -121,9 +125,12 @@ def _session_frontend(samples, run: TacanRunConfig, backend: str) -> FrontendOut
     return fo
 
 
-def model_frontend(samples, run: TacanRunConfig) -> FrontendOutput:
-    """The ``model`` backend: the bit-exact HDL model and its FIFO, with the range log."""
-    return _session_frontend(samples, run, "model")
+def model_frontend(samples, run: TacanRunConfig, envelope_memo=None) -> FrontendOutput:
+    """The ``model`` backend: the bit-exact HDL model and its FIFO, with the range log.
+    ``envelope_memo``: an :class:`~hdl.tacan.envelope_memo.EnvelopeMemo` shared by the runs
+    of one record whose front ends differ in their peak searches only (the envelope chain
+    computed once, the same bits)."""
+    return _session_frontend(samples, run, "model", envelope_memo)
 
 
 def _hdl_sim(samples, run: TacanRunConfig, kind: str) -> FrontendOutput:

@@ -245,6 +245,9 @@ SWEEP_OPTIONS = (
            help="ADC samples re-checked per point (default 1e6 Verilator, 6e4 pysim)"),
     Option(_SW, "target_rel", flag="--target",
            help="proposal target: RMSE within (1 + target) of the float golden (fraction)"),
+    Option(_SW, "availability_margin",
+           help="proposal target: availability at most this much (fraction) below the float "
+                "golden's"),
     Arg("--no-confirm", action="store_true", help="skip the confirming re-run"),
     Arg("--out", default="build/studies/sweep", help="output directory"),
     Arg("--jobs", type=parse_int, default=None,
@@ -418,6 +421,7 @@ def _sim_speed(out, quick: bool = False, jobs: int | None = None) -> dict:
 BENCHMARKS = {
     **{f"tacan-{k}": Benchmark(_tacan_bench(k), jobs=True)
        for k in ("accuracy", "robustness", "detector", "sensitivity", "confidence")},
+    "tacan-record": Benchmark(_tacan_bench("record")),
     "dsp-speed": Benchmark(_dsp_speed), "dsp-hour": Benchmark(_dsp_hour),
     "sim-speed": Benchmark(_sim_speed),
 }

@@ -424,20 +424,60 @@ def noise_enbw_hz(cfg: TacanSignalConfig) -> float:
     return float(cfg.fs_hz / 2 * np.sum(h * h) / abs(g0[0]) ** 2)
 
 
-def generate(cfg: TacanSignalConfig) -> TacanSignal:
+@dataclass(frozen=True)
+class UnitNoise:
+    """A record's IF noise before its scaling: the seed's noise stream (white, unit
+    variance) through the IF noise filter, warmed up as :func:`generate` does, float64, one
+    value per ADC sample. It depends on :func:`noise_key` alone -- not on the SNR, the mode,
+    the bearing or the ADC -- so records that share the key (a benchmark grid's modes and
+    SNRs at one seed) draw and filter it once: :func:`generate` given it scales it exactly
+    as it scales the noise it draws itself (the same bits)."""
+
+    key: tuple
+    values: np.ndarray
+
+
+def noise_key(cfg: TacanSignalConfig) -> tuple:
+    """What :class:`UnitNoise` depends on: the seed, the sample rate, the filter's band
+    (digital IF, noise bandwidth) and the record length."""
+    return (int(cfg.seed), float(cfg.fs_hz), float(cfg.digital_if_hz), float(cfg.noise_bw_hz),
+            int(cfg.n_samples))
+
+
+def _noise_chunks(cfg: TacanSignalConfig, rng_noise):
+    """The filtered unit noise chunk by chunk (:data:`_CHUNK` samples, the last shorter):
+    the filter warmed up on 4096 samples so that the record starts in steady state."""
+    from scipy import signal as sps
+    sos = _noise_filter(cfg)
+    _, zi = sps.sosfilt(sos, rng_noise.standard_normal(4096), zi=np.zeros((sos.shape[0], 2)))
+    n = cfg.n_samples
+    for c0 in range(0, n, _CHUNK):
+        nz, zi = sps.sosfilt(sos, rng_noise.standard_normal(min(n, c0 + _CHUNK) - c0), zi=zi)
+        yield nz
+
+
+def unit_noise(cfg: TacanSignalConfig) -> UnitNoise:
+    """The :class:`UnitNoise` of ``cfg`` (480 MB for a 3 s record at 20 MHz)."""
+    return UnitNoise(noise_key(cfg), np.concatenate(list(_noise_chunks(cfg, _streams(cfg.seed)[2]))))
+
+
+def generate(cfg: TacanSignalConfig, noise: UnitNoise | None = None) -> TacanSignal:
     """Generate the ADC samples and the truth for a scenario.
 
     Runs in chunks (bounded memory); the same ``cfg`` (seed included) gives the same bits.
+    ``noise``: the record's :func:`unit_noise`, drawn once for several records (the same
+    bits as without it).
     """
-    return generate_adc_variants(cfg, (cfg.adc_bits,))[cfg.adc_bits]
+    return generate_adc_variants(cfg, (cfg.adc_bits,), noise)[cfg.adc_bits]
 
 
-def generate_adc_variants(cfg: TacanSignalConfig, adc_bits) -> dict:
+def generate_adc_variants(cfg: TacanSignalConfig, adc_bits, noise: UnitNoise | None = None) -> dict:
     """The same analog record digitised by ADCs of several word lengths (one generation).
 
     Returns ``{bits: TacanSignal}``; ``result[cfg.adc_bits]`` equals :func:`generate`
     bit for bit, and every variant is what ``generate(replace(cfg, adc_bits=bits))`` gives
     (the analog signal and the AGC loading do not depend on the ADC word length).
+    ``noise``: as :func:`generate`'s.
     """
     bits_list = []
     for b in adc_bits:
@@ -483,12 +523,10 @@ def generate_adc_variants(cfg: TacanSignalConfig, adc_bits) -> dict:
     outs = {b: np.empty(n, dtype=np.int16 if b <= 16 else np.int32) for b in bits_list}
     n_clips = dict.fromkeys(bits_list, 0)
 
-    from scipy import signal as sps
-    sos = _noise_filter(cfg) if snr is not None else None
-    zi = None
-    if sos is not None:
-        # Warm the filter up on noise so the record starts in steady state.
-        _, zi = sps.sosfilt(sos, rng_noise.standard_normal(4096), zi=np.zeros((sos.shape[0], 2)))
+    if noise is not None and noise.key != noise_key(cfg):
+        raise ValueError(f"the unit noise given is another record's: key {noise.key} != "
+                         f"{noise_key(cfg)} (seed, fs, digital IF, noise bandwidth, samples)")
+    chunks = None if snr is None or noise is not None else _noise_chunks(cfg, rng_noise)
     # White input density so that the filter's passband density is N0 = P / (SNR B).
     sigma_w = 0.0 if snr is None else math.sqrt((a0 * a0 / 2) / (snr * cfg.noise_bw_hz) * fs / 2)
     centre = np.rint(all_t * fs).astype(np.int64)
@@ -505,8 +543,7 @@ def generate_adc_variants(cfg: TacanSignalConfig, adc_bits) -> dict:
             ok = (idx >= c0) & (idx < c1)
             x += np.bincount(idx[ok] - c0, weights=val[ok], minlength=c1 - c0)
         if snr is not None:
-            nz, zi = sps.sosfilt(sos, rng_noise.standard_normal(c1 - c0), zi=zi)
-            x += nz * sigma_w
+            x += (next(chunks) if noise is None else noise.values[c0:c1]) * sigma_w
         for b, full in fulls.items():
             n_clips[b] += int(_adc_codes(x, float(full), outs[b][c0:c1]))
 

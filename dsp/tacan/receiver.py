@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..fixed import FixedFormat
+from ..shown import valid_figures
 from .bearing import (ANGLE_BITS, TWO_PI, bangle_to_deg, bearing_from_state, combine_coarse_fine,
                       deg_to_bangle, reference_advances, track_sector, wrap_deg)
 from .decode import DecoderConfig, decode, outside_bursts
@@ -156,10 +157,12 @@ class ReceiverConfig:
     flag_state_jump: float | None = 12.0
     #: Each peak is a pulse *pair* (the FPGA's pulse-pair detection,
     #: :attr:`dsp.tacan.peak_params.PeakParams.pair_offset`; ``python -m cosim tacan --detector pair``):
-    #: timestamped at its second pulse, with the pair's mean envelope. The DSP takes it as the
-    #: pair's two pulses, the mode's pair spacing apart, each at that amplitude
-    #: (:func:`expand_pairs`), so the decoder and the filter see pulses as from a pulse
-    #: detector.
+    #: timestamped at its second pulse, with the pair's mean envelope. The decoder reads
+    #: the pairs' two pulses, the mode's pair spacing apart (:func:`expand_pairs`); the
+    #: filter takes each report once, at its pair's centre
+    #: (:func:`dsp.tacan.pairsource.pair_centres`), as with both searches -- not as two
+    #: pulses at that amplitude, which biases the bearing by a constant (ideal front end:
+    #: +0.0035 deg X, +0.0056 deg Y against the single pulses, every bearing).
     pair_reports: bool = False
     #: The front end's peak-amplitude bias near its threshold
     #: (:class:`dsp.tacan.peakbias.PeakBias`, e.g. ``PAIR_PEAK_BIAS`` for the pair
@@ -301,20 +304,18 @@ def process_peaks(times_s, amplitudes, cfg: ReceiverConfig | None = None, *,
         ticks = ticks[pm] if ticks is not None else None
     else:
         thr = bias.threshold(amps) if bias is not None else None
-    if cfg.pair_reports:
-        t, amps, ticks = expand_pairs(t, amps, cfg.mode, ticks=ticks,
-                                      tick_hz=cfg.kalman.tick_hz, tol_s=dcfg.tol_s)
-    elif source is not None:   # one measurement per pair report, at the pair's centre
-        t, amps, ticks = pair_centres(t, amps, cfg.mode, ticks=ticks, tick_hz=cfg.kalman.tick_hz)
-    if source is None:
+    if cfg.pair_reports:       # the decoder reads the pairs' pulses (their times)
+        dec = decode(expand_pairs(t, amps, cfg.mode, ticks=ticks, tick_hz=cfg.kalman.tick_hz,
+                                  tol_s=dcfg.tol_s)[0], cfg.mode, dcfg)
+    if source is None and not cfg.pair_reports:
         dec = decode(t, cfg.mode, dcfg)
         sel = np.flatnonzero(dec.measurement_mask)
-    elif dec.near_floor:   # the pair reports: near the floor those outside the bursts
-        # (measured, 0 dB, 8 records: RMSE 0.461 / 0.420 deg at 90 / 270 deg; with the
-        # bursts' 0.519 / 0.388)
-        sel = np.flatnonzero(outside_bursts(t, dec, cfg.mode))
-    else:
-        sel = np.arange(t.size)
+    else:                      # pair reports: one measurement each, at its pair's centre
+        t, amps, ticks = pair_centres(t, amps, cfg.mode, ticks=ticks, tick_hz=cfg.kalman.tick_hz)
+        # near the floor those outside the bursts (measured, both searches, 0 dB, 8
+        # records: RMSE 0.461 / 0.420 deg at 90 / 270 deg; with the bursts' 0.519 / 0.388)
+        sel = np.flatnonzero(outside_bursts(t, dec, cfg.mode) if dec.near_floor
+                             else np.ones(t.size, bool))
     tm, ym = t[sel], amps[:, sel]
     r_mult = burst_r_mult(tm, dec, cfg.mode) if cfg.density_weighting else None
     B = amps.shape[0]
@@ -565,20 +566,27 @@ MISLEADING_DEG = 20.0
 
 def bearing_stats(track: BearingTrack, bearing_true_deg, settle_s: float) -> dict:
     """Error statistics of the bearings produced after ``settle_s`` (per trial arrays), and
-    of those the receiver shows valid: their count, RMSE (NaN without any) and how many are
-    misleading (more than :data:`MISLEADING_DEG` off)."""
+    of those the receiver shows valid, as a user sees them (:func:`dsp.shown.valid_figures`
+    of the bearings that became available from ``settle_s`` on, ``produced_s``, as
+    :func:`cosim.tacan.run.shown_bearings` scores them): their count ``n_valid``, RMSE
+    ``valid_rmse_deg`` (NaN without any) and how many are ``misleading`` (more than
+    :data:`MISLEADING_DEG` off)."""
     keep = track.times_s >= settle_s
     truth = np.atleast_1d(np.asarray(bearing_true_deg, dtype=np.float64))[:, None]
     err = wrap_deg(track.bearing_deg[:, keep] - truth)
     B = track.bearing_deg.shape[0]
     shown = np.ones(track.bearing_deg.shape, bool) if track.valid is None else track.valid
-    valid = np.broadcast_to(shown[:, keep], err.shape)
-    n_valid = np.count_nonzero(valid, axis=1)
-    sq_valid = np.where(valid, err, 0.0) ** 2
-    vstats = {"n_valid": n_valid,
-              "valid_rmse_deg": np.where(n_valid > 0, np.sqrt(sq_valid.sum(axis=1)
-                                                               / np.maximum(n_valid, 1)), np.nan),
-              "misleading": np.count_nonzero(valid & (np.abs(err) > MISLEADING_DEG), axis=1)}
+    t = track.produced_s if track.produced_s is not None else track.times_s
+    order = np.argsort(t, kind="stable")
+    scored = order[t[order] >= settle_s]
+    e_all = wrap_deg(track.bearing_deg - truth)
+    v_all = np.broadcast_to(shown, e_all.shape)
+    figs = [valid_figures(e_all[r, scored], v_all[r, scored], bound=MISLEADING_DEG)
+            for r in range(e_all.shape[0])]
+    vstats = {"n_valid": np.array([f["n_valid"] for f in figs], np.int64),
+              "valid_rmse_deg": np.array([np.nan if f["rmse"] is None else f["rmse"]
+                                          for f in figs]),
+              "misleading": np.array([f["misleading"] for f in figs], np.int64)}
     if err.shape[1] == 0:
         nan = np.full(B, np.nan)
         return {"n": 0, "rmse_deg": nan, "mean_error_deg": nan, "max_abs_error_deg": nan,

@@ -69,8 +69,31 @@ def estimate_rotation(ref_t: np.ndarray, tol: float, min_refs: int,
     return quantize_rotation(1.0 / (9.0 * fit[1]))
 
 
+#: The last few :func:`rotation_track` results by their exact inputs (one record's
+#: references, decoded once, are tracked again by each detector variant measured on them).
+_TRACKS: dict = {}
+_TRACKS_KEPT = 4
+
+
 def rotation_track(ref_t, tol: float, min_refs: int, min_span_s: float,
                    window_s: float = 2.0, prior_rate: float | None = None):
+    """:func:`compute_rotation_track`, its result kept for the same inputs (the same reference
+    times bit for bit and the same parameters; the last :data:`_TRACKS_KEPT`) and given
+    again as copies: the same arrays as computing it again."""
+    ref_t = np.asarray(ref_t, dtype=np.float64)
+    key = (ref_t.tobytes(), float(tol), int(min_refs), float(min_span_s), float(window_s),
+           None if prior_rate is None else float(prior_rate))
+    got = _TRACKS.get(key)
+    if got is None:
+        got = compute_rotation_track(ref_t, tol, min_refs, min_span_s, window_s, prior_rate)
+        while len(_TRACKS) >= _TRACKS_KEPT:
+            _TRACKS.pop(next(iter(_TRACKS)))
+        _TRACKS[key] = got
+    return got[0].copy(), got[1].copy()
+
+
+def compute_rotation_track(ref_t, tol: float, min_refs: int, min_span_s: float,
+                           window_s: float = 2.0, prior_rate: float | None = None):
     """Causal rotation-rate estimate after each reference of ``ref_t`` (given in the order
     the references become known): :func:`estimate_rotation` of the references known so
     far that lie within ``window_s`` of the newest (a tracker: it follows a slowly changing

@@ -30,6 +30,7 @@ from ..model.envelope import envelope_model
 from ..model.fifo import fifo_model
 from ..model.fir import FirKernel, fir_model
 from ..model.nco import NcoState
+from .envelope_memo import EnvelopeMemo, chain_key
 from .fifo_merge import FifoRun, fifo_write_cycles
 from .params import TacanFrontendParams
 from .peak_model import peak_search
@@ -143,6 +144,10 @@ class TacanFrontendModel:
         self.range_log: dict[str, list[int]] = {}
         self.freq_word = self.params.nco_freq_word if freq_word is None else int(freq_word)
         self.ddc = DdcModel(self.params.ddc)
+        #: An :class:`~hdl.tacan.envelope_memo.EnvelopeMemo` shared with other models on
+        #: the same record (fast path only): the envelope chunks it holds are taken back.
+        self.envelope_memo: EnvelopeMemo | None = None
+        self._notes: list | None = None    # range-log entries of the chunk being kept
         self._fast = self._fast_ok() if fast is None else bool(fast and self._fast_ok())
         p = self.params
         if self._fast:
@@ -194,6 +199,17 @@ class TacanFrontendModel:
         fw0 = self.freq_word if st.freq is None else st.freq
         ch_idx, ch_val = _changes_in(freq_changes, st.n_adc, st.n_adc + usable)
         fw_end = int(ch_val[-1]) if ch_val.size else fw0
+        memo = self.envelope_memo if self._fast else None
+        if memo is not None:
+            key, state_in = chain_key(self), (st.nco, st.cic, st.fir, fw0)
+            hit = memo.lookup(key, st.n_adc, state_in, x, (ch_idx, ch_val))
+            if hit is not None:
+                e, nco, cic, fir, notes = hit
+                for name, lo, hi in notes:
+                    self._note(name, np.array([lo, hi]))
+                return e, replace(st, nco=nco, cic=cic, fir=fir, n_adc=st.n_adc + usable,
+                                  pending=rest, freq=fw_end)
+            self._notes = []
         if self.log_ranges and x.size:
             self._note("adc", x)
         if self._fast:
@@ -214,6 +230,10 @@ class TacanFrontendModel:
                 self._note("fir", f)
         if self.log_ranges and x.size:
             self._note("envelope", e)
+        if memo is not None:
+            memo.keep(key, st.n_adc, state_in, x, (ch_idx, ch_val), (e, nco, cic, fir),
+                      self._notes, p.adc_bits)
+            self._notes = None
         return e, replace(st, nco=nco, cic=cic, fir=fir, n_adc=st.n_adc + usable,
                           pending=rest, freq=fw_end)
 
@@ -222,6 +242,8 @@ class TacanFrontendModel:
         if v.size == 0:
             return
         lo, hi = int(v.min()), int(v.max())
+        if self._notes is not None:
+            self._notes.append((name, lo, hi))
         r = self.range_log.get(name)
         self.range_log[name] = [lo, hi] if r is None else [min(r[0], lo), max(r[1], hi)]
 

@@ -164,3 +164,30 @@ def test_cli_pair_detector_reaches_the_hardware_and_stays_bit_exact(capsys):
 def test_cli_pair_detector_refuses_the_pulse_detector_options(capsys, extra):
     assert main(["tacan", "--detector", "pair", "--duration-s", "1"] + extra) == 2
     assert "the pair detector has its own noise floor" in capsys.readouterr().err
+
+
+def test_sweep_availability_margin_reaches_the_proposal(monkeypatch, capsys, tmp_path):
+    """``sweep tacan --availability-margin`` sets the proposal's availability margin (the
+    study receives it; the proposal judges with it); out of [0, 1) it is refused in one
+    line before the study starts."""
+    import cosim.studies.sweep as sweep
+    from cosim.studies.proposal import passes
+    got = []
+
+    def study(cfg, out, **kw):
+        got.append(cfg)
+        return {"n_points": 0, "elapsed_s": 0.0, "proposal": {}, "rechecks": []}
+    monkeypatch.setattr(sweep, "study", study)
+    base = ["sweep", "tacan", "--param", "adc_bits=8,12", "--out", str(tmp_path / "s")]
+    assert main(base + ["--availability-margin", "0.1"]) == 0
+    assert got[-1].availability_margin == 0.1
+    assert main(base) == 0 and got[-1].availability_margin == 0.02
+    # a point 5 epochs in 100 below the golden chain: refused at 0.02, passed at 0.1
+    row = {"invalid": False, "excess_misleading": 0, "golden_locked": 10, "trials": 10,
+           "availability_diff": -0.05, "ratio_to_golden": 1.0, "ratio_ci95": [0.99, 1.01]}
+    assert passes(row, 0.05, 0.1) and not passes(row, 0.05, 0.02)
+    capsys.readouterr()
+    assert main(base + ["--availability-margin", "1.5"]) == 2
+    err = [l for l in capsys.readouterr().err.splitlines() if l.strip()]
+    assert len(err) == 1 and "availability_margin must be in [0, 1)" in err[0]
+    assert len(got) == 2

@@ -147,3 +147,25 @@ def test_first_valid_bearing_waits_for_the_reference_timing():
     assert first[0] < 0.1
     wrap = np.abs(wrap_deg(tr.bearing_deg[:, tr.times_s > 1.0] - BEARINGS[:, None]))
     assert wrap.max() < 0.5
+
+
+def test_rotation_track_gives_a_kept_result_as_copies_equal_to_computing_it():
+    """``rotation_track`` keeps its last results by their exact inputs (the detector
+    variants of one record track the same references): the same arrays as
+    ``compute_rotation_track``, copies a caller may change, and another input (one
+    reference moved by 1 ns, another parameter) computed afresh."""
+    from dsp.tacan.rotation import compute_rotation_track
+    t = _grid(15.05, 80, jitter_s=50e-9)
+    f, conf = rotation_track(t, 1e-6, 8, 0.05)
+    g, cg = compute_rotation_track(t, 1e-6, 8, 0.05)
+    assert np.array_equal(f, g) and np.array_equal(conf, cg)
+    f[:] = 0.0
+    conf[:] = False
+    f2, c2 = rotation_track(t, 1e-6, 8, 0.05)
+    assert np.array_equal(f2, g) and np.array_equal(c2, cg)
+    u = t.copy()
+    u[10] += 1e-9
+    assert np.array_equal(rotation_track(u, 1e-6, 8, 0.05)[0],
+                          compute_rotation_track(u, 1e-6, 8, 0.05)[0])
+    assert np.array_equal(rotation_track(t, 1e-6, 8, 0.05, prior_rate=15.1)[0],
+                          compute_rotation_track(t, 1e-6, 8, 0.05, prior_rate=15.1)[0])
