@@ -51,7 +51,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
 
@@ -67,6 +66,7 @@ def threshold(pfa: float, n_cells: int, n_noncoherent: int) -> float:
     independent chi-square(2K) cells (module docstring)."""
     if not (0 < pfa < 1):
         raise ValueError(f"pfa must be in (0, 1), not {pfa!r}")
+    from scipy import stats      # here, not at import: a command's refusals need no scipy.stats
     pfa_cell = -math.expm1(math.log1p(-pfa) / n_cells)
     return float(stats.chi2.isf(pfa_cell, 2 * n_noncoherent))
 

@@ -65,7 +65,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
-from scipy import stats
 
 from .acquisition import threshold
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ, ca_code_levels, check_prn
@@ -322,6 +321,7 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
             <= len(sched)):
         raise ValueError(f"first, last must pick dwells of the {len(sched)} within the limit, "
                          f"not {first!r}, {last!r}")
+    from scipy import stats      # here, not at import: a command's refusals need no scipy.stats
     pt = pfa / n_tests
     start, out, p_min, looks = 0, None, math.inf, []
     for si, d in enumerate(sched[:last]):

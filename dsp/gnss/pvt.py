@@ -55,7 +55,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pymap3d
-from scipy.stats import chi2
 
 from .ca_code import L1_HZ
 from .ephemeris import C_LIGHT, OMEGA_E_DOT
@@ -431,6 +430,7 @@ def solve(prns, sat_pos_m, sat_clock_s, pseudorange_m, *, cn0_dbhz=None, sat_vel
     while cfg.raim and len(idx) >= 5:
         dof = len(idx) - 4
         stat = float(np.sum((sol.resid / sol.sigma) ** 2))
+        from scipy.stats import chi2      # here: a command's refusals need no scipy.stats
         thr = float(chi2.isf(cfg.p_false_alarm, dof))
         if stat <= thr:
             break
