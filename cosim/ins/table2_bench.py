@@ -44,16 +44,9 @@ from .table2 import AXES, LOOPS, PAPER_TABLE2, ChannelAiding, Table2Config, \
 
 __all__ = ["table2", "ins_table2_bench", "BENCH", "QUICK"]
 
-#: The benchmark's configuration and why (:class:`Table2Config`'s defaults are the full one).
-BENCH_NOTE = ("reduced from Table2Config's defaults (150 s, a 35 s IF window, a 1 dB threshold "
-              "search of 4 runs of 40 s: ~40 min of CPU) to fit the shared 2-core machine "
-              "(load ~20): the table over the first 40 s of the trajectory (the manoeuvre, "
-              "5-32 s, and 8 s of cruise), the bit-exact IF runs over its first 9 s (4 fixes "
-              "after settling, in the 5 g/s ramp), the threshold on single runs of its first "
-              "18 s (the ramp to 50 g and 3 s at 50 g) on a 4 dB grid from 28 to 40 dB-Hz")
-BENCH = Table2Config(duration_s=40.0, chunk_runs=20, if_window_s=9.0, threshold_runs=1,
-                     threshold_duration_s=18.0, threshold_lo_dbhz=28.0, threshold_hi_dbhz=40.0,
-                     threshold_step_db=4.0)
+#: The benchmark's configuration: :class:`Table2Config`'s defaults (150 s, 20 runs per loop,
+#: a 35 s IF window, a 1 dB threshold search of 4 runs of 40 s).
+BENCH = Table2Config()
 #: The smoke run's configuration.
 QUICK = Table2Config(runs=4, duration_s=20.0, chunk_runs=2, if_window_s=7.0,
                      threshold_runs=1, threshold_duration_s=10.0, threshold_lo_dbhz=26.0,
@@ -202,7 +195,7 @@ def ins_table2_bench(out, quick: bool = False, jobs: int | None = None,
     res, series = table2(cfg, Path("build") / "ins_table2", jobs=jobs, scheduler=scheduler)
     res = {"machine": machine_info(), "benchmark": "ins-table2", "smoke": bool(quick),
            "engine": {"scheduler": scheduler, "jobs": jobs},
-           "configuration_note": None if quick else BENCH_NOTE, **res}
+           **res}
     write_result(out, "ins_table2", res, _markdown(res))
     _plot(out / "ins_table2.png", series)
     return res
@@ -242,8 +235,6 @@ def _markdown(r: dict) -> str:
          f"Measured {m['date']} on {m['host']} ({m['cpu']}, {m['cores']} cores, shared), "
          f"commit {m['commit']}, command `{m['command']}`."
          + (" **Smoke run (not the result).**" if r["smoke"] else ""), "",
-         *([f"Configuration {r['configuration_note']}.", ""] if r.get("configuration_note")
-           else []),
          f"{c['runs']} runs per loop, {c['duration_s']:g} s, C/N0 {c['cn0_dbhz']:g} dB-Hz, "
          f"Kalman loops' oscillator model {c['oscillator']}, dsp {c['dsp']}, fixes at "
          f"{c['rate_hz']:g} Hz after {c['settle_s']:g} s; satellites "
