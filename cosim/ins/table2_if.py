@@ -12,7 +12,7 @@ depend on its length), written to ``scenario.int8`` by
 :func:`cosim.gnss.gps_scenario.write_scenario` (2-bit real IF, 5 MS/s); the table's
 satellites (:func:`~cosim.ins.table2.table2_signal`), one channel each, handed over from the
 truth at sample 0 (Doppler, code phase: a perfect acquisition, as the fast path's hot start
-and :func:`cosim.gnss.gps_fast_check.if_path`). The tracking stops ``_TAIL_S`` before the
+and :func:`cosim.gnss.gps_fast_check.if_path`). The tracking stops ``AIDING_TAIL_S`` before the
 record's end (the loops ask for the aiding of the next two epochs).
 
 Aiding
@@ -52,14 +52,13 @@ import numpy as np
 
 from dsp.gnss.ca_code import CODE_PERIOD_S
 
-from .table2 import AXES, ChannelAiding, Table2Config, table2_signal, tracker_options
+from .table2 import AIDING_TAIL_S, AXES, ChannelAiding, Table2Config, table2_signal, \
+    tracker_options
 
 __all__ = ["write_if_scenario", "run_if_loop", "compare_if", "Z_INSIDE"]
 
 #: The IF value is inside the fast path's distribution within this many standard deviations.
 Z_INSIDE = 3.0
-#: Tracking stops this long before the record's end (the aiding of the next two epochs).
-_TAIL_S = 0.01
 
 
 def _window_cfg(cfg: Table2Config) -> Table2Config:
@@ -115,7 +114,7 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
     f = SampleFile(rec["file"], "int8", rec["fs_hz"], rec["if_hz"])
     fs = f.fs_hz
     p = array_channel_params(channel_params_for(f), S)
-    n = int(round((w.duration_s - _TAIL_S) * fs))
+    n = int(round((w.duration_s - AIDING_TAIL_S) * fs))
     run = GnssRunConfig(tracker=loop, dsp="fixed", backend="model")
     wall = time.perf_counter()
     m = track_file(f, cands, run, TrackConfig(channels=S), n_samples=n, tracker_setup=setup)
