@@ -128,8 +128,18 @@ def _add_bench(sub):
     p.add_argument("--jobs", type=parse_int, default=None,
                    help=f"worker processes, 1 .. the cores ({', '.join(_jobs_benchmarks())}; "
                         f"default: all cores)")
+    p.add_argument("--scheduler", default=None,
+                   help=f"where the tasks run ({', '.join(_scheduler_benchmarks())}): 'local' "
+                        f"(process pool, the default), 'dask' (local Dask cluster) or a Dask "
+                        f"scheduler address (tcp://HOST:PORT; its workers need this checkout)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=_cmd_bench)
+
+
+def _scheduler_benchmarks() -> list[str]:
+    """Benchmarks whose tasks run on the studies' engine (--scheduler)."""
+    from .tools.bench import benchmarks
+    return [name for name, b in benchmarks().items() if b.scheduler]
 
 
 def _jobs_benchmarks() -> list[str]:
@@ -152,8 +162,15 @@ def _cmd_bench(a) -> int:
         raise ValueError(f"--jobs has no effect on bench {a.name} (only on "
                          f"{', '.join(jobs_benchmarks)})")
     jobs = check_jobs(a.jobs) if a.jobs is not None else None
+    if a.scheduler is not None:
+        from .studies.engine import check_scheduler
+        sched = _scheduler_benchmarks()
+        if a.name not in sched:
+            raise ValueError(f"--scheduler has no effect on bench {a.name} (only on "
+                             f"{', '.join(sched)})")
+        check_scheduler(a.scheduler, a.jobs, flag="--scheduler", reach=True)
     check_out_dir(out, "--out")
-    summary = run(a.name, out=out, quick=a.quick, jobs=jobs)
+    summary = run(a.name, out=out, quick=a.quick, jobs=jobs, scheduler=a.scheduler)
     if a.json:
         print(dumps(summary))
     return 0

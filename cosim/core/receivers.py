@@ -339,10 +339,15 @@ class Benchmark:
     jobs : bool
         True when the benchmark spreads over ``--jobs`` worker processes (the others
         measure one core or size their own pool).
+    scheduler : bool
+        True when it runs its tasks on :func:`cosim.studies.engine.run_tasks` and takes
+        ``--scheduler`` (``run(..., scheduler=...)``: local, dask or a Dask scheduler's
+        address).
     """
 
     run: Callable[..., dict]
     jobs: bool = False
+    scheduler: bool = False
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,11 @@ Input, one of:
 
 Processing: acquisition of ``--prns`` (:func:`dsp.gnss.search.search_all`), every satellite
 found tracked on the channel array (:func:`cosim.gnss.multichannel.track_file`, the
-bit-exact model by default), then the back end (:func:`cosim.gnss.gps_receiver.navigate`):
+bit-exact model by default; the aided trackers ``aided-kf`` / ``aided-pll`` only on a
+generated ``--trajectory ins`` scenario, every channel aided by the INS Doppler rate of
+:func:`cosim.ins.table2.ins_tracker_setup` -- the truth's plus the INS paper's sensor
+errors drawn from ``--seed`` -- and tracked to 10 ms before the record's end; a recording,
+a static or a CSV scenario has no INS and is refused), then the back end (:func:`cosim.gnss.gps_receiver.navigate`):
 bit sync, frame sync, LNAV decoding, observables at ``--rate`` Hz, PVT. ``--ephemeris RINEX``
 hot-starts from a navigation file (the scenario's own ephemerides and Klobuchar
 coefficients with ``--hot-start``);
@@ -132,7 +136,13 @@ def process(a):
     from .multichannel_session import array_channel_params, check_parallel
     from .rinex_nav import read_rinex_nav
     t_wall = time.time()
-    prns = check_search_options(a, tracker=a.tracker)
+    from dsp.gnss.trackers import needs_aiding
+    aided = needs_aiding(a.tracker)
+    # a recording has no INS; a generated --trajectory ins scenario has one (module doc)
+    prns = check_search_options(a, tracker=a.tracker if a.file is not None else None)
+    if aided and a.file is None and a.trajectory != "ins":
+        raise ValueError(f"--tracker {a.tracker} needs an INS aiding source: a generated "
+                         f"scenario has one with --trajectory ins, a static or CSV one none")
     out = check_out_dir(a.out, "--out")
     bound = JUMP_BOUND_M if a.jump_bound_m is None else \
         check_float("--jump-bound-m", a.jump_bound_m, 0.0, lo_open=True, unit="m")
@@ -217,9 +227,14 @@ def process(a):
     cands = [Candidate.of(d) for d in rep.detections]
     _say(a, f"found {[c.prn for c in cands]}; tracking {n / f.fs_hz:g} s on the "
             f"{a.backend} array ...")
+    setup = None
+    if aided:                  # the INS of the generated scenario (module doc)
+        from ..ins.table2 import AIDING_TAIL_S, ins_tracker_setup
+        setup = ins_tracker_setup(sig, a.seed)
+        n -= int(round(AIDING_TAIL_S * f.fs_hz))
     if cands:
         m = track_file(f, cands, run_cfg, tcfg, n_samples=n,
-                       progress=not a.json and sys.stderr.isatty())
+                       progress=not a.json and sys.stderr.isatty(), tracker_setup=setup)
         _say(a, f"tracked in {m.wall_s:.1f} s; navigating ...")
         g = navigate(m, p, reference_week=week, inverted=f.doppler_sign_inverted,
                      if_hz=f.if_hz, ephemerides=hot, iono=iono, config=gcfg)

@@ -41,7 +41,7 @@ from .gps_fast import fixes_from_series, run_fast, select_channels
 from .gps_receiver import GpsConfig
 from .multichannel import TrackConfig
 
-__all__ = ["if_path", "compare", "effective_dof", "variance_ratio_test", "figures"]
+__all__ = ["if_path", "if_series", "compare", "effective_dof", "variance_ratio_test", "figures"]
 
 #: Two-sided level of each fast/IF test.
 ALPHA = 0.002
@@ -51,12 +51,10 @@ def if_path(spec, out_dir, run: GnssRunConfig = GnssRunConfig(),
             gps: GpsConfig = GpsConfig(rate_hz=10.0), track: TrackConfig = TrackConfig()):
     """The IF path on the generated scenario ``spec`` (module doc): ``(signal, prns, t_m,
     series (M, 1, S), runs, wall_s)``."""
-    from dsp.gnss.ca_code import CODE_LENGTH
     from .files import SampleFile
     from .gps_scenario import write_scenario
     from .multichannel import Candidate, channel_params_for, track_file
     from .multichannel_session import array_channel_params
-    from .navigation import channel_navigation
     sc = write_scenario(spec, out_dir)
     sig = sc["signal"]
     cols = select_channels(sig, track.channels)
@@ -71,12 +69,30 @@ def if_path(spec, out_dir, run: GnssRunConfig = GnssRunConfig(),
     wall = time.perf_counter()
     m = track_file(f, cands, run, track, n_samples=n)
     wall = time.perf_counter() - wall
-    fs = f.fs_hz
     t_m = np.arange(1, int(math.floor(spec.duration_s * gps.rate_hz + 1e-9)) + 1) / gps.rate_hz
     t_m = t_m[t_m < spec.duration_s]
-    N = np.round(t_m * fs).astype(np.int64)
+    ser = if_series(m, p, f, sig, prns, t_m)
+    runs = fixes_from_series(sig, prns, t_m, ser, gps, sc["ephemerides"], sc["iono"])
+    return sig, prns, t_m, ser, runs, wall
+
+
+def if_series(m, p, f, sig, prns, t_m, *, doppler_instant: bool = False) -> dict:
+    """The fast path's series (``code_chips``, ``doppler_hz``, ``cn0_dbhz``,
+    ``carrier_cycles``: (M, 1, S), NaN where no channel tracks; ``locked``) of the IF run
+    ``m`` (:func:`~cosim.gnss.multichannel.track_file` on ``f``, channel parameters ``p``)
+    at the measurement instants ``t_m`` for the satellites ``prns`` of the generated
+    signal ``sig`` (module doc). Each assignment fills only the epochs inside its own
+    records (a PRN assigned again after a loss keeps both assignments' epochs). The
+    Doppler: the report of the record holding the instant, or (``doppler_instant``) the
+    tracker's last two reports interpolated linearly to the instant, each tagged at its
+    record's prompt boundary plus the tracker's ``doppler_offset_epochs`` epochs (the fast
+    path's ``doppler_instant``)."""
+    from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH
+    from .navigation import channel_navigation
+    t_m = np.asarray(t_m, float)
+    N = np.round(t_m * f.fs_hz).astype(np.int64)
     tr = sig.truth_at(t_m)
-    chi_true = sig.chi0 + 1.023e6 * t_m[:, None] - tr.pseudorange_m / CHIP_M
+    chi_true = sig.chi0 + CHIP_RATE_HZ * t_m[:, None] - tr.pseudorange_m / CHIP_M
     M, S = t_m.size, len(prns)
     ser = {k: np.full((M, 1, S), np.nan) for k in
            ("code_chips", "doppler_hz", "cn0_dbhz", "carrier_cycles")}
@@ -84,24 +100,37 @@ def if_path(spec, out_dir, run: GnssRunConfig = GnssRunConfig(),
     for a in m.assignments:
         if a.prn not in prns:
             continue
-        j = prns.index(a.prn)
+        j = list(prns).index(a.prn)
         nav = channel_navigation(a, m, p, reference_week=sig.cfg.week, inverted=False,
                                  if_hz=f.if_hz)
-        if nav.g.size < 2:
+        if nav.g.size < (3 if doppler_instant else 2):
             continue
         k, chips, inside = nav.record_at(N)
-        ct = chi_true[:, sig.prns.index(a.prn)]
+        ct = chi_true[:, list(sig.prns).index(a.prn)]
         d = np.mod(chips - ct + CODE_LENGTH / 2, CODE_LENGTH) - CODE_LENGTH / 2
-        kk = np.clip(k, 0, nav.doppler.size - 1)
-        ser["code_chips"][:, 0, j] = np.where(inside, ct + d, np.nan)
-        ser["doppler_hz"][:, 0, j] = np.where(inside, nav.doppler[kk], np.nan)
-        ser["cn0_dbhz"][:, 0, j] = nav.cn0_at(N)
-        ser["carrier_cycles"][:, 0, j] = -nav.carrier_cycles(N)
-        w = np.searchsorted(nav.win_t, t_m, side="right") - 1
-        ser["locked"][:, 0, j] = (w >= 0) & nav.win_ok[np.clip(w, 0, None)] \
-            if nav.win_t.size else False
-    runs = fixes_from_series(sig, prns, t_m, ser, gps, sc["ephemerides"], sc["iono"])
-    return sig, prns, t_m, ser, runs, wall
+        if doppler_instant:
+            dop = np.where(k >= 2, _doppler_at(nav, k, t_m, a.doppler_offset_epochs), np.nan)
+        else:
+            dop = nav.doppler[np.clip(k, 0, nav.doppler.size - 1)]
+        wi = np.searchsorted(nav.win_t, t_m, side="right") - 1
+        lk = ((wi >= 0) & nav.win_ok[np.clip(wi, 0, None)]) if nav.win_t.size \
+            else np.zeros(M, bool)
+        for key, v in (("code_chips", ct + d), ("doppler_hz", dop), ("cn0_dbhz", nav.cn0_at(N)),
+                       ("carrier_cycles", -nav.carrier_cycles(N)), ("locked", lk)):
+            ser[key][inside, 0, j] = v[inside]
+    return ser
+
+
+def _doppler_at(nav, k, t_m, offset_epochs: float):
+    """The tracker's reports after records ``k - 1`` and ``k`` of ``nav`` interpolated to
+    ``t_m`` (:func:`if_series`)."""
+    fs = nav.fs_hz
+    kk = np.clip(k, 2, nav.n_p.size - 1)
+    tb = nav.n_p / fs
+    tag1 = tb[kk] + offset_epochs * (tb[kk] - tb[kk - 1])
+    tag0 = tb[kk - 1] + offset_epochs * (tb[kk - 1] - tb[kk - 2])
+    d0, d1 = nav.doppler[kk - 1], nav.doppler[kk]
+    return d0 + (d1 - d0) * (t_m - tag0) / (tag1 - tag0)
 
 
 def effective_dof(x, max_lag: int | None = None) -> float:

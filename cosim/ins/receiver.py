@@ -67,9 +67,10 @@ def _bench(out, quick: bool = False, jobs: int | None = None) -> dict:
     return ins_bench(out, quick=quick, jobs=jobs)
 
 
-def _bench_table2(out, quick: bool = False, jobs: int | None = None) -> dict:
+def _bench_table2(out, quick: bool = False, jobs: int | None = None,
+                  scheduler: str = "local") -> dict:
     from .table2_bench import ins_table2_bench
-    return ins_table2_bench(out, quick=quick, jobs=jobs)
+    return ins_table2_bench(out, quick=quick, jobs=jobs, scheduler=scheduler)
 
 
 INS = register(Receiver(
@@ -81,4 +82,4 @@ INS = register(Receiver(
              "lock_fraction", "cycle_slips"),
     primary=Figure("vel_err_std_mps", "LOS velocity error std", "m/s"),
     benchmarks={"ins": Benchmark(_bench, jobs=True),
-                "ins-table2": Benchmark(_bench_table2, jobs=True)}))
+                "ins-table2": Benchmark(_bench_table2, jobs=True, scheduler=True)}))

@@ -64,6 +64,7 @@ from .ins_error import InsErrors, acceleration_error_enu, integrate_errors
 from .trajectory import G_MPS2, doppler_rate_hz_s
 
 __all__ = ["Table2Config", "PAPER_TABLE2", "CLAIMS", "table2_signal", "ChannelAiding",
+           "ins_tracker_setup", "AIDING_TAIL_S",
            "run_loop", "tracker_options", "EpochRates", "error_table", "judge_claims", "LOOPS", "AXES"]
 
 LOOPS = ("unaided-kf", "aided-pll", "aided-kf")
@@ -266,6 +267,27 @@ class ChannelAiding:
             raise ValueError(f"aiding asked for epoch {k}: the run holds epochs "
                              f"0..{self.mid.shape[0] - 1}")
         return self.rate(self.mid[k])
+
+
+#: An aided loop asks the aiding of the epochs after the one it tracks: a record tracked
+#: with the aiding of :meth:`ChannelAiding.channel` stops this long before its end.
+AIDING_TAIL_S = 0.01
+
+
+def ins_tracker_setup(sig, seed: int, step_s: float = 0.01, options=None):
+    """``track_file``'s ``tracker_setup`` for the generated moving scenario ``sig``: every
+    channel aided by :meth:`ChannelAiding.channel` (the truth's Doppler rate plus the INS
+    errors of :mod:`cosim.ins.ins_error`'s model, realisation ``(seed, 0)``) of its PRN,
+    from its first tracked epoch; ``options``: the tracker options it adds."""
+    cols = np.arange(len(sig.prns))
+    aid = ChannelAiding(sig, cols, 1, seed, step_s=step_s)
+    prns = [int(p) for p in sig.prns]
+
+    def setup(prn, t_first_s):
+        if int(prn) not in prns:
+            raise ValueError(f"PRN {prn} is not in the scenario: no INS aiding for it")
+        return {"aiding": aid.channel(prns.index(int(prn)), t_first_s)}, dict(options or {})
+    return setup
 
 
 class EpochRates:

@@ -17,6 +17,14 @@ workers need this checkout and the IF recording's directory): the Monte Carlo in
 starting at run ``r0`` from ``(seed, r0, 1)``, the same for the three loops: paired runs,
 whatever the number of workers), the three IF runs, and the threshold search's runs.
 
+Resumption
+----------
+Each finished task's result is kept under ``out_dir/tasks`` keyed by the task and the
+code's git trees (``cosim``, ``dsp``, ``hdl``; nothing is kept from uncommitted code): the
+same command run again after an interruption takes the finished tasks from there (their
+measured wall times with them) and runs the rest; ``tasks_from_cache`` in the result
+counts them.
+
 Threshold
 ---------
 Per loop, on the fast path: ``threshold_runs`` runs over the first
@@ -44,16 +52,9 @@ from .table2 import AXES, LOOPS, PAPER_TABLE2, ChannelAiding, Table2Config, \
 
 __all__ = ["table2", "ins_table2_bench", "BENCH", "QUICK"]
 
-#: The benchmark's configuration and why (:class:`Table2Config`'s defaults are the full one).
-BENCH_NOTE = ("reduced from Table2Config's defaults (150 s, a 35 s IF window, a 1 dB threshold "
-              "search of 4 runs of 40 s: ~40 min of CPU) to fit the shared 2-core machine "
-              "(load ~20): the table over the first 40 s of the trajectory (the manoeuvre, "
-              "5-32 s, and 8 s of cruise), the bit-exact IF runs over its first 9 s (4 fixes "
-              "after settling, in the 5 g/s ramp), the threshold on single runs of its first "
-              "18 s (the ramp to 50 g and 3 s at 50 g) on a 4 dB grid from 28 to 40 dB-Hz")
-BENCH = Table2Config(duration_s=40.0, chunk_runs=20, if_window_s=9.0, threshold_runs=1,
-                     threshold_duration_s=18.0, threshold_lo_dbhz=28.0, threshold_hi_dbhz=40.0,
-                     threshold_step_db=4.0)
+#: The benchmark's configuration: :class:`Table2Config`'s defaults (150 s, 20 runs per loop,
+#: a 35 s IF window, a 1 dB threshold search of 4 runs of 40 s).
+BENCH = Table2Config()
 #: The smoke run's configuration.
 QUICK = Table2Config(runs=4, duration_s=20.0, chunk_runs=2, if_window_s=7.0,
                      threshold_runs=1, threshold_duration_s=10.0, threshold_lo_dbhz=26.0,
@@ -62,6 +63,50 @@ QUICK = Table2Config(runs=4, duration_s=20.0, chunk_runs=2, if_window_s=7.0,
 
 def _chunk_seed(seed: int, first: int) -> int:
     return int(np.random.SeedSequence((int(seed), int(first), 1)).generate_state(1)[0])
+
+
+def _code_version() -> str | None:
+    """The git trees of ``cosim``, ``dsp`` and ``hdl`` at HEAD; None when they hold
+    uncommitted changes (or there is no git): then nothing is cached."""
+    import subprocess
+    from ..core.provenance import REPO_ROOT
+    try:
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                "cosim", "dsp", "hdl"], capture_output=True, text=True,
+                               cwd=REPO_ROOT, timeout=30)
+        trees = subprocess.run(["git", "rev-parse", "HEAD:cosim", "HEAD:dsp", "HEAD:hdl"],
+                               capture_output=True, text=True, cwd=REPO_ROOT, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if dirty.returncode or trees.returncode or dirty.stdout.strip():
+        return None
+    return " ".join(trees.stdout.split())
+
+
+def _cached(cache, t):
+    """``_task(t)``, kept in ``cache = (directory, code version)`` (module doc) and taken
+    from it when the same task of the same code finished before (``"cached": True``)."""
+    import hashlib
+    import os
+    import pickle
+    from dataclasses import asdict
+    d, ver = cache
+    if ver is None:
+        return _task(t)
+    kind, cfg, loop = t[:3]
+    rest = (t[3]["file"], t[3]["prns"]) if kind == "if" else t[3:]
+    key = hashlib.sha256(repr((ver, kind, asdict(cfg), loop, rest)).encode()).hexdigest()[:20]
+    path = Path(d) / f"{kind}-{loop}-{key}.pkl"
+    if path.exists():
+        r = pickle.loads(path.read_bytes())
+        if kind != "rec" or Path(r["file"]).exists():
+            return {**r, "cached": True}
+    r = _task(t)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(pickle.dumps(r))
+    os.replace(tmp, path)
+    return r
 
 
 def _task(t):
@@ -102,13 +147,15 @@ def _grid(cfg):
 
 
 def table2(cfg: Table2Config, out_dir="build/ins_table2", *, jobs=None,
-           scheduler: str = "local") -> tuple[dict, dict]:
+           scheduler: str = "local", cache: bool = True) -> tuple[dict, dict]:
     """``(result, series)``: the tables, verdicts, lock counts, IF runs and their check,
     thresholds of ``cfg`` (module doc); the error series (t, (M, runs, 6) per loop; the IF
     runs' under ``"if"``) for the plot."""
+    from functools import partial
     from ..studies.engine import run_tasks
     from .table2_if import compare_if
     t0 = time.perf_counter()
+    fn = partial(_cached, (str(Path(out_dir) / "tasks"), _code_version() if cache else None))
     sig, cols, info = table2_signal(cfg)
     tasks = [("mc", cfg, loop, a, min(cfg.chunk_runs, cfg.runs - a))
              for loop in LOOPS for a in range(0, cfg.runs, cfg.chunk_runs)]
@@ -119,7 +166,8 @@ def table2(cfg: Table2Config, out_dir="build/ins_table2", *, jobs=None,
     evals = {loop: {} for loop in LOOPS}
     if cfg.threshold_runs > 0:
         tasks += [("thr", cfg, loop, grid[i]) for loop in LOOPS for i in state[loop]]
-    first = run_tasks(_task, tasks, jobs=jobs, scheduler=scheduler)
+    first = run_tasks(fn, tasks, jobs=jobs, scheduler=scheduler)
+    n_cached = sum(bool(r.get("cached")) for r in first)
     rec = next((r for r in first if r["kind"] == "rec"), None)
     nxt = [("if", cfg, loop, rec) for loop in LOOPS] if rec is not None else []
     for r in first:
@@ -140,7 +188,9 @@ def table2(cfg: Table2Config, out_dir="build/ins_table2", *, jobs=None,
                 state[loop] = [lo, mid] if e[grid[mid]]["held"] else [mid, hi]
         if not nxt:
             break
-        for r in run_tasks(_task, nxt, jobs=jobs, scheduler=scheduler):
+        got = run_tasks(fn, nxt, jobs=jobs, scheduler=scheduler)
+        n_cached += sum(bool(r.get("cached")) for r in got)
+        for r in got:
             if r["kind"] == "thr":
                 evals[r["loop"]][r["cn0_dbhz"]] = r
             else:
@@ -181,6 +231,7 @@ def table2(cfg: Table2Config, out_dir="build/ins_table2", *, jobs=None,
         out["threshold"] = {loop: _threshold(evals[loop], state[loop], grid) for loop in LOOPS}
         walls["threshold"] = sum(r["wall_s"] for e in evals.values() for r in e.values())
     out["wall_s"] = {**walls, "total": time.perf_counter() - t0}
+    out["tasks_from_cache"] = n_cached
     return out, series
 
 
@@ -202,7 +253,7 @@ def ins_table2_bench(out, quick: bool = False, jobs: int | None = None,
     res, series = table2(cfg, Path("build") / "ins_table2", jobs=jobs, scheduler=scheduler)
     res = {"machine": machine_info(), "benchmark": "ins-table2", "smoke": bool(quick),
            "engine": {"scheduler": scheduler, "jobs": jobs},
-           "configuration_note": None if quick else BENCH_NOTE, **res}
+           **res}
     write_result(out, "ins_table2", res, _markdown(res))
     _plot(out / "ins_table2.png", series)
     return res
@@ -242,8 +293,6 @@ def _markdown(r: dict) -> str:
          f"Measured {m['date']} on {m['host']} ({m['cpu']}, {m['cores']} cores, shared), "
          f"commit {m['commit']}, command `{m['command']}`."
          + (" **Smoke run (not the result).**" if r["smoke"] else ""), "",
-         *([f"Configuration {r['configuration_note']}.", ""] if r.get("configuration_note")
-           else []),
          f"{c['runs']} runs per loop, {c['duration_s']:g} s, C/N0 {c['cn0_dbhz']:g} dB-Hz, "
          f"Kalman loops' oscillator model {c['oscillator']}, dsp {c['dsp']}, fixes at "
          f"{c['rate_hz']:g} Hz after {c['settle_s']:g} s; satellites "

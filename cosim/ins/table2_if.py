@@ -12,7 +12,7 @@ depend on its length), written to ``scenario.int8`` by
 :func:`cosim.gnss.gps_scenario.write_scenario` (2-bit real IF, 5 MS/s); the table's
 satellites (:func:`~cosim.ins.table2.table2_signal`), one channel each, handed over from the
 truth at sample 0 (Doppler, code phase: a perfect acquisition, as the fast path's hot start
-and :func:`cosim.gnss.gps_fast_check.if_path`). The tracking stops ``_TAIL_S`` before the
+and :func:`cosim.gnss.gps_fast_check.if_path`). The tracking stops ``AIDING_TAIL_S`` before the
 record's end (the loops ask for the aiding of the next two epochs).
 
 Aiding
@@ -27,14 +27,10 @@ is an internal error).
 
 Observables and fixes
 ---------------------
-As :func:`cosim.gnss.gps_fast_check.if_path` (the fast path's back end on the IF path's
-series, so the two are scored alike): per channel
-(:func:`cosim.gnss.navigation.channel_navigation`'s records) at each measurement epoch the
-prompt code phase (its whole code periods from the truth: the hot start's TOW), the
-Doppler -- here, as the fast path's ``doppler_instant``, the tracker's last two reports
-interpolated linearly to the instant, each tagged at its record's prompt boundary plus the
-tracker's ``doppler_offset_epochs`` epochs --, the C/N0, the carrier phase and the lock of
-the last window; the fixes by :func:`cosim.gnss.gps_fast.fixes_from_series`; errors on ECEF
+The series of :func:`cosim.gnss.gps_fast_check.if_series` (the fast path's series from the
+IF run, each assignment on its own epochs, so the two paths are scored alike) with
+``doppler_instant``: the Doppler interpolated to the measurement instant as the fast path's;
+the fixes by :func:`cosim.gnss.gps_fast.fixes_from_series`; errors on ECEF
 x, y, z, vx, vy, vz against the truth.
 
 Comparison (:func:`compare_if`)
@@ -54,16 +50,15 @@ from pathlib import Path
 
 import numpy as np
 
-from dsp.gnss.ca_code import CODE_LENGTH, CODE_PERIOD_S
+from dsp.gnss.ca_code import CODE_PERIOD_S
 
-from .table2 import AXES, ChannelAiding, Table2Config, table2_signal, tracker_options
+from .table2 import AIDING_TAIL_S, AXES, ChannelAiding, Table2Config, table2_signal, \
+    tracker_options
 
 __all__ = ["write_if_scenario", "run_if_loop", "compare_if", "Z_INSIDE"]
 
 #: The IF value is inside the fast path's distribution within this many standard deviations.
 Z_INSIDE = 3.0
-#: Tracking stops this long before the record's end (the aiding of the next two epochs).
-_TAIL_S = 0.01
 
 
 def _window_cfg(cfg: Table2Config) -> Table2Config:
@@ -91,10 +86,10 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
     from ..gnss.config import GnssRunConfig
     from ..gnss.files import SampleFile
     from ..gnss.gps_fast import fixes_from_series
+    from ..gnss.gps_fast_check import if_series
     from ..gnss.gps_receiver import GpsConfig
     from ..gnss.multichannel import Candidate, TrackConfig, channel_params_for, track_file
     from ..gnss.multichannel_session import array_channel_params
-    from ..gnss.navigation import channel_navigation
     w = _window_cfg(cfg)
     sig, cols, _ = table2_signal(w)
     prns = tuple(int(sig.prns[j]) for j in cols)
@@ -119,45 +114,22 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
     f = SampleFile(rec["file"], "int8", rec["fs_hz"], rec["if_hz"])
     fs = f.fs_hz
     p = array_channel_params(channel_params_for(f), S)
-    n = int(round((w.duration_s - _TAIL_S) * fs))
+    n = int(round((w.duration_s - AIDING_TAIL_S) * fs))
     run = GnssRunConfig(tracker=loop, dsp="fixed", backend="model")
     wall = time.perf_counter()
     m = track_file(f, cands, run, TrackConfig(channels=S), n_samples=n, tracker_setup=setup)
     wall = time.perf_counter() - wall
     t_m = np.arange(1, int(math.floor(w.duration_s * cfg.rate_hz + 1e-9)) + 1) / cfg.rate_hz
     t_m = t_m[t_m < n / fs]
-    N = np.round(t_m * fs).astype(np.int64)
-    tr = sig.truth_at(t_m)
-    chi_true = sig.chi0 + 1.023e6 * t_m[:, None] - tr.pseudorange_m / (299792458.0 / 1.023e6)
     M = t_m.size
-    ser = {k: np.full((M, 1, S), np.nan) for k in
-           ("code_chips", "doppler_hz", "cn0_dbhz", "carrier_cycles")}
-    ser["locked"] = np.zeros((M, 1, S), bool)
-    offset = 0.0
+    tr = sig.truth_at(t_m)
     if len(given) != len(m.assignments):
         raise RuntimeError("internal: the tracker setups and the assignments do not pair")
+    offset = 0.0             # each assignment's first tracked epoch against its aiding's
     for a, g in zip(m.assignments, given):
-        if a.prn not in prns:
-            continue
-        j = prns.index(a.prn)
-        if g is not None and a.t:        # the first tracked epoch against the aiding's
+        if g is not None and a.t:
             offset = max(offset, abs(a.t[0] - g.mid_s[0] - CODE_PERIOD_S / 2))
-        nav = channel_navigation(a, m, p, reference_week=sig.cfg.week, inverted=False,
-                                 if_hz=f.if_hz)
-        if nav.g.size < 3:
-            continue
-        k, chips, inside = nav.record_at(N)
-        ct = chi_true[:, sig.prns.index(a.prn)]
-        d = np.mod(chips - ct + CODE_LENGTH / 2, CODE_LENGTH) - CODE_LENGTH / 2
-        # (a PRN assigned again after a loss: each assignment's epochs are its own)
-        ser["code_chips"][inside, 0, j] = (ct + d)[inside]
-        ser["doppler_hz"][inside, 0, j] = np.where(
-            k >= 2, _doppler_at(nav, k, t_m, a.doppler_offset_epochs), np.nan)[inside]
-        ser["cn0_dbhz"][inside, 0, j] = nav.cn0_at(N)[inside]
-        ser["carrier_cycles"][inside, 0, j] = -nav.carrier_cycles(N)[inside]
-        wi = np.searchsorted(nav.win_t, t_m, side="right") - 1
-        if nav.win_t.size:
-            ser["locked"][inside, 0, j] = ((wi >= 0) & nav.win_ok[np.clip(wi, 0, None)])[inside]
+    ser = if_series(m, p, f, sig, prns, t_m, doppler_instant=True)
     if offset * 1e6 > 50.0:
         raise RuntimeError(f"internal: a channel's first tracked epoch is {offset * 1e6:.1f} us "
                            f"off the aiding's epochs")
@@ -177,18 +149,6 @@ def run_if_loop(cfg: Table2Config, loop: str, rec: dict) -> dict:
                              "end_reason": a.end_reason} for a in m.assignments],
             "digest": m.pipeline.digest if hasattr(m.pipeline, "digest") else None,
             "wall_s": wall, "signal_s": n / fs, "backend": run.backend, "dsp": run.dsp}
-
-
-def _doppler_at(nav, k, t_m, offset_epochs: float):
-    """The tracker's reports after records ``k - 1`` and ``k`` interpolated to ``t_m``
-    (module doc)."""
-    fs = nav.fs_hz
-    kk = np.clip(k, 2, nav.n_p.size - 1)
-    tb = nav.n_p / fs
-    tag1 = tb[kk] + offset_epochs * (tb[kk] - tb[kk - 1])
-    tag0 = tb[kk - 1] + offset_epochs * (tb[kk - 1] - tb[kk - 2])
-    d0, d1 = nav.doppler[kk - 1], nav.doppler[kk]
-    return d0 + (d1 - d0) * (t_m - tag0) / (tag1 - tag0)
 
 
 def compare_if(ifr: dict, t_fast, err_fast, settle_s: float) -> dict:

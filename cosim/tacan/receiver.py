@@ -259,7 +259,7 @@ SWEEP_OPTIONS = (
 
 
 def cmd_sweep(a) -> int:
-    import re
+    from ..studies.engine import check_scheduler
     from ..studies.spec import check_recheck, parse_param, parse_values
     from ..studies.sweep import check_points, study
     if a.seed < 0:
@@ -274,13 +274,7 @@ def cmd_sweep(a) -> int:
     if not all(isinstance(v, (int, float)) for v in snrs):
         raise ValueError(f"--snr-db takes numbers (dB), not {a.snr_db!r}")
     jobs = check_jobs(a.jobs)
-    if a.scheduler not in ("local", "dask") and not re.fullmatch(
-            r"(tcp|tls|inproc|ucx)://[^\s:/]+(:\d+)?|[^\s:/]+:\d+", a.scheduler):
-        raise ValueError(f"--scheduler must be local, dask or a Dask scheduler address "
-                         f"(tcp://HOST:PORT), not {a.scheduler!r}")
-    if a.scheduler not in ("local", "dask") and a.jobs is not None:
-        raise ValueError("--jobs sizes the local pool or cluster; a remote Dask scheduler "
-                         "(--scheduler ADDRESS) has its own workers")
+    check_scheduler(a.scheduler, a.jobs, flag="--scheduler", reach=True)
     check_out_dir(a.out, "--out")
     cfg = SweepConfig(params=params, snr_db=tuple(float(v) for v in snrs),
                       **config_kwargs(a, SWEEP_OPTIONS, SweepConfig))

@@ -46,9 +46,15 @@ def benchmarks() -> dict[str, Benchmark]:
     return out
 
 
-def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None) -> dict:
-    """Run benchmark ``name``, writing under ``out``; returns its summary."""
+def run(name: str, out: str = "results", quick: bool = False, jobs: int | None = None,
+        scheduler: str | None = None) -> dict:
+    """Run benchmark ``name``, writing under ``out``; returns its summary. ``scheduler``
+    (only for a benchmark with ``Benchmark.scheduler``): where its tasks run."""
     known = benchmarks()
     if name not in known:
         raise ValueError(f"benchmark must be one of {sorted(known)}, not {name!r}")
-    return known[name].run(Path(out), quick=quick, jobs=jobs)
+    if scheduler is None:
+        return known[name].run(Path(out), quick=quick, jobs=jobs)
+    if not known[name].scheduler:
+        raise ValueError(f"benchmark {name} takes no scheduler")
+    return known[name].run(Path(out), quick=quick, jobs=jobs, scheduler=scheduler)

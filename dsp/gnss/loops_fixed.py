@@ -179,6 +179,7 @@ class ChannelCore:
             k3, k2, k1 = 0.0, T * w ** 2, A2 * w
         self.K3, self.K2, self.K1 = (o.coef(k, COEF_FRAC) for k in (k3, k2, k1))
         self.KT = o.coef(T, T_FRAC)
+        self.KA = o.coef(1.0 / T, COEF_FRAC)          # Hz per cycle: the phase alignment
         self.KD = o.coef(4.0 * dll_bn_hz, COEF_FRAC)   # chips/s per chip of code error
         self.fs = float(fs_hz)
         self.if_hz = float(if_hz)
@@ -195,12 +196,33 @@ class ChannelCore:
     def doppler_hz(self):
         return self.v1 * 2.0 ** -V1.frac if self.o.fixed else self.v1
 
-    def step(self, ie, qe, ip, qp, il, ql):
+    def _wrap(self, e):
+        """A DISC_PHASE difference back into the discriminator's range (Costas: +-1/4
+        cycle, else +-1/2)."""
+        o, half = self.o, (0.25 if self.costas else 0.5)
+        if not o.fixed:
+            return (e + half) % (2 * half) - half
+        h = int(round(half * 2 ** DISC_PHASE.frac))
+        return (e + h) % (2 * h) - h
+
+    def step(self, ie, qe, ip, qp, il, ql, phase_offset=None, align: bool = False):
+        """One epoch. ``phase_offset`` (DISC_PHASE, the core's arithmetic): a phase
+        correction already commanded but not yet seen, taken off the discriminator.
+        ``align``: the hand-over's phase alignment -- the integrators keep their state and
+        the carrier NCO runs ``v1 + e / T`` for the interval, which removes the phase error
+        ``e`` measured now (the PLL's counterpart of a Kalman loop's uniform initial
+        phase)."""
         o = self.o
         qs = self.s * (float(qp) if type(qp) is int else np.asarray(qp, float))
         e = o.q(costas_atan(ip, qs) if self.costas else pll_atan2(ip, qs), DISC_PHASE)
+        if phase_offset is not None:
+            e = self._wrap(o.add(e, -phase_offset))
         tau = o.q(dll_nelp(ie, qe, il, ql, self.d), DISC_CODE)
         ef = DISC_PHASE.frac + COEF_FRAC
+        if align:
+            f = o.add(self.v1, o.mul(e, self.KA, ef - V1.frac), V1)
+            self.e, self.tau = e, tau
+            return self._words(f, tau)
         if self.order == 3:
             self.v2 = o.add(self.v2, o.mul(e, self.K3, ef - V2.frac), V2)
             self.v1 = o.add(o.add(self.v1, o.mul(e, self.K2, ef - V1.frac)),
@@ -209,6 +231,12 @@ class ChannelCore:
             self.v1 = o.add(self.v1, o.mul(e, self.K2, ef - V1.frac), V1)
         f = o.add(self.v1, o.mul(e, self.K1, ef - V1.frac), V1)    # Doppler, V1 format
         self.e, self.tau = e, tau
+        return self._words(f, tau)
+
+    def _words(self, f, tau):
+        """The NCO words (fixed) or frequencies (float) of carrier Doppler ``f`` (V1) and
+        code discriminator ``tau``."""
+        o = self.o
         if not o.fixed:
             return self.if_hz + self.s * f, CHIP_RATE_HZ + f / 1540.0 + self.KD * tau
         f16 = o.mul(f, 1, V1.frac - F16_FRAC)

@@ -37,7 +37,13 @@ what the filter was told.
 Aided PLL: ``dsp.gnss.loops_fixed.ChannelCore`` (Kaplan a3 1.1, b3 2.4, w0 = Bn/0.7845,
 Bn 15 Hz) with the INS rate fed forward into its frequency integrator
 (``v1 += T u`` each epoch, in the core's arithmetic), so its rate integrator holds only the
-INS error. Both loops close a carrier-aided 1st-order DLL (4 Bn_dll chips/s per chip).
+INS error. The hand-over gives a frequency but not the carrier phase: the first tracked
+epoch aligns the phase (``ChannelCore.step(align=True)``: the NCO runs ``v1 + e0 / T`` for
+one interval, the integrators untouched) and, until that interval has been seen, the
+discriminator is read less the correction still to come (``e0`` over the ``latency``
+epochs before it is in force, ``e0 / 2`` over the interval it is: the phase error's mean
+there) -- without it a phase near a quarter cycle kicks the rate integrator (``K3 e`` per
+epoch) and the loop needs over 100 ms to settle. Both loops close a carrier-aided 1st-order DLL (4 Bn_dll chips/s per chip).
 
 PLI: ``(I^2 - Q^2) / (I^2 + Q^2)`` of the prompt summed over ``pli_epochs``.
 """
@@ -293,7 +299,8 @@ class AidedPll:
         _finite("T_s", ctx.T_s, 0.0, strict=True)
         _finite("bn_hz", bn_hz, 0.0, strict=True)
         self.aiding = ctx.aiding
-        self.doppler_offset_epochs = 0.5 + int(ctx.latency_epochs)
+        self.latency = int(ctx.latency_epochs)
+        self.doppler_offset_epochs = 0.5 + self.latency
         self.core = ChannelCore(arith, ctx.fs_hz, ctx.T_s, 3, bn_hz, dll_bn_hz, ctx.spacing_chips,
                                 ctx.if_hz, ctx.inverted, np.asarray(ctx.doppler0_hz, float),
                                 0.0 * np.asarray(ctx.doppler_rate0_hz_s, float), True)
@@ -315,7 +322,16 @@ class AidedPll:
         u = np.broadcast_to((self._u + u1) / 2, self.shape)
         self._u = u1
         self.core.v1 = o.add(self.core.v1, o.mul(o.q(u, V2), self.core.KT, V2.frac + T_FRAC - V1.frac), V1)
-        out = self.core.step(ie, qe, ip, qp, il, ql)
+        L = self.latency
+        if self.k == 0:                 # the hand-over's phase alignment (module doc)
+            out = self.core.step(ie, qe, ip, qp, il, ql, align=True)
+            self._e0 = self.core.e
+        elif self.k <= L + 1:           # the alignment not yet (fully) in the interval seen
+            off = self._e0 if self.k <= L else (o.mul(self._e0, 1, 1) if o.fixed
+                                                 else self._e0 / 2)
+            out = self.core.step(ie, qe, ip, qp, il, ql, phase_offset=off)
+        else:
+            out = self.core.step(ie, qe, ip, qp, il, ql)
         e = self.core.e * 2.0 ** -15 if o.fixed else self.core.e
         self.history.add(e, np.asarray(ip, float), self.core.s * np.asarray(qp, float), self.core.doppler_hz())
         self.k += 1

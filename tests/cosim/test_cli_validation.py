@@ -362,3 +362,18 @@ def test_sweep_report_tables_render():
 def test_committed_report_tables_render(path):
     bad = [(i, h, s) for h, s, i in _tables(path.read_text()) if h != s]
     assert not bad, bad
+
+
+def test_bench_scheduler_refusals(capsys, tmp_path):
+    # before any work: a benchmark without tasks, a malformed or unreachable address,
+    # --jobs with an address
+    out = str(tmp_path / "x")
+    refused(capsys, ["bench", "estimation", "--scheduler", "dask", "--out", out],
+            "--scheduler has no effect on bench estimation (only on ins-table2)")
+    refused(capsys, ["bench", "ins-table2", "--scheduler", "sideways", "--out", out],
+            "--scheduler must be local, dask or a Dask scheduler address")
+    refused(capsys, ["bench", "ins-table2", "--scheduler", "tcp://127.0.0.1:1", "--jobs", "2",
+                     "--out", out], "a remote Dask scheduler (--scheduler ADDRESS) has its own")
+    refused(capsys, ["bench", "ins-table2", "--scheduler", "tcp://127.0.0.1:1", "--out", out],
+            "--scheduler tcp://127.0.0.1:1: cannot connect")
+    assert not (tmp_path / "x").exists()

@@ -241,3 +241,36 @@ def test_doppler_at_the_measurement_instant(tracker):
     lo, hi = (0.1, 1.1) if tracker == "aided-kf" else (0.9, 2.6)
     assert np.all((lag_ms > lo) & (lag_ms < hi)), lag_ms
     assert np.all(np.abs(ins) < 0.2 * np.abs(rep)), (ins, rep)
+
+
+def test_if_series_keeps_each_assignments_epochs(monkeypatch):
+    # a PRN lost and assigned again: the first assignment's epochs keep its observables,
+    # the gap is NaN, the second fills its own (not NaN over the first's)
+    import types
+    import cosim.gnss.navigation as navigation
+    from cosim.gnss.gps_fast_check import if_series
+    cfg, _ = scenario_config(scenario(45.0, 1.6))
+    sig = ConstellationSignal(cfg)
+    prn = int(sig.prns[0])
+    t_m = np.arange(1, 11) / 10.0
+    inside = {1: np.arange(10) < 5, 2: np.arange(10) >= 7}
+
+    def fake_nav(a, *args, **kw):
+        i, M = a.which, t_m.size
+        return types.SimpleNamespace(
+            g=np.arange(5), n_p=np.arange(5) * 10, fs_hz=1000.0, doppler=np.full(5, 100.0 * i),
+            win_t=np.array([0.0]), win_ok=np.array([i == 1]),
+            record_at=lambda N: (np.zeros(M, np.int64), np.full(M, 7.0), inside[i]),
+            cn0_at=lambda N: np.full(M, 40.0 + i), carrier_cycles=lambda N: np.full(M, -i))
+    monkeypatch.setattr(navigation, "channel_navigation", fake_nav)
+    m = types.SimpleNamespace(assignments=[
+        types.SimpleNamespace(prn=prn, which=1, doppler_offset_epochs=0.0),
+        types.SimpleNamespace(prn=prn, which=2, doppler_offset_epochs=0.0)])
+    f = types.SimpleNamespace(fs_hz=1000.0, if_hz=0.0)
+    ser = if_series(m, None, f, sig, (prn,), t_m)
+    nan = np.nan
+    np.testing.assert_array_equal(ser["doppler_hz"][:, 0, 0], [100] * 5 + [nan] * 2 + [200] * 3)
+    np.testing.assert_array_equal(ser["cn0_dbhz"][:, 0, 0], [41] * 5 + [nan] * 2 + [42] * 3)
+    np.testing.assert_array_equal(ser["carrier_cycles"][:, 0, 0], [1] * 5 + [nan] * 2 + [2] * 3)
+    np.testing.assert_array_equal(ser["locked"][:, 0, 0], [True] * 5 + [False] * 5)
+    assert np.isfinite(ser["code_chips"][:, 0, 0]).tolist() == [True] * 5 + [False] * 2 + [True] * 3

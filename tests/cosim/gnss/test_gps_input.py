@@ -122,6 +122,10 @@ def test_a_trajectory_that_does_not_parse_is_refused(capsys, tmp_path):
       "--trajectory", "ins"], "--trajectory is for a generated scenario"),
     (["--file", "x.int8", "--format", "int8", "--fs-hz", "5e6", "--week", "2300",
       "--elevation-mask-deg", "5"], "--elevation-mask-deg is for a generated scenario"),
+    (["--file", "x.int8", "--format", "int8", "--fs-hz", "5e6", "--week", "2300",
+      "--tracker", "aided-kf"], "--tracker aided-kf needs an INS aiding source; a recording"),
+    (["--tracker", "aided-pll"], "--tracker aided-pll needs an INS aiding source: a generated "
+                                 "scenario has one with --trajectory ins"),
 ])
 def test_bad_scenario_options_are_refused(capsys, tmp_path, argv, match):
     assert match in _refused(capsys, tmp_path, *argv)
@@ -182,16 +186,18 @@ def test_a_moving_receivers_fix_is_compared_with_the_truth_at_its_epoch():
 
 
 @pytest.mark.slow
-def test_a_receiver_on_the_ins_trajectory_is_fixed_at_every_epoch(capsys, tmp_path):
+@pytest.mark.parametrize("tracker", ["pll3", "aided-kf"])
+def test_a_receiver_on_the_ins_trajectory_is_fixed_at_every_epoch(capsys, tmp_path, tracker):
     """9 s of the INS paper's profile (at rest, from 5 s 5 g/s: 20 g and 370 m/s at the end)
-    under 8 satellites at 45 dB-Hz, hot start, 10 Hz, on the bit-exact array: every fix
+    under 8 satellites at 45 dB-Hz, hot start, 10 Hz, on the bit-exact array, the 3rd-order
+    PLL or the aided Kalman loop (each channel aided by the scenario's INS): every fix
     within 5 m of the trajectory at its own epoch (hundreds of metres from the start point),
-    the Doppler velocity within 0.2 m/s of the truth, no fix jump. ~80 s of CPU (2-10
+    the Doppler velocity within 0.2 m/s of the truth, no fix jump. ~80 s of CPU each (2-10
     minutes on the shared cores)."""
     import csv
     out = tmp_path / "gps"
     rc = main(["gps", "--duration-s", "9", "--hot-start", "--rate", "10", "--trajectory", "ins",
-               "--out", str(out), "--no-plots", "--json"])
+               "--tracker", tracker, "--out", str(out), "--no-plots", "--json"])
     s = json.loads(capsys.readouterr().out)
     assert rc == 0 and s["truth"]["trajectory"] == "ins"
     assert all(c["status"] == "ok" for c in s["channels"]) and len(s["channels"]) >= 8

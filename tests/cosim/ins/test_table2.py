@@ -197,3 +197,21 @@ def test_the_if_path_runs_the_aided_loop_with_the_fast_paths_aiding(tmp_path):
     assert r["lock"]["losses"] == 0 and r["lock"]["fixes_missing"] == 0
     e = r["err"][r["t_s"] >= 1.0]
     assert e.shape[0] == 2 and np.all(np.abs(e[:, :3]) < 10) and np.all(np.abs(e[:, 3:]) < 1)
+
+
+def test_a_finished_task_is_taken_from_the_cache(monkeypatch, tmp_path):
+    # the same task of the same code: from the cache; another task, another code version
+    # or uncommitted code (version None): computed
+    from cosim.ins import table2_bench
+    calls = []
+    monkeypatch.setattr(table2_bench, "_task",
+                        lambda t: calls.append(t) or {"kind": t[0], "v": len(calls)})
+    cfg = Table2Config()
+    a = table2_bench._cached((tmp_path, "v1"), ("mc", cfg, "aided-kf", 0, 10))
+    b = table2_bench._cached((tmp_path, "v1"), ("mc", cfg, "aided-kf", 0, 10))
+    assert a == {"kind": "mc", "v": 1} and b == {**a, "cached": True} and len(calls) == 1
+    table2_bench._cached((tmp_path, "v1"), ("mc", cfg, "aided-kf", 10, 10))
+    table2_bench._cached((tmp_path, "v2"), ("mc", cfg, "aided-kf", 0, 10))
+    table2_bench._cached((tmp_path, None), ("mc", cfg, "aided-kf", 0, 10))
+    table2_bench._cached((tmp_path, None), ("mc", cfg, "aided-kf", 0, 10))
+    assert len(calls) == 5

@@ -137,3 +137,28 @@ def test_fixed_within_bound_of_float(loop, dopp_hz=0.005, phase_deg=0.05):
     dp = np.abs(out["float"]["phase_err_cycles"] - out["fixed"]["phase_err_cycles"]).max() * 360
     print(loop, "fixed - float: Doppler", dd, "Hz, phase", dp, "deg")
     assert dd <= dopp_hz and dp <= phase_deg, (dd, dp)
+
+
+@pytest.mark.parametrize("latency", [0, 1])
+def test_aided_pll_aligns_the_handed_over_phase(latency):
+    # a hand-over gives the Doppler, not the carrier phase: from a phase 0.22 cycle off
+    # (near the Costas quarter cycle), noise-free and perfectly aided, the aided PLL is
+    # within 2 deg of the truth from the epoch its alignment is in force on, and its rate
+    # integrator is not kicked (without the alignment: ~70 deg after 20 ms, ~35 Hz/s)
+    from dsp.gnss.loops_fixed import FixedArith
+    from cosim.gnss.loopsim import track_fast
+    sc = Scenario(PaperTrajectory(duration_s=4.0, start_s=0.5, accel_g=5.0, v_max_mps=100.0), osc=None)
+    ins = InsAiding(sc, InsErrors(0, 0, 0, 0), T, 204)
+    t0 = sc.truth_at(np.zeros(1))
+    for arith in (FLOAT, FixedArith()):
+        ctx = TrackerContext(fs_hz=16.368e6, T_s=T, doppler0_hz=t0["doppler_hz"],
+                             doppler_rate0_hz_s=t0["doppler_rate_hz_s"], cn0_dbhz=40.0,
+                             aiding=ins, latency_epochs=latency)
+        trk = make_tracker("aided-pll", ctx, arith)
+        r = track_fast(sc.truth_at, None, 150, T, shape=(1,), tracker=trk, latency=latency,
+                       phase0_err_cycles=0.22)
+        ph = np.abs(r.phase_err_cycles[:, 0] - np.rint(r.phase_err_cycles[:, 0] * 2) / 2)
+        assert ph[:latency + 1].min() > 0.2, ph[:3]          # the start is 0.22 cycle off
+        assert ph[latency + 2:].max() * 360 < 2.0, (latency, ph.max() * 360)
+        v2 = trk.core.v2 * 2.0 ** -20 if arith is not FLOAT else trk.core.v2
+        assert abs(float(np.ravel(v2)[0])) < 1.0, v2
