@@ -458,7 +458,7 @@ def _cmd_synth(a) -> int:
 
 
 def _cmd_synth_all(a) -> int:
-    from .tools.synth import run_all
+    from .tools.synth_record import run_all
     return run_all(a, receivers())
 
 

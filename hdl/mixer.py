@@ -5,7 +5,12 @@ Pipeline (one register per line, so each multiplier has registered inputs and ou
 maps onto an ECP5 MULT18X18D):
 
 1. inputs (the real mixer negates ``sin`` here, so ``q`` is a plain product), then
-   ``input_stages - 1`` more copies of them (timing: the last can sit beside the DSP block);
+   ``input_stages - 1`` more copies of them (timing: the last can sit beside the DSP block).
+   With two or more stages, the registers of the last carry the ``keep`` attribute: mixers
+   fed the same LO (several DDCs on one NCO) or the same samples (channels on one ADC
+   stream) have identical copies, which yosys would otherwise merge into one register
+   driving every mixer's multipliers (:mod:`cosim.tools.synth` keeps registers marked
+   ``keep``);
 2. products;
 3. complex input only: sum / difference of the products;
 4. rounding adder, arithmetic right shift by ``drop_bits``;
@@ -111,10 +116,13 @@ class Mixer(wiring.Component):
         return m
 
     def _more_input_stages(self, m, stage, *regs):
-        """``input_stages - 1`` more register copies of the input registers ``regs``."""
-        for k in range(1, self.params.input_stages):
+        """``input_stages - 1`` more register copies of the input registers ``regs`` (the
+        last marked ``keep``)."""
+        last = self.params.input_stages - 1
+        for k in range(1, last + 1):
             stage()
-            nxt = tuple(Signal.like(r, name=f"{r.name}_p{k}") for r in regs)
+            nxt = tuple(Signal.like(r, name=f"{r.name}_p{k}",
+                                    attrs={"keep": 1} if k == last else {}) for r in regs)
             m.d.sync += [n.eq(r) for n, r in zip(nxt, regs)]
             regs = nxt
         return regs

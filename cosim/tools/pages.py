@@ -169,9 +169,17 @@ def render_synth(data: dict) -> str:
            f"{data.get('tools', {}).get('nextpnr-ecp5')}.", "",
            *(["**Incomplete**: the run was stopped before every seed was placed ('-': a "
                "seed not placed).", ""] if data.get("complete") is False else []),
-           *([f"Rows of {', '.join(data['merged'])} are from an earlier run (`--tops` "
-               f"merges a run of some tops into the file; each row names its commit).", ""]
-             if data.get("merged") else []),
+           *([f"Runs of {', '.join(data['merged'])} are from an earlier invocation (`--tops` "
+               f"merges a run of some tops and seeds into the file, seed by seed, keeping a "
+               f"top's other seeds only when they placed the same netlist; each row names "
+               f"its commit).", ""] if data.get("merged") else []),
+           *(["Invocations (wall and CPU time above are their sums):", "",
+              "| command | commit | date | tops | seeds | wall (s) | tools' CPU (s) |",
+              "|---|---|---|---|---|---:|---:|"]
+             + [f"| `{i.get('command')}` | {i.get('commit')} | {i.get('date')} | "
+                f"{', '.join(i.get('tops') or [])} | {fmt(i.get('seeds'))} | "
+                f"{fmt(i.get('wall_s'))} | {fmt(i.get('tool_cpu_s'))} |"
+                for i in data["invocations"]] + [""] if data.get("invocations") else []),
            "## Tops", "",
            "| top | LUT4 | FF | MULT18 | DP16KD | " +
            " | ".join(f"Fmax seed {s} (MHz)" for s in seeds) +

@@ -17,6 +17,7 @@ says whether it was met.
 """
 from __future__ import annotations
 
+import hashlib
 import heapq
 import itertools
 import json
@@ -33,7 +34,8 @@ from pathlib import Path
 from ..core.provenance import REPO_ROOT
 from ..backends.verilog import verilog_text
 
-__all__ = ["synth", "synthesise", "place", "synth_all", "critical_path", "yowasp_available",
+__all__ = ["synth", "synthesise", "place", "synth_all", "critical_path", "netlist_id",
+           "yowasp_available",
            "tool_versions", "DEVICES"]
 
 #: nextpnr-ecp5 device switch per device name.
@@ -173,6 +175,18 @@ def _check(device: str, target_mhz: float, router: str) -> tuple[str, str]:
     return yosys, nextpnr
 
 
+#: Registers whose signal has the ``keep`` attribute (Amaranth ``attrs={"keep": 1}``) are
+#: kept as their own flip-flops: the attribute is put on the flip-flop cells that drive
+#: them, so yosys does not merge them with identical registers (``opt_merge`` merges cells
+#: with the same inputs unless both are marked; a ``keep`` on the wire alone only keeps the
+#: wire). Used by :class:`hdl.mixer.Mixer` so that each mixer's multipliers have input
+#: registers of their own, placeable beside the DSP block. The step is in the script only
+#: when the Verilog has such a signal.
+_KEEP_ATTR = "(* keep = 32'd1 *)"
+_KEEP = ("hierarchy -top {name}\nproc\n"
+         "setattr -set keep 1 a:keep %ci1:+$dff,$adff[Q] c:* %i\n")
+
+
 def synthesise(component, *, name: str, out_dir: str | Path = REPO_ROOT / "build" / "synth",
                timeout_s: float = 1800, verilog: str | None = None) -> Path:
     """Export ``component`` to ``<out_dir>/<name>/<name>.v`` (or write the text
@@ -186,8 +200,9 @@ def synthesise(component, *, name: str, out_dir: str | Path = REPO_ROOT / "build
     work.mkdir(parents=True, exist_ok=True)
     if verilog is None:
         verilog = verilog_text(component, name=name, emit_src=False)
-    script = (f"read_verilog {name}.v\n"
-              f"synth_ecp5 -top {name} -json {name}.json\n"
+    script = (f"read_verilog {name}.v\n" + (_KEEP.format(name=name) if _KEEP_ATTR in verilog
+                                               else "")
+              + f"synth_ecp5 -top {name} -json {name}.json\n"
               f"tee -q -o yosys_stat.json stat -json\n")
     done = work / "yosys.done"          # the script and Verilog the netlist was made from
     key = f"{script}\n{verilog}"
@@ -245,6 +260,7 @@ def place(work: str | Path, *, name: str, device: str = "LFE5U-85F",
         pass  # cell counts are informative only; the report is the result
     return {
         "top": name,
+        "netlist": netlist_id(work / netlist),
         "lut4": used("TRELLIS_COMB"),
         "ff": used("TRELLIS_FF"),
         "mult18": used("MULT18X18D"),
@@ -261,6 +277,12 @@ def place(work: str | Path, *, name: str, device: str = "LFE5U-85F",
         "critical_path": critical_path(report),
         "report": str(run / "report.json"),
     }
+
+
+def netlist_id(path: str | Path) -> str:
+    """The first 12 hex digits of the SHA-256 of a yosys netlist (``<name>.json``): two runs
+    with the same id, seed and nextpnr placed the same netlist."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
 
 
 def _register(cell: str) -> str:
@@ -321,7 +343,8 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
         ``fmax_median``, ``met_all_seeds``, ``met_at_median``, the worst seed's critical path
         ``critical_from`` / ``critical_to``, ``yosys_s``); ``runs``: one row per top and
         seed (``fmax_mhz``, resources, :func:`critical_path`'s fields, ``nextpnr_s``);
-        ``failures``; ``wall_s`` (the whole run) and ``tool_cpu_s`` (the tools' CPU time);
+        ``failures``; ``netlists`` (top -> :func:`netlist_id` of its netlist); ``wall_s`` (the
+        whole run) and ``tool_cpu_s`` (the tools' CPU time);
         ``complete`` (True). ``checkpoint``, if given, is called with the same dict of the
         runs done so far (``complete`` False) after every tool run, so a long run on a
         shared machine can be written as it goes.
@@ -341,6 +364,7 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
     open_tasks = [0]        # queued + running
     results: dict = {}
     yosys_s: dict = {}
+    netlists: dict = {}
     failures: dict = {}
 
     def push(prio, fn):
@@ -378,6 +402,8 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
                 say(f"{name}: yosys FAILED ({str(e).splitlines()[0]})")
                 return
             yosys_s[name] = round(time.time() - t0, 1)
+            net = work / f"{name}.json"
+            netlists[name] = netlist_id(net) if net.exists() else None
             try:
                 size = sum(json.loads((work / "yosys_stat.json").read_text())
                            .get("design", {}).get("num_cells_by_type", {}).values())
@@ -414,6 +440,7 @@ def synth_all(tops: dict, *, seeds=(1, 2, 3), jobs: int | None = None,
             rows, runs = _summarise(tops, seeds, results, yosys_s, target_mhz)
             cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             return {"tops": rows, "runs": runs, "failures": dict(failures), "seeds": seeds,
+                    "netlists": dict(netlists),
                     "jobs": jobs, "wall_s": round(time.time() - t0, 1),
                     "tool_cpu_s": round(cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime
                                         - cpu0.ru_stime, 1), "complete": done}
@@ -433,149 +460,42 @@ def _summarise(tops, seeds, results, yosys_s, target_mhz) -> tuple[list, list]:
     rows, runs = [], []
     for name in tops:
         placed = [(s, results[(name, s)]) for s in seeds if (name, s) in results]
+        mine = []
         for seed, r in placed:
             cp = r["critical_path"] or {}
-            runs.append({"top": name, "seed": seed, "fmax_mhz": _round(r["fmax_mhz"]),
+            mine.append({"top": name, "seed": seed, "netlist": r.get("netlist"),
+                         "fmax_mhz": _round(r["fmax_mhz"]),
                          "timing_met": r["timing_met"], "lut4": r["lut4"], "ff": r["ff"],
                          "critical_from": cp.get("from"), "critical_to": cp.get("to"),
                          "critical_ns": cp.get("ns"), "logic_ns": cp.get("logic_ns"),
                          "routing_ns": cp.get("routing_ns"), "logic_cells": cp.get("cells"),
                          "nextpnr_s": r["nextpnr_s"]})
-        if not placed:
-            continue
-        first = placed[0][1]
-        fmax = [results[(name, s)]["fmax_mhz"] if (name, s) in results else None
-                for s in seeds]                 # None: a seed not placed (failed, or not yet)
-        worst = min(placed, key=lambda sr: sr[1]["fmax_mhz"] or 0.0)[1]["critical_path"] or {}
-        known = [f for f in fmax if f is not None]
-        med = statistics.median(known) if known else None
-        rows.append({"top": name, "lut4": first["lut4"], "ff": first["ff"],
-                     "mult18": first["mult18"], "bram": first["bram"],
-                     "fmax_mhz": [_round(f) for f in fmax],
-                     "fmax_min": _round(min(known)) if known else None,
-                     "fmax_median": _round(med),
-                     "met_all_seeds": len(known) == len(seeds) and min(known) >= target_mhz,
-                     "met_at_median": med is not None and med >= target_mhz,
-                     "critical_from": worst.get("from"), "critical_to": worst.get("to"),
-                     "yosys_s": yosys_s.get(name)})
+        runs += mine
+        if placed:
+            first = placed[0][1]
+            rows.append(top_row(name, seeds, mine, target_mhz, {
+                "netlist": first.get("netlist"), "lut4": first["lut4"], "ff": first["ff"],
+                "mult18": first["mult18"], "bram": first["bram"],
+                "yosys_s": yosys_s.get(name)}))
     return rows, runs
+
+
+def top_row(name: str, seeds, runs: list, target_mhz: float, base: dict) -> dict:
+    """The row of top ``name`` from its run rows ``runs`` (``seed``, ``fmax_mhz``,
+    ``critical_from`` / ``critical_to``): ``base`` (resources, netlist) with ``fmax_mhz``
+    per seed of ``seeds`` (None: not placed), ``fmax_min``, ``fmax_median``,
+    ``met_all_seeds``, ``met_at_median`` and the worst seed's critical path."""
+    by_seed = {r["seed"]: r for r in runs}
+    fmax = [by_seed[s]["fmax_mhz"] if s in by_seed else None for s in seeds]
+    known = [f for f in fmax if f is not None]
+    med = statistics.median(known) if known else None
+    worst = min(runs, key=lambda r: r["fmax_mhz"] or 0.0) if runs else {}
+    return {"top": name, **base, "fmax_mhz": [_round(f) for f in fmax],
+            "fmax_min": _round(min(known)) if known else None, "fmax_median": _round(med),
+            "met_all_seeds": len(known) == len(seeds) and min(known) >= target_mhz,
+            "met_at_median": med is not None and med >= target_mhz,
+            "critical_from": worst.get("critical_from"), "critical_to": worst.get("critical_to")}
 
 
 def _round(v):
     return None if v is None else round(float(v), 2)
-
-
-def all_tops(receivers) -> dict:
-    """Every registered top: each receiver's ``tops`` (Verilog name -> builder), in registry
-    order (the GNSS receiver's: 1 and 12 channels, real IF and complex I/Q input)."""
-    return {name: make for rx in receivers for name, make in (rx.tops or {}).items()}
-
-
-def run_all(a, receivers) -> int:
-    """``python -m cosim synth --all``: :func:`synth_all` over :func:`all_tops`, printed as a
-    table; ``--results DIR`` writes ``DIR/synth.json`` (and the run's full record is in
-    ``--out``/synth.json either way). Exit 1 when a run failed or a top misses the target
-    at a seed."""
-    from ..core.provenance import machine_info
-    for flag, value in (("--top", a.top), ("--seed", a.seed), ("--channels", a.channels),
-                        ("--variant", a.variant)):
-        if value is not None:
-            raise ValueError(f"--all builds every top at every --seeds: drop {flag}")
-    try:
-        seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
-    except ValueError:
-        raise ValueError(f"--seeds takes comma-separated integers, not {a.seeds!r}") from None
-    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
-        raise ValueError(f"--seeds takes distinct seeds >= 0, not {a.seeds!r}")
-    from ..core.validate import check_jobs
-    jobs = check_jobs(a.jobs)
-    tops = all_tops(receivers)
-    if a.tops is not None:
-        names = [n.strip() for n in a.tops.split(",") if n.strip()]
-        unknown = [n for n in names if n not in tops]
-        if unknown or not names:
-            raise ValueError(f"--tops takes names among {', '.join(tops)}, not {a.tops!r}")
-        tops = {n: tops[n] for n in tops if n in names}
-    machine = machine_info()            # date and commit of the code the run starts with
-    say = (lambda msg: None) if a.json else \
-        (lambda msg: print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True))
-    versions = tool_versions()
-
-    def record(r: dict) -> dict:
-        for row in r["tops"] + r["runs"]:
-            row["commit"] = machine["commit"]
-        n = len(tops)
-        return {"benchmark": "synthesis of every top", "device": a.device,
-                "target_mhz": a.target_mhz, "router": a.router,
-                "tmg_ripup": not a.no_tmg_ripup, "seeds": r["seeds"], "jobs": r["jobs"],
-                "wall_s": r["wall_s"], "tool_cpu_s": r["tool_cpu_s"],
-                "complete": r["complete"],
-                "all_met_at_median": len(r["tops"]) == n and
-                all(t["met_at_median"] for t in r["tops"]),
-                "all_met_all_seeds": len(r["tops"]) == n and
-                all(t["met_all_seeds"] for t in r["tops"]),
-                "tools": versions, "tops": r["tops"], "runs": r["runs"],
-                "failures": r["failures"], "machine": machine}
-
-    Path(a.out).mkdir(parents=True, exist_ok=True)
-    partial = Path(a.out) / "synth.json"
-
-    def checkpoint(r: dict) -> None:     # the runs so far, in case the run is stopped
-        partial.write_text(json.dumps(record(r), indent=1) + "\n")
-
-    r = synth_all(tops, seeds=seeds, jobs=jobs, out_dir=Path(a.out), device=a.device,
-                  target_mhz=a.target_mhz, timeout_s=60 * a.timeout_min, router=a.router,
-                  tmg_ripup=not a.no_tmg_ripup, progress=say, checkpoint=checkpoint)
-    rec = record(r)
-    text = json.dumps(rec, indent=1) + "\n"
-    partial.write_text(text)
-    if a.results:
-        Path(a.results).mkdir(parents=True, exist_ok=True)
-        dest = Path(a.results) / "synth.json"
-        if a.tops is not None and dest.exists():
-            rec = merge(json.loads(dest.read_text()), rec, all_tops(receivers))
-            text = json.dumps(rec, indent=1) + "\n"
-        dest.write_text(text)
-    if a.json:
-        print(json.dumps(rec))
-    else:
-        print(f"{'top':<26} {'LUT4':>6} {'FF':>6} {'MULT18':>6} {'DP16KD':>6}  "
-              + " ".join(f"{'s' + str(s):>6}" for s in r["seeds"])
-              + f" {'min':>6} {'median':>6}  critical path (worst seed)")
-        for t in r["tops"]:
-            print(f"{t['top']:<26} {t['lut4']:>6} {t['ff']:>6} {t['mult18']:>6} {t['bram']:>6}  "
-                  + " ".join(f"{f:>6.1f}" if f is not None else f"{'-':>6}"
-                             for f in t["fmax_mhz"] + [t["fmax_min"], t["fmax_median"]])
-                  + "  "
-                  f"{t['critical_from']} -> {t['critical_to']}")
-        for what, why in r["failures"].items():
-            print(f"FAILED {what}: {why.splitlines()[0]}")
-        print(f"wall {r['wall_s']:.0f} s, tool CPU {r['tool_cpu_s']:.0f} s, {r['jobs']} jobs; "
-              f"every top >= {a.target_mhz:g} MHz at every seed: "
-              f"{'yes' if rec['all_met_all_seeds'] else 'NO'}")
-    return 0 if rec["all_met_all_seeds"] and not r["failures"] else 1
-
-
-def merge(old: dict, new: dict, order) -> dict:
-    """``new`` (a ``synth --all --tops`` run) with the rows of ``old`` for the tops it did
-    not build; each row keeps the ``commit`` it was built from. Refused when the two runs
-    differ in device, target, seeds, router or rip-up (their rows would not compare)."""
-    keys = ("device", "target_mhz", "seeds", "router", "tmg_ripup")
-    if any(old.get(k) != new.get(k) for k in keys):
-        raise ValueError(f"--tops: {', '.join(keys)} differ from the existing synth.json's "
-                         f"({[old.get(k) for k in keys]} vs {[new.get(k) for k in keys]}): "
-                         f"run every top, or write elsewhere (--results)")
-    built = {t["top"] for t in new["tops"]} | {k.split(" seed ")[0] for k in new["failures"]}
-    rank = {n: i for i, n in enumerate(order)}
-    tops = [t for t in old.get("tops", []) if t["top"] not in built] + new["tops"]
-    runs = [r for r in old.get("runs", []) if r["top"] not in built] + new["runs"]
-    fails = {k: v for k, v in old.get("failures", {}).items()
-             if k.split(" seed ")[0] not in built}
-    tops.sort(key=lambda t: rank.get(t["top"], len(rank)))
-    runs.sort(key=lambda r: (rank.get(r["top"], len(rank)), r["seed"]))
-    out = dict(new, tops=tops, runs=runs, failures={**fails, **new["failures"]})
-    n = len(order)
-    out["all_met_at_median"] = len(tops) == n and all(t["met_at_median"] for t in tops)
-    out["all_met_all_seeds"] = len(tops) == n and all(t["met_all_seeds"] for t in tops)
-    out["merged"] = sorted({t["top"] for t in tops} - built, key=lambda x: rank.get(x, n))
-    return out

@@ -7,12 +7,12 @@ file builds it. Pipeline of one sample (input cycle ``c``):
 * ``c``: code NCO / generator / delay line / carrier accumulator update (registers);
   the replicas and the carrier phase of the sample are the registers' values in ``c``;
 * ``c .. c+5``: carrier NCO (:class:`hdl.nco.Nco`, phase port), the ADC word (real input)
-  or words (I and Q, ``input="complex"``) delayed alongside; ``c+5 .. c+9``: real mixer
-  (:class:`hdl.mixer.Mixer`; complex input: the complex mixer, one cycle more, ``c+5 ..
-  c+10``); replica bits and epoch flags delayed alongside;
+  or words (I and Q, ``input="complex"``) delayed alongside; ``c+5 .. c+10``: real mixer
+  (:class:`hdl.mixer.Mixer`, two input stages; complex input: the complex mixer, one cycle
+  more, ``c+5 .. c+11``); replica bits and epoch flags delayed alongside;
 * then the six replica products ``+-I``, ``+-Q`` (registered), the accumulators (a dump
   loads the record registers) and the record valid: :attr:`GnssChannelParams.latency`
-  cycles (11 real, 12 complex) from ``c``.
+  cycles (12 real, 13 complex) from ``c``.
 """
 from __future__ import annotations
 
@@ -192,15 +192,28 @@ class GnssCorrelator(wiring.Component):
         boundary = Signal()
         m.d.comb += [advance.eq(valid & hold_zero & s[CB]),
                      wrap.eq(advance & chip_last)]
+        # The boundary is decided a cycle ahead: ``armed`` is always ``hold_zero & s[CB] &
+        # chip_last & gen_k_last`` (a valid sample now is a boundary), loaded with the next
+        # values of those registers. A boundary enables ~140 latched bits; from four
+        # registers through three LUT levels to that enable net it was the 12-channel
+        # array's next critical path. The next value is 0 after any wrap (chip_last
+        # clears), so the boundary's own loads of hold_zero and s do not enter it.
+        armed = Signal()
+        ep_last = Signal()           # chip_last & gen_k_last, in the next cycle
         if K > 1:
             gen_k = Signal(range(K))
             gen_k_last = Signal()
-            m.d.comb += boundary.eq(wrap & gen_k_last)
             with m.If(wrap):
                 m.d.sync += [gen_k.eq(Mux(gen_k_last, 0, gen_k + 1)),
                              gen_k_last.eq(~gen_k_last & (gen_k == K - 2))]
         else:
-            m.d.comb += boundary.eq(wrap)
+            gen_k_last = Const(1, 1)
+        m.d.comb += [boundary.eq(valid & armed),
+                     ep_last.eq(gen_k_last & Mux(advance, ~chip_last & (chip == 1021),
+                                                 chip_last))]
+        m.d.sync += armed.eq(ep_last
+                             & Mux(valid & ~hold_zero, hold == 1, hold_zero)
+                             & Mux(valid & hold_zero, s_keep[CB], s[CB]))
 
         with m.If(valid):
             m.d.sync += [gen_ep.eq(wrap), gen_first.eq(boundary)]

@@ -287,13 +287,19 @@ class GnssChannelParams:
 
         Either way ``|I|, |Q| < 2**(iq_width - 1)`` per sample, which :attr:`acc_width`
         builds on.
+
+        Two input stages (:attr:`MixerParams.input_stages`): the second, each channel's own
+        registers beside its DSP blocks, takes the route from the NCO and the ADC delay line
+        (shared by every channel of an array) off the multiplier path, the 12-channel
+        array's critical path with one stage.
         """
         a, b = self.mixer_in_width, self.lo_bits
         if self.complex_input:
             return MixerParams(in_width=a, complex_input=True, lo_width=b, out_width=a + b,
-                               rounding="floor", overflow="wrap", headroom_bits=1)
+                               rounding="floor", overflow="wrap", headroom_bits=1,
+                               input_stages=2)
         return MixerParams(in_width=a, complex_input=False, lo_width=b, out_width=a + b - 1,
-                           rounding="floor", overflow="wrap")
+                           rounding="floor", overflow="wrap", input_stages=2)
 
     @property
     def iq_width(self) -> int:

@@ -6,7 +6,7 @@ Hardware structure (why it looks the way it does)
 -------------------------------------------------
 Every path is one compare, a few LUT levels or one adder between registers, and every block
 RAM read and constant product is registered before use: the TACAN front end with both
-searches meets 100 MHz on the LFE5U-85F (results/synth_tacan.json, 102.2 MHz). Before this
+searches meets 100 MHz on the LFE5U-85F (results/synth.json, ``python -m cosim synth --all``). Before this
 structure it reached 56.7 MHz: a block RAM's clock-to-output, a compare, muxes and the
 floor's adder shared one cycle.
 

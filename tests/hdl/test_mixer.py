@@ -226,3 +226,65 @@ def test_verilator_matches_model_long(kind):
     p = VL_PARAMS[kind]
     _check(p, 1_000_000, seed=510 + p.complex_input, backends=("verilator",),
            name=f"mixer_{kind}_vl")
+
+
+@pytest.mark.parametrize("p, kept", [
+    (MixerParams(), 0), (MixerParams(input_stages=2), 3), (MixerParams(input_stages=3), 3),
+    (MixerParams(complex_input=True, input_stages=2), 4),
+])
+def test_last_input_stage_is_marked_keep(p, kept):
+    """With two or more input stages the copies beside the multipliers (the last stage:
+    x, cos, -sin; complex: xi, xq, cos, sin) carry ``keep``, so synthesis does not merge
+    the copies of mixers fed the same LO or samples; earlier stages do not."""
+    import re
+    from cosim.backends.verilog import verilog_text
+    text = verilog_text(Mixer(p), name="mixer_keep", emit_src=False)
+    got = re.findall(r"\(\* keep = 32'd1 \*\)\s+reg (?:\[\d+:0\] )?\\?(\S+?) ", text)
+    assert len(got) == kept
+    assert all(re.search(rf"_p{p.input_stages - 1}(\$\d+)?$", g) for g in got), got
+
+
+@pytest.mark.synth
+@pytest.mark.slow
+def test_synthesis_keeps_each_mixers_input_copies(tmp_path):
+    """Two mixers fed the same LO and sample: yosys keeps each one's last input stage (17 +
+    16 + 12 flip-flops each); identical registers without ``keep`` would be merged into one
+    set (the monopulse DDCs' LO copies were, before the mixer marked them)."""
+    import json
+    import re
+    from amaranth.hdl import Module
+    from amaranth.lib import wiring as w
+    from amaranth.lib.wiring import In, Out
+    from amaranth.lib import stream
+    from cosim.tools.synth import synthesise, yowasp_available
+    if not yowasp_available():
+        pytest.skip("YoWASP yosys not installed")
+    p = MixerParams(input_stages=2)
+    from hdl.mixer import mixer_in_layout
+    from hdl.common import iq_layout
+
+    class Two(w.Component):
+        def __init__(self):
+            out = Out(stream.Signature(iq_layout(p.out_width), always_ready=True))
+            super().__init__({"i": In(stream.Signature(mixer_in_layout(p), always_ready=True)),
+                              "a": out, "b": out})
+
+        def elaborate(self, platform):
+            m = Module()
+            for name, port in (("m0", self.a), ("m1", self.b)):
+                mix = m.submodules[name] = Mixer(p)
+                m.d.comb += [mix.i.valid.eq(self.i.valid), mix.i.payload.eq(self.i.payload),
+                             port.valid.eq(mix.o.valid), port.payload.eq(mix.o.payload)]
+            return m
+
+    from cosim.backends.verilog import verilog_text
+    work = synthesise(None, name="two_mixers", out_dir=tmp_path,
+                      verilog=verilog_text(Two(), name="two_mixers", emit_src=False))
+    cells = json.loads((work / "two_mixers.json").read_text())["modules"]["two_mixers"]["cells"]
+    ffs = {}
+    for n, c in cells.items():
+        hit = re.match(r"\\?(m\d)\.(\S+_p1)_TRELLIS_FF", n)
+        if c["type"] == "TRELLIS_FF" and hit:
+            ffs[hit.groups()] = ffs.get(hit.groups(), 0) + 1
+    assert ffs == {(m, r): k for m in ("m0", "m1")
+                   for r, k in (("$signal_p1", 12), ("c_p1", 16), ("sn_p1", 17))}

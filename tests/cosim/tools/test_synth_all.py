@@ -11,7 +11,8 @@ import cosim.tools.synth as synth_mod
 from cosim.cli import main
 from cosim.core.receivers import receivers
 from cosim.tools import pages
-from cosim.tools.synth import all_tops, critical_path
+from cosim.tools.synth import critical_path
+from cosim.tools.synth_record import all_tops
 
 TOPS = {"tacan_frontend", "gnss_channel", "gnss_channel_array12", "gnss_channel_iq",
         "gnss_channel_array12_iq", "monopulse_frontend"}
@@ -117,28 +118,64 @@ def test_every_top_meets_100mhz_at_its_median_seed(tmp_path, capsys):
     assert rc in (0, 1)         # 1: a top misses 100 MHz at one seed (not its median)
 
 
-def test_tops_merges_into_the_existing_json(monkeypatch, tmp_path):
-    """``--tops`` re-runs some tops; ``--results`` keeps the other tops' rows (each names its
-    commit) and refuses to merge runs made with other settings."""
+def _fake_placed(tops, *, seeds, fmax, netlist):
+    """synth_all's answer with every top placed at ``seeds`` with ``fmax`` (one per seed)
+    from a netlist with id ``netlist``."""
+    runs = [{"top": n, "seed": s, "netlist": netlist, "fmax_mhz": f, "timing_met": f >= 100,
+             "lut4": 10, "ff": 5, "critical_from": f"a{s}", "critical_to": "b",
+             "critical_ns": 9.9, "logic_ns": 3.0, "routing_ns": 6.9, "logic_cells": 4,
+             "nextpnr_s": 2.0} for n in tops for s, f in zip(seeds, fmax)]
+    rows = [synth_mod.top_row(n, list(seeds), [r for r in runs if r["top"] == n], 100.0,
+                              {"netlist": netlist, "lut4": 10, "ff": 5, "mult18": 1, "bram": 0,
+                               "yosys_s": 1.0}) for n in tops]
+    return {"tops": rows, "runs": runs, "failures": {}, "seeds": list(seeds), "jobs": 1,
+            "netlists": {n: netlist for n in tops}, "wall_s": 3.0, "tool_cpu_s": 5.0,
+            "complete": True}
+
+
+def test_tops_merges_into_the_existing_json_seed_by_seed(monkeypatch, tmp_path):
+    """``--tops`` (with any ``--seeds``) merges into ``--results``' synth.json run by run:
+    a top not built keeps its rows, a re-placed seed replaces the old one, the other seeds
+    of a top are kept only when they placed the same netlist; each row names its commit,
+    the file lists its invocations, and runs made with other settings are refused."""
     monkeypatch.setattr(synth_mod, "tool_versions", lambda: {"yosys": "y", "nextpnr-ecp5": "n"})
-    fmax = {"v": (99.0, 100.5, 104.0)}
+    run = {"fmax": (99.0, 100.5, 104.0), "netlist": "n1"}
     monkeypatch.setattr(synth_mod, "synth_all",
-                        lambda tops, *, seeds, **kw: _fake_run(tops, seeds=seeds,
-                                                               fmax=fmax["v"]))
+                        lambda tops, *, seeds, **kw: _fake_placed(tops, seeds=seeds, **run))
     base = ["synth", "--all", "--jobs", "1", "--out", str(tmp_path / "b"),
             "--results", str(tmp_path / "r")]
+
+    def rec():
+        return json.loads((tmp_path / "r" / "synth.json").read_text())
+
     assert main(base) == 1
-    fmax["v"] = (101.0, 102.0, 103.0)
+    run.update(fmax=(101.0, 102.0, 103.0), netlist="n2")
     assert main(base + ["--tops", "gnss_channel,monopulse_frontend"]) == 1
-    rec = json.loads((tmp_path / "r" / "synth.json").read_text())
-    got = {t["top"]: t["fmax_min"] for t in rec["tops"]}
+    got = {t["top"]: t for t in rec()["tops"]}
     assert list(got) == list(all_tops(receivers()))
-    assert got["gnss_channel"] == got["monopulse_frontend"] == 101.0
-    assert got["tacan_frontend"] == 99.0 and "tacan_frontend" in rec["merged"]
-    assert len(rec["runs"]) == 3 * len(got) and all(t["commit"] for t in rec["tops"])
-    assert not rec["all_met_all_seeds"]
-    assert "earlier run" in pages.render_page("synth", rec)
-    assert main(base + ["--tops", "gnss_channel", "--seeds", "1,2"]) == 2
+    assert got["gnss_channel"]["fmax_min"] == got["monopulse_frontend"]["fmax_min"] == 101.0
+    assert got["tacan_frontend"]["fmax_mhz"] == [99.0, 100.5, 104.0]
+    assert "tacan_frontend" in rec()["merged"] and "gnss_channel" not in rec()["merged"]
+    assert len(rec()["runs"]) == 3 * len(got) and all(t["commit"] for t in rec()["tops"])
+    assert "earlier" in pages.render_page("synth", rec())
+    # seed 1 of the same tacan netlist placed again: replaces that seed only
+    run.update(fmax=(100.7,), netlist="n1")
+    assert main(base + ["--tops", "tacan_frontend", "--seeds", "1"]) == 1
+    r = rec()
+    tacan = next(t for t in r["tops"] if t["top"] == "tacan_frontend")
+    assert tacan["fmax_mhz"] == [100.7, 100.5, 104.0] and tacan["met_all_seeds"]
+    assert r["seeds"] == [1, 2, 3] and r["complete"] and len(r["runs"]) == 3 * len(got)
+    assert [i["seeds"] for i in r["invocations"]] == [[1, 2, 3], [1, 2, 3], [1]]
+    assert r["wall_s"] == 3 * 3.0 and r["tool_cpu_s"] == 3 * 5.0
+    # another netlist of gnss_channel at a new seed: its old seeds go, the file is incomplete
+    run.update(fmax=(105.0,), netlist="n3")
+    assert main(base + ["--tops", "gnss_channel", "--seeds", "4"]) == 1
+    r = rec()
+    gnss = next(t for t in r["tops"] if t["top"] == "gnss_channel")
+    assert r["seeds"] == [1, 2, 3, 4] and gnss["fmax_mhz"] == [None, None, None, 105.0]
+    assert not gnss["met_all_seeds"] and not r["complete"] and not r["all_met_all_seeds"]
+    assert [x["seed"] for x in r["runs"] if x["top"] == "gnss_channel"] == [4]
+    assert main(base + ["--tops", "gnss_channel", "--target-mhz", "90"]) == 2
     assert main(base + ["--tops", "nope"]) == 2
 
 
