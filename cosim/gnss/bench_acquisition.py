@@ -72,7 +72,8 @@ def trial(cn0_dbhz: float | None, index: int) -> dict:
     None: noise only, every test run). Deterministic in (``cn0_dbhz``, ``index``)."""
     from dsp.gnss.dwell import (DEFAULT_LIMIT_MS, DEFAULT_SCHEDULE, Baseband, fixed_schedule,
                                 sequential_search)
-    from .dynamics import L1_WAVELENGTH_M, PolynomialProfile
+    from dsp.gnss.ephemeris import L1_WAVELENGTH_M
+    from .dynamics import PolynomialProfile
     from .signal import GnssSignalConfig, GnssSignalGenerator
     key = 0 if cn0_dbhz is None else int(round(cn0_dbhz * 10))
     rng = np.random.default_rng(np.random.SeedSequence(BASE_SEED, spawn_key=(key, index)))

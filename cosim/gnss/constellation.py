@@ -65,13 +65,12 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from dsp.gnss.ca_code import CHIP_RATE_HZ, ca_code_levels
-from dsp.gnss.ephemeris import C_LIGHT, WEEK_S, Ephemeris, KlobucharParameters, \
+from dsp.gnss.ephemeris import C_LIGHT, CHIP_M, L1_WAVELENGTH_M, WEEK_S, Ephemeris, KlobucharParameters, \
     UtcParameters, select_ephemeris
 from dsp.gnss.lnav import encode_frames
 
 from ..core.validate import check_float
-from .constellation_kernels import CHIP_M, L1_WAVELENGTH_M, constellation_kernel, \
-    interpolate_ranges
+from .constellation_kernels import constellation_kernel, interpolate_ranges
 from .constellation_geometry import ClockRealisation, Cn0Model, ReceiverClock, \
     StaticReceiver, TrajectoryReceiver, atmosphere, check_motion, geometry
 from .files import BLOCK_SAMPLES, FORMATS, AdcMap, samples_per_ms, write_samples

@@ -8,16 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
-from dsp.gnss.ephemeris import C_LIGHT
+from dsp.gnss.ephemeris import CHIP_M, L1_WAVELENGTH_M
 from dsp.jit import njit_cached
 
-__all__ = ["L1_WAVELENGTH_M", "CHIP_M", "hermite", "linear", "ranges_at", "interpolate_ranges",
+__all__ = ["hermite", "linear", "ranges_at", "interpolate_ranges",
            "constellation_kernel"]
 
-#: L1 wavelength and C/A chip length (m).
-L1_WAVELENGTH_M = C_LIGHT / L1_HZ
-CHIP_M = C_LIGHT / CHIP_RATE_HZ
 
 
 @njit_cached(nogil=True)

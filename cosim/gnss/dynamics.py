@@ -35,14 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dsp.gnss.ca_code import L1_HZ
-from dsp.gnss.ephemeris import C_LIGHT
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
 from dsp.gnss.jerk import phi_b, jerk_phi, jerk_q  # noqa: F401  (the model lives with the DSP)
 
 from ..core.csv_table import read_csv_table
 
-#: L1 wavelength (m).
-L1_WAVELENGTH_M = C_LIGHT / L1_HZ
 #: The AUKF patent's initial state [theta rad, w0 rad/s, w1 rad/s^2, w2 rad/s^3].
 PATENT_X0 = (0.0, 32995.519, 323.356, 0.0)
 #: Default range at t = 0 (m): a typical GPS satellite range, ~20 000 km.

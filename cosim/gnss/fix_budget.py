@@ -49,10 +49,11 @@ from pathlib import Path
 import numpy as np
 
 from dsp.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
-from dsp.gnss.budget import CHIP_M, TrackingLoops, channel_sigmas, solution_covariance
+from dsp.gnss.budget import TrackingLoops, channel_sigmas, solution_covariance
 from dsp.gnss.ca_code import CHIP_RATE_HZ
 from dsp.gnss.ephemeris import C_LIGHT, WEEK_S
-from dsp.gnss.pvt import L1_WAVELENGTH_M, enu_geometry
+from dsp.gnss.ephemeris import CHIP_M, L1_WAVELENGTH_M
+from dsp.gnss.pvt import enu_geometry
 
 __all__ = ["fix_budget", "loops_of", "markdown"]
 

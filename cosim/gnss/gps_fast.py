@@ -83,7 +83,8 @@ from dsp.jit import njit_cached
 
 from ..core.validate import check_float, check_int
 from .config import GnssRunConfig
-from .constellation import CHIP_M, L1_WAVELENGTH_M, PAGE_POINTS, ConstellationSignal
+from dsp.gnss.ephemeris import CHIP_M, L1_WAVELENGTH_M
+from .constellation import PAGE_POINTS, ConstellationSignal
 from .constellation_kernels import linear, ranges_at
 from .fastpath import adc_efficiency, correlate_fast
 from .gps_receiver import GpsConfig, GpsEpoch, GpsRun, ReceiverTime, fix_epoch

@@ -36,7 +36,7 @@ from dataclasses import replace
 import numpy as np
 
 from .config import GnssRunConfig
-from .constellation import CHIP_M
+from dsp.gnss.ephemeris import CHIP_M
 from .gps_fast import fixes_from_series, run_fast, select_channels
 from .gps_receiver import GpsConfig
 from .multichannel import TrackConfig

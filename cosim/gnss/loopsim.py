@@ -18,7 +18,8 @@ from dsp.gnss.ca_code import CHIP_RATE_HZ
 from dsp.gnss.loops import TrackingChannel, jerk_stress_deg, kaplan_jitter_deg
 from hdl.gnss.params import DEFAULT_FS_HZ
 
-from .dynamics import L1_WAVELENGTH_M, aukf_patent_dynamics
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
+from .dynamics import aukf_patent_dynamics
 from .fastpath import correlate_fast
 from .signal import GnssSignalConfig, GnssSignalGenerator
 

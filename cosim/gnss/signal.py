@@ -337,7 +337,7 @@ class GnssSignalGenerator:
 
     # -- the truth -------------------------------------------------------------------------
     def _motion_cycles(self, t):
-        from .dynamics import L1_WAVELENGTH_M
+        from dsp.gnss.ephemeris import L1_WAVELENGTH_M
         return -self.traj.delta_range_m(t) / L1_WAVELENGTH_M
 
     def _chips(self, t, motion=None):
@@ -346,7 +346,7 @@ class GnssSignalGenerator:
 
     def truth_at(self, t_s) -> dict:
         """The truth at receiver times ``t_s`` (s): the fields of :class:`GnssTruth`."""
-        from .dynamics import L1_WAVELENGTH_M
+        from dsp.gnss.ephemeris import L1_WAVELENGTH_M
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         m = self._motion_cycles(t)
         d = self.traj.evaluate(t)

@@ -39,10 +39,11 @@ import numpy as np
 from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S
 
 from ..core.validate import check_float, check_int
-from .study import CHIP_M, LOOPS
+from dsp.gnss.ephemeris import CHIP_M, L1_WAVELENGTH_M
+from .study import LOOPS
 from cosim.gnss.signal import check_cn0
 
-from .trajectory import L1_WAVELENGTH_M, Geometry, Scenario, PaperTrajectory
+from .trajectory import Geometry, Scenario, PaperTrajectory
 
 OSCILLATORS = ("tcxo", "ocxo")
 #: The fields that shape the built-in profile (not a CSV's).

@@ -24,13 +24,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.gnss.loopsim import cycle_slips, track_fast
-from dsp.gnss.budget import CHIP_M
+from dsp.gnss.ephemeris import CHIP_M, L1_WAVELENGTH_M
 from dsp.gnss.loops_fixed import FLOAT, FixedArith
 from dsp.gnss.trackers import TrackerContext, make_tracker
 from hdl.gnss.params import DEFAULT_FS_HZ
 
 from .ins_error import InsAiding, InsErrors
-from .trajectory import Geometry, Scenario, PaperTrajectory, L1_WAVELENGTH_M
+from .trajectory import Geometry, Scenario, PaperTrajectory
 
 LOOPS = ("aided-kf", "aided-pll", "unaided-kf")
 

@@ -189,7 +189,7 @@ class ChannelAiding:
         from dsp.gnss.ca_code import CHIP_RATE_HZ, CODE_LENGTH
         from dsp.gnss.ephemeris import satellite_position_velocity, select_ephemeris
 
-        from ..gnss.constellation import CHIP_M
+        from dsp.gnss.ephemeris import CHIP_M
         err = errors or InsErrors()
         dur = sig.cfg.duration_s
         h = float(step_s)

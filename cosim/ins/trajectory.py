@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core.csv_table import read_csv_table
-from cosim.gnss.dynamics import L1_WAVELENGTH_M
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
 from cosim.gnss.oscillator import OscillatorPhase
 from dsp.gnss.oscillator import oscillator
 from dsp.gnss.ca_code import CHIP_RATE_HZ

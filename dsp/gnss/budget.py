@@ -42,17 +42,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .ca_code import CHIP_RATE_HZ
-from .ephemeris import C_LIGHT
+from .ephemeris import CHIP_M, L1_WAVELENGTH_M
 from .loops import carrier_loop_response, loop_impulse_response
-from .pvt import L1_WAVELENGTH_M, enu_geometry
+from .pvt import enu_geometry
 
 __all__ = ["TrackingLoops", "nelp_discriminator_variance", "costas_discriminator_variance",
            "betz_dll_sigma_chips", "dll_response", "code_sigma_chips", "doppler_sigma_hz",
-           "channel_sigmas", "solution_covariance", "predicted_errors", "CHIP_M"]
+           "channel_sigmas", "solution_covariance", "predicted_errors"]
 
-#: One C/A chip (m).
-CHIP_M = C_LIGHT / CHIP_RATE_HZ
 
 
 def _cn0(cn0_dbhz):

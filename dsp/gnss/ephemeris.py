@@ -44,6 +44,7 @@ from typing import NamedTuple, Sequence, Union
 
 import numpy as np
 
+from .ca_code import CHIP_RATE_HZ, L1_HZ
 from .lnav_fields import EPHEMERIS_FIELDS, EPHEMERIS_INTEGERS, IONO_FIELDS, PI_GPS, \
     UTC_FIELDS, check_integer, quantise_value
 
@@ -55,6 +56,9 @@ OMEGA_E_DOT = 7.2921151467e-5
 F_REL = -4.442807633e-10
 #: Speed of light (m/s), the value of IS-GPS-200 and of WGS-84.
 C_LIGHT = 299792458.0
+#: The L1 carrier's wavelength and one C/A chip (m).
+L1_WAVELENGTH_M = C_LIGHT / L1_HZ
+CHIP_M = C_LIGHT / CHIP_RATE_HZ
 #: Seconds in a GPS week, and half of it (the tk fold of Table 20-IV).
 WEEK_S = 604800.0
 HALF_WEEK_S = 302400.0

@@ -47,8 +47,8 @@ import numpy as np
 import pymap3d
 
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH
-from .ephemeris import C_LIGHT, MU_GPS, OMEGA_E_DOT, WEEK_S
-from .pvt import L1_WAVELENGTH_M, rotate_z
+from .ephemeris import C_LIGHT, L1_WAVELENGTH_M, MU_GPS, OMEGA_E_DOT, WEEK_S
+from .pvt import rotate_z
 
 #: Data-bit and code periods (s).
 BIT_S = 0.020

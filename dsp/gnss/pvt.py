@@ -56,13 +56,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pymap3d
 
-from .ca_code import L1_HZ
-from .ephemeris import C_LIGHT, OMEGA_E_DOT
+from .ephemeris import C_LIGHT, L1_WAVELENGTH_M, OMEGA_E_DOT
 from .atmosphere import (TROPO_HEIGHT_RANGE_M, TROPO_MIN_ELEVATION_DEG,
                          klobuchar_delay_m, saastamoinen_delay_m)
 
-#: L1 carrier wavelength (m).
-L1_WAVELENGTH_M = C_LIGHT / L1_HZ
 #: Heights (m) between which an estimate counts as near the surface (elevations, atmosphere).
 SURFACE_HEIGHT_RANGE_M = (-5_000.0, 100_000.0)
 

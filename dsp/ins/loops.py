@@ -58,10 +58,10 @@ from dsp.estimation.formats import fmt, to_fixed
 from dsp.estimation.kalman import KalmanFilter, KalmanFormats
 from dsp.estimation.models import LinearGaussianModel
 from dsp.gnss.ca_code import CHIP_RATE_HZ, L1_HZ
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
 from dsp.gnss.discriminators import costas_atan, dll_nelp
 from dsp.gnss.trackers import register_tracker
 
-L1_WAVELENGTH_M = 299792458.0 / L1_HZ
 G_MPS2 = 9.80665
 
 #: Fixed-point table of the Kalman loop on the scaled state (below): rate up to +-7800 Hz/s,

@@ -9,7 +9,8 @@ import numpy as np
 import pymap3d
 import pytest
 
-from cosim.gnss.constellation import L1_WAVELENGTH_M, ConstellationConfig, \
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
+from cosim.gnss.constellation import ConstellationConfig, \
     ConstellationSignal, write_constellation
 from cosim.gnss.constellation_geometry import Cn0Model, ReceiverClock, StaticReceiver, \
     TrajectoryReceiver, along_track_receiver

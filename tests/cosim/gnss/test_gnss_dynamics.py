@@ -6,7 +6,8 @@ import pytest
 from scipy.linalg import expm
 
 from cosim.gnss import dynamics as dy
-from cosim.gnss.dynamics import L1_WAVELENGTH_M, CsvProfile, JerkProcess, PolynomialProfile
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
+from cosim.gnss.dynamics import CsvProfile, JerkProcess, PolynomialProfile
 from dsp.gnss.jerk import jerk_phi, jerk_q
 
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from cosim.gnss.dynamics import L1_WAVELENGTH_M
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
 from cosim.ins.ins_error import InsAiding, InsErrors
 from cosim.ins.trajectory import G_MPS2, Scenario, PaperTrajectory, los_kinematics
 

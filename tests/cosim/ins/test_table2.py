@@ -10,7 +10,8 @@ import pytest
 from cosim.ins.ins_error import InsErrors
 from cosim.ins.table2 import (AXES, LOOPS, ChannelAiding, Table2Config, error_table,
                               judge_claims, lock_counts, run_loop, table2_signal)
-from cosim.ins.trajectory import G_MPS2, L1_WAVELENGTH_M
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
+from cosim.ins.trajectory import G_MPS2
 
 
 def test_bad_config_and_too_few_satellites_are_refused():

@@ -7,7 +7,8 @@ import pytest
 
 from cosim.gnss.dynamics import from_doppler
 from cosim.gnss.loopsim import track_fast, truth_for
-from dsp.gnss.budget import (CHIP_M, TrackingLoops, betz_dll_sigma_chips, channel_sigmas,
+from dsp.gnss.ephemeris import CHIP_M
+from dsp.gnss.budget import (TrackingLoops, betz_dll_sigma_chips, channel_sigmas,
                              code_sigma_chips, costas_discriminator_variance, dll_response,
                              doppler_sigma_hz, nelp_discriminator_variance, predicted_errors,
                              solution_covariance)

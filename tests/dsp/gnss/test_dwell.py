@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cosim.gnss.dynamics import L1_WAVELENGTH_M, PolynomialProfile
+from dsp.gnss.ephemeris import L1_WAVELENGTH_M
+from cosim.gnss.dynamics import PolynomialProfile
 from cosim.gnss.signal import GnssSignalConfig, GnssSignalGenerator
 from dsp.gnss.dwell import (DEFAULT_LIMIT_MS, DEFAULT_SCHEDULE, Baseband, Dwell, fixed_schedule,
                             refine, schedule_within, sequential_search)

@@ -10,6 +10,7 @@ from scipy.stats import binomtest, chi2
 
 from dsp.gnss import observables as ob
 from dsp.gnss import pvt
+from dsp.gnss import ephemeris
 from dsp.gnss.atmosphere import klobuchar_delay_m, saastamoinen_delay_m
 
 LAT, LON, H = 48.15, 11.58, 520.0
@@ -70,7 +71,7 @@ def test_without_the_earth_rotation_the_position_is_tens_of_metres_off():
 
 def test_the_pseudorange_rate_input_equals_the_doppler_input():
     s = scene()
-    rate = -s["dop"] * pvt.L1_WAVELENGTH_M
+    rate = -s["dop"] * ephemeris.L1_WAVELENGTH_M
     a = solve(s, sat_vel_mps=s["vel"], sat_clock_drift=s["drift"], doppler_hz=s["dop"])
     b = solve(s, sat_vel_mps=s["vel"], sat_clock_drift=s["drift"], pseudorange_rate_mps=rate)
     np.testing.assert_allclose(a.velocity_ecef_mps, b.velocity_ecef_mps, atol=1e-9)
@@ -315,7 +316,7 @@ def test_the_velocity_error_covariance_matches_the_weighted_geometry():
     s = scene()
     sig = pvt.pseudorange_sigma_m(s["cn0"], EL)
     k = 0.01
-    rate = -s["dop"] * pvt.L1_WAVELENGTH_M
+    rate = -s["dop"] * ephemeris.L1_WAVELENGTH_M
     rng = np.random.default_rng(4242)
     trials, nees = 300, 0.0
     for _ in range(trials):
