@@ -6,7 +6,7 @@ search.
 Correlation
 -----------
 The input is zero-IF complex samples at ``fs_d`` with a whole number ``N`` of samples per
-1 ms (:class:`Baseband` makes them from a recording: :func:`dsp.gnss.search.to_baseband`,
+1 ms (:class:`Baseband` makes them from a recording: :func:`dsp.gnss.search_frontend.to_baseband`,
 2.046 MS/s by default, cells half a chip apart). For every 1 ms period ``k`` and every
 *coarse* Doppler ``f_b`` (multiples of :data:`COARSE_HZ` = 500 Hz within
 ``+-max_doppler_hz``) the circular correlation with the sampled replica is taken by FFT::
@@ -367,15 +367,15 @@ def sequential_search(read_ms, fs_d: float, prn: int, schedule=DEFAULT_SCHEDULE,
 
 class Baseband:
     """Zero-IF complex samples at the search rate, 1 ms at a time, from a reader of raw
-    samples: :func:`dsp.gnss.search.to_baseband` (mixer referred to the recording's first
-    sample, ``firwin`` low-pass, decimation by :func:`dsp.gnss.search.decimation`) on the
+    samples: :func:`dsp.gnss.search_frontend.to_baseband` (mixer referred to the recording's first
+    sample, ``firwin`` low-pass, decimation by :func:`dsp.gnss.search_frontend.decimation`) on the
     requested stretch plus the filter's half length on each side, so a stretch equals the
     same samples of the whole record converted at once (in complex64 arithmetic: to
-    ~1e-6 of :func:`~dsp.gnss.search.to_baseband`'s complex128)."""
+    ~1e-6 of :func:`~dsp.gnss.search_frontend.to_baseband`'s complex128)."""
 
     def __init__(self, read, n_samples: int, fs_hz: float, if_hz: float,
                  inverted: bool = False, min_rate_hz: float | None = None):
-        from .search import MIN_RATE_HZ, decimation
+        from .search_frontend import MIN_RATE_HZ, decimation
         self.read, self.n_samples = read, int(n_samples)
         self.fs_hz, self.if_hz, self.inverted = float(fs_hz), float(if_hz), bool(inverted)
         self.N = int(round(fs_hz * CODE_PERIOD_S))
@@ -410,7 +410,7 @@ class Baseband:
         n_out = min(b, k1 * N) - k0 * N
         if D == 1:
             return y[i0:i0 + n_out]
-        # centred FIR low-pass (search.to_baseband's), only the kept samples computed
+        # centred FIR low-pass (search_frontend.to_baseband's), only the kept samples computed
         h = sps.firwin(16 * D + 1, 1.0 / D).astype(np.float32)
         z = sps.resample_poly(y, 1, D, window=h)      # z[i] at y[i D]; i0 is a multiple of D
         return z[i0 // D:i0 // D - (-n_out // D)]

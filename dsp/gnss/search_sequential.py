@@ -35,9 +35,8 @@ from __future__ import annotations
 
 from .ca_code import CHIP_RATE_HZ, CODE_LENGTH, CODE_PERIOD_S, L1_HZ
 from .dwell import DEFAULT_LIMIT_MS, DEFAULT_SCHEDULE, schedule_within, sequential_search
-from .search import (EXCISE_DB, MIN_RATE_HZ, PERIODIC_RATIO, Detection, SearchReport,
-                     check_search_args, decimation, front_end, refine_detection,
-                     two_pass_search)
+from .search import Detection, SearchReport, check_search_args, refine_detection, two_pass_search
+from .search_frontend import EXCISE_DB, MIN_RATE_HZ, PERIODIC_RATIO, decimation, front_end
 
 __all__ = ["sequential_search_all"]
 

@@ -10,7 +10,7 @@ from cosim.gnss.dynamics import PolynomialProfile
 from cosim.gnss.signal import GnssSignalConfig, GnssSignalGenerator
 from dsp.gnss.dwell import (DEFAULT_LIMIT_MS, DEFAULT_SCHEDULE, Baseband, Dwell, fixed_schedule,
                             refine, schedule_within, sequential_search)
-from dsp.gnss.search import to_baseband
+from dsp.gnss.search_frontend import to_baseband
 
 FS, IF = 6.138e6, 1.5345e6
 

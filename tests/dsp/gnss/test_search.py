@@ -10,8 +10,8 @@ from cosim.gnss.files import SampleFile
 from cosim.gnss.synthetic_file import SatelliteSpec, SyntheticRecording, write_synthetic
 from dsp.gnss.acquisition import acquire
 from dsp.gnss.ca_code import CHIP_RATE_HZ
-from dsp.gnss.search import (DEEP_STAGES, Detection, Stage, cross_correlation_suspects,
-                             excise, remove_periodic, search_all, to_baseband)
+from dsp.gnss.search import DEEP_STAGES, Detection, Stage, cross_correlation_suspects, search_all
+from dsp.gnss.search_frontend import excise, remove_periodic, to_baseband
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "gnss"
 
