@@ -236,7 +236,7 @@ class SweepModel:
         (the signal of that SNR and trial seed made once, a front-end cache shared by its
         points) with ``base`` (a dict every row of the record carries), ``golden()`` and
         ``point(combo, recheck=False)``; each returns the metrics dict: ``shown``, the
-        three figures of what a user sees (:func:`cosim.studies.shown.shown_figures`:
+        three figures of what a user sees (:func:`dsp.shown.shown_figures`:
         the receiver's estimates, valid flags and error bound), optionally ``dsp_events``,
         ``ranges``, ``recheck``, ``crb_deg`` and any other metric. A point is paired with
         the golden run of its own record.

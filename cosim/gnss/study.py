@@ -121,13 +121,13 @@ MISLEADING_DOPPLER_HZ = 5.0
 
 
 def shown_tracking(r, trk, duration_s: float) -> dict:
-    """What a user sees of a fast-path run's trial 0 (:func:`cosim.studies.shown.shown_figures`):
+    """What a user sees of a fast-path run's trial 0 (:func:`dsp.shown.shown_figures`):
     one estimate per 1 ms epoch, its carrier phase error (deg, wrapped to the Costas lock
     point); valid unless the tracker has raised its ``diverged`` flag; display epoch 1 ms;
     scored over the record's second half; misleading = shown valid after a cycle slip (the
     true phase error's nearest lock point moved from where it locked) or with a Doppler
     error beyond :data:`MISLEADING_DOPPLER_HZ`."""
-    from cosim.studies.shown import shown_figures
+    from dsp.shown import shown_figures
     raw = r.phase_err_cycles[:, 0]
     n = raw.size
     lock = np.rint(raw / 0.5)

@@ -158,7 +158,8 @@ def shown_loop(cfg: InsStudyConfig, t_s, vel_err, pli, phase_err_cycles) -> dict
     ``skip_s``; misleading = shown valid after a cycle slip (the true phase error's nearest
     Costas lock point moved from where it locked) or more than :data:`MISLEADING_VEL_MPS`
     off."""
-    from cosim.studies.shown import pool, shown_figures
+    from cosim.studies.shown import pool
+    from dsp.shown import shown_figures
     n, B = vel_err.shape
     k = np.arange(n)
     j = (k + 1) // cfg.pli_epochs - 1              # the latest complete PLI value

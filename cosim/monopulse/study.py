@@ -94,13 +94,13 @@ _KEEP = ("az_track_rms_deg", "el_track_rms_deg", "az_meas_rms_deg", "el_meas_rms
 
 
 def shown_tracking(r: dict, run) -> dict:
-    """What a user sees of a run's trial 0 (:func:`cosim.studies.shown.shown_figures`; the run
+    """What a user sees of a run's trial 0 (:func:`dsp.shown.shown_figures`; the run
     made with ``keep_series``): one azimuth estimate per block (the tracker's, error in
     deg), valid while the loop is in track; display epoch one block; misleading = in track
     with the beam's pointing error beyond the unambiguous half-width (``lambda / 2D``, either
     axis), where the monopulse ratio no longer points back to the target."""
     from dsp.monopulse.angles import angles
-    from cosim.studies.shown import shown_figures
+    from dsp.shown import shown_figures
     from .run import TRACK
     s = r["series"]
     est, truth = s["est"][:, 0], s["truth"][:, 0]

@@ -10,7 +10,7 @@
   GNSS: a cycle slip or a Doppler error over its bound; monopulse: a pointing error beyond
   the unambiguous half-width).
 
-:func:`shown_figures` (in :mod:`dsp.shown`, with :func:`dsp.shown.valid_figures`, the
+:func:`dsp.shown.shown_figures` (with :func:`dsp.shown.valid_figures`, the
 accuracy and integrity part that the receivers' own statistics use) computes them for one
 record from the receiver's estimates (when each became available, its error against the
 truth, its valid flag); :func:`pool` sums them
@@ -28,9 +28,7 @@ import math
 
 import numpy as np
 
-from dsp.shown import FIGURE_KEYS, shown_figures
-
-__all__ = ["shown_figures", "pool", "paired", "wilson_ci", "FIGURE_KEYS"]
+__all__ = ["pool", "paired", "wilson_ci"]
 
 
 def wilson_ci(k: int, n: int, z: float = 1.96) -> list[float] | None:
@@ -46,8 +44,8 @@ def wilson_ci(k: int, n: int, z: float = 1.96) -> list[float] | None:
 
 
 def pool(figs: list[dict]) -> dict:
-    """The figures of a study point over its trials (one :func:`shown_figures` dict each):
-    accuracy over the trials that showed a valid estimate (RMSE: the root of the mean of
+    """The figures of a study point over its trials (one :func:`dsp.shown.shown_figures`
+    dict each): accuracy over the trials that showed a valid estimate (RMSE: the root of the mean of
     the trials' mean squares, each trial one sample; mean error: the mean of theirs),
     availability the mean over every trial (a trial without a valid estimate counts 0),
     the time to the first valid estimate (median and worst over the trials that had one,

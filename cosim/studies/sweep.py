@@ -42,11 +42,11 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core.validate import check_jobs, dumps
+from dsp.shown import FIGURE_KEYS
 
 from .engine import run_tasks
 from .proposal import aggregate, confirms, propose, shortfall, widen_one
 from .report import plot, proposal_record, report_md
-from .shown import FIGURE_KEYS
 from .spec import SweepConfig, primary_key, sweep_model
 
 #: CPU seconds one point costs per second of record (TACAN's: model front end, FIFO, fixed
@@ -96,12 +96,12 @@ def point_key(cfg: SweepConfig, combo, snr_db, trial) -> str:
 
 def _shown(metrics: dict, cfg: SweepConfig) -> dict:
     """A record's metrics with what a user sees: the receiver gives ``shown``, the figures
-    of :func:`cosim.studies.shown.shown_figures` (accuracy, availability, integrity); a
+    of :func:`dsp.shown.shown_figures` (accuracy, availability, integrity); a
     record is ``locked`` when it showed a valid estimate after settling."""
     fig = metrics.get("shown")
     if not isinstance(fig, dict) or any(k not in fig for k in FIGURE_KEYS):
         raise RuntimeError(f"the {cfg.receiver} study model's record gave no 'shown' figures "
-                           f"(cosim.studies.shown.shown_figures)")
+                           f"(dsp.shown.shown_figures)")
     return {**metrics, "locked": fig["n_valid"] > 0}
 
 

@@ -109,11 +109,11 @@ EPOCH_S = 1.0 / F15
 
 def shown_bearings(track: BearingTrack, bearing_true_deg: float, settle_s: float,
                    end_s: float) -> dict:
-    """What a user sees of trial 0's bearings (:func:`cosim.studies.shown.shown_figures`):
+    """What a user sees of trial 0's bearings (:func:`dsp.shown.shown_figures`):
     each bearing when it became available, its error, its valid flag; display epoch one
     revolution (:data:`EPOCH_S`); a bearing shown valid more than
     :data:`dsp.tacan.receiver.MISLEADING_DEG` (20 deg: a sector error) off is misleading."""
-    from cosim.studies.shown import shown_figures
+    from dsp.shown import shown_figures
     t = track.produced_s if track.produced_s is not None else track.times_s
     b = track.bearing_deg[0] if track.bearing_deg.shape[0] else np.zeros(0)
     err = wrap_deg(b - float(bearing_true_deg))

@@ -255,7 +255,7 @@ class _GainRecord:
     def _shown(self, y):
         """What a user sees: every sample an estimate, valid, misleading beyond 0.25 FS."""
         import numpy as np
-        from cosim.studies.shown import shown_figures
+        from dsp.shown import shown_figures
         t = np.arange(self.truth.size) / 1000.0
         return shown_figures(t, y - self.truth, np.ones(t.size, bool),
                              settle_s=2 * self.cfg.memory_s, end_s=self.cfg.duration_s,

@@ -5,7 +5,8 @@ import pytest
 
 from cosim.studies.faults import _shown_table
 from cosim.studies.proposal import aggregate, confirms, failing, passes, propose
-from cosim.studies.shown import paired, pool, shown_figures, wilson_ci
+from cosim.studies.shown import paired, pool, wilson_ci
+from dsp.shown import shown_figures
 from cosim.studies.spec import SweepConfig
 
 T = np.arange(1, 100) * 0.01            # an estimate every 10 ms, 0.01 .. 0.99 s
