@@ -6,10 +6,16 @@ respelled copy of the export into C++ (:mod:`cosim.backends.verilator`), and Ica
 interprets the exported text itself (:func:`cosim.backends.verilog.verilog_text`, the same
 text that is linted and synthesised), unmodified, as its top module.
 
-- Build: ``cocotb_tools.runner.get_runner("icarus").build`` compiles the Verilog with
-  ``iverilog -g2012`` into ``build/icarus/<sha256>/sim.vvp``, the key hashing the Verilog
-  text, the Icarus and cocotb versions and the testbench (:mod:`cosim.backends.icarus_tb`);
-  a design built before is not compiled again.
+- Build: ``cocotb_tools.runner.get_runner("icarus").build`` compiles the Verilog as
+  Verilog-2005 (``iverilog -g2005``, :data:`ICARUS_FLAGS`: the language yosys writes) into
+  ``build/icarus/<sha256>/sim.vvp``, the key hashing the Verilog text, the flags, the Icarus
+  and cocotb versions and the testbench (:mod:`cosim.backends.icarus_tb`); a design built
+  before is not compiled again. Not ``-g2012`` (the runner's default): under SystemVerilog
+  rules a variable's declaration initializer is applied before any process starts, so the
+  initializer yosys gives every combinational ``always @*`` block to run it at time 0 makes no
+  event, and a block whose inputs are all initialised registers keeps X until one of them
+  changes -- an X select that four-state ``if`` reads as false (a channel's first FIFO record
+  lost its last three words that way, while the model, Amaranth and Verilator agreed).
 - Run: :class:`IcarusSession` (a :class:`cosim.core.session.FrontendSession`) starts
   ``vvp`` through the runner's ``test`` in a thread, with :mod:`cosim.backends.icarus_tb` as
   cocotb's test module; the simulator stays alive between steps, each step one message over a
@@ -56,6 +62,9 @@ from .verilog import PortInfo, stream_ports, verilog_text
 
 __all__ = ["IcarusStreamSim", "IcarusSession", "UnknownValueError", "icarus_available",
            "icarus_missing_message", "icarus_version"]
+
+#: Compiler flags after the runner's own (``-g2012``, overridden: module doc).
+ICARUS_FLAGS = ("-g2005",)
 
 #: The cocotb test module run inside ``vvp`` (imported there, not here: it needs cocotb).
 TB_MODULE = "cosim.backends.icarus_tb"
@@ -154,7 +163,7 @@ class IcarusStreamSim:
     # -- building -------------------------------------------------------------------------
     def _cache_key(self) -> str:
         h = hashlib.sha256()
-        for part in (self.verilog, self.name, icarus_version(),
+        for part in (self.verilog, self.name, " ".join(ICARUS_FLAGS), icarus_version(),
                      TB_PATH.read_text()):
             h.update(part.encode())
             h.update(b"\0")
@@ -172,7 +181,8 @@ class IcarusStreamSim:
         runner = get_runner("icarus")
         try:
             runner.build(sources=[src], hdl_toplevel=self.name, build_dir=tmp,
-                         timescale=("1ns", "1ps"), log_file=tmp / "build.log", always=True)
+                         timescale=("1ns", "1ps"), log_file=tmp / "build.log", always=True,
+                         build_args=list(ICARUS_FLAGS))
         except (RuntimeError, SystemExit) as e:
             log = (tmp / "build.log").read_text() if (tmp / "build.log").exists() else ""
             tail = "\n".join(log.splitlines()[-40:])
@@ -317,7 +327,8 @@ class IcarusSession(FrontendSession):
         runner.log.addFilter(quiet)
         try:
             runner.build(sources=[sim.build_path / f"{sim.name}.v"], hdl_toplevel=sim.name,
-                         build_dir=sim.build_path, log_file=self.run_dir / "build.log")
+                         build_dir=sim.build_path, log_file=self.run_dir / "build.log",
+                         build_args=list(ICARUS_FLAGS))
         finally:
             runner.log.removeFilter(quiet)
 
