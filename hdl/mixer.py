@@ -1,8 +1,9 @@
 """Pipelined complex mixer ``y = x * exp(-j*phi)``; scaling and rounding in
 :mod:`hdl.model.mixer`.
 
-Pipeline (one register per line, so each multiplier has registered inputs and output and
-maps onto an ECP5 MULT18X18D):
+Pipeline (one register per line, so each multiplier has registered inputs and output; a
+product of a narrow operand, such as a GNSS channel's 2-3 bit sample, is shifts and adds in
+LUTs, a wider one an ECP5 MULT18X18D: :func:`hdl.common.narrow_mul`):
 
 1. inputs (the real mixer negates ``sin`` here, so ``q`` is a plain product), then
    ``input_stages - 1`` more copies of them (timing: the last can sit beside the DSP block).
@@ -22,7 +23,7 @@ from amaranth.hdl import Module, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from .common import check_params, fit_width, iq_layout, lo_layout, round_shift
+from .common import check_params, fit_width, iq_layout, lo_layout, narrow_mul, round_shift
 from .model.mixer import MixerParams
 
 
@@ -83,7 +84,8 @@ class Mixer(wiring.Component):
             stage()
             pw = p.product_width
             pic, pqs, pqc, pis = (Signal(signed(pw), name=n) for n in ("p_ic", "p_qs", "p_qc", "p_is"))
-            m.d.sync += [pic.eq(xi * c), pqs.eq(xq * s), pqc.eq(xq * c), pis.eq(xi * s)]
+            m.d.sync += [pic.eq(narrow_mul(xi, c)), pqs.eq(narrow_mul(xq, s)),
+                         pqc.eq(narrow_mul(xq, c)), pis.eq(narrow_mul(xi, s))]
             stage()
             yi, yq = Signal(signed(p.sum_width)), Signal(signed(p.sum_width))
             m.d.sync += [yi.eq(pic + pqs), yq.eq(pqc - pis)]
@@ -94,7 +96,7 @@ class Mixer(wiring.Component):
             x, c, sn = self._more_input_stages(m, stage, x, c, sn)
             stage()
             yi, yq = Signal(signed(p.product_width)), Signal(signed(p.product_width))
-            m.d.sync += [yi.eq(x * c), yq.eq(x * sn)]
+            m.d.sync += [yi.eq(narrow_mul(x, c)), yq.eq(narrow_mul(x, sn))]
 
         stage()
         ri_val = round_shift(yi, p.drop_bits, p.rounding)

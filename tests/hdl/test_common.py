@@ -9,7 +9,8 @@ from amaranth.sim import Simulator
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS, FixedFormat, shift_right
 from hdl.cic import Cic
-from hdl.common import check_bool, check_params, const_mul, fit_width, round_shift
+from hdl.common import (NARROW_MUL_BITS, check_bool, check_params, const_mul, fit_width,
+                        narrow_mul, round_shift)
 from hdl.ddc import Ddc
 from hdl.envelope import Envelope
 from hdl.fir import Fir
@@ -61,6 +62,34 @@ def test_const_mul(c):
             const_mul(Signal(8), c)).count("(-") <= 1, c
     with pytest.raises(ValueError, match="integer constant >= 0"):
         const_mul(Signal(8), -1)
+
+
+@pytest.mark.parametrize("wb", range(1, NARROW_MUL_BITS + 2))
+@pytest.mark.parametrize("wa", [1, 3, 6])
+def test_narrow_mul(wa, wb):
+    """Every pair of signed inputs: the signed product, taken apart into shifted copies
+    (no multiplier: no `*` in the expression) up to NARROW_MUL_BITS bits, a `*` above."""
+    a, b = Signal(signed(wa)), Signal(signed(wb))
+    out = narrow_mul(a, b)
+    o = Signal(signed(wa + wb))
+    m = Module()
+    m.d.comb += o.eq(out)
+    sim = Simulator(m)
+    xs = range(-(1 << (wa - 1)), 1 << (wa - 1))
+    ys = range(-(1 << (wb - 1)), 1 << (wb - 1))
+    got = []
+
+    async def bench(ctx):
+        for x in xs:
+            for y in ys:
+                ctx.set(a, x)
+                ctx.set(b, y)
+                got.append(ctx.get(o))
+
+    sim.add_testbench(bench)
+    sim.run()
+    assert got == [x * y for x in xs for y in ys]
+    assert ("(*" in str(out)) == (min(wa, wb) > NARROW_MUL_BITS)
 
 
 @pytest.mark.parametrize("overflow", OVERFLOWS)
