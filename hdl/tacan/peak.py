@@ -41,8 +41,13 @@ selects ``F_1 = (S_0 >> (log2 L + s)) << s``. ``F <= (2**aw - 1) << s`` (``m_b <
 1``), so it fits its width.
 
 The detector runs ``det_delay`` (4) cycles behind the noise path on a delay line, so the
-threshold multiplier ``nu * thr_mult`` and the ``max(thr_min, .)`` are registered and
-``T_{b+1}`` is ready when the detector reaches block ``b+1``; its pre-stage registers the
+threshold ``T = max(thr_min, (nu * thr_mult) >> thr_frac)`` has two registered stages and
+``T_{b+1}`` is ready when the detector reaches block ``b+1``. There is no multiplier:
+``thr_mult = c_hi + c_lo`` (its bits from some ``k`` on and below it, split where each part
+takes the fewest adders as shifted copies of ``nu``, :func:`hdl.common.const_mul`), and the
+first stage registers ``nu * c_hi``, ``nu * c_lo`` and the flag ``nu < ceil((thr_min <<
+thr_frac) / thr_mult)`` (the product's shift is below ``thr_min`` exactly then), the second
+their sum shifted, or ``thr_min`` under the flag. The detector's pre-stage registers the
 comparison ``e >= T`` so the pulse logic starts from a flop. A pulse closes on compares of
 its registers with constants (``below = hold - 1`` and not above, ``len = max_len - 1``), not
 on their incremented values.
@@ -98,7 +103,7 @@ becomes three stages, one cycle more (latency inner + 4):
 """
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Module, Mux, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -107,6 +112,31 @@ from hdl.common import check_params, const_mul
 from dsp.tacan.peak_params import PeakParams
 
 __all__ = ["PeakSearch", "PeakParams"]
+
+
+def _csd_terms(c: int) -> int:
+    """Shifted copies of ``x`` in :func:`hdl.common.const_mul` ``(x, c)`` (nonzero canonical
+    signed digits of ``c``)."""
+    n = 0
+    while c:
+        if c & 1:
+            c -= 2 - (c & 3)
+            n += 1
+        c >>= 1
+    return n
+
+
+def _split_const(c: int) -> tuple[int, int]:
+    """``(c_hi, c_lo)``: ``c``'s bits from ``k`` on and below ``k``, at the ``k`` (lowest of
+    the ties) whose larger part takes the fewest shifted copies (adders) in
+    :func:`hdl.common.const_mul`: 46 = 40 + 6, one adder each; 48 = 32 + 16, none."""
+    k = min(range(c.bit_length() + 1),
+            key=lambda k: max(_csd_terms(c >> k << k), _csd_terms(c & ((1 << k) - 1))))
+    return c >> k << k, c & ((1 << k) - 1)
+
+
+def _ceil_div(a: int, b: int) -> int:
+    return -(-a // b)
 
 
 class PeakSearch(wiring.Component):
@@ -284,16 +314,24 @@ class PeakSearch(wiring.Component):
         else:
             # nu_{b+1} = (S + nu_b (2**s - 1) L) >> (log2 L + s)
             base = Signal(unsigned(p.acc_width))
-            m.d.sync += [base.eq(nu * (((1 << p.smooth_log2) - 1) * L)), base2.eq(base + cd1)]
+            # (the constant is 2**(log2 L + s) - L: one subtracter, no multiplier)
+            m.d.sync += [base.eq(const_mul(nu, ((1 << p.smooth_log2) - 1) * L)),
+                         base2.eq(base + cd1)]
             with m.If(s_v):
                 m.d.sync += nu.eq((s_reg + base2) >> K)
 
-        # Threshold pipeline: registered product, then the floor.
-        prod = Signal(unsigned(aw + p.thr_mult.bit_length()))
+        # Threshold pipeline, no multiplier: the partial products nu * c_hi and nu * c_lo
+        # (shifted copies of nu) and whether nu is below thr_min's floor registered, then
+        # their sum (one adder) or thr_min into t_next.
+        c_hi, c_lo = _split_const(p.thr_mult)
+        pw = aw + p.thr_mult.bit_length()
+        thr_hi = Signal(unsigned(pw))
+        thr_lo = Signal(unsigned(pw))
+        thr_low = Signal()                       # max(thr_min, .) is thr_min
         t_next = Signal(unsigned(p.thr_width))
-        m.d.sync += prod.eq(nu * Const(p.thr_mult, unsigned(p.thr_mult.bit_length())))
-        scaled = prod >> p.thr_frac
-        m.d.sync += t_next.eq(Mux(scaled < p.thr_min, p.thr_min, scaled))
+        m.d.sync += [thr_hi.eq(const_mul(nu, c_hi)), thr_lo.eq(const_mul(nu, c_lo)),
+                     thr_low.eq(nu < _ceil_div(p.thr_min << p.thr_frac, p.thr_mult))]
+        m.d.sync += t_next.eq(Mux(thr_low, p.thr_min, (thr_hi + thr_lo) >> p.thr_frac))
 
         # -- detector, det_delay cycles behind ----------------------------------------------
         # A pre-stage (det_delay - 1 cycles behind) picks the threshold and registers the
