@@ -48,7 +48,11 @@ takes the fewest adders as shifted copies of ``nu``, :func:`hdl.common.const_mul
 first stage registers ``nu * c_hi``, ``nu * c_lo`` and the flag ``nu < ceil((thr_min <<
 thr_frac) / thr_mult)`` (the product's shift is below ``thr_min`` exactly then), the second
 their sum shifted, or ``thr_min`` under the flag. The detector's pre-stage registers the
-comparison ``e >= T`` so the pulse logic starts from a flop. A pulse closes on compares of
+comparison ``e >= T`` so the pulse logic starts from a flop, and the comparison ``e >
+max`` against the pulse's max as it will be when the sample reaches the detector (the
+detector's sample if that one is taken as the max on this cycle, else the max register): the
+max, its timestamp and the output take a registered select, and the max is taken without
+the close decision (a closed pulse's max is not read; opening loads it). A pulse closes on compares of
 its registers with constants (``below = hold - 1`` and not above, ``len = max_len - 1``), not
 on their incremented values.
 
@@ -373,13 +377,19 @@ class PeakSearch(wiring.Component):
         below = Signal(range(p.hold + 1))
         plen = Signal(range(p.max_len + 1))
 
-        upd = de > pmax
-        new_max = Mux(upd, de, pmax)
-        new_ts = Mux(upd, ts, pts)
         below_n = Mux(above, 0, below + 1)
         len_n = plen + 1
         # (compares of the registers with constants: no adder in front of the enables)
         close = (~above & (below == p.hold - 1)) | (plen == p.max_len - 1)
+        # upd = de > pmax, registered: the pre-stage compares its sample with the max that is
+        # current when the sample reaches the detector (de if `take`, else pmax)
+        upd = Signal()
+        take = Signal()       # de becomes the pulse's max: it opens the pulse or exceeds the
+        #                       max (on the closing sample too: a closed pulse's max is not read)
+        m.d.comb += take.eq(dv & Mux(is_open, upd, above))
+        m.d.sync += upd.eq(Mux(take, pe > de, pe > pmax))
+        new_max = Mux(upd, de, pmax)
+        new_ts = Mux(upd, ts, pts)
 
         o_valid = Signal()
         o_amp = Signal(unsigned(aw))
@@ -389,14 +399,15 @@ class PeakSearch(wiring.Component):
             pa_c, pb_c = Signal(unsigned(aw)), Signal(unsigned(aw))
             o_pa, o_pb = Signal(unsigned(aw)), Signal(unsigned(aw))
             new_a, new_b = Mux(upd, da, pa_c), Mux(upd, db, pb_c)
+        with m.If(take):
+            m.d.sync += [pmax.eq(de), pts.eq(ts)]
+            if D:
+                m.d.sync += [pa_c.eq(da), pb_c.eq(db)]
         with m.If(dv):
             m.d.sync += ts.eq(ts + p.ts_step)
             with m.If(~is_open):
                 with m.If(above):
-                    m.d.sync += [is_open.eq(1), pmax.eq(de), pts.eq(ts), below.eq(0),
-                                 plen.eq(1)]
-                    if D:
-                        m.d.sync += [pa_c.eq(da), pb_c.eq(db)]
+                    m.d.sync += [is_open.eq(1), below.eq(0), plen.eq(1)]
             with m.Else():
                 with m.If(close):
                     m.d.sync += [is_open.eq(0), o_valid.eq(1), o_amp.eq(new_max),
@@ -404,10 +415,7 @@ class PeakSearch(wiring.Component):
                     if D:
                         m.d.sync += [o_pa.eq(new_a), o_pb.eq(new_b)]
                 with m.Else():
-                    m.d.sync += [pmax.eq(new_max), pts.eq(new_ts), below.eq(below_n),
-                                 plen.eq(len_n)]
-                    if D:
-                        m.d.sync += [pa_c.eq(new_a), pb_c.eq(new_b)]
+                    m.d.sync += [below.eq(below_n), plen.eq(len_n)]
         m.d.comb += [
             self.o.valid.eq(o_valid),
             self.o.payload.amplitude.eq(o_amp),

@@ -90,6 +90,16 @@ def test_gaps_in_valid():
     check_sim(SMALL, e, valid)
 
 
+def test_gaps_in_valid_ignore_the_idle_payload():
+    """A payload without valid is not a sample: the top of the input range on those cycles
+    changes nothing (the plain search's input register takes the payload on every cycle)."""
+    rng = np.random.default_rng(216)
+    e = realistic_envelope(rng, 3000)
+    for p in (SMALL, replace(SMALL, smooth_log2=5, floor_frac=True),
+              replace(SMALL, partner_offset=12), replace(SMALL, pair_offset=7)):
+        check_sim(p, e, rng.random(9000) < 0.35, idle_payload=(1 << p.amp_width) - 1)
+
+
 def test_gaps_in_valid_with_floor_frac():
     rng = np.random.default_rng(206)
     e = realistic_envelope(rng, 3000)
