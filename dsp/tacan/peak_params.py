@@ -211,7 +211,8 @@ class PeakParams:
     @property
     def det_delay(self) -> int:
         """Cycles the detector runs behind the noise-floor path (threshold pipeline: new
-        ``nu`` 1 cycle after the block sum, product +1, floor +1, registered compare +1)."""
+        ``nu`` 1 cycle after the block sum, the partial products +1, their sum or ``thr_min``
+        +1, registered compare +1)."""
         return 4
 
     @property

@@ -41,9 +41,18 @@ selects ``F_1 = (S_0 >> (log2 L + s)) << s``. ``F <= (2**aw - 1) << s`` (``m_b <
 1``), so it fits its width.
 
 The detector runs ``det_delay`` (4) cycles behind the noise path on a delay line, so the
-threshold multiplier ``nu * thr_mult`` and the ``max(thr_min, .)`` are registered and
-``T_{b+1}`` is ready when the detector reaches block ``b+1``; its pre-stage registers the
-comparison ``e >= T`` so the pulse logic starts from a flop. A pulse closes on compares of
+threshold ``T = max(thr_min, (nu * thr_mult) >> thr_frac)`` has two registered stages and
+``T_{b+1}`` is ready when the detector reaches block ``b+1``. There is no multiplier:
+``thr_mult = c_hi + c_lo`` (its bits from some ``k`` on and below it, split where each part
+takes the fewest adders as shifted copies of ``nu``, :func:`hdl.common.const_mul`), and the
+first stage registers ``nu * c_hi``, ``nu * c_lo`` and the flag ``nu < ceil((thr_min <<
+thr_frac) / thr_mult)`` (the product's shift is below ``thr_min`` exactly then), the second
+their sum shifted, or ``thr_min`` under the flag. The detector's pre-stage registers the
+comparison ``e >= T`` so the pulse logic starts from a flop, and the comparison ``e >
+max`` against the pulse's max as it will be when the sample reaches the detector (the
+detector's sample if that one is taken as the max on this cycle, else the max register): the
+max, its timestamp and the output take a registered select, and the max is taken without
+the close decision (a closed pulse's max is not read; opening loads it). A pulse closes on compares of
 its registers with constants (``below = hold - 1`` and not above, ``len = max_len - 1``), not
 on their incremented values.
 
@@ -98,7 +107,7 @@ becomes three stages, one cycle more (latency inner + 4):
 """
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Module, Mux, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -107,6 +116,31 @@ from hdl.common import check_params, const_mul
 from dsp.tacan.peak_params import PeakParams
 
 __all__ = ["PeakSearch", "PeakParams"]
+
+
+def _csd_terms(c: int) -> int:
+    """Shifted copies of ``x`` in :func:`hdl.common.const_mul` ``(x, c)`` (nonzero canonical
+    signed digits of ``c``)."""
+    n = 0
+    while c:
+        if c & 1:
+            c -= 2 - (c & 3)
+            n += 1
+        c >>= 1
+    return n
+
+
+def _split_const(c: int) -> tuple[int, int]:
+    """``(c_hi, c_lo)``: ``c``'s bits from ``k`` on and below ``k``, at the ``k`` (lowest of
+    the ties) whose larger part takes the fewest shifted copies (adders) in
+    :func:`hdl.common.const_mul`: 46 = 40 + 6, one adder each; 48 = 32 + 16, none."""
+    k = min(range(c.bit_length() + 1),
+            key=lambda k: max(_csd_terms(c >> k << k), _csd_terms(c & ((1 << k) - 1))))
+    return c >> k << k, c & ((1 << k) - 1)
+
+
+def _ceil_div(a: int, b: int) -> int:
+    return -(-a // b)
 
 
 class PeakSearch(wiring.Component):
@@ -284,16 +318,24 @@ class PeakSearch(wiring.Component):
         else:
             # nu_{b+1} = (S + nu_b (2**s - 1) L) >> (log2 L + s)
             base = Signal(unsigned(p.acc_width))
-            m.d.sync += [base.eq(nu * (((1 << p.smooth_log2) - 1) * L)), base2.eq(base + cd1)]
+            # (the constant is 2**(log2 L + s) - L: one subtracter, no multiplier)
+            m.d.sync += [base.eq(const_mul(nu, ((1 << p.smooth_log2) - 1) * L)),
+                         base2.eq(base + cd1)]
             with m.If(s_v):
                 m.d.sync += nu.eq((s_reg + base2) >> K)
 
-        # Threshold pipeline: registered product, then the floor.
-        prod = Signal(unsigned(aw + p.thr_mult.bit_length()))
+        # Threshold pipeline, no multiplier: the partial products nu * c_hi and nu * c_lo
+        # (shifted copies of nu) and whether nu is below thr_min's floor registered, then
+        # their sum (one adder) or thr_min into t_next.
+        c_hi, c_lo = _split_const(p.thr_mult)
+        pw = aw + p.thr_mult.bit_length()
+        thr_hi = Signal(unsigned(pw))
+        thr_lo = Signal(unsigned(pw))
+        thr_low = Signal()                       # max(thr_min, .) is thr_min
         t_next = Signal(unsigned(p.thr_width))
-        m.d.sync += prod.eq(nu * Const(p.thr_mult, unsigned(p.thr_mult.bit_length())))
-        scaled = prod >> p.thr_frac
-        m.d.sync += t_next.eq(Mux(scaled < p.thr_min, p.thr_min, scaled))
+        m.d.sync += [thr_hi.eq(const_mul(nu, c_hi)), thr_lo.eq(const_mul(nu, c_lo)),
+                     thr_low.eq(nu < _ceil_div(p.thr_min << p.thr_frac, p.thr_mult))]
+        m.d.sync += t_next.eq(Mux(thr_low, p.thr_min, (thr_hi + thr_lo) >> p.thr_frac))
 
         # -- detector, det_delay cycles behind ----------------------------------------------
         # A pre-stage (det_delay - 1 cycles behind) picks the threshold and registers the
@@ -335,13 +377,19 @@ class PeakSearch(wiring.Component):
         below = Signal(range(p.hold + 1))
         plen = Signal(range(p.max_len + 1))
 
-        upd = de > pmax
-        new_max = Mux(upd, de, pmax)
-        new_ts = Mux(upd, ts, pts)
         below_n = Mux(above, 0, below + 1)
         len_n = plen + 1
         # (compares of the registers with constants: no adder in front of the enables)
         close = (~above & (below == p.hold - 1)) | (plen == p.max_len - 1)
+        # upd = de > pmax, registered: the pre-stage compares its sample with the max that is
+        # current when the sample reaches the detector (de if `take`, else pmax)
+        upd = Signal()
+        take = Signal()       # de becomes the pulse's max: it opens the pulse or exceeds the
+        #                       max (on the closing sample too: a closed pulse's max is not read)
+        m.d.comb += take.eq(dv & Mux(is_open, upd, above))
+        m.d.sync += upd.eq(Mux(take, pe > de, pe > pmax))
+        new_max = Mux(upd, de, pmax)
+        new_ts = Mux(upd, ts, pts)
 
         o_valid = Signal()
         o_amp = Signal(unsigned(aw))
@@ -351,14 +399,15 @@ class PeakSearch(wiring.Component):
             pa_c, pb_c = Signal(unsigned(aw)), Signal(unsigned(aw))
             o_pa, o_pb = Signal(unsigned(aw)), Signal(unsigned(aw))
             new_a, new_b = Mux(upd, da, pa_c), Mux(upd, db, pb_c)
+        with m.If(take):
+            m.d.sync += [pmax.eq(de), pts.eq(ts)]
+            if D:
+                m.d.sync += [pa_c.eq(da), pb_c.eq(db)]
         with m.If(dv):
             m.d.sync += ts.eq(ts + p.ts_step)
             with m.If(~is_open):
                 with m.If(above):
-                    m.d.sync += [is_open.eq(1), pmax.eq(de), pts.eq(ts), below.eq(0),
-                                 plen.eq(1)]
-                    if D:
-                        m.d.sync += [pa_c.eq(da), pb_c.eq(db)]
+                    m.d.sync += [is_open.eq(1), below.eq(0), plen.eq(1)]
             with m.Else():
                 with m.If(close):
                     m.d.sync += [is_open.eq(0), o_valid.eq(1), o_amp.eq(new_max),
@@ -366,10 +415,7 @@ class PeakSearch(wiring.Component):
                     if D:
                         m.d.sync += [o_pa.eq(new_a), o_pb.eq(new_b)]
                 with m.Else():
-                    m.d.sync += [pmax.eq(new_max), pts.eq(new_ts), below.eq(below_n),
-                                 plen.eq(len_n)]
-                    if D:
-                        m.d.sync += [pa_c.eq(new_a), pb_c.eq(new_b)]
+                    m.d.sync += [below.eq(below_n), plen.eq(len_n)]
         m.d.comb += [
             self.o.valid.eq(o_valid),
             self.o.payload.amplitude.eq(o_amp),

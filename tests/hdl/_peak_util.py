@@ -101,8 +101,16 @@ def run_sim(p, e, in_valid=None, dut=None, **kw):
     return res, f["amplitude"], f["timestamp"]
 
 
-def check_sim(p, e, in_valid=None):
-    res = run_stream(PeakSearch(p), e, in_valid=in_valid, flush_cycles=p.latency + 2)
+def check_sim(p, e, in_valid=None, idle_payload=None):
+    """Simulation == model (:func:`peak_search`), the output cycles included. ``idle_payload``:
+    the input payload on the cycles of ``in_valid`` that offer nothing (default: the last
+    word offered stays)."""
+    dut = PeakSearch(p)
+    writes = None
+    if idle_payload is not None:
+        writes = [(int(c), dut.i.payload, idle_payload)
+                  for c in np.flatnonzero(~np.asarray(in_valid, bool))]
+    res = run_stream(dut, e, in_valid=in_valid, flush_cycles=p.latency + 2, writes=writes)
     f = unpack_fields(res.words, p.out_layout)
     ref, _ = peak_search(e, p)
     np.testing.assert_array_equal(f["amplitude"], ref.amplitude)

@@ -90,6 +90,16 @@ def test_gaps_in_valid():
     check_sim(SMALL, e, valid)
 
 
+def test_gaps_in_valid_ignore_the_idle_payload():
+    """A payload without valid is not a sample: the top of the input range on those cycles
+    changes nothing (the plain search's input register takes the payload on every cycle)."""
+    rng = np.random.default_rng(216)
+    e = realistic_envelope(rng, 3000)
+    for p in (SMALL, replace(SMALL, smooth_log2=5, floor_frac=True),
+              replace(SMALL, partner_offset=12), replace(SMALL, pair_offset=7)):
+        check_sim(p, e, rng.random(9000) < 0.35, idle_payload=(1 << p.amp_width) - 1)
+
+
 def test_gaps_in_valid_with_floor_frac():
     rng = np.random.default_rng(206)
     e = realistic_envelope(rng, 3000)
@@ -120,6 +130,30 @@ def test_pulse_spanning_block_boundary():
     ref = check_sim(p, e)
     assert as_tuples(ref) == reference_loop(e, p)
     assert ref.index[0] == 2 * L + 1 and ref.end_index[0] >= 2 * L
+
+
+@pytest.mark.parametrize("thr_mult, thr_frac, thr_min", [(48, 4, 16), (91, 5, 50), (5, 0, 33)])
+def test_threshold_at_the_thr_min_boundary(thr_mult, thr_frac, thr_min):
+    """The HDL takes ``thr_min`` when ``nu < ceil((thr_min << thr_frac) / thr_mult)`` (a
+    registered flag beside the partial products); floors ``c - 2 .. c + 1`` around that
+    bound, each followed by a block of probes between the thresholds on either side of it."""
+    p = PeakParams(block_log2=5, smooth_log2=0, clip_log2=8, hold=1, max_len=2,
+                   thr_mult=thr_mult, thr_frac=thr_frac, thr_min=thr_min)
+    L = p.block_len
+    c = -(-(thr_min << thr_frac) // thr_mult)
+    probes = list(range((((c - 1) * thr_mult) >> thr_frac) - 1, ((c * thr_mult) >> thr_frac) + 2))
+    assert 2 * len(probes) < L and ((c - 1) * thr_mult) >> thr_frac < thr_min
+    blocks, expected = [], 0
+    for v in (c, c - 2, c - 1, c, c + 1, c - 1, c):
+        assert v < thr_min            # the floor's own block stays below its threshold
+        probe = np.full(L, v)
+        probe[1:2 * len(probes):2] = probes
+        blocks += [np.full(L, v), probe]
+        expected += sum(x >= p.threshold(v) for x in probes)
+    e = np.concatenate(blocks).astype(np.int64)
+    ref = check_sim(p, e)
+    assert as_tuples(ref) == reference_loop(e, p)
+    assert ref.amplitude.size == expected
 
 
 def test_tie_first_occurrence_wins():
