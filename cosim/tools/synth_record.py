@@ -115,7 +115,8 @@ def merge(old: dict, new: dict, order) -> dict:
     without one are dropped), so the seeds of a top can be placed by several invocations
     but never mix two designs. ``seeds`` is the union; every row keeps its ``commit``;
     ``invocations`` lists the runs the file is made of (command, commit, date, tops, seeds,
-    wall and CPU time) and ``wall_s`` / ``tool_cpu_s`` are their sums. Refused when the
+    wall and CPU time; one none of whose rows is left is dropped) and ``wall_s`` /
+    ``tool_cpu_s`` are their sums. Refused when the
     two differ in device, target, router or rip-up (their rows would not compare)."""
     keys = ("device", "target_mhz", "router", "tmg_ripup")
     if any(old.get(k) != new.get(k) for k in keys):
@@ -158,7 +159,12 @@ def merge(old: dict, new: dict, order) -> dict:
                                                 if r.get("commit")))
         tops.append(row)
     inv = old.get("invocations") or [_invocation(old)]
-    inv = inv + [_invocation(new)]
+    # an invocation is listed while a row of it is left: a run of a top it placed, at its
+    # commit, or a failure of such a top
+    inv = [i for i in inv + [_invocation(new)]
+           if any(r["top"] in (i.get("tops") or []) and r.get("commit") == i.get("commit")
+                  for r in runs)
+           or any(k.split(" seed ")[0] in (i.get("tops") or []) for k in {**fails, **new["failures"]})]
     n = len(order)
     done = {(r["top"], r["seed"]) for r in runs} | {
         (k.split(" seed ")[0], int(k.split(" seed ")[1])) for k in fails if " seed " in k}

@@ -12,7 +12,7 @@ from cosim.cli import main
 from cosim.core.receivers import receivers
 from cosim.tools import pages
 from cosim.tools.synth import critical_path
-from cosim.tools.synth_record import all_tops
+from cosim.tools.synth_record import all_tops, merge
 
 TOPS = {"tacan_frontend", "gnss_channel", "gnss_channel_array12", "gnss_channel_iq",
         "gnss_channel_array12_iq", "monopulse_frontend"}
@@ -177,6 +177,22 @@ def test_tops_merges_into_the_existing_json_seed_by_seed(monkeypatch, tmp_path):
     assert [x["seed"] for x in r["runs"] if x["top"] == "gnss_channel"] == [4]
     assert main(base + ["--tops", "gnss_channel", "--target-mhz", "90"]) == 2
     assert main(base + ["--tops", "nope"]) == 2
+
+
+def test_an_invocation_whose_rows_are_all_replaced_is_no_longer_listed():
+    """merge keeps an invocation (and its wall time) while a row of it is left."""
+    def placed(tops, seeds, commit):
+        r = _fake_placed(tops, seeds=seeds, fmax=[101.0] * len(seeds), netlist=commit)
+        for x in r["runs"]:
+            x["commit"] = commit
+        return dict(r, device="d", target_mhz=100.0, router="router2", tmg_ripup=True,
+                    machine={"commit": commit, "command": f"synth {commit}"})
+    order = ["a", "b"]
+    first = merge(placed(["a", "b"], [1, 2], "c1"), placed(["a"], [1, 2], "c2"), order)
+    assert [i["commit"] for i in first["invocations"]] == ["c1", "c2"]     # b's rows are c1's
+    both = merge(first, placed(["b"], [1, 2], "c3"), order)
+    assert [i["commit"] for i in both["invocations"]] == ["c2", "c3"]
+    assert both["wall_s"] == 2 * 3.0 and both["complete"]
 
 
 def test_scheduler_seed_by_seed_with_checkpoints_and_failures(monkeypatch, tmp_path):
