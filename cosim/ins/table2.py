@@ -371,45 +371,90 @@ def error_table(err, t_s, settle_s: float) -> dict:
             "epochs": int(e.shape[0] * runs)}
 
 
+def _claim_verdict(d, min_pct):
+    """``(verdict, mean, se)`` of the per-run improvements ``d`` (%), or ``(None, ...)``
+    with fewer than 2 runs."""
+    dm = float(d.mean()) if d.size else math.nan
+    se = float(d.std(ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.nan
+    if d.size < 2:
+        return None, dm, se
+    return ("held" if dm >= min_pct and dm > 2 * se else "not held"), dm, se
+
+
+def _runs_text(idx) -> str:
+    return ", ".join(str(int(i)) for i in idx)
+
+
 def judge_claims(tables: dict, lock: dict | None = None) -> list:
     """The paper's claims (:data:`CLAIMS`) judged per axis on the tables of ``aided-kf`` and
     ``aided-pll`` (:func:`error_table`): per run the improvement ``1 - std_kf / std_pll``
     (paired runs), its mean ``d`` and standard error ``se`` over runs. ``held``: ``d >=
     min_pct`` and ``d > 2 se`` (better than the PLL beyond the Monte Carlo noise); ``not
-    held``: otherwise; ``not comparable``: a loop lost lock (``lock[loop]["losses"] > 0``)
-    or fewer than 2 runs."""
+    held``: otherwise.
+
+    Lock losses (``lock[loop]["losses_per_run"]``, :func:`lock_counts`): the claim is judged
+    twice, on all runs and on the runs where neither aided loop lost lock (``*_no_loss``).
+    The same verdict both ways stands, its reason naming the losses and both improvements;
+    verdicts that differ (the losses decide it), or fewer than 2 runs without a loss, give
+    ``not comparable``. Fewer than 2 runs in all: ``not comparable``."""
     kf, pll = tables["aided-kf"], tables["aided-pll"]
     a, b = np.asarray(kf["std_runs"]), np.asarray(pll["std_runs"])
+    aided = ("aided-kf", "aided-pll")
+    per = {lp: np.asarray(lock[lp]["losses_per_run"], np.int64) if lock else np.zeros(a.shape[0], np.int64)
+           for lp in aided}
+    for lp in aided:
+        if per[lp].shape != (a.shape[0],):
+            raise ValueError(f"{lp}: {per[lp].size} per-run loss counts for {a.shape[0]} runs")
+    bad = (per["aided-kf"] > 0) | (per["aided-pll"] > 0)
+    keep = ~bad
+    lost = "; ".join(f"{lp} lost lock {int(per[lp].sum())} time(s) in run(s) "
+                     f"{_runs_text(np.flatnonzero(per[lp]))}" for lp in aided if per[lp].any())
     out = []
     for c in CLAIMS:
         axes = []
         for ax in c["axes"]:
             i = AXES.index(ax)
             d = 100 * (1 - a[:, i] / b[:, i])
-            dm = float(d.mean())
-            se = float(d.std(ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.nan
-            lost = [lp for lp in ("aided-kf", "aided-pll") if lock and lock[lp]["losses"] > 0]
-            if d.size < 2:
+            v_all, dm, se = _claim_verdict(d, c["min_pct"])
+            v0, dm0, se0 = _claim_verdict(d[keep], c["min_pct"]) if bad.any() else (v_all, dm, se)
+            v = v_all
+            both = (f"{dm:+.1f} +- {se:.1f} % on all {d.size} runs, {dm0:+.1f} +- {se0:.1f} % on "
+                    f"the {int(keep.sum())} without a loss")
+            if v is None:
                 v, why = "not comparable", "fewer than 2 runs: no Monte Carlo uncertainty"
-            elif lost:
-                v, why = "not comparable", f"{', '.join(lost)} lost lock during the run"
-            elif dm >= c["min_pct"] and dm > 2 * se:
-                v, why = "held", f"aided KF std {dm:.1f} +- {se:.1f} % lower (claimed >= {c['min_pct']:g} %)"
+            elif bad.any() and v0 is None:
+                v, why = "not comparable", (f"{lost}: {int(keep.sum())} run(s) without a loss, "
+                                            f"fewer than 2 to judge the claim without them")
+            elif bad.any() and v0 != v:
+                v, why = "not comparable", (f"{lost}; the losses decide the verdict: {v} on all "
+                                            f"runs, {v0} without runs {_runs_text(np.flatnonzero(bad))} "
+                                            f"(aided KF std lower by {both})")
+            elif v == "held":
+                why = f"aided KF std {dm:.1f} +- {se:.1f} % lower (claimed >= {c['min_pct']:g} %)"
             else:
-                v, why = "not held", (f"aided KF std {dm:+.1f} +- {se:.1f} % lower than the aided "
-                                      f"PLL's; the claim needs >= {c['min_pct']:g} % beyond 2 se")
+                why = (f"aided KF std {dm:+.1f} +- {se:.1f} % lower than the aided PLL's; the "
+                       f"claim needs >= {c['min_pct']:g} % beyond 2 se")
+            if bad.any() and v != "not comparable":
+                why += (f"; {lost}: the same verdict without runs "
+                        f"{_runs_text(np.flatnonzero(bad))} (lower by {both})")
             axes.append({"axis": ax, "improvement_pct": dm, "se_pct": se, "verdict": v,
-                         "reason": why})
-        out.append({**{k: c[k] for k in ("name", "text", "min_pct")}, "axes": axes})
+                         "reason": why, "runs": int(d.size),
+                         "improvement_pct_no_loss": dm0, "se_pct_no_loss": se0,
+                         "runs_no_loss": int(keep.sum()),
+                         "verdict_all_runs": v_all, "verdict_no_loss": v0})
+        out.append({**{k: c[k] for k in ("name", "text", "min_pct")}, "axes": axes,
+                    "runs_left_out": np.flatnonzero(bad).tolist()})
     return out
 
 
 def lock_counts(r, settle_s: float) -> dict:
-    """Lock of a :func:`run_fast` run after ``settle_s`` (module doc)."""
+    """Lock of a :func:`run_fast` run after ``settle_s`` (module doc); ``losses_per_run``:
+    the losses of each Monte Carlo run (summed over its channels)."""
     lk = r.series["locked"][r.t_s >= settle_s]                      # (M, runs, S)
-    losses = int(np.sum(lk[:-1] & ~lk[1:]))
+    per_run = np.sum(lk[:-1] & ~lk[1:], axis=(0, 2))
     err = fix_errors(r)[r.t_s >= settle_s]
-    return {"losses": losses, "unlocked_channel_epochs": int(np.sum(~lk)),
+    return {"losses": int(per_run.sum()), "losses_per_run": [int(x) for x in per_run],
+            "unlocked_channel_epochs": int(np.sum(~lk)),
             "channel_epochs": int(lk.size),
             "fixes_missing": int(np.sum(~np.isfinite(err[..., 0]))),
             "epochs_with_unlocked_channel": int(np.sum(~lk.all(axis=2)))}

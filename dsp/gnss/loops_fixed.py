@@ -8,8 +8,9 @@ re-scales (float: ``a k``; fixed: the exact integer product shifted right ``shif
 round half up), ``add``. The float run is the golden (``dsp.gnss.loops.TrackingChannel``
 without FLL, same equations to float64 rounding); the fixed run differs from it only where
 the formats quantise. Vectorised over any batch shape (numpy ``int64``; every product is
-checked below ``2^62`` by the format widths, and the test re-does every step with Python
-integers).
+kept below ``2^62``: :func:`check_products` bounds each one from its operand's format and
+its coefficient at construction and raises where one cannot hold, and the test re-does
+every step with Python integers).
 
 Named formats (``Format(bits, frac)``, signed, value = integer * 2^-frac):
 
@@ -20,10 +21,23 @@ COEF           24 fraction bits       loop gains T w0^3, T a3 w0^2, b3 w0, (4 Bn
 V2             Q(40, 20) Hz/s         3rd-order rate integrator
 T_Q            30 fraction bits       the epoch T (1 ms is not binary: 1.7e-7 relative)
 V1, FREQ       Q(48, 32) Hz           frequency integrator and the Doppler output
-F16            16 fraction bits       Doppler fed to the word multiplier
-WORD_COEF      24 fraction bits       2^32 / fs (carrier), 2^32 / (1540 fs) (code)
+F16            Q(32, 16) Hz           Doppler fed to the word multipliers (|f16| <= 2^31)
+WORD_COEF      Q(32, c), K < 2^31     2^32 / fs (carrier), 2^32 / (1540 fs) (code),
+                                      2^32 4 Bn_dll / fs (DLL); ``c`` per coefficient
+                                      from fs (:func:`word_coef_frac`)
 NCO word       32-bit two's complement  round(f 2^32 / fs), carrier and code
 =============  =====================  ================================================
+
+The word coefficients: each takes the largest fraction ``c`` that leaves it below ``2^31``,
+so its product with an operand of at most ``2^31`` (F16, DISC_CODE) stays below ``2^62``
+at any sample rate (at 5 MS/s the carrier's ``c`` is 21, at 16.368 MS/s 22). The carrier
+word is within ``1/2 + 2^15 / fs + 2^(14 - c)`` LSB of ``f 2^32 / fs`` (``f`` the V1
+Doppler, any value V1 holds: final rounding, F16's rounding, the coefficient's rounding;
+0.515 LSB at 5 MS/s), so it differs from the float path's word ``round(f 2^32 / fs)`` by at
+most 1. The code word sums three terms rounded each on its own (the chip rate, ``f / 1540``
+and the DLL term ``4 Bn_dll tau``): within 3/2 LSB plus the coefficients' and F16's rounding
+(each at most 1/16 LSB) of the exact sum. :func:`word_coef_frac` raises where the coefficient's or
+F16's rounding would pass 1/16 LSB over V1's range (fs below 2^19 Hz for the carrier).
 
 The discriminators themselves (atan, envelope division) are evaluated in float64 and
 quantised at their output to DISC_PHASE / DISC_CODE: in the FPGA+DSP split they run on the
@@ -53,9 +67,43 @@ V2 = Format(40, 20)
 V1 = Format(48, 32)
 COEF_FRAC = 24
 T_FRAC = 30
-F16_FRAC = 16
-WORD_COEF_FRAC = 24
+F16 = Format(32, 16)
+F16_FRAC = F16.frac
+WORD_COEF_BITS = 32
 WORD_BITS = 32
+#: Most a word coefficient's or F16's rounding may add to a word over its operand's range (LSB).
+WORD_ROUNDING_LSB = 1.0 / 16
+PRODUCT_LIMIT = 1 << 62
+
+
+def word_coef_frac(scale: float, operand_max: float, name: str) -> int:
+    """The fraction ``c`` of the word coefficient ``round(scale 2^c)``: the largest that
+    keeps it below ``2^(WORD_COEF_BITS - 1)``. ``operand_max``: the largest magnitude (real
+    units) the coefficient multiplies; raises ``ValueError`` where the coefficient's rounding
+    (``operand_max 2^-(c+1)`` LSB) would pass ``WORD_ROUNDING_LSB``."""
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"{name}: word scale must be a finite number > 0, not {scale!r}")
+    top = 1 << (WORD_COEF_BITS - 1)
+    c = math.floor(math.log2(top / scale)) + 1
+    while c > -64 and round(scale * 2.0 ** c) >= top:
+        c -= 1
+    err = operand_max * 2.0 ** -(c + 1)
+    if err > WORD_ROUNDING_LSB:
+        raise ValueError(f"{name}: coefficient {scale:.6g} word LSB per unit fits {WORD_COEF_BITS} "
+                         f"bits only with {c} fraction bits, whose rounding adds up to {err:.3g} "
+                         f"LSB over +-{operand_max:g} (more than {WORD_ROUNDING_LSB:g}): sample "
+                         f"rate too low for the {WORD_BITS}-bit NCO word formats")
+    return c
+
+
+def check_products(products) -> None:
+    """Raise ``ValueError`` unless every ``(name, operand Format, integer coefficient)``
+    product stays below ``2^62`` (the operand at its format's full range)."""
+    for name, fmt, k in products:
+        if (1 << (fmt.bits - 1)) * abs(int(k)) >= PRODUCT_LIMIT:
+            raise ValueError(f"{name}: Q({fmt.bits}, {fmt.frac}) operand times coefficient {k} "
+                             f"can reach 2^{math.log2(abs(k)) + fmt.bits - 1:.2f}, past the int64 "
+                             f"products' 2^62 (the formats do not hold this rate / loop setting)")
 
 
 class FloatArith:
@@ -184,9 +232,26 @@ class ChannelCore:
         self.fs = float(fs_hz)
         self.if_hz = float(if_hz)
         # word scales (fixed) -- in float the frequencies are carried in Hz
-        self.KWC = o.coef(2.0 ** WORD_BITS / fs_hz, WORD_COEF_FRAC)
-        self.KWK = o.coef(2.0 ** WORD_BITS / fs_hz / 1540.0, WORD_COEF_FRAC)
-        self.KWD = o.coef(2.0 ** WORD_BITS / fs_hz * 4.0 * dll_bn_hz, WORD_COEF_FRAC)
+        sc = 2.0 ** WORD_BITS / self.fs
+        if o.fixed:
+            if 2.0 ** (WORD_BITS - F16_FRAC - 1) / self.fs > WORD_ROUNDING_LSB:
+                raise ValueError(f"fs {self.fs:g} Hz: F16's rounding (2^-{F16_FRAC + 1} Hz) "
+                                 f"passes {WORD_ROUNDING_LSB:g} LSB of the {WORD_BITS}-bit word")
+            f_max = 2.0 ** (V1.bits - 1 - V1.frac)
+            self.CWC = word_coef_frac(sc, f_max, "carrier word")
+            self.CWK = word_coef_frac(sc / 1540.0, f_max, "code word")
+            self.CWD = word_coef_frac(sc * 4.0 * dll_bn_hz, 2.0 ** (DISC_CODE.bits - 1 - DISC_CODE.frac),
+                                      "DLL word")
+        else:
+            self.CWC = self.CWK = self.CWD = 0
+        self.KWC = o.coef(sc, self.CWC)
+        self.KWK = o.coef(sc / 1540.0, self.CWK)
+        self.KWD = o.coef(sc * 4.0 * dll_bn_hz, self.CWD)
+        if o.fixed:
+            check_products([("carrier word", F16, self.KWC), ("code word", F16, self.KWK),
+                            ("DLL word", DISC_CODE, self.KWD), ("K3", DISC_PHASE, self.K3),
+                            ("K2", DISC_PHASE, self.K2), ("K1", DISC_PHASE, self.K1),
+                            ("KA", DISC_PHASE, self.KA), ("KT", V2, self.KT)])
         self.W_IF = int(round(if_hz * 2 ** WORD_BITS / fs_hz))
         self.W_CHIP = int(round(CHIP_RATE_HZ * 2 ** WORD_BITS / fs_hz))
         self.v1 = o.q(doppler0_hz, V1)
@@ -240,9 +305,9 @@ class ChannelCore:
         if not o.fixed:
             return self.if_hz + self.s * f, CHIP_RATE_HZ + f / 1540.0 + self.KD * tau
         f16 = o.mul(f, 1, V1.frac - F16_FRAC)
-        cw = self.W_IF + self.s * o.mul(f16, self.KWC, F16_FRAC + WORD_COEF_FRAC)
-        kw = self.W_CHIP + o.mul(f16, self.KWK, F16_FRAC + WORD_COEF_FRAC) \
-            + o.mul(tau, self.KWD, DISC_CODE.frac + WORD_COEF_FRAC)
+        cw = self.W_IF + self.s * o.mul(f16, self.KWC, F16_FRAC + self.CWC)
+        kw = self.W_CHIP + o.mul(f16, self.KWK, F16_FRAC + self.CWK) \
+            + o.mul(tau, self.KWD, DISC_CODE.frac + self.CWD)
         return cw, kw
 
     def frequencies_hz(self, words):

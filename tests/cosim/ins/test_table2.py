@@ -108,24 +108,86 @@ def _tables(ratio, runs=8, seed=0):
     return {"aided-pll": {"std_runs": pll.tolist()}, "aided-kf": {"std_runs": kf.tolist()}}
 
 
+def _lock(runs=8, **per_loop):
+    return {lp: {"losses": sum(per_loop.get(lp, [0] * runs)),
+                 "losses_per_run": list(per_loop.get(lp, [0] * runs))} for lp in LOOPS}
+
+
 def test_verdicts():
-    ok = {lp: {"losses": 0} for lp in LOOPS}
+    ok = _lock()
     # KF 5 % lower in position, 30 % lower in velocity: both claims held on every axis
     v = judge_claims(_tables([0.95] * 3 + [0.7] * 3), ok)
     assert [a["verdict"] for c in v for a in c["axes"]] == ["held"] * 6
     assert [a["axis"] for c in v for a in c["axes"]] == list(AXES)
+    assert all(a["runs_no_loss"] == 8 and a["improvement_pct_no_loss"] == a["improvement_pct"]
+               for c in v for a in c["axes"])
     # KF 1 % lower in position (claim: >= 2 %), velocity 10 % lower but vz 2 % higher
     v = judge_claims(_tables([0.99] * 3 + [0.9, 0.9, 1.02]), ok)
     assert [a["verdict"] for a in v[0]["axes"]] == ["not held"] * 3
     assert [a["verdict"] for a in v[1]["axes"]] == ["held", "held", "not held"]
     assert abs(v[1]["axes"][2]["improvement_pct"] + 2.0) < 0.5
-    # a loop that lost lock, or a single run: not comparable
-    lost = dict(ok, **{"aided-pll": {"losses": 3}})
-    v = judge_claims(_tables([0.9] * 6), lost)
-    assert all(a["verdict"] == "not comparable" and "aided-pll" in a["reason"]
-               for c in v for a in c["axes"])
-    v = judge_claims(_tables([0.9] * 6, runs=1), ok)
+    # a single run: not comparable
+    v = judge_claims(_tables([0.9] * 6, runs=1), _lock(1))
     assert all(a["verdict"] == "not comparable" for c in v for a in c["axes"])
+
+
+def test_a_lock_loss_that_changes_nothing_keeps_the_verdict():
+    """Losses of the aided PLL in runs 2 and 5 (3 in all): the claims judged without those
+    runs give the same verdicts, which stand; the reason names the losses and both
+    figures."""
+    tab = _tables([0.95] * 3 + [0.7, 0.7, 1.02])
+    base = judge_claims(tab, _lock())
+    v = judge_claims(tab, _lock(**{"aided-pll": [0, 0, 2, 0, 0, 1, 0, 0]}))
+    assert [a["verdict"] for c in v for a in c["axes"]] == ["held"] * 5 + ["not held"]
+    assert [a["verdict"] for c in v for a in c["axes"]] == [a["verdict"] for c in base for a in c["axes"]]
+    for c in v:
+        assert c["runs_left_out"] == [2, 5]
+        for a in c["axes"]:
+            assert a["runs_no_loss"] == 6 and a["verdict_no_loss"] == a["verdict_all_runs"]
+            assert "aided-pll lost lock 3 time(s) in run(s) 2, 5" in a["reason"]
+            assert "without runs 2, 5" in a["reason"] and "on all 8 runs" in a["reason"]
+            assert a["improvement_pct_no_loss"] != a["improvement_pct"]
+
+
+def test_a_lock_loss_that_decides_the_verdict_is_not_comparable():
+    """The aided KF's advantage comes from the runs where the aided PLL lost lock (its std
+    doubled there): held on all runs, not held without them -> not comparable. Fewer than
+    2 runs without a loss (either aided loop's): not comparable."""
+    runs = 8
+    pll = np.ones((runs, 6))
+    pll[4:] = 2.0                                         # runs 4-7: the PLL lost lock
+    kf = np.ones((runs, 6)) * (1 + 0.001 * np.arange(runs))[:, None]
+    tab = {"aided-pll": {"std_runs": pll.tolist()}, "aided-kf": {"std_runs": kf.tolist()}}
+    assert all(a["verdict"] == "held" for c in judge_claims(tab, _lock()) for a in c["axes"])
+    v = judge_claims(tab, _lock(**{"aided-pll": [0, 0, 0, 0, 1, 1, 2, 1]}))
+    for c in v:
+        for a in c["axes"]:
+            assert a["verdict"] == "not comparable", a
+            assert (a["verdict_all_runs"], a["verdict_no_loss"]) == ("held", "not held")
+            assert "the losses decide the verdict" in a["reason"] and "4, 5, 6, 7" in a["reason"]
+    v = judge_claims(tab, _lock(**{"aided-kf": [1, 1, 1, 1, 0, 0, 0, 0],
+                                    "aided-pll": [0, 0, 0, 0, 1, 1, 1, 0]}))
+    assert all(a["verdict"] == "not comparable" and "fewer than 2" in a["reason"]
+               and "aided-kf lost lock 4" in a["reason"] for c in v for a in c["axes"])
+    # the unaided loop's losses do not enter the claims
+    v = judge_claims(tab, _lock(**{"unaided-kf": [1] * runs}))
+    assert all(a["verdict"] == "held" for c in v for a in c["axes"])
+    with pytest.raises(ValueError, match="per-run loss counts"):
+        judge_claims(tab, _lock(runs - 1))
+
+
+def test_lock_counts_per_run():
+    from types import SimpleNamespace
+    M, runs, S = 6, 3, 2
+    lk = np.ones((M, runs, S), bool)
+    lk[0, 0, 0] = False                     # before settle: not counted
+    lk[3, 1, 0] = lk[4, 1, 1] = False       # run 1: two losses
+    lk[2:, 2, 1] = False                    # run 2: one loss, never regained
+    r = SimpleNamespace(t_s=np.arange(M, dtype=float), trials=runs, series={"locked": lk},
+                        runs=[SimpleNamespace(epochs=[SimpleNamespace(solution=None)] * M)] * runs)
+    c = lock_counts(r, 1.0)
+    assert c["losses_per_run"] == [0, 2, 1] and c["losses"] == 3
+    assert c["unlocked_channel_epochs"] == 2 + 4 and c["fixes_missing"] == (M - 1) * runs
 
 
 @pytest.mark.slow

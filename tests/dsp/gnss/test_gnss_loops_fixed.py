@@ -9,7 +9,7 @@ from cosim.gnss.loopsim import cycle_slips, track_fast, truth_for
 from dsp.gnss.discriminators import costas_atan, dll_nelp, pll_atan2
 from dsp.gnss.loops import TrackingChannel, hz_to_word
 from dsp.gnss.loops_fixed import (COEF_FRAC, DISC_CODE, DISC_PHASE, F16_FRAC, FLOAT, T_FRAC, V1,
-                                  V2, WORD_COEF_FRAC, ChannelCore, FixedArith)
+                                  V2, ChannelCore, FixedArith, check_products, word_coef_frac)
 
 FS = 16.368e6
 T = 1e-3
@@ -63,6 +63,11 @@ def test_fixed_is_bit_exact_against_python_ints(order, inverted):
     core = ChannelCore(FixedArith(), FS, T, order, 15.0, 1.0, 0.5, 4.092e6, inverted, f0, r0)
     K1, K2, K3, KT = core.K1, core.K2, core.K3, core.KT
     assert K3 == (round(T * (15 / 0.7845) ** 3 * 2 ** COEF_FRAC) if order == 3 else 0)
+    # the word coefficients' fractions at 16.368 MS/s: the largest under 2^31
+    KWC, KWK, KWD = (round(2 ** 32 / FS * 2 ** 22), round(2 ** 32 / FS / 1540 * 2 ** 33),
+                     round(2 ** 32 / FS * 4 * 2 ** 20))
+    assert (core.KWC, core.KWK, core.KWD) == (KWC, KWK, KWD)
+    assert 2 ** 30 <= KWC < 2 ** 31 and 2 ** 30 <= KWK < 2 ** 31 and 2 ** 30 <= KWD < 2 ** 31
     s = -1 if inverted else 1
     v1 = [_q(f, V1) for f in f0]
     v2 = [_q(r, V2) for r in r0]
@@ -80,9 +85,8 @@ def test_fixed_is_bit_exact_against_python_ints(order, inverted):
                 v1[b] = _sat(v1[b] + _rs(e * K2, ef - V1.frac), V1)
             f = _sat(v1[b] + _rs(e * K1, ef - V1.frac), V1)
             f16 = _rs(f, V1.frac - F16_FRAC)
-            w_c = core.W_IF + s * _rs(f16 * core.KWC, F16_FRAC + WORD_COEF_FRAC)
-            w_k = core.W_CHIP + _rs(f16 * core.KWK, F16_FRAC + WORD_COEF_FRAC) \
-                + _rs(tau * core.KWD, DISC_CODE.frac + WORD_COEF_FRAC)
+            w_c = core.W_IF + s * _rs(f16 * KWC, F16_FRAC + 22)
+            w_k = core.W_CHIP + _rs(f16 * KWK, F16_FRAC + 33) + _rs(tau * KWD, DISC_CODE.frac + 20)
             assert (int(cw[b]), int(kw[b])) == (w_c, w_k), (k, b)
             assert int(core.v1[b]) == v1[b] and int(core.v2[b]) == v2[b]
     # and the words are the float frequencies' words to within the quantisation
@@ -93,6 +97,48 @@ def test_fixed_is_bit_exact_against_python_ints(order, inverted):
         c_x = fx.step(*(x[k] for x in d))
     wf = hz_to_word(c_f[0], FS)[0]
     assert np.max(np.abs(c_x[0] - wf)) <= 2     # open loop: integrated e quantisation
+
+
+@pytest.mark.parametrize("fs", [5e6, 16.384e6])
+@pytest.mark.parametrize("inverted", [False, True])
+def test_carrier_word_within_bound_over_v1_range(fs, inverted):
+    """At any Doppler V1 holds (+-30 kHz, its saturation at +-2^15 Hz) the fixed carrier and
+    code words are the float frequencies' words to within the documented bound: carrier
+    within 1/2 + 2^15 / fs + 2^(14 - c) LSB of f 2^32 / fs (so within 1 of the float word),
+    code within 3/2 + 1/8 LSB. An int64 wrap of the word product misses by ~2^32 / 2^c."""
+    f = np.array([-2.0 ** 15, -30000.0, -10_700.0, -1.0, 0.0, 3.3, 10_700.0, 30000.0,
+                  2.0 ** 15 - 2.0 ** -32])
+    if_hz = 4.092e6 if fs > 1e7 else 1.25e6
+    fx = ChannelCore(FixedArith(), fs, T, 3, 15.0, 1.0, 0.5, if_hz, inverted, f, 0.0)
+    fl = ChannelCore(FLOAT, fs, T, 3, 15.0, 1.0, 0.5, if_hz, inverted, f, 0.0)
+    z, a = np.zeros(f.size), np.full(f.size, 100.0)
+    cw, kw = fx.step(a, z, a, z, a, z)            # e = 0, tau = 0: the state's words
+    assert fx.o.sat == {} and np.array_equal(fx.v1, [_q(x, V1) for x in f])
+    fc, fk = fl.step(a, z, a, z, a, z)
+    c = fx.CWC
+    assert c == int(np.floor(np.log2(fs / 2)))
+    exact_c = (if_hz + (-1 if inverted else 1) * f) * 2.0 ** 32 / fs
+    bound = 0.5 + 2.0 ** 15 / fs + 2.0 ** (14 - c)
+    assert bound < 0.52
+    assert np.max(np.abs(cw - exact_c)) <= bound + 0.5      # and W_IF's own rounding
+    assert np.max(np.abs((cw - fx.W_IF) - (-1 if inverted else 1) * f * 2.0 ** 32 / fs)) <= bound
+    assert np.max(np.abs(cw - hz_to_word(fc, fs)[0])) <= 1
+    assert np.max(np.abs(kw - fk * 2.0 ** 32 / fs)) <= 1.5 + 1 / 8
+    assert np.max(np.abs(kw - hz_to_word(fk, fs)[0])) <= 2
+
+
+def test_word_formats_raise_where_they_cannot_hold():
+    assert word_coef_frac(2 ** 32 / 5e6, 2.0 ** 15, "carrier") == 21
+    with pytest.raises(ValueError, match="sample rate too low"):
+        word_coef_frac(2 ** 32 / 4e5, 2.0 ** 15, "carrier")
+    with pytest.raises(ValueError, match="F16"):
+        ChannelCore(FixedArith(), 4e5, T, 3, 15.0, 1.0, 0.5, 1e5)
+    ChannelCore(FLOAT, 4e5, T, 3, 15.0, 1.0, 0.5, 1e5)          # the float form has no words
+    with pytest.raises(ValueError, match="2\\^62"):
+        check_products([("x", V2, 2 ** 23)])
+    check_products([("x", V2, 2 ** 23 - 1)])
+    with pytest.raises(ValueError, match="KT"):                # V2 at full range times 10 ms
+        ChannelCore(FixedArith(), 5e6, 10e-3, 3, 15.0, 1.0, 0.5, 1.25e6)
 
 
 def _closed(duration_s, n_trials, seed):
@@ -124,12 +170,12 @@ def test_fixed_within_bound_of_float_aukf_patent_jerk_10_s():
 
 
 @pytest.mark.parametrize("fs,doppler,order,inverted", [
-    (12e6, 1234.5, 3, False), (2.046e6, 4900.0, 3, True),      # word product past int64: wraps
+    (12e6, 1234.5, 3, False), (2.046e6, 4900.0, 3, True),
     (5e6, 2e5, 2, False)])                                      # V1 saturates
 def test_scalar_step_is_the_batch_step(fs, doppler, order, inverted):
     """One channel's step on Python ints (the closed loop's per-channel tracker) gives the
-    bits, states and saturation counts of the numpy batch path, also where the int64
-    products wrap and the formats saturate."""
+    bits, states and saturation counts of the numpy batch path, also where the formats
+    saturate."""
     rng = np.random.default_rng(7)
     a, b = FixedArith(), FixedArith()
     one = ChannelCore(a, fs, T, order, 15.0, 1.0, 0.5, fs / 4, inverted, np.asarray(doppler),
