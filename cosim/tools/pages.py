@@ -292,11 +292,18 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
     d = _get(results, "ins_table2")
     if d and not d.get("smoke") and d.get("claims"):
         v = {c["name"]: sum(a["verdict"] == "held" for a in c["axes"]) for c in d["claims"]}
+        nc = sum(a["verdict"] == "not comparable" for c in d["claims"] for a in c["axes"])
+        lk = d.get("lock", {})
+        losses = ", ".join(f"{lp} {lk[lp]['losses']}" for lp in ("aided-kf", "aided-pll")
+                           if lp in lk)
         c = d["config"]
         add(f"INS paper Table 2 on the multi-satellite fast path, {fmt(c['cn0_dbhz'])} dB-Hz, "
             f"{c['runs']} runs x {fmt(c['duration_s'])} s", "paper's claims held per axis: "
             "position 2-3 %, velocity 4-72 % (aided KF vs aided PLL)",
-            f"{v.get('claim 1', 0)}/3, {v.get('claim 2', 0)}/3", "ins_table2")
+            f"{v.get('claim 1', 0)}/3, {v.get('claim 2', 0)}/3"
+            + (f", {nc} axes not comparable" if nc else "")
+            + (f" (lock losses {losses}; judged with and without their runs)" if losses
+               else ""), "ins_table2")
         ip = d.get("if_path")
         if ip:
             q = ip["loops"]
