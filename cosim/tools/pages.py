@@ -311,6 +311,8 @@ def headline(results: dict) -> list[tuple[str, str, str, str]]:
                 f"{fmt(ip['window_s'])} s) against the fast path's {c['runs']} runs",
                 "IF per-axis mean and std inside the fast path's distribution (|z| <= 3)",
                 ", ".join(f"{lp} {q[lp]['check']['inside']}/{q[lp]['check']['tests']}"
+                          + (f" ({q[lp]['lock']['losses']} lock losses)"
+                             if q[lp].get("lock", {}).get("losses") else "")
                           for lp in q), "ins_table2")
         th = d.get("threshold")
         if th:
