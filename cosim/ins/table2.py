@@ -400,8 +400,8 @@ def judge_claims(tables: dict, lock: dict | None = None) -> list:
     kf, pll = tables["aided-kf"], tables["aided-pll"]
     a, b = np.asarray(kf["std_runs"]), np.asarray(pll["std_runs"])
     aided = ("aided-kf", "aided-pll")
-    per = {lp: np.asarray(lock[lp]["losses_per_run"], np.int64) if lock else np.zeros(a.shape[0], np.int64)
-           for lp in aided}
+    per = {lp: np.asarray(lock[lp]["losses_per_run"], np.int64) if lock
+           else np.zeros(a.shape[0], np.int64) for lp in aided}
     for lp in aided:
         if per[lp].shape != (a.shape[0],):
             raise ValueError(f"{lp}: {per[lp].size} per-run loss counts for {a.shape[0]} runs")
@@ -426,8 +426,9 @@ def judge_claims(tables: dict, lock: dict | None = None) -> list:
                 v, why = "not comparable", (f"{lost}: {int(keep.sum())} run(s) without a loss, "
                                             f"fewer than 2 to judge the claim without them")
             elif bad.any() and v0 != v:
+                left = _runs_text(np.flatnonzero(bad))
                 v, why = "not comparable", (f"{lost}; the losses decide the verdict: {v} on all "
-                                            f"runs, {v0} without runs {_runs_text(np.flatnonzero(bad))} "
+                                            f"runs, {v0} without runs {left} "
                                             f"(aided KF std lower by {both})")
             elif v == "held":
                 why = f"aided KF std {dm:.1f} +- {se:.1f} % lower (claimed >= {c['min_pct']:g} %)"

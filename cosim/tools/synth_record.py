@@ -164,7 +164,8 @@ def merge(old: dict, new: dict, order) -> dict:
     inv = [i for i in inv + [_invocation(new)]
            if any(r["top"] in (i.get("tops") or []) and r.get("commit") == i.get("commit")
                   for r in runs)
-           or any(k.split(" seed ")[0] in (i.get("tops") or []) for k in {**fails, **new["failures"]})]
+           or any(k.split(" seed ")[0] in (i.get("tops") or [])
+                  for k in {**fails, **new["failures"]})]
     n = len(order)
     done = {(r["top"], r["seed"]) for r in runs} | {
         (k.split(" seed ")[0], int(k.split(" seed ")[1])) for k in fails if " seed " in k}

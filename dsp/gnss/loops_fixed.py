@@ -240,8 +240,8 @@ class ChannelCore:
             f_max = 2.0 ** (V1.bits - 1 - V1.frac)
             self.CWC = word_coef_frac(sc, f_max, "carrier word")
             self.CWK = word_coef_frac(sc / 1540.0, f_max, "code word")
-            self.CWD = word_coef_frac(sc * 4.0 * dll_bn_hz, 2.0 ** (DISC_CODE.bits - 1 - DISC_CODE.frac),
-                                      "DLL word")
+            tau_max = 2.0 ** (DISC_CODE.bits - 1 - DISC_CODE.frac)
+            self.CWD = word_coef_frac(sc * 4.0 * dll_bn_hz, tau_max, "DLL word")
         else:
             self.CWC = self.CWK = self.CWD = 0
         self.KWC = o.coef(sc, self.CWC)

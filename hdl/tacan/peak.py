@@ -52,9 +52,9 @@ comparison ``e >= T`` so the pulse logic starts from a flop, and the comparison 
 max`` against the pulse's max as it will be when the sample reaches the detector (the
 detector's sample if that one is taken as the max on this cycle, else the max register): the
 max, its timestamp and the output take a registered select, and the max is taken without
-the close decision (a closed pulse's max is not read; opening loads it). A pulse closes on compares of
-its registers with constants (``below = hold - 1`` and not above, ``len = max_len - 1``), not
-on their incremented values.
+the close decision (a closed pulse's max is not read; opening loads it). A pulse closes on
+compares of its registers with constants (``below = hold - 1`` and not above, ``len =
+max_len - 1``), not on their incremented values.
 
 Pair-partner readout (``partner_offset = D > 0``): the input goes through a ``2 D``-word
 delay line (one memory, written at ``wp``; read at ``wp + D`` -- the sample ``D`` back, which
