@@ -20,8 +20,8 @@ DISC_CODE      Q(16, 14) chips        normalised E-L envelope (|tau| <= 1)
 COEF           24 fraction bits       loop gains T w0^3, T a3 w0^2, b3 w0, (4 Bn_dll)
 V2             Q(40, 20) Hz/s         3rd-order rate integrator
 T_Q            30 fraction bits       the epoch T (1 ms is not binary: 1.7e-7 relative)
-V1, FREQ       Q(48, 32) Hz           frequency integrator and the Doppler output
-F16            Q(32, 16) Hz           Doppler fed to the word multipliers (|f16| <= 2^31)
+V1, FREQ       Q(48, 31) Hz           frequency integrator and the Doppler output (+-65 kHz)
+F16            Q(32, 15) Hz           Doppler fed to the word multipliers (|f16| <= 2^31)
 WORD_COEF      Q(32, c), K < 2^31     2^32 / fs (carrier), 2^32 / (1540 fs) (code),
                                       2^32 4 Bn_dll / fs (DLL); ``c`` per coefficient
                                       from fs (:func:`word_coef_frac`)
@@ -31,13 +31,13 @@ NCO word       32-bit two's complement  round(f 2^32 / fs), carrier and code
 The word coefficients: each takes the largest fraction ``c`` that leaves it below ``2^31``,
 so its product with an operand of at most ``2^31`` (F16, DISC_CODE) stays below ``2^62``
 at any sample rate (at 5 MS/s the carrier's ``c`` is 21, at 16.368 MS/s 22). The carrier
-word is within ``1/2 + 2^15 / fs + 2^(14 - c)`` LSB of ``f 2^32 / fs`` (``f`` the V1
+word is within ``1/2 + 2^16 / fs + 2^(15 - c)`` LSB of ``f 2^32 / fs`` (``f`` the V1
 Doppler, any value V1 holds: final rounding, F16's rounding, the coefficient's rounding;
-0.515 LSB at 5 MS/s), so it differs from the float path's word ``round(f 2^32 / fs)`` by at
+0.529 LSB at 5 MS/s), so it differs from the float path's word ``round(f 2^32 / fs)`` by at
 most 1. The code word sums three terms rounded each on its own (the chip rate, ``f / 1540``
 and the DLL term ``4 Bn_dll tau``): within 3/2 LSB plus the coefficients' and F16's rounding
 (each at most 1/16 LSB) of the exact sum. :func:`word_coef_frac` raises where the coefficient's or
-F16's rounding would pass 1/16 LSB over V1's range (fs below 2^19 Hz for the carrier).
+F16's rounding would pass 1/16 LSB over V1's range (fs below 2^20 Hz for the carrier).
 
 The discriminators themselves (atan, envelope division) are evaluated in float64 and
 quantised at their output to DISC_PHASE / DISC_CODE: in the FPGA+DSP split they run on the
@@ -64,10 +64,10 @@ class Format:
 DISC_PHASE = Format(16, 15)
 DISC_CODE = Format(16, 14)
 V2 = Format(40, 20)
-V1 = Format(48, 32)
+V1 = Format(48, 31)
 COEF_FRAC = 24
 T_FRAC = 30
-F16 = Format(32, 16)
+F16 = Format(32, 15)
 F16_FRAC = F16.frac
 WORD_COEF_BITS = 32
 WORD_BITS = 32

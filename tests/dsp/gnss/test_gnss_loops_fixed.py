@@ -102,12 +102,12 @@ def test_fixed_is_bit_exact_against_python_ints(order, inverted):
 @pytest.mark.parametrize("fs", [5e6, 16.384e6])
 @pytest.mark.parametrize("inverted", [False, True])
 def test_carrier_word_within_bound_over_v1_range(fs, inverted):
-    """At any Doppler V1 holds (+-30 kHz, its saturation at +-2^15 Hz) the fixed carrier and
+    """At any Doppler V1 holds (+-60 kHz, its saturation at +-2^16 Hz) the fixed carrier and
     code words are the float frequencies' words to within the documented bound: carrier
-    within 1/2 + 2^15 / fs + 2^(14 - c) LSB of f 2^32 / fs (so within 1 of the float word),
+    within 1/2 + 2^16 / fs + 2^(15 - c) LSB of f 2^32 / fs (so within 1 of the float word),
     code within 3/2 + 1/8 LSB. An int64 wrap of the word product misses by ~2^32 / 2^c."""
-    f = np.array([-2.0 ** 15, -30000.0, -10_700.0, -1.0, 0.0, 3.3, 10_700.0, 30000.0,
-                  2.0 ** 15 - 2.0 ** -32])
+    f = np.array([-2.0 ** 16, -60000.0, -41_000.0, -10_700.0, -1.0, 0.0, 3.3, 10_700.0,
+                  41_000.0, 60000.0, 2.0 ** 16 - 2.0 ** -31])
     if_hz = 4.092e6 if fs > 1e7 else 1.25e6
     fx = ChannelCore(FixedArith(), fs, T, 3, 15.0, 1.0, 0.5, if_hz, inverted, f, 0.0)
     fl = ChannelCore(FLOAT, fs, T, 3, 15.0, 1.0, 0.5, if_hz, inverted, f, 0.0)
@@ -118,8 +118,8 @@ def test_carrier_word_within_bound_over_v1_range(fs, inverted):
     c = fx.CWC
     assert c == int(np.floor(np.log2(fs / 2)))
     exact_c = (if_hz + (-1 if inverted else 1) * f) * 2.0 ** 32 / fs
-    bound = 0.5 + 2.0 ** 15 / fs + 2.0 ** (14 - c)
-    assert bound < 0.52
+    bound = 0.5 + 2.0 ** 16 / fs + 2.0 ** (15 - c)
+    assert bound < 0.53
     assert np.max(np.abs(cw - exact_c)) <= bound + 0.5      # and W_IF's own rounding
     assert np.max(np.abs((cw - fx.W_IF) - (-1 if inverted else 1) * f * 2.0 ** 32 / fs)) <= bound
     assert np.max(np.abs(cw - hz_to_word(fc, fs)[0])) <= 1
@@ -128,9 +128,9 @@ def test_carrier_word_within_bound_over_v1_range(fs, inverted):
 
 
 def test_word_formats_raise_where_they_cannot_hold():
-    assert word_coef_frac(2 ** 32 / 5e6, 2.0 ** 15, "carrier") == 21
+    assert word_coef_frac(2 ** 32 / 5e6, 2.0 ** 16, "carrier") == 21
     with pytest.raises(ValueError, match="sample rate too low"):
-        word_coef_frac(2 ** 32 / 4e5, 2.0 ** 15, "carrier")
+        word_coef_frac(2 ** 32 / 4e5, 2.0 ** 16, "carrier")
     with pytest.raises(ValueError, match="F16"):
         ChannelCore(FixedArith(), 4e5, T, 3, 15.0, 1.0, 0.5, 1e5)
     ChannelCore(FLOAT, 4e5, T, 3, 15.0, 1.0, 0.5, 1e5)          # the float form has no words
