@@ -33,7 +33,8 @@ from .params import ACC_FIELDS, GnssChannelParams
 __all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
            "input_shape", "record_layout", "gnss_top"]
 
-#: Record bits one copy of the array's grant select drives (:class:`GnssChannelArray`).
+#: Record bits one copy of a fan-out register drives: the array's grant select
+#: (:class:`GnssChannelArray`) and a correlator's record load enable (:class:`GnssCorrelator`).
 SEL_SLICE = 32
 
 
@@ -318,13 +319,27 @@ class GnssCorrelator(wiring.Component):
         rec = Signal(self.layout)
         rec_valid = Signal()
         m.d.sync += rec_valid.eq(0)
+        # The dump's record load enable (t_valid & t_first) decided a cycle ahead into
+        # registers, one copy per SEL_SLICE record bits (kept apart from yosys's merging):
+        # the record's clock enables come from a flip-flop, not through a LUT from the
+        # input valid that every channel of an array shares (the 12-channel I/Q array's
+        # critical path at one seed).
+        new = Signal(self.layout)
+        m.d.comb += [getattr(new, n).eq(accs[n]) for n in ACC_FIELDS]
+        m.d.comb += [new.epoch.eq(epoch + 1), new.carr_phase.eq(carr_at),
+                     new.code_phase.eq(code_at)]
+        rec_bits, new_bits = Value.cast(rec), Value.cast(new)
+        for k in range(0, len(rec_bits), SEL_SLICE):
+            load = Signal(name=f"rec_load{k // SEL_SLICE}", attrs={"keep": 1})
+            m.d.sync += load.eq(mixer.o.valid & f_first)
+            with m.If(load):
+                m.d.sync += rec_bits[k:k + SEL_SLICE].eq(new_bits[k:k + SEL_SLICE])
+                if k == 0:
+                    m.d.sync += rec_valid.eq(1)
         with m.If(t_valid):
             with m.If(t_ep):
                 m.d.sync += epoch.eq(epoch + 1)
             with m.If(t_first):
-                m.d.sync += [getattr(rec, n).eq(accs[n]) for n in ACC_FIELDS]
-                m.d.sync += [rec.epoch.eq(epoch + 1), rec.carr_phase.eq(carr_at),
-                             rec.code_phase.eq(code_at), rec_valid.eq(1)]
                 m.d.sync += [accs[n].eq(terms[n]) for n in ACC_FIELDS]
             with m.Else():
                 m.d.sync += [accs[n].eq(accs[n] + terms[n]) for n in ACC_FIELDS]
