@@ -173,6 +173,10 @@ def _cmd_bench(a) -> int:
     summary = run(a.name, out=out, quick=a.quick, jobs=jobs, scheduler=a.scheduler)
     if a.json:
         print(dumps(summary))
+    if summary.get("passed") is False:        # a judge whose checks failed (results written)
+        print(f"error: bench {a.name}: its checks failed (results written under {out})",
+              file=sys.stderr)
+        return 1
     return 0
 
 

@@ -335,7 +335,8 @@ class Benchmark:
     ----------
     run : callable
         ``run(out, quick=False, jobs=None) -> dict``: writes its results under the directory
-        ``out`` (a :class:`pathlib.Path`) and returns the summary.
+        ``out`` (a :class:`pathlib.Path`) and returns the summary. A judge (a benchmark with
+        pass/fail checks) puts ``"passed": bool`` in it; ``bench`` exits 1 when it is False.
     jobs : bool
         True when the benchmark spreads over ``--jobs`` worker processes (the others
         measure one core or size their own pool).

@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -308,12 +309,13 @@ def checks(rows: list, records: list, grid: AccuracyGrid) -> dict:
     z = {"records": len(zero), "with_bearing": sum(r["both"]["locked"] for r in zero),
          "sector_slips": sum(r["both"].get("slip", False) for r in zero),
          "misleading": sum(r["both"].get("misleading", 0) for r in zero)}
-    return {"default_worse_than_pulse_at": worse,
-            "default_rmse_over_crb_from_3db": high,
-            "from_3db_within_1_3": all(v is not None and v <= 1.3 for v in high.values()),
-            "at_0db": z,
-            "at_0db_ok": bool(zero) and z["with_bearing"] == len(zero)
-            and z["sector_slips"] == 0 and z["misleading"] == 0}
+    c = {"default_worse_than_pulse_at": worse,
+         "default_rmse_over_crb_from_3db": high,
+         "from_3db_within_1_3": all(v is not None and v <= 1.3 for v in high.values()),
+         "at_0db": z,
+         "at_0db_ok": bool(zero) and z["with_bearing"] == len(zero)
+         and z["sector_slips"] == 0 and z["misleading"] == 0}
+    return c | {"passed": not worse and c["from_3db_within_1_3"] and c["at_0db_ok"]}
 
 
 def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None,
@@ -335,6 +337,7 @@ def tacan_accuracy(out: Path, quick: bool = False, jobs: int | None = None,
                "frontend_cache": None if frontend_cache is None else
                {"dir": str(frontend_cache), "sources_digest": frontend_sources_digest()},
                "checks": checks(rows, records, grid), "rows": rows}
+    summary["passed"] = summary["checks"]["passed"]
     out.mkdir(parents=True, exist_ok=True)
     (out / "tacan_accuracy.json").write_text(json.dumps({**summary, "records": records}, indent=1))
     _plot(out / "tacan_accuracy.png", rows, records, grid)
@@ -414,6 +417,8 @@ def _markdown(s: dict) -> str:
               + f" the bound ({'within' if c['from_3db_within_1_3'] else 'not within'} 1.3x)",
               f"- 0 dB: {z['with_bearing']}/{z['records']} records give a bearing, "
               f"{z['sector_slips']} sector slips, {z['misleading']} misleading bearings"]
+    if c.get("passed") is not None:
+        lines.append(f"- verdict: {'passed' if c['passed'] else '**FAILED**'}")
     return "\n".join(lines) + "\n"
 
 
@@ -441,6 +446,10 @@ def main(argv=None) -> int:
                         variants=tuple(a.variants.split(",")))
     s = tacan_accuracy(Path(a.out), jobs=a.jobs, grid=grid, frontend_cache=a.frontend_cache)
     print(json.dumps(s["checks"], indent=1))
+    if not s["passed"]:
+        print("error: the accuracy checks failed (see 'checks' above and tacan_accuracy.md)",
+              file=sys.stderr)
+        return 1
     return 0
 
 

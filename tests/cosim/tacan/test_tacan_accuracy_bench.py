@@ -53,6 +53,10 @@ def test_pooling_and_the_checks():
     assert not c["from_3db_within_1_3"]
     assert c["at_0db_ok"] and c["at_0db"] == {"records": 4, "with_bearing": 4,
                                              "sector_slips": 0, "misleading": 0}
+    assert c["passed"] is False
+    good = recs[:4] + [_rec("X", 6.0, b, k, (0.11, 0.0), (0.11, 0.0)) for b in (0.0, 180.0)
+                       for k in (0, 1)]
+    assert checks(pool(good, g), good, g)["passed"] is True
     # a slip, a misleading bearing or a record without a bearing at 0 dB fails the check
     for bad in (dict(slip=True), dict(misleading=1), dict(locked=False)):
         worse = recs[1:] + [_rec("X", 0.0, 0.0, 0, (0.3, 0.1), (1.0, 0.5), **bad)]
@@ -64,3 +68,14 @@ def test_every_record_of_the_grid_has_its_own_noise():
     g = AccuracyGrid(bearing_step_deg=60.0, snrs_db=(3.0,), modes=("X",), records=2)
     seeds = [it["seed"] for it in g.items()]
     assert seeds == list(range(100, 112))
+
+
+def test_a_failing_judge_exits_non_zero(monkeypatch, tmp_path, capsys):
+    """``bench`` exits 1 when a judge's summary says its checks failed (its results are
+    written all the same), 0 when they passed."""
+    import cosim.tools.bench as bench
+    from cosim.cli import main
+    for passed, rc in ((False, 1), (True, 0)):
+        monkeypatch.setattr(bench, "run", lambda *a, passed=passed, **k: {"passed": passed})
+        assert main(["bench", "tacan-accuracy", "--out", str(tmp_path)]) == rc
+    assert "tacan-accuracy: its checks failed" in capsys.readouterr().err
