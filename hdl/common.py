@@ -10,6 +10,8 @@ the same way:
   wraparound** -- :func:`fit_width` (the ``overflow`` modes of :mod:`dsp.fixed`).
 * **Constant and narrow products** -- :func:`const_mul` and :func:`narrow_mul`, shifts and
   adds instead of a multiplier.
+* **Fan-out copies** -- :func:`fanout_copies`, a registered value copied per slice of the
+  bits it drives, each copy kept apart from yosys's merging.
 * **Constructor errors** -- a block validates its arguments in ``__init__`` and raises
   ``ValueError`` stating the rule and repeating the bad value (never ``assert``: it vanishes
   under ``python -O``): :func:`check_params` for the parameter object, the parameter
@@ -17,13 +19,17 @@ the same way:
 """
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Mux, signed
+from amaranth.hdl import Cat, Const, Mux, Signal, signed
 from amaranth.lib import data
 
 from dsp.fixed import OVERFLOWS, ROUNDINGS
 
 __all__ = ["iq_layout", "lo_layout", "sample_shape", "channel_values", "round_shift",
-           "fit_width", "const_mul", "check_params", "check_bool"]
+           "fit_width", "const_mul", "narrow_mul", "fanout_copies", "check_params",
+           "check_bool"]
+
+#: Bits one copy of a :func:`fanout_copies` register drives.
+FANOUT_SLICE = 32
 
 
 # -- layouts ----------------------------------------------------------------------------------
@@ -150,6 +156,19 @@ def narrow_mul(a, b):
     for k in range(n - 1):
         out = out + Mux(b[k], a << k, 0)
     return out
+
+
+def fanout_copies(m, value, bits: int, name: str, width: int = 1):
+    """Yield ``(bit slice, register)``: one ``width``-bit register loaded with ``value``
+    every cycle in ``m``'s sync domain per :data:`FANOUT_SLICE` of the ``bits`` it drives,
+    named ``<name><k>`` and marked ``keep`` so yosys does not merge the copies back into one
+    (:mod:`cosim.tools.synth`): no copy drives more than ``FANOUT_SLICE`` enables or gates,
+    and each can be placed beside its slice. Each register is made as its slice is asked
+    for, so the caller's statements for a slice follow that register's."""
+    for k in range(-(-bits // FANOUT_SLICE)):
+        r = Signal(width, name=f"{name}{k}", attrs={"keep": 1})
+        m.d.sync += r.eq(value)
+        yield slice(k * FANOUT_SLICE, (k + 1) * FANOUT_SLICE), r
 
 
 def check_params(component, params, cls: type, *, article: str | None = None):

@@ -23,7 +23,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from dsp.gnss.ca_code import G1_FEEDBACK, G2_FEEDBACK, G2_TAPS
-from hdl.common import iq_layout
+from hdl.common import FANOUT_SLICE, fanout_copies, iq_layout
 from hdl.fifo import DspFifo
 from hdl.mixer import Mixer
 from hdl.nco import Nco
@@ -32,10 +32,6 @@ from .params import ACC_FIELDS, GnssChannelParams
 
 __all__ = ["CaCodeGenerator", "GnssCorrelator", "GnssChannel", "GnssChannelArray", "array_params",
            "input_shape", "record_layout", "gnss_top"]
-
-#: Record bits one copy of a fan-out register drives: the array's grant select
-#: (:class:`GnssChannelArray`) and a correlator's record load enable (:class:`GnssCorrelator`).
-SEL_SLICE = 32
 
 
 def input_shape(params: GnssChannelParams):
@@ -320,21 +316,19 @@ class GnssCorrelator(wiring.Component):
         rec_valid = Signal()
         m.d.sync += rec_valid.eq(0)
         # The dump's record load enable (t_valid & t_first) decided a cycle ahead into
-        # registers, one copy per SEL_SLICE record bits (kept apart from yosys's merging):
-        # the record's clock enables come from a flip-flop, not through a LUT from the
-        # input valid that every channel of an array shares (the 12-channel I/Q array's
-        # critical path at one seed).
+        # registers, one per FANOUT_SLICE record bits (hdl.common.fanout_copies): the
+        # record's clock enables come from a flip-flop, not through a LUT from the input
+        # valid that every channel of an array shares (the 12-channel I/Q array's critical
+        # path at one seed).
         new = Signal(self.layout)
         m.d.comb += [getattr(new, n).eq(accs[n]) for n in ACC_FIELDS]
         m.d.comb += [new.epoch.eq(epoch + 1), new.carr_phase.eq(carr_at),
                      new.code_phase.eq(code_at)]
         rec_bits, new_bits = Value.cast(rec), Value.cast(new)
-        for k in range(0, len(rec_bits), SEL_SLICE):
-            load = Signal(name=f"rec_load{k // SEL_SLICE}", attrs={"keep": 1})
-            m.d.sync += load.eq(mixer.o.valid & f_first)
+        for bits, load in fanout_copies(m, mixer.o.valid & f_first, len(rec_bits), "rec_load"):
             with m.If(load):
-                m.d.sync += rec_bits[k:k + SEL_SLICE].eq(new_bits[k:k + SEL_SLICE])
-                if k == 0:
+                m.d.sync += rec_bits[bits].eq(new_bits[bits])
+                if bits.start == 0:
                     m.d.sync += rec_valid.eq(1)
         with m.If(t_valid):
             with m.If(t_ep):
@@ -473,15 +467,12 @@ class GnssChannelArray(wiring.Component):
         # otherwise). A grant sets the gap, so with record_words > 1 no grant follows one and
         # the next cycle's pending flags are ``pend | recv`` whenever a grant can follow.
         nxt = (pend | recv) if n > 1 else ((pend & ~grant) | recv)
-        # One copy of it per SEL_SLICE record bits (kept apart from yosys's merging), so that
-        # no select bit drives more than SEL_SLICE AND gates: one copy driving all of a
+        # One copy of it per FANOUT_SLICE record bits (hdl.common.fanout_copies), so that no
+        # select bit drives more than FANOUT_SLICE AND gates: one copy driving all of a
         # record's bits was the 12-channel I/Q array's critical path (sel_next ->
         # rec_group1, 8.8 ns of routing).
-        sels = []
-        for k in range(-(-p.record_bits // SEL_SLICE)):
-            sel = Signal(self.channels, name=f"sel_next{k}", attrs={"keep": 1})
-            m.d.sync += sel.eq(nxt & -nxt)
-            sels.append(sel)
+        sels = [r for _, r in fanout_copies(m, nxt & -nxt, p.record_bits, "sel_next",
+                                             self.channels)]
         # The record of a granted channel holds until its next dump, a code period later.
         group = 4
         parts = []
@@ -489,7 +480,7 @@ class GnssChannelArray(wiring.Component):
             mux = Const(0, p.record_bits)
             for ch in range(g0, min(g0 + group, self.channels)):
                 rec = Cat(Value.cast(cores[ch].rec.payload), Const(ch, p.channel_bits))
-                mask = Cat(sels[b // SEL_SLICE][ch] for b in range(p.record_bits))
+                mask = Cat(sels[b // FANOUT_SLICE][ch] for b in range(p.record_bits))
                 mux = mux | (rec & mask)
             part = Signal(p.record_bits, name=f"rec_group{g0 // group}")
             m.d.sync += part.eq(mux)
