@@ -237,11 +237,12 @@ class EnvelopeKalman(StateMonitor):
         The measurement row is the expected report's slope at the predicted amplitude times
         ``H`` (``g = 1 + d bias / ds``, :func:`bias_slopes`, in the ``cs`` format): an
         extended Kalman filter. Near the threshold a report moves ~0.2-0.6x as much as the
-        amplitude; with the row ``H`` the filter counted each such report as a full
-        measurement, its covariance (and the coarse bearing's sigma) claimed 2-5x less
-        than it knew, and from its uninformative start it settled on a biased state (0 dB,
-        X, 250 deg, seed 201, both searches: the 15 Hz phase 31 deg off at 0.34 s with a
-        sigma of 2.7 deg, a 40 deg sector held until 1.1 s).
+        amplitude; with the row ``H`` alone each such report counts as a full measurement,
+        the covariance (and the coarse bearing's sigma) claims 2-5x too little, and from
+        the uninformative start the filter can settle on a biased state (measured with
+        ``H``: 0 dB, X, 250 deg, seed 201, both searches: the 15 Hz phase 31 deg off at
+        0.34 s with a sigma of 2.7 deg, a 40 deg sector held until 1.1 s; with ``g H``
+        +6 deg, sigma 5.4 deg).
 
         ``noise = (report, predicted)`` (signal units): a report below ``report`` while the
         predicted amplitude is ``predicted`` or more is taken as a noise report, not a
