@@ -246,7 +246,9 @@ class EnvelopeKalman(StateMonitor):
 
         ``noise = (report, predicted)`` (signal units): a report below ``report`` while the
         predicted amplitude is ``predicted`` or more is taken as a noise report, not a
-        measurement (predict only; counted as ``noise_reports``)."""
+        measurement (predict only; counted as ``noise_reports``), once the filter has warmed
+        up (``KalmanConfig.warmup`` updates: before, the prediction is no yardstick -- the
+        first extended updates near the threshold step up to 4x as far as plain ones)."""
         b = np.asarray(bias, dtype=np.float64).ravel()
         k = int(step_log2)
         nq = (0.0, 0.0) if noise is None else tuple(float(v) for v in noise)

@@ -80,7 +80,8 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, gt, bs, nq):
     minimum) or NaN (float) is no measurement: predict only. ``bt`` (empty: none) is the
     expected measurement bias at the predicted amplitude, a table of step ``2**bs`` in the
     ``x`` format's units; with it, a measurement below ``nq[0]`` while the predicted
-    amplitude is ``nq[1]`` or more (``nq[1] > 0``) is a noise report: predict only
+    amplitude is ``nq[1]`` or more (``nq[1] > 0``) after the warm-up (before it the
+    prediction is no yardstick) is a noise report: predict only
     (:meth:`EnvelopeKalman.set_peak_bias`). ``gt`` (as long as ``bt``, in the ``cs``
     format) is the slope of the expected report at that amplitude, ``1 + d bias / ds``:
     the measurement row is ``gt[j] H`` (the linearisation of the biased measurement)."""
@@ -147,7 +148,8 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, gt, bs, nq):
             continue
         cnt[2] = 0
         yh = xp[0] + xp[2] + xp[4]
-        if bt.size and nq[1] > 0 and yh >= nq[1] and align(y, xf - yf) < nq[0]:
+        if bt.size and nq[1] > 0 and cnt[0] >= warmup and yh >= nq[1] \
+                and align(y, xf - yf) < nq[0]:
             ev[12] += 1             # a noise report where the signal stands clear of it
             _predict_only(x, P, xp, Pp)
             continue
