@@ -111,6 +111,27 @@ MAX_TICKS = 1 << 38
 RANGE_SIGNALS = {0: "y", 1: "x", 2: "P", 3: "K", 4: "innov", 5: "r", 6: "rmult"}
 
 
+#: The slope table's smoothing (entries either side) and its floor.
+SLOPE_HALF_WIDTH = 3
+SLOPE_MIN = 0.25
+
+
+def bias_slopes(bias, step_log2: int) -> np.ndarray:
+    """``g[i] = 1 + d bias / ds`` at the entries of a peak-bias table of step
+    ``2**-step_log2`` (central differences over :data:`SLOPE_HALF_WIDTH` entries either
+    side, one-sided at the ends), within [:data:`SLOPE_MIN`, 1]: the expected report
+    rises with the amplitude (the bias falls), at least a quarter as fast as it (a floor
+    that bounds the filter's step on a report near the threshold to 4x the plain one)."""
+    b = np.asarray(bias, dtype=np.float64).ravel()
+    if b.size < 2:
+        return np.ones(b.size)
+    i = np.arange(b.size)
+    lo = np.maximum(i - SLOPE_HALF_WIDTH, 0)
+    hi = np.minimum(i + SLOPE_HALF_WIDTH, b.size - 1)
+    d = (b[hi] - b[lo]) / ((hi - lo) * 2.0 ** -int(step_log2))
+    return np.clip(1.0 + d, SLOPE_MIN, 1.0)
+
+
 class EnvelopeKalman(StateMonitor):
     """Batched envelope Kalman filter, float (golden) or fixed point by configuration.
 
@@ -171,6 +192,7 @@ class EnvelopeKalman(StateMonitor):
         self._upsets = None
         self.upsets_applied = 0
         self._bt = np.zeros(0, dtype)      # the peak-bias table (set_peak_bias), step 2**_bs
+        self._gt = np.zeros(0, dtype)      # its slope table (1 + d bias / ds, cs format)
         self._bs = 0
         self._nq = np.zeros(2, dtype)      # its noise-report rule (0: off)
         self._ck = None                    # the state-continuity checkpoint (checkpoint())
@@ -212,9 +234,21 @@ class EnvelopeKalman(StateMonitor):
         :class:`dsp.tacan.peakbias.PeakBias`). The fixed core holds the table in the ``x``
         format. An empty ``bias``: none (the default).
 
+        The measurement row is the expected report's slope at the predicted amplitude times
+        ``H`` (``g = 1 + d bias / ds``, :func:`bias_slopes`, in the ``cs`` format): an
+        extended Kalman filter. Near the threshold a report moves ~0.2-0.6x as much as the
+        amplitude; with the row ``H`` alone each such report counts as a full measurement,
+        the covariance (and the coarse bearing's sigma) claims 2-5x too little, and from
+        the uninformative start the filter can settle on a biased state (measured with
+        ``H``: 0 dB, X, 250 deg, seed 201, both searches: the 15 Hz phase 31 deg off at
+        0.34 s with a sigma of 2.7 deg, a 40 deg sector held until 1.1 s; with ``g H``
+        +6 deg, sigma 5.4 deg).
+
         ``noise = (report, predicted)`` (signal units): a report below ``report`` while the
         predicted amplitude is ``predicted`` or more is taken as a noise report, not a
-        measurement (predict only; counted as ``noise_reports``)."""
+        measurement (predict only; counted as ``noise_reports``), once the filter has warmed
+        up (``KalmanConfig.warmup`` updates: before, the prediction is no yardstick -- the
+        first extended updates near the threshold step up to 4x as far as plain ones)."""
         b = np.asarray(bias, dtype=np.float64).ravel()
         k = int(step_log2)
         nq = (0.0, 0.0) if noise is None else tuple(float(v) for v in noise)
@@ -224,13 +258,15 @@ class EnvelopeKalman(StateMonitor):
             raise ValueError("peak-bias table must be finite")
         if b.size > 1 << 16:
             raise ValueError(f"peak-bias table of {b.size} entries: at most 65536")
+        g = bias_slopes(b, k)
         if self.fixed is None:
-            self._bt, self._bs, self._nq = b.copy(), -k, np.array(nq)
+            self._bt, self._gt, self._bs, self._nq = b.copy(), g, -k, np.array(nq)
             return
         fx = self.fixed.x
         if not -62 < fx.frac - k < 62:
             raise ValueError(f"peak-bias table step 2**-{k} does not suit the x format {fx}")
         self._bt = np.clip(np.round(np.ldexp(b, fx.frac)), fx.min_int, fx.max_int).astype(np.int64)
+        self._gt = np.round(np.ldexp(g, self.fixed.cs.frac)).astype(np.int64)
         self._bs = fx.frac - k
         self._nq = np.clip(np.round(np.ldexp(np.array(nq), fx.frac)), 0, fx.max_int
                            ).astype(np.int64)
@@ -369,7 +405,7 @@ class EnvelopeKalman(StateMonitor):
         y = np.ascontiguousarray(y)
         if self._upsets is None:
             kern(self.x, self.P, self._r, self._cnt, self._ev, sc, y, self._ci, self._cv,
-                 self._bt, self._bs, self._nq)
+                 self._bt, self._gt, self._bs, self._nq)
             self.n_updates += t.size
             return
         st, wd, bt, k = self._upsets
@@ -379,8 +415,8 @@ class EnvelopeKalman(StateMonitor):
             b = t.size if k >= st.size or st[k] - n0 >= t.size else int(st[k] - n0)
             if b > a:
                 kern(self.x, self.P, self._r, self._cnt, self._ev, sc[a:b],
-                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv, self._bt, self._bs,
-                     self._nq)
+                     np.ascontiguousarray(y[:, a:b]), self._ci, self._cv, self._bt, self._gt,
+                     self._bs, self._nq)
                 a = b
             while k < st.size and st[k] - n0 == a and a < t.size:
                 self._flip(int(wd[k]), int(bt[k]))

@@ -74,14 +74,17 @@ def _restart(x, P, p0, cnt, ev):
 
 
 @_jit
-def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
+def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, gt, bs, nq):
     """One trial over all steps. ``r_st`` (1,) the r estimate, ``cnt`` = [n, consecutive
     gated, consecutive implausible inputs]; ``ys[k]`` equal to ``cv[7]`` (int: the int64
     minimum) or NaN (float) is no measurement: predict only. ``bt`` (empty: none) is the
     expected measurement bias at the predicted amplitude, a table of step ``2**bs`` in the
     ``x`` format's units; with it, a measurement below ``nq[0]`` while the predicted
-    amplitude is ``nq[1]`` or more (``nq[1] > 0``) is a noise report: predict only
-    (:meth:`EnvelopeKalman.set_peak_bias`)."""
+    amplitude is ``nq[1]`` or more (``nq[1] > 0``) after the warm-up (before it the
+    prediction is no yardstick) is a noise report: predict only
+    (:meth:`EnvelopeKalman.set_peak_bias`). ``gt`` (as long as ``bt``, in the ``cs``
+    format) is the slope of the expected report at that amplitude, ``1 + d bias / ds``:
+    the measurement row is ``gt[j] H`` (the linearisation of the biased measurement)."""
     yf = ci[_Y]
     xf, xlo, xhi, xh = ci[_X], ci[_X + 1], ci[_X + 2], ci[_X + 3]
     pf, plo, phi, ph = ci[_P], ci[_P + 1], ci[_P + 2], ci[_P + 3]
@@ -145,17 +148,23 @@ def _trial(x, P, r_st, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
             continue
         cnt[2] = 0
         yh = xp[0] + xp[2] + xp[4]
-        if bt.size and nq[1] > 0 and yh >= nq[1] and align(y, xf - yf) < nq[0]:
+        if bt.size and nq[1] > 0 and cnt[0] >= warmup and yh >= nq[1] \
+                and align(y, xf - yf) < nq[0]:
             ev[12] += 1             # a noise report where the signal stands clear of it
             _predict_only(x, P, xp, Pp)
             continue
         # -- innovation, S, e2 = innov^2 / S
         for i in range(5):
             PH[i] = Pp[i, 0] + Pp[i, 2] + Pp[i, 4]
-        S = PH[0] + PH[2] + PH[4] + sc[k, 6]
-        if bt.size:                 # what the front end reports at that amplitude
-            j = lut_index(yh, bs)
-            yh = yh + bt[min(max(j, 0), bt.size - 1)]
+        if bt.size:                 # what the front end reports at that amplitude, and
+            j = min(max(lut_index(yh, bs), 0), bt.size - 1)   # its slope: the row g H
+            g = gt[j]
+            for i in range(5):
+                PH[i] = mulw(PH[i], g, csf, csf, ph)
+            S = mulw(PH[0] + PH[2] + PH[4], g, csf, csf, ph) + sc[k, 6]
+            yh = yh + bt[j]
+        else:
+            S = PH[0] + PH[2] + PH[4] + sc[k, 6]
         iv = sat(rs(align(y, xf - yf) - yh, xf - ivf, ivh), ivlo, ivhi, ev, 4)
         r = r_st[0]
         n = cnt[0]
@@ -218,21 +227,21 @@ BLOCK = 2048
 
 
 @_jit
-def run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
+def run_serial(x, P, r, cnt, ev, sc, ys, ci, cv, bt, gt, bs, nq):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in range(ys.shape[0]):
             _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
-                   bt, bs, nq)
+                   bt, gt, bs, nq)
 
 
 @njit_cached(nogil=True, parallel=True)
-def run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, bs, nq):
+def run_parallel(x, P, r, cnt, ev, sc, ys, ci, cv, bt, gt, bs, nq):
     for k0 in range(0, ys.shape[1], BLOCK):
         k1 = min(k0 + BLOCK, ys.shape[1])
         for b in numba.prange(ys.shape[0]):
             _trial(x[b], P[b], r[b:b + 1], cnt[b], ev[b], sc[k0:k1], ys[b, k0:k1], ci, cv,
-                   bt, bs, nq)
+                   bt, gt, bs, nq)
 
 
 # ---------------------------------------------------------------------------------------

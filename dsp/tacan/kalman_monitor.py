@@ -142,7 +142,7 @@ class StateMonitor:
         no_y = np.full((nb, 1), self._cv[7], self.x.dtype)      # no measurement: predict
         cnt, ev = self._cnt[back].copy(), self._ev[back].copy()   # counters untouched
         run_serial(x, P, self._r[back].copy(), cnt, ev, sc, no_y, self._ci, self._cv,
-                    self._bt, self._bs, self._nq)
+                    self._bt, self._gt, self._bs, self._nq)
         self.x[back], self.P[back] = x, P
 
     # -- upsets (bit-error studies) -------------------------------------------------------

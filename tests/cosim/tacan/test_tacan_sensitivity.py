@@ -43,30 +43,36 @@ def test_beacon_far_below_the_noise_gives_no_valid_bearing():
 @pytest.mark.slow
 def test_zero_db_other_mode_beacon_gives_no_valid_bearing():
     """A Y beacon heard by the X receiver (the run's mode is the beacon's: the receiver's
-    is set apart) at 0 and 20 dB: no valid bearing."""
+    is set apart; the default front end, both searches, its reports in time order as the
+    FIFO delivers them) at 0 and 20 dB: no valid bearing."""
+    from dataclasses import replace
     from cosim.tacan.signal import generate
     from dsp.tacan.frontend import run_golden_frontend
-    from dsp.tacan.receiver import ReceiverConfig, process_peaks
+    from dsp.tacan.receiver import process_peaks
     for snr in (0.0, 20.0):
         sig = TacanSignalConfig(mode="Y", bearing_deg=90.0, snr_db=snr, duration_s=4.0, seed=5)
         s = generate(sig)
-        pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig).frontend, sig.adc_bits)
-        tr = process_peaks(pk.timestamps / sig.fs_hz, pk.amplitudes, ReceiverConfig(mode="X"))
+        run = TacanRunConfig(signal=sig)
+        pk = run_golden_frontend(s.samples, run.frontend, sig.adc_bits)
+        o = np.argsort(pk.timestamps, kind="stable")
+        tr = process_peaks(pk.timestamps[o] / sig.fs_hz, pk.amplitudes[o],
+                           replace(run.receiver, mode="X"), source=pk.source[o])
         assert not np.any(tr.valid), snr
 
 
 @pytest.mark.slow
 def test_minus_3_db_gives_no_misleading_bearing():
-    """-3 dB, 270 deg, seed 100: the references are acquired, but the coarse bearing is
-    20-60 deg off; the filter's own coarse standard deviation (15-19 deg here) flags every
-    bearing. Without that flag 15 bearings 38 deg off were valid."""
+    """The single-pulse search, -3 dB, 270 deg, seed 100: the references are acquired, but
+    the coarse bearing is 20-60 deg off; the filter's own coarse standard deviation (15-19
+    deg here) flags every bearing. Without that flag 15 bearings 38 deg off were valid."""
     from cosim.tacan.signal import generate
     from dsp.tacan.bearing import wrap_deg
     from dsp.tacan.frontend import run_golden_frontend
     from dsp.tacan.receiver import ReceiverConfig, process_peaks
     sig = TacanSignalConfig(bearing_deg=270.0, snr_db=-3.0, duration_s=3.0, seed=100)
     s = generate(sig)
-    pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig).frontend, sig.adc_bits)
+    pk = run_golden_frontend(s.samples, TacanRunConfig(signal=sig, detector="pulse").frontend,
+                             sig.adc_bits)
     t, a = pk.timestamps / sig.fs_hz, pk.amplitudes
     tr = process_peaks(t, a)
     assert tr.times_s.size > 100            # references acquired
@@ -78,14 +84,15 @@ def test_minus_3_db_gives_no_misleading_bearing():
 
 @pytest.mark.slow
 def test_partner_amplitude_removes_most_of_the_zero_db_error():
-    """0 dB, 270 deg, seeds 100-101, 3 s: the detector's peak amplitudes are censored by its
-    threshold (only pulses that noise lifted over 3x the floor pass), the pair partner's
-    envelope is not. Measured: RMSE 1.86 / 1.12 deg with the peaks, 0.70 / 0.55 with the
+    """The single-pulse search (``--amplitude`` is its option), 0 dB, 270 deg, seeds 100-101,
+    3 s: the detector's peak amplitudes are censored by its threshold (only pulses that noise
+    lifted over 3x the floor pass), the pair partner's envelope is not. Measured: RMSE 1.86 / 1.12 deg with the peaks, 0.70 / 0.55 with the
     partner; mean error +1.80 / +1.09 -> +0.60 / +0.46 deg."""
     out = {}
     for amp in ("peak", "partner"):
         rs = [run_tacan(TacanRunConfig(signal=TacanSignalConfig(
-            bearing_deg=270.0, snr_db=0.0, duration_s=3.0, seed=k), amplitude=amp))
+            bearing_deg=270.0, snr_db=0.0, duration_s=3.0, seed=k), amplitude=amp,
+            detector="pulse"))
             for k in (100, 101)]
         out[amp] = (np.sqrt(np.mean([r["rmse_deg"] ** 2 for r in rs])),
                     np.mean([r["mean_error_deg"] for r in rs]))

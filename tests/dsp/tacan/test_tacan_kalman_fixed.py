@@ -110,16 +110,20 @@ class _Ref:
             self.x, self.P = xp, Pp
             return
         yh = xp[0] + xp[2] + xp[4]
-        if self.bias and self.bias[2][1] > 0 and yh >= self.bias[2][1] \
-                and (y << (fx.frac - fy.frac)) < self.bias[2][0]:
+        if self.bias and self.bias[3][1] > 0 and self.n >= self.warmup and yh >= self.bias[3][1] \
+                and (y << (fx.frac - fy.frac)) < self.bias[3][0]:
             self.ev["noise_reports"] += 1               # a noise report: predict only
             self.x, self.P = xp, Pp
             return
         PH = [Pp[i][0] + Pp[i][2] + Pp[i][4] for i in range(5)]
-        S = PH[0] + PH[2] + PH[4] + rm
-        if self.bias:                  # (table codes, shift, noise rule): the peak-bias table
-            tab, sh, _ = self.bias
-            yh += tab[min(max(_rs(yh, sh, False), 0), len(tab) - 1)]
+        if self.bias:   # (table codes, slope codes, shift, noise rule): the peak-bias table
+            tab, slope, sh, _ = self.bias
+            j = min(max(_rs(yh, sh, False), 0), len(tab) - 1)
+            PH = [_rs(v * slope[j], cf, hP) for v in PH]           # the row g H
+            S = _rs((PH[0] + PH[2] + PH[4]) * slope[j], cf, hP) + rm
+            yh += tab[j]
+        else:
+            S = PH[0] + PH[2] + PH[4] + rm
         iv = self.sat(_rs((y << (fx.frac - fy.frac)) - yh, fx.frac - fi.frac, hi), fi,
                       "sat_innov")
         if S <= 0:
@@ -187,14 +191,16 @@ def test_kernel_equals_unbounded_integer_reference(peak_bias):
     the predicted amplitude; :mod:`dsp.tacan.peakbias`)."""
     n, B = 400, 4
     outl = [(k, 1.9) for k in range(250, 256)] + [(300, -1.9)] + \
-        [(k, 7.5) for k in range(100, 104)] + [(k, -40.0) for k in range(320, 330)]
+        [(k, 7.5) for k in range(100, 104)] + [(k, -40.0) for k in range(320, 330)] + \
+        [(k, 0.05) for k in range(150, 153)]       # low reports after the warm-up
     dt, y, rm = _stream(7, n, B, outl)
     cfg = KalmanFixedConfig(KalmanConfig(warmup=60, max_rejects=5, r_smooth=64))
     kf = EnvelopeKalmanFixed(cfg, batch=B)
     if peak_bias:
         from dsp.tacan.peakbias import PAIR_PEAK_BIAS
-        kf.set_peak_bias(*PAIR_PEAK_BIAS.table(0.6), noise=(0.45, 0.9))
+        kf.set_peak_bias(*PAIR_PEAK_BIAS.table(0.6), noise=(0.45, 0.5))
         assert len(set(kf._bt.tolist())) > 50 and kf._bs > 0
+        assert len(set(kf._gt.tolist())) > 20 and kf._gt.max() == 1 << cfg.cs.frac
         plain = EnvelopeKalmanFixed(cfg, batch=B)
         plain.run(dt, y, rm)
     kf.run(dt, y, rm)
@@ -207,7 +213,8 @@ def test_kernel_equals_unbounded_integer_reference(peak_bias):
     rmi = np.round(np.ldexp(rm, cfg.P.frac)).astype(np.int64)
     for b in range(B):
         ref = _Ref(cfg)
-        ref.bias = ([int(v) for v in kf._bt], int(kf._bs), [int(v) for v in kf._nq]) \
+        ref.bias = ([int(v) for v in kf._bt], [int(v) for v in kf._gt], int(kf._bs),
+                    [int(v) for v in kf._nq]) \
             if peak_bias else None
         for k in range(n):
             ref.step(int(dt[k]), None if implausible[b, k] else int(yi[b, k]), int(rmi[k]))
