@@ -229,14 +229,15 @@ def _fold_search(t, lo, hi, offs, p_c, tol, rel_span=6e-5, rel_step=1e-6):
     return lo + best[1], best[2], best[0]
 
 
-def acquire(t, mode: str, cfg: AcquireConfig, t_from: float | None = None):
+def acquire(t, mode: str, cfg: AcquireConfig, t_from: float | None = None, cands=None):
     """First confirmed 135 Hz grid: (a, p, t_confirmed) or None. Windows end at
-    0.1, 0.15, ... s (x1.5) up to ``window_s`` after the start, then slide by half of it."""
+    0.1, 0.15, ... s (x1.5) up to ``window_s`` after the start, then slide by half of it.
+    ``cands``: :func:`candidates` of ``t`` when already computed."""
     if t.size < 10:
         return None
     aux = burst_offsets(mode, "aux")
     step = float(aux[1] - aux[0])
-    c, w = candidates(t, aux, cfg)
+    c, w = candidates(t, aux, cfg) if cands is None else cands
     if c.size < cfg.min_grid_refs:
         return None
     p0 = 1.0 / F135
@@ -398,8 +399,9 @@ def acquire_references(t, mode: str, cfg: AcquireConfig | None = None):
     cfg = cfg or AcquireConfig()
     t = np.asarray(t, np.float64)
     t_from = None
+    cands = candidates(t, burst_offsets(mode, "aux"), cfg)    # once for every search
     while True:
-        got = acquire(t, mode, cfg, t_from)
+        got = acquire(t, mode, cfg, t_from, cands)
         if got is None:
             return None
         a, p, t_conf = got
